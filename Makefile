@@ -1,0 +1,62 @@
+# amps.h build: tests, tools, examples, benchmarks.
+#   make test          build and run every test (last line: "N passed, N failed")
+#   make test SAN=1    the same under AddressSanitizer + UndefinedBehaviorSanitizer
+#   make test OMP=     the same without OpenMP
+#   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv
+#   make stress        long stability runs (not part of make test)
+#   make deps          install (as root) or list the Debian packages the tests need
+CC      ?= cc
+CXX     ?= c++
+OPT     ?= -O2 -g
+OMP     ?= -fopenmp
+STD     ?= -std=c99
+WARN    ?= -Wall -Wextra -pedantic
+SSINC   ?= -I/usr/include/suitesparse
+SAN     ?=
+ifeq ($(SAN),1)
+  SANFLAGS = -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+  BUILD  ?= build/san
+else
+  SANFLAGS =
+endif
+ifeq ($(OMP),)
+  BUILD  ?= build/noomp
+endif
+BUILD   ?= build/default
+CFLAGS_ALL = $(STD) $(WARN) $(OPT) $(OMP) $(SANFLAGS) -I. $(SSINC) $(EXTRA)
+LDLIBS_T   = -lcholmod -lm
+LDLIBS     = -lm
+
+TEST_SRC  := $(wildcard tests/test_*.c)
+TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
+TOOLS     := $(BUILD)/amps_replay
+
+.PHONY: all test deps deps-check tools bench bench-quick stress clean cxx
+all: tools
+
+tools: $(TOOLS)
+
+$(BUILD)/amps_replay: tools/amps_replay.c amps.h | $(BUILD)
+	$(CC) $(CFLAGS_ALL) -o $@ $< $(LDLIBS)
+
+$(BUILD):
+	mkdir -p $(BUILD)
+
+$(BUILD)/test_%: tests/test_%.c amps.h tests/*.h | $(BUILD)
+	$(CC) $(CFLAGS_ALL) -o $@ $< $(LDLIBS_T)
+
+test: deps-check $(TEST_BIN)
+	@bash tests/run.sh $(TEST_BIN)
+
+deps-check:
+	@bash tools/deps.sh
+
+deps:
+	@bash tools/deps.sh
+
+cxx: | $(BUILD)
+	printf '#define AMPS_IMPLEMENTATION\n#include "amps.h"\nint main(void){amps_ctx c; amps_ctx_init(&c); return 0;}\n' > $(BUILD)/cxx_check.cpp
+	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -c $(BUILD)/cxx_check.cpp -o $(BUILD)/cxx_check.o
+
+clean:
+	rm -rf build bench/out
