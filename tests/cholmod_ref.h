@@ -29,10 +29,11 @@ static int ref_solve(int n, const int *Ap, const int *Ai, const double *Ax, cons
     B = cholmod_allocate_dense(n, 1, n, CHOLMOD_REAL, &c);
     memcpy(B->x, b, sizeof(double) * n);
     X = ok ? cholmod_solve(CHOLMOD_A, L, B, &c) : NULL;
+    ok = ok && X != NULL;
     if (X) memcpy(x, X->x, sizeof(double) * n);
     cholmod_free_dense(&X, &c); cholmod_free_dense(&B, &c);
     cholmod_free_factor(&L, &c); cholmod_free_sparse(&A, &c); cholmod_finish(&c);
-    return X || !ok ? (ok ? 0 : 1) : 1;
+    return ok ? 0 : 1;
 }
 
 /* nnz(L) (with diagonal) for ordering: perm given, or NULL for CHOLMOD AMD (method=CHOLMOD_AMD)
