@@ -237,6 +237,10 @@ typedef struct amps_update_opts {
     int grow;               /* 1: grow capacities on demand (may allocate in update calls) */
     amps_formulation formulation;
     double singular_tol;    /* pivot of the dense system below tol * column norm is singular; default 1e-12 */
+    int refine;             /* 1 (default): one refinement step on the residual of the modified rows,
+                               inside the same full solve (adds a partial backward solve over
+                               closure(S u C u neighbours) and O(|S u C|^2)) */
+    int eq320;              /* 1: take x_S from the small system (Eq. 3.20); default 0 (see bench/RESULTS.md) */
 } amps_update_opts;
 
 /* Per-commit and per-solve measurements (seconds) and sizes. */
@@ -477,7 +481,7 @@ struct amps_update {
     const amps_factor *F;
     amps_formulation form;
     double tol, sigma;
-    int grow, nthr;
+    int grow, nthr, refine, eq320;
     amps_int n, N, kpend, capN;
     amps_int *Kp, *Ki;  double *Kx;        /* base K, both triangles, original numbering */
     double *f;                             /* capN forces */
@@ -504,7 +508,9 @@ struct amps_update {
     amps__djour *dj; amps_int ndj;         /* Delta row headers before this commit */
     amps__kjour *kj; amps_int nkj;         /* kinds and values before this commit (cappc) */
     double *x, *react, *z, *rhs, *tmp, *yv, *wv; /* solution and dense vectors */
+    double *sb, *rd, *wd, *yd, *rho;       /* dense vectors of the refinement step */
     double *work;                          /* nthr * n, zero between uses */
+    double *work2;                         /* n: copy for the partial backward solve */
     amps_int *iwork;                       /* n + capN */
     amps_marker mk, mkN;
     int dirty, has_sol;
@@ -530,6 +536,8 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
     o->grow = 0;
     o->formulation = AMPS_FORM_PRIMAL;
     o->singular_tol = 1e-12;
+    o->refine = 1;
+    o->eq320 = 0;
 }
 
 /* ---- allocation of the capacity-dependent arrays ---- */
@@ -576,7 +584,12 @@ static amps_status amps__grow_u(amps_ctx *ctx, amps_update *U, amps_int cap) {
         amps__realloc(ctx, (void **)&U->rhs, c, sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->tmp, c, sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->yv, c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->wv, c, sizeof(double))) {
+        amps__realloc(ctx, (void **)&U->wv, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->sb, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->rd, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->wd, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->yd, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->rho, c, sizeof(double))) {
         amps__free(ctx, G); amps__free(ctx, LU);
         return amps__err(ctx, AMPS_ERR_OOM, "amps_update: out of memory growing to %ld modified indices", (long)cap);
     }
@@ -662,7 +675,8 @@ AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     amps__free(ctx, U->dj); amps__free(ctx, U->kj);
     amps__free(ctx, U->x); amps__free(ctx, U->react); amps__free(ctx, U->z); amps__free(ctx, U->rhs);
     amps__free(ctx, U->tmp); amps__free(ctx, U->yv); amps__free(ctx, U->wv);
-    amps__free(ctx, U->work); amps__free(ctx, U->iwork);
+    amps__free(ctx, U->sb); amps__free(ctx, U->rd); amps__free(ctx, U->wd); amps__free(ctx, U->yd); amps__free(ctx, U->rho);
+    amps__free(ctx, U->work); amps__free(ctx, U->work2); amps__free(ctx, U->iwork);
     amps_marker_free(ctx, &U->mk); amps_marker_free(ctx, &U->mkN);
     amps__free(ctx, U);
 }
@@ -721,6 +735,7 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     U = AMPS__CAST(amps_update *, amps__calloc(ctx, 1, sizeof(amps_update)));
     if (!U) return NULL;
     U->F = F; U->form = o.formulation; U->tol = o.singular_tol; U->grow = o.grow;
+    U->refine = o.refine; U->eq320 = o.eq320;
     U->n = n; U->N = n; U->capN = capN; U->capu = 0; U->u = 0;
 #ifdef _OPENMP
     U->nthr = ctx && ctx->nthreads > 0 ? ctx->nthreads : omp_get_max_threads();
@@ -742,6 +757,7 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     U->isd = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
     U->pf = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n, sizeof(amps_int)));
     U->work = AMPS__CAST(double *, amps__calloc(ctx, (size_t)n * (size_t)U->nthr, sizeof(double)));
+    U->work2 = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
     U->pd = AMPS__CAST(amps__pdelta *, amps__malloc(ctx, (size_t)U->cappd, sizeof(amps__pdelta)));
     U->pc = AMPS__CAST(amps__pcon *, amps__malloc(ctx, (size_t)U->cappc, sizeof(amps__pcon)));
     U->vval = AMPS__CAST(double *, amps__malloc(ctx, vcap, sizeof(double)));
@@ -750,7 +766,7 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     U->dval = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->dcap, sizeof(double)));
     U->kj = AMPS__CAST(amps__kjour *, amps__malloc(ctx, (size_t)U->cappc, sizeof(amps__kjour)));
     U->rv = AMPS__CAST(double *, amps__malloc(ctx, 2 * (size_t)capN, sizeof(double)));
-    if (!U->f || !U->x || !U->upos || !U->iwork || !U->ct || !U->fct || !U->isd || !U->pf || !U->work || !U->pd || !U->pc ||
+    if (!U->f || !U->x || !U->upos || !U->iwork || !U->ct || !U->fct || !U->isd || !U->pf || !U->work || !U->work2 || !U->pd || !U->pc ||
         !U->vval || !U->vidx || !U->dcol || !U->dval || !U->kj || !U->rv)
         goto fail;
     if (amps_marker_init(ctx, &U->mk, n > 0 ? n : 1) || amps_marker_init(ctx, &U->mkN, capN > 0 ? capN : 1)) goto fail;
@@ -1162,7 +1178,12 @@ static amps_status amps__lu_extend(amps_update *U, amps_int nf, amps_int u_old, 
             amps_int qq = qp + c, pr = qq, j = U->colorder[qq], cc;
             double *col = LU + (size_t)qq * ld, pmax = fabs(col[qq]), piv;
             for (r = qq + 1; r < u; r++) if (fabs(col[r]) > pmax) { pmax = fabs(col[r]); pr = r; }
-            if (!(pmax > U->tol * U->cnorm[j]) || pmax == 0.0) { *bad = j; return AMPS_ERR_SINGULAR_UPDATE; }
+            /* reference: the column's norm; for unconstrained columns at least the identity part,
+               so that a column cancelled to rounding level (a row with no stiffness) is caught */
+            if (!(pmax > U->tol * ((U->ukind[j] & AMPS__UCON) || U->cnorm[j] > 1.0 ? U->cnorm[j] : 1.0)) || pmax == 0.0) {
+                *bad = j;
+                return AMPS_ERR_SINGULAR_UPDATE;
+            }
             if (pr != qq) {
                 amps_int t = U->rowperm[pr];
                 U->rowperm[pr] = U->rowperm[qq]; U->rowperm[qq] = t;
@@ -1511,11 +1532,123 @@ static void amps__update_ct(amps_update *U) {
     U->npf = 0; U->pf_all = 0;
 }
 
+/* Step 5: the forces w of the augmentation (and y = x_U, primal form) for right-hand side
+   r = H^T K-bar^{-1} f and prescribed values g on C (hom: g = 0). */
+static void amps__dense_step(amps_update *U, const double *r, int hom, double *yv, double *wv) {
+    amps_int u = U->u, a, k;
+    size_t ld = (size_t)U->capu;
+    double *z = U->z, *b = U->sb, *d = U->tmp;
+#define AMPS__G(a) (hom ? 0.0 : U->g[a])
+    if (U->form == AMPS_FORM_PRIMAL) {
+        /* b = r - G d - g^, d = Delta[F', C] g; z = A^{-1} b; y = (z_F', g); w = (Delta_F' y, z_C) */
+        for (a = 0; a < u; a++) b[a] = r[a] - ((U->ukind[a] & AMPS__UCON) ? AMPS__G(a) : 0.0);
+        if (!hom) {
+            for (a = 0; a < u; a++) {
+                double sum = 0;
+                if (!(U->ukind[a] & AMPS__UCON))
+                    for (k = 0; k < U->dln[a]; k++) {
+                        amps_int bb = U->dcol[U->dst[a] + k];
+                        if (U->ukind[bb] & AMPS__UCON) sum += U->dval[U->dst[a] + k] * U->g[bb];
+                    }
+                d[a] = sum;
+            }
+            for (k = 0; k < u; k++)
+                if (d[k] != 0.0) {
+                    const double *gk = U->G + (size_t)k * ld;
+                    for (a = 0; a < u; a++) b[a] -= gk[a] * d[k];
+                }
+        }
+        amps__lu_solve(U, b, z, U->tmp);
+        for (a = 0; a < u; a++) yv[a] = (U->ukind[a] & AMPS__UCON) ? AMPS__G(a) : z[a];
+        for (a = 0; a < u; a++) {
+            double sum = 0;
+            if (U->ukind[a] & AMPS__UCON) { wv[a] = z[a]; continue; }
+            for (k = 0; k < U->dln[a]; k++) sum += U->dval[U->dst[a] + k] * yv[U->dcol[U->dst[a] + k]];
+            wv[a] = sum;
+        }
+    } else {
+        /* b'_F' = Delta[F', :] r^ (r^ = r on F', g on C), b'_C = r_C - g; w = A^{-T} b' */
+        double *rh = yv;
+        for (a = 0; a < u; a++) rh[a] = (U->ukind[a] & AMPS__UCON) ? AMPS__G(a) : r[a];
+        for (a = 0; a < u; a++) {
+            double sum = 0;
+            if (U->ukind[a] & AMPS__UCON) { b[a] = r[a] - AMPS__G(a); continue; }
+            for (k = 0; k < U->dln[a]; k++) sum += U->dval[U->dst[a] + k] * rh[U->dcol[U->dst[a] + k]];
+            b[a] = sum;
+        }
+        amps__lu_solve_t(U, b, wv, U->tmp);
+        for (a = 0; a < u; a++) yv[a] = (U->ukind[a] & AMPS__UCON) ? AMPS__G(a) : 0.0;
+    }
+#undef AMPS__G
+}
+
+/* sv -= D^{-1/2} sum_a c_a W_a (permuted n-vector; appended DOFs have no W). */
+static void amps__scatter_w(const amps_update *U, const double *c, double *sv) {
+    amps_int a, t;
+    for (a = 0; a < U->u; a++) {
+        const double *w = U->vval + U->voff[a];
+        const amps_int *wi = U->vidx + U->voff[a];
+        double ca = c[a];
+        if (U->uidx[a] >= U->n || ca == 0.0) continue;
+        for (t = 0; t < U->vlen[a]; t++) sv[wi[t]] -= ca * w[t] * U->isd[wi[t]];
+    }
+}
+
+/* (K^ v)_i for the committed K^, reading v[j] for the neighbours j of i only. */
+static double amps__krow(const amps_update *U, amps_int i, const double *v) {
+    amps_int p, a = U->upos[i], k;
+    double s = 0;
+    if (i < U->n) for (p = U->Kp[i]; p < U->Kp[i + 1]; p++) s += U->Kx[p] * v[U->Ki[p]];
+    else s = U->sigma * v[i];
+    if (a >= 0) for (k = 0; k < U->dln[a]; k++) s += U->dval[U->dst[a] + k] * v[U->uidx[U->dcol[U->dst[a] + k]]];
+    return s;
+}
+
+/* Refinement: x~ = K-bar^{-1}(f - H w) on U and its neighbours by a partial backward solve of
+   sv (a copy), rho = (f - K^ x~) on the free rows of U, and the correction problem K^ d = H rho
+   (d_C = 0) gives wd; afterwards the full solve uses w + wd - rho. x~ is gathered into U->x. */
+static void amps__refine(amps_update *U, const double *sv, const double *wv) {
+    const amps_factor *F = U->F;
+    amps_int u = U->u, n = U->n, a, k, p, nreq = 0, *req = U->iwork, *clo = U->iwork + n, ncl;
+    double *s2 = U->work2;
+    size_t ld = (size_t)U->capu;
+    amps_marker_next(&U->mk);
+    for (a = 0; a < u; a++) {
+        amps_int i = U->uidx[a];
+        if (i >= n) continue;
+        for (p = U->Kp[i]; p < U->Kp[i + 1]; p++) {
+            amps_int q = F->iperm[U->Ki[p]];
+            if (U->mk.mark[q] != U->mk.stamp) { U->mk.mark[q] = U->mk.stamp; req[nreq++] = q; }
+        }
+        {
+            amps_int q = F->iperm[i];
+            if (U->mk.mark[q] != U->mk.stamp) { U->mk.mark[q] = U->mk.stamp; req[nreq++] = q; }
+        }
+    }
+    memcpy(s2, sv, sizeof(double) * (size_t)n);
+    ncl = amps_ltsolve_partial(F, nreq, req, s2, clo, &U->mk);
+    for (k = 0; k < ncl; k++) U->x[F->perm[clo[k]]] = s2[clo[k]];
+    for (k = n; k < U->N; k++) { a = U->upos[k]; U->x[k] = (U->f[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma; }
+    for (a = 0; a < u; a++) if (U->ukind[a] & AMPS__UCON) U->x[U->uidx[a]] = U->g[a];
+    for (a = 0; a < u; a++) {
+        amps_int i = U->uidx[a];
+        U->rho[a] = (U->ukind[a] & AMPS__UCON) ? 0.0 : U->f[i] - amps__krow(U, i, U->x);
+    }
+    /* r_d = G rho */
+    for (a = 0; a < u; a++) U->rd[a] = 0;
+    for (k = 0; k < u; k++)
+        if (U->rho[k] != 0.0) {
+            const double *gk = U->G + (size_t)k * ld;
+            for (a = 0; a < u; a++) U->rd[a] += gk[a] * U->rho[k];
+        }
+    amps__dense_step(U, U->rd, 1, U->yd, U->wd);
+    for (a = 0; a < u; a++) U->wd[a] -= U->rho[a];
+}
+
 AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xout) {
     const amps_factor *F;
     amps_int u, a, k, n;
-    double t0, t1, *r, *z, *yv, *wv;
-    size_t ld;
+    double t0, t1, *r, *yv, *wv;
     amps_status s;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve: NULL engine");
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
@@ -1523,11 +1656,11 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
         if (xout) memcpy(xout, U->x, sizeof(double) * (size_t)U->N);
         return AMPS_OK;
     }
-    F = U->F; n = U->n; u = U->u; ld = (size_t)U->capu;
-    r = U->rhs; z = U->z; yv = U->yv; wv = U->wv;
+    F = U->F; n = U->n; u = U->u;
+    r = U->rhs; yv = U->yv; wv = U->wv;
     t0 = amps__now();
     amps__update_ct(U);
-    /* Step 4: r = H^T K-bar^{-1} f^ */
+    /* Step 4: r = H^T K-bar^{-1} f^ = W^T ct on base positions, f/sigma on appended ones */
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 16) num_threads(U->nthr) if (u > 32)
 #endif
@@ -1538,84 +1671,36 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
             const amps_int *wi = U->vidx + U->voff[a];
             double sum = 0;
             for (t = 0; t < U->vlen[a]; t++) sum += w[t] * U->ct[wi[t]];
-            z[a] = sum;
-        } else z[a] = U->f[i] / U->sigma;
+            r[a] = sum;
+        } else r[a] = U->f[i] / U->sigma;
     }
-    memcpy(r, z, sizeof(double) * (size_t)u);
     t1 = amps__now(); U->st.t_step[4] = t1 - t0; t0 = t1;
-    /* Step 5: the dense solve, then the correction forces w */
-    if (U->form == AMPS_FORM_PRIMAL) {
-        /* b = r - G d - g^, d = Delta[F', C] g */
-        double *d = U->tmp, *b = wv;
-        for (a = 0; a < u; a++) {
-            double sum = 0;
-            if (!(U->ukind[a] & AMPS__UCON))
-                for (k = 0; k < U->dln[a]; k++) {
-                    amps_int bb = U->dcol[U->dst[a] + k];
-                    if (U->ukind[bb] & AMPS__UCON) sum += U->dval[U->dst[a] + k] * U->g[bb];
-                }
-            d[a] = sum;
-        }
-        for (a = 0; a < u; a++) b[a] = r[a] - ((U->ukind[a] & AMPS__UCON) ? U->g[a] : 0.0);
-        for (k = 0; k < u; k++)
-            if (d[k] != 0.0) {
-                const double *gk = U->G + (size_t)k * ld;
-                for (a = 0; a < u; a++) b[a] -= gk[a] * d[k];
-            }
-        amps__lu_solve(U, b, z, U->tmp);
-        for (a = 0; a < u; a++) yv[a] = (U->ukind[a] & AMPS__UCON) ? U->g[a] : z[a];
-        for (a = 0; a < u; a++) {
-            if (U->ukind[a] & AMPS__UCON) { wv[a] = z[a]; continue; }
-            {
-                double sum = 0;
-                for (k = 0; k < U->dln[a]; k++) sum += U->dval[U->dst[a] + k] * yv[U->dcol[U->dst[a] + k]];
-                wv[a] = sum;
-            }
-        }
-    } else {
-        /* b'_F' = Delta[F', :] r^ (r^ = r on F', g on C), b'_C = r_C - g; w = A^{-T} b' */
-        double *rh = yv, *b = U->tmp;
-        for (a = 0; a < u; a++) rh[a] = (U->ukind[a] & AMPS__UCON) ? U->g[a] : r[a];
-        for (a = 0; a < u; a++) {
-            if (U->ukind[a] & AMPS__UCON) { b[a] = r[a] - U->g[a]; continue; }
-            {
-                double sum = 0;
-                for (k = 0; k < U->dln[a]; k++) sum += U->dval[U->dst[a] + k] * rh[U->dcol[U->dst[a] + k]];
-                b[a] = sum;
-            }
-        }
-        memcpy(z, b, sizeof(double) * (size_t)u);
-        amps__lu_solve_t(U, z, wv, U->tmp);
-    }
+    /* Step 5 */
+    amps__dense_step(U, r, 0, yv, wv);
     t1 = amps__now(); U->st.t_step[5] += t1 - t0; t0 = t1;
     /* Step 6: x = K-bar^{-1} (f^ - H w), permuted: L^{-T} D^{-1/2} (ct - sum_a w_a W_a) */
     {
         double *sv = U->work;
-        memcpy(sv, U->ct, sizeof(double) * (size_t)n);
-        for (a = 0; a < u; a++) {
-            amps_int t;
-            const double *w = U->vval + U->voff[a];
-            const amps_int *wi = U->vidx + U->voff[a];
-            double wa = wv[a];
-            if (U->uidx[a] >= n || wa == 0.0) continue;
-            for (t = 0; t < U->vlen[a]; t++) sv[wi[t]] -= wa * w[t];
+        for (k = 0; k < n; k++) sv[k] = U->ct[k] * U->isd[k];
+        amps__scatter_w(U, wv, sv);
+        if (U->refine && u > 0) {
+            amps__refine(U, sv, wv);
+            amps__scatter_w(U, U->wd, sv);
+            for (a = 0; a < u; a++) { wv[a] += U->wd[a]; yv[a] += U->yd[a]; }
         }
-        for (k = 0; k < n; k++) sv[k] *= U->isd[k];
         amps_ltsolve(F, sv);
         for (k = 0; k < n; k++) { U->x[F->perm[k]] = sv[k]; sv[k] = 0.0; }
         for (k = n; k < U->N; k++) {
             a = U->upos[k];
             U->x[k] = (U->f[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma;
         }
-        if (U->form == AMPS_FORM_PRIMAL) for (a = 0; a < u; a++) U->x[U->uidx[a]] = yv[a];
-        else for (a = 0; a < u; a++) if (U->ukind[a] & AMPS__UCON) U->x[U->uidx[a]] = U->g[a];
+        for (a = 0; a < u; a++)
+            if ((U->ukind[a] & AMPS__UCON) || (U->eq320 && U->form == AMPS_FORM_PRIMAL)) U->x[U->uidx[a]] = yv[a];
     }
-    /* reactions (K^ x - f^)_C = (Delta x_U)_C - w_C */
+    /* reactions (K^ x - f^)_C */
     for (a = 0; a < u; a++) {
-        double sum = 0;
-        if (!(U->ukind[a] & AMPS__UCON)) { U->react[a] = 0; continue; }
-        for (k = 0; k < U->dln[a]; k++) sum += U->dval[U->dst[a] + k] * U->x[U->uidx[U->dcol[U->dst[a] + k]]];
-        U->react[a] = sum - wv[a];
+        amps_int i = U->uidx[a];
+        U->react[a] = (U->ukind[a] & AMPS__UCON) ? amps__krow(U, i, U->x) - U->f[i] : 0.0;
     }
     t1 = amps__now(); U->st.t_step[6] = t1 - t0;
     U->dirty = 0; U->has_sol = 1; U->solN = U->N;
