@@ -281,6 +281,8 @@ AMPS_API amps_status amps_update_constrain(amps_ctx *ctx, amps_update *U, amps_i
 AMPS_API amps_status amps_update_release(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx);
 /* Sets f^[idx[k]] = val[k]. */
 AMPS_API amps_status amps_update_set_force(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx, const double *val);
+/* Drops every change recorded since the last commit (forces stay). */
+AMPS_API void amps_update_discard(amps_update *U);
 /* Applies the recorded changes (Steps 1-5). On failure discards them all. */
 AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U);
 /* Commits, then solves (Step 6): x (room for amps_update_dim, may be NULL) receives the solution. */
@@ -1300,6 +1302,11 @@ static void amps__rollback(amps_update *U, amps_int u_old, size_t vused_old, amp
     U->npd = 0; U->npc = 0; U->kpend = 0;
     if (U->u > 0) (void)amps__lu_full(U, &bad);   /* the old system was regular */
     U->dirty = 1;
+}
+
+AMPS_API void amps_update_discard(amps_update *U) {
+    if (!U) return;
+    U->npd = 0; U->npc = 0; U->kpend = 0;
 }
 
 AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
