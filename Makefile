@@ -29,9 +29,10 @@ LDLIBS     = -lm
 
 TEST_SRC  := $(wildcard tests/test_*.c)
 TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
-TOOLS     := $(BUILD)/amps_replay
+TEST_SH   := $(wildcard tests/test_*.sh)
+TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example
 
-.PHONY: all test deps deps-check tools bench bench-quick stress clean cxx
+.PHONY: all test deps deps-check tools demo bench bench-quick stress clean cxx
 all: tools
 
 tools: $(TOOLS)
@@ -39,14 +40,24 @@ tools: $(TOOLS)
 $(BUILD)/amps_replay: tools/amps_replay.c amps.h | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< $(LDLIBS)
 
+$(BUILD)/readme_example: examples/readme_example.c amps.h | $(BUILD)
+	$(CC) $(CFLAGS_ALL) -o $@ $< $(LDLIBS)
+
+# The main job: replay the brick incision, write VTU/CSV (and a PNG when gnuplot is there).
+demo: deps-check $(BUILD)/amps_replay
+	@mkdir -p build/demo
+	cd build/demo && $(abspath $(BUILD))/amps_replay --surface brick_incision.surf $(abspath examples/brick_incision.scn)
+	@bash tools/render.sh build/demo/brick_incision.surf build/demo/brick_incision.png
+	@echo "results: build/demo/brick_incision.vtu (ParaView: Warp By Vector on displacement), build/demo/brick_incision.csv"
+
 $(BUILD):
 	mkdir -p $(BUILD)
 
 $(BUILD)/test_%: tests/test_%.c amps.h tests/*.h | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< $(LDLIBS_T)
 
-test: deps-check $(TEST_BIN)
-	@bash tests/run.sh $(TEST_BIN)
+test: deps-check $(TEST_BIN) $(TOOLS)
+	@AMPS_BUILD=$(BUILD) bash tests/run.sh $(TEST_BIN) $(TEST_SH)
 
 deps-check:
 	@bash tools/deps.sh

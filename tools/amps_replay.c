@@ -1,0 +1,365 @@
+/* amps_replay: runs a scenario (mesh, material, fixed nodes, forces, pins, cuts, solves) with
+   amps.h and prints one line per solve and a summary.
+
+   usage: amps_replay [-q] [--residual] [--threads N] [--order auto|amd|nd|metis|natural]
+                      [--dual] [--eq320] [--surface FILE] scenario
+   --surface FILE writes the deformed boundary triangles (cut faces included) at the end, one
+   block of 4 lines "x y z |u|" per triangle, for gnuplot's "with polygons".
+
+   Scenario lines (# starts a comment anywhere; node indices 0-based in the mesh's order):
+     mesh <file> | mesh beam <h> | mesh brick <R>   (.node with its .ele, .msh or .mesh; paths
+                                                      relative to the scenario's directory)
+     material <E> <nu>        all tetrahedra; only before the first solve
+     fix <x|y|z> <lt|gt> <v>  fix the nodes whose coordinate is below / above v
+     force <node> <fx> <fy> <fz>
+     pin <node> <ux> <uy> <uz>
+     release <node>
+     cut <node> <px> <py> <pz> <nx> <ny> <nz>
+     solve
+     residual on|off
+     dump <file.csv>          node,ux,uy,uz of every node (values of the last solve)
+     write <file.vtu>         mesh, displacement and stresses for ParaView */
+#define AMPS_IMPLEMENTATION
+#include "amps.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <ctype.h>
+#include <math.h>
+
+#define MAXTOK 16
+
+typedef struct replay {
+    amps_ctx ctx;
+    amps_scene *S;
+    const char *file;
+    char dir[4096];
+    int line, quiet, residual_on, steps, solved;
+    amps_scene_opts opts;
+    double step_time, *times;
+    int ntimes, captimes;
+    double worst_res;
+    char last_cmd[64];
+    double E, nu;
+    int have_material;
+} replay;
+
+static double now(void) {
+#ifdef _OPENMP
+    return omp_get_wtime();
+#else
+    return (double)clock() / CLOCKS_PER_SEC;
+#endif
+}
+
+static int fail(replay *R, const char *fmt, const char *a) {
+    fprintf(stderr, "%s:%d: ", R->file, R->line);
+    fprintf(stderr, fmt, a);
+    fprintf(stderr, "\n");
+    return 1;
+}
+
+static int parse_num(const char *s, double *v) {
+    char *end;
+    *v = strtod(s, &end);
+    return *end == '\0' && end != s && (*v - *v == 0.0);
+}
+
+static int parse_node(const char *s, amps_int *v) {
+    char *end;
+    long x = strtol(s, &end, 10);
+    if (*end != '\0' || end == s || x < 0) return 0;
+    *v = (amps_int)x;
+    return 1;
+}
+
+typedef struct face { amps_int v[3], t; } face;
+
+static int cmp_face(const void *a, const void *b) {
+    const face *x = (const face *)a, *y = (const face *)b;
+    int k;
+    for (k = 0; k < 3; k++) if (x->v[k] != y->v[k]) return x->v[k] < y->v[k] ? -1 : 1;
+    return 0;
+}
+
+/* Boundary triangles (faces of exactly one tet) at their deformed positions. */
+static int write_surface(replay *R, const char *path) {
+    const amps_mesh *m = amps_scene_mesh(R->S);
+    const double *u = amps_scene_displacements(R->S);
+    static const int fv[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+    face *f = (face *)malloc(sizeof(face) * 4 * (size_t)m->ntet);
+    amps_int t, k, n = 0;
+    FILE *o = fopen(path, "w");
+    if (!f || !o) { free(f); if (o) fclose(o); fprintf(stderr, "%s: cannot write\n", path); return 1; }
+    for (t = 0; t < m->ntet; t++)
+        for (k = 0; k < 4; k++) {
+            amps_int a = m->tet[4 * t + fv[k][0]], b = m->tet[4 * t + fv[k][1]], c = m->tet[4 * t + fv[k][2]], x;
+            if (a > b) { x = a; a = b; b = x; }
+            if (b > c) { x = b; b = c; c = x; }
+            if (a > b) { x = a; a = b; b = x; }
+            f[n].v[0] = a; f[n].v[1] = b; f[n].v[2] = c; f[n].t = t; n++;
+        }
+    qsort(f, (size_t)n, sizeof(face), cmp_face);
+    for (k = 0; k < n; k++) {
+        int q;
+        if ((k > 0 && !cmp_face(f + k, f + k - 1)) || (k + 1 < n && !cmp_face(f + k, f + k + 1))) continue;
+        for (q = 0; q <= 3; q++) {
+            amps_int v = f[k].v[q % 3];
+            double d = sqrt(u[3 * v] * u[3 * v] + u[3 * v + 1] * u[3 * v + 1] + u[3 * v + 2] * u[3 * v + 2]);
+            fprintf(o, "%g %g %g %g\n", m->xyz[3 * v] + u[3 * v], m->xyz[3 * v + 1] + u[3 * v + 1], m->xyz[3 * v + 2] + u[3 * v + 2], d);
+        }
+        fprintf(o, "\n");
+    }
+    free(f);
+    fclose(o);
+    if (!R->quiet) printf("surface: %s\n", path);
+    return 0;
+}
+
+static int cmp_double(const void *a, const void *b) {
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : (x > y ? 1 : 0);
+}
+
+/* Library error: a fatal stop with file:line and the library's message. */
+static int lib_fail(replay *R, const char *what) {
+    fprintf(stderr, "%s:%d: %s: %s\n", R->file, R->line, what, R->ctx.msg);
+    return 1;
+}
+
+static int need_scene(replay *R) {
+    if (!R->S) { fail(R, "%s", "no mesh yet (the first command must be 'mesh')"); return 0; }
+    return 1;
+}
+
+static int cmd_mesh(replay *R, int nt, char **t) {
+    amps_mesh *m = NULL;
+    if (R->S) return fail(R, "%s", "mesh given twice");
+    if (nt == 3 && (!strcmp(t[1], "beam") || !strcmp(t[1], "brick"))) {
+        amps_int k;
+        if (!parse_node(t[2], &k) || k < 1) return fail(R, "bad size '%s'", t[2]);
+        m = !strcmp(t[1], "beam") ? amps_mesh_beam(&R->ctx, k) : amps_mesh_brick(&R->ctx, k);
+    } else if (nt == 2) {
+        char path[8192];
+        if (t[1][0] == '/') snprintf(path, sizeof(path), "%s", t[1]);
+        else snprintf(path, sizeof(path), "%s%s", R->dir, t[1]);
+        m = amps_mesh_read(&R->ctx, path);
+    } else return fail(R, "%s", "usage: mesh <file> | mesh beam <h> | mesh brick <R>");
+    if (!m) return lib_fail(R, "mesh");
+    R->S = amps_scene_create(&R->ctx, m, &R->opts);
+    if (!R->S) { amps_mesh_free(&R->ctx, m); return lib_fail(R, "mesh"); }
+    if (!R->quiet) printf("mesh: %ld nodes, %ld tetrahedra\n", (long)m->nnode, (long)m->ntet);
+    return 0;
+}
+
+static void print_factor_info(replay *R, double t) {
+    const amps_factor *F = amps_scene_factor(R->S);
+    if (R->quiet || !F) return;
+    printf("factor: %ld equations, nnz(L) %.0f, elimination tree height %ld, %.1f ms (ordering, analysis, numeric)\n",
+           (long)F->n, amps_factor_nnz(F), (long)F->height, 1e3 * t);
+}
+
+static int run_line(replay *R, int nt, char **t) {
+    const char *c = t[0];
+    amps_int v;
+    double x[6];
+    int k;
+    double t0 = now();
+    if (!strcmp(c, "mesh")) return cmd_mesh(R, nt, t);
+    if (!need_scene(R)) return 1;
+    if (!strcmp(c, "material")) {
+        if (nt != 3 || !parse_num(t[1], &x[0]) || !parse_num(t[2], &x[1])) return fail(R, "%s", "usage: material <E> <nu>");
+        if (R->solved) return fail(R, "%s", "material is allowed only before the first solve");
+        if (amps_scene_set_material(&R->ctx, R->S, x[0], x[1])) return lib_fail(R, "material");
+        return 0;
+    }
+    if (!strcmp(c, "fix")) {
+        int axis;
+        amps_int cnt;
+        if (nt != 4) return fail(R, "%s", "usage: fix <x|y|z> <lt|gt> <value>");
+        if (!strcmp(t[1], "x")) axis = 0; else if (!strcmp(t[1], "y")) axis = 1; else if (!strcmp(t[1], "z")) axis = 2;
+        else return fail(R, "bad axis '%s' (x, y or z)", t[1]);
+        if (strcmp(t[2], "lt") && strcmp(t[2], "gt")) return fail(R, "bad comparison '%s' (lt or gt)", t[2]);
+        if (!parse_num(t[3], &x[0])) return fail(R, "bad value '%s'", t[3]);
+        if (amps_scene_fix_where(&R->ctx, R->S, axis, !strcmp(t[2], "lt") ? AMPS_LT : AMPS_GT, x[0], &cnt)) return lib_fail(R, "fix");
+        if (!R->quiet) printf("fix: %ld nodes\n", (long)cnt);
+        return 0;
+    }
+    if (!strcmp(c, "force") || !strcmp(c, "pin")) {
+        amps_status s;
+        if (nt != 5 || !parse_node(t[1], &v)) return fail(R, "usage: %s <node> <x> <y> <z>", c);
+        for (k = 0; k < 3; k++) if (!parse_num(t[2 + k], &x[k])) return fail(R, "bad number '%s'", t[2 + k]);
+        if (v >= amps_scene_mesh(R->S)->nnode) return fail(R, "node %s out of range", t[1]);
+        s = !strcmp(c, "force") ? amps_scene_force(&R->ctx, R->S, v, x) : amps_scene_pin(&R->ctx, R->S, v, x);
+        if (s != AMPS_OK) return lib_fail(R, c);
+        snprintf(R->last_cmd, sizeof(R->last_cmd), "%s %ld", c, (long)v);
+        R->step_time += now() - t0;
+        return 0;
+    }
+    if (!strcmp(c, "release")) {
+        if (nt != 2 || !parse_node(t[1], &v)) return fail(R, "%s", "usage: release <node>");
+        if (v >= amps_scene_mesh(R->S)->nnode) return fail(R, "node %s out of range", t[1]);
+        if (amps_scene_release(&R->ctx, R->S, v) != AMPS_OK) {
+            if (R->ctx.status != AMPS_ERR_SINGULAR_UPDATE) return lib_fail(R, "release");
+            printf("%s:%d: release kept: %s\n", R->file, R->line, R->ctx.msg);
+        }
+        snprintf(R->last_cmd, sizeof(R->last_cmd), "release %ld", (long)v);
+        R->step_time += now() - t0;
+        return 0;
+    }
+    if (!strcmp(c, "cut")) {
+        amps_int vn;
+        amps_status s;
+        if (nt != 8 || !parse_node(t[1], &v)) return fail(R, "%s", "usage: cut <node> <px> <py> <pz> <nx> <ny> <nz>");
+        for (k = 0; k < 6; k++) if (!parse_num(t[2 + k], &x[k])) return fail(R, "bad number '%s'", t[2 + k]);
+        if (v >= amps_scene_mesh(R->S)->nnode) return fail(R, "node %s out of range", t[1]);
+        if (x[3] == 0 && x[4] == 0 && x[5] == 0) return fail(R, "%s", "zero plane normal");
+        s = amps_scene_cut(&R->ctx, R->S, v, x, x + 3, &vn);
+        if (s == AMPS_WARN_NOOP) { if (!R->quiet) printf("%s:%d: cut %ld is a no-op: %s\n", R->file, R->line, (long)v, R->ctx.msg); }
+        else if (s == AMPS_ERR_SINGULAR_UPDATE) printf("%s:%d: cut %ld undone: %s\n", R->file, R->line, (long)v, R->ctx.msg);
+        else if (s != AMPS_OK) return lib_fail(R, "cut");
+        snprintf(R->last_cmd, sizeof(R->last_cmd), "cut %ld", (long)v);
+        R->step_time += now() - t0;
+        return 0;
+    }
+    if (!strcmp(c, "solve")) {
+        double res = -1, dt;
+        amps_update_stats st;
+        int first = !R->solved;
+        if (nt != 1) return fail(R, "%s", "usage: solve");
+        if (amps_scene_solve(&R->ctx, R->S) != AMPS_OK) return lib_fail(R, "solve");
+        dt = R->step_time + now() - t0;
+        if (first) { print_factor_info(R, dt); }
+        R->solved = 1;
+        if (R->residual_on) {
+            if (amps_scene_residual(&R->ctx, R->S, &res)) return lib_fail(R, "residual");
+            if (res > R->worst_res) R->worst_res = res;
+        }
+        amps_update_get_stats(amps_scene_engine(R->S), &st);
+        R->steps++;
+        if (!first) {
+            if (R->ntimes == R->captimes) { R->captimes = 2 * R->captimes + 64; R->times = (double *)realloc(R->times, sizeof(double) * R->captimes); }
+            R->times[R->ntimes++] = dt;
+        }
+        if (!R->quiet) {
+            printf("step %4d  %-14s dofs %7ld  |S|%6ld  %9.3f ms  %9.1f Hz", R->steps, R->last_cmd[0] ? R->last_cmd : "solve",
+                   (long)st.dim, (long)st.nsys, 1e3 * dt, dt > 0 ? 1.0 / dt : 0.0);
+            if (res >= 0) printf("  residual %.2e", res);
+            printf("%s\n", first ? "  (includes the factorization)" : "");
+        }
+        R->step_time = 0; R->last_cmd[0] = 0;
+        return 0;
+    }
+    if (!strcmp(c, "residual")) {
+        if (nt != 2 || (strcmp(t[1], "on") && strcmp(t[1], "off"))) return fail(R, "%s", "usage: residual on|off");
+        R->residual_on = !strcmp(t[1], "on");
+        return 0;
+    }
+    if (!strcmp(c, "dump")) {
+        FILE *f;
+        const amps_mesh *m = amps_scene_mesh(R->S);
+        const double *d = amps_scene_displacements(R->S);
+        amps_int i;
+        if (nt != 2) return fail(R, "%s", "usage: dump <file.csv>");
+        f = fopen(t[1], "w");
+        if (!f) return fail(R, "cannot write '%s'", t[1]);
+        fprintf(f, "node,ux,uy,uz\n");
+        for (i = 0; i < m->nnode; i++) fprintf(f, "%ld,%.17g,%.17g,%.17g\n", (long)i, d[3 * i], d[3 * i + 1], d[3 * i + 2]);
+        if (fclose(f)) return fail(R, "cannot write '%s'", t[1]);
+        if (!R->quiet) printf("dump: %s (%ld nodes)\n", t[1], (long)m->nnode);
+        return 0;
+    }
+    if (!strcmp(c, "write")) {
+        const amps_mesh *m = amps_scene_mesh(R->S);
+        double *vm, *pr;
+        amps_status s;
+        if (nt != 2) return fail(R, "%s", "usage: write <file.vtu>");
+        vm = (double *)malloc(sizeof(double) * (m->ntet + 1));
+        pr = (double *)malloc(sizeof(double) * 3 * (m->ntet + 1));
+        s = amps_scene_stress(&R->ctx, R->S, NULL, vm, pr);
+        if (s == AMPS_OK) s = amps_write_vtu(&R->ctx, t[1], m, amps_scene_displacements(R->S), vm, pr);
+        free(vm); free(pr);
+        if (s != AMPS_OK) return lib_fail(R, "write");
+        if (!R->quiet) printf("write: %s\n", t[1]);
+        return 0;
+    }
+    return fail(R, "unknown command '%s'", c);
+}
+
+int main(int argc, char **argv) {
+    replay R;
+    FILE *f;
+    char buf[65536];
+    int a, rc = 0;
+    const char *path = NULL, *surface = NULL;
+    memset(&R, 0, sizeof(R));
+    amps_ctx_init(&R.ctx);
+    amps_scene_opts_default(&R.opts);
+    for (a = 1; a < argc; a++) {
+        if (!strcmp(argv[a], "-q")) R.quiet = 1;
+        else if (!strcmp(argv[a], "--residual")) R.residual_on = 1;
+        else if (!strcmp(argv[a], "--dual")) R.opts.update.formulation = AMPS_FORM_DUAL;
+        else if (!strcmp(argv[a], "--eq320")) R.opts.update.eq320 = 1;
+        else if (!strcmp(argv[a], "--threads") && a + 1 < argc) R.ctx.nthreads = atoi(argv[++a]);
+        else if (!strcmp(argv[a], "--surface") && a + 1 < argc) surface = argv[++a];
+        else if (!strcmp(argv[a], "--order") && a + 1 < argc) {
+            const char *o = argv[++a];
+            if (!strcmp(o, "amd")) R.opts.order.method = AMPS_ORDER_AMD;
+            else if (!strcmp(o, "nd")) R.opts.order.method = AMPS_ORDER_ND;
+            else if (!strcmp(o, "metis")) R.opts.order.method = AMPS_ORDER_METIS;
+            else if (!strcmp(o, "natural")) R.opts.order.method = AMPS_ORDER_NATURAL;
+            else if (!strcmp(o, "auto")) R.opts.order.method = AMPS_ORDER_AUTO;
+            else { fprintf(stderr, "amps_replay: unknown ordering '%s'\n", o); return 2; }
+        } else if (argv[a][0] == '-' && argv[a][1]) { fprintf(stderr, "amps_replay: unknown option '%s'\n", argv[a]); return 2; }
+        else path = argv[a];
+    }
+    if (!path) {
+        fprintf(stderr, "usage: amps_replay [-q] [--residual] [--threads N] [--order auto|amd|nd|metis|natural] [--dual] [--eq320] [--surface FILE] scenario\n");
+        return 2;
+    }
+#ifdef _OPENMP
+    if (R.ctx.nthreads > 0) omp_set_num_threads(R.ctx.nthreads);
+#endif
+    R.file = path;
+    {
+        const char *sl = strrchr(path, '/');
+        size_t n = sl ? (size_t)(sl - path + 1) : 0;
+        if (n >= sizeof(R.dir)) n = 0;
+        memcpy(R.dir, path, n);
+        R.dir[n] = 0;
+    }
+    f = fopen(path, "r");
+    if (!f) { fprintf(stderr, "%s: cannot open\n", path); return 1; }
+    while (fgets(buf, sizeof(buf), f)) {
+        char *tok[MAXTOK], *p = buf, *hash = strchr(buf, '#');
+        int nt = 0;
+        R.line++;
+        if (hash) *hash = 0;
+        if (!strchr(buf, '\n') && !feof(f)) { rc = fail(&R, "%s", "line too long"); break; }
+        while (*p) {
+            while (*p && isspace((unsigned char)*p)) *p++ = 0;
+            if (!*p) break;
+            if (nt == MAXTOK) { nt = MAXTOK + 1; break; }
+            tok[nt++] = p;
+            while (*p && !isspace((unsigned char)*p)) p++;
+        }
+        if (nt == 0) continue;
+        if (nt > MAXTOK) { rc = fail(&R, "%s", "too many arguments"); break; }
+        if ((rc = run_line(&R, nt, tok)) != 0) break;
+    }
+    fclose(f);
+    if (rc == 0) {
+        if (R.ntimes > 0) {
+            double med, worst;
+            qsort(R.times, (size_t)R.ntimes, sizeof(double), cmp_double);
+            med = R.times[R.ntimes / 2]; worst = R.times[R.ntimes - 1];
+            printf("summary: %d solves; after the first: median step %.3f ms (%.1f Hz), worst %.3f ms", R.steps, 1e3 * med, 1.0 / med, 1e3 * worst);
+        } else printf("summary: %d solves", R.steps);
+        if (R.residual_on) printf(", worst residual %.2e", R.worst_res);
+        printf("\n");
+        if (surface && R.S) rc = write_surface(&R, surface);
+    }
+    free(R.times);
+    amps_scene_free(&R.ctx, R.S);
+    return rc;
+}
