@@ -544,17 +544,6 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
 
 /* ---- allocation of the capacity-dependent arrays ---- */
 
-/* Resizes a capu x capu column-major matrix from leading dimension ld0 to ld1 (keeps u x u). */
-static amps_status amps__regrow_dense(amps_ctx *ctx, double **A, amps_int u, amps_int ld0, amps_int ld1) {
-    double *B = AMPS__CAST(double *, amps__malloc(ctx, (size_t)ld1 * (size_t)ld1, sizeof(double)));
-    amps_int j;
-    if (!B) return AMPS_ERR_OOM;
-    for (j = 0; j < u; j++) memcpy(B + (size_t)j * ld1, *A + (size_t)j * ld0, sizeof(double) * (size_t)u);
-    amps__free(ctx, *A);
-    *A = B;
-    return AMPS_OK;
-}
-
 /* Grows every U-sized array to capacity cap (> capu). All-or-nothing. */
 static amps_status amps__grow_u(amps_ctx *ctx, amps_update *U, amps_int cap) {
     double *G = NULL, *LU = NULL;
@@ -1093,24 +1082,25 @@ static double amps__aentry(const amps_update *U, amps_int i, amps_int j) {
 
 /* ---- Step 5: left-looking dense LU with partial pivoting, P A(:, colorder) = L U ---- */
 
-/* C(0:m, 0:w) -= A(0:m, 0:kk) B(0:kk, 0:w), column major, parallel over row blocks. */
+/* C(0:m, 0:w) -= A(0:m, 0:kk) B(0:kk, 0:w), column major; one parallel region over row
+   blocks of 128 (a block of C stays in cache while A streams through once). */
 static void amps__gemm_sub(amps_int m, amps_int w, amps_int kk, const double *A, size_t lda,
                            const double *B, size_t ldb, double *C, size_t ldc, int nthr) {
     amps_int rb, nrb = (m + 127) / 128;
     (void)nthr;
     if (m <= 0 || w <= 0 || kk <= 0) return;
 #ifdef _OPENMP
-#pragma omp parallel for schedule(static) num_threads(nthr) if (m * w * kk > 200000)
+#pragma omp parallel for schedule(static) num_threads(nthr) if ((double)m * w * kk > 1e6)
 #endif
     for (rb = 0; rb < nrb; rb++) {
         amps_int r0 = rb * 128, r1 = r0 + 128 < m ? r0 + 128 : m, k, c, r;
         for (k = 0; k < kk; k++) {
             const double *a = A + (size_t)k * lda;
             for (c = 0; c < w; c++) {
-                double b = B[(size_t)c * ldb + (size_t)k];
+                double bv = B[(size_t)c * ldb + (size_t)k];
                 double *cc = C + (size_t)c * ldc;
-                if (b == 0.0) continue;
-                for (r = r0; r < r1; r++) cc[r] -= a[r] * b;
+                if (bv == 0.0) continue;
+                for (r = r0; r < r1; r++) cc[r] -= a[r] * bv;
             }
         }
     }
@@ -1159,22 +1149,21 @@ static amps_status amps__lu_extend(amps_update *U, amps_int nf, amps_int u_old, 
             for (rr = 0; rr < u; rr++) { col[rr] = buf[U->rowperm[rr]]; if (fabs(buf[rr]) > nrm) nrm = fabs(buf[rr]); }
             U->cnorm[j] = nrm;
         }
-        /* apply the factored columns 0..qp-1 in blocks: unit lower solve on the block's rows,
-           then one product for every row below it */
-        for (kb = 0; kb < qp; kb += 64) {
-            amps_int kw = qp - kb < 64 ? qp - kb : 64, kk;
-            for (c = 0; c < w; c++) {
-                double *col = P + (size_t)c * ld;
-                for (kk = kb; kk < kb + kw; kk++) {
-                    const double *lk = LU + (size_t)kk * ld;
-                    double x = col[kk];
-                    if (x == 0.0) continue;
-                    for (r = kk + 1; r < kb + kw; r++) col[r] -= lk[r] * x;
-                }
+        /* apply the factored columns 0..qp-1: P(0:qp) = L11^{-1} P(0:qp) (unit lower, per
+           column), then P(qp:u) -= L(qp:u, 0:qp) P(0:qp) */
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) num_threads(U->nthr) if (w > 1 && (double)qp * qp * w > 4e5)
+#endif
+        for (c = 0; c < w; c++) {
+            double *col = P + (size_t)c * ld;
+            for (kb = 0; kb < qp; kb++) {
+                const double *lk = LU + (size_t)kb * ld;
+                double x = col[kb];
+                if (x == 0.0) continue;
+                for (r = kb + 1; r < qp; r++) col[r] -= lk[r] * x;
             }
-            amps__gemm_sub(u - (kb + kw), w, kw, LU + (size_t)kb * ld + (size_t)(kb + kw), ld,
-                           P + (size_t)kb, ld, P + (size_t)(kb + kw), ld, U->nthr);
         }
+        amps__gemm_sub(u - qp, w, qp, LU + (size_t)qp, ld, P, ld, P + (size_t)qp, ld, U->nthr);
         /* factor the panel with partial pivoting; swaps act on whole rows 0..qp+w-1 */
         for (c = 0; c < w; c++) {
             amps_int qq = qp + c, pr = qq, j = U->colorder[qq], cc;
@@ -1390,7 +1379,7 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
         amps_int b, u = U->u;
         size_t ld = (size_t)U->capu;
 #ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 8) num_threads(U->nthr) if (u > 16)
+#pragma omp parallel for schedule(dynamic, 8) num_threads(U->nthr) if ((double)u * (u - u_old) > 4096)
 #endif
         for (b = 0; b < u; b++) {
             amps_int aa;
@@ -1669,7 +1658,7 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
     amps__update_ct(U);
     /* Step 4: r = H^T K-bar^{-1} f^ = W^T ct on base positions, f/sigma on appended ones */
 #ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 16) num_threads(U->nthr) if (u > 32)
+#pragma omp parallel for schedule(dynamic, 16) num_threads(U->nthr) if (u > 64)
 #endif
     for (a = 0; a < u; a++) {
         amps_int i = U->uidx[a], t;

@@ -334,8 +334,8 @@ int main(int argc, char **argv) {
         char *tok[MAXTOK], *p = buf, *hash = strchr(buf, '#');
         int nt = 0;
         R.line++;
-        if (hash) *hash = 0;
         if (!strchr(buf, '\n') && !feof(f)) { rc = fail(&R, "%s", "line too long"); break; }
+        if (hash) *hash = 0;
         while (*p) {
             while (*p && isspace((unsigned char)*p)) *p++ = 0;
             if (!*p) break;
