@@ -473,6 +473,7 @@ static int amps__isfinite(double v) { return v - v == 0.0; }
 #define AMPS__UMOD 1u  /* index in S */
 #define AMPS__UCON 2u  /* index in C */
 #define AMPS__NB 32    /* dense panel width */
+#define AMPS__VB 16    /* right-hand sides per chunk of Step 1 */
 
 typedef struct amps__pdelta { amps_int r, c; double v; } amps__pdelta;
 typedef struct amps__pcon { amps_int i; int release; double v; } amps__pcon;
@@ -513,6 +514,8 @@ struct amps_update {
     double *sb, *rd, *wd, *yd, *rho;       /* dense vectors of the refinement step */
     double *work;                          /* nthr * n, zero between uses */
     double *work2;                         /* n: copy for the partial backward solve */
+    double *xb; amps_int xrows;            /* Step 1 chunks: nthr * xrows * AMPS__VB */
+    amps_int *lmap, *clo;                  /* Step 1: nthr * n each (lmap -1 between uses) */
     amps_int *iwork;                       /* n + capN */
     amps_marker mk, mkN;
     int dirty, has_sol;
@@ -668,6 +671,7 @@ AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     amps__free(ctx, U->tmp); amps__free(ctx, U->yv); amps__free(ctx, U->wv);
     amps__free(ctx, U->sb); amps__free(ctx, U->rd); amps__free(ctx, U->wd); amps__free(ctx, U->yd); amps__free(ctx, U->rho);
     amps__free(ctx, U->work); amps__free(ctx, U->work2); amps__free(ctx, U->iwork);
+    amps__free(ctx, U->xb); amps__free(ctx, U->lmap); amps__free(ctx, U->clo);
     amps_marker_free(ctx, &U->mk); amps_marker_free(ctx, &U->mkN);
     amps__free(ctx, U);
 }
@@ -749,6 +753,10 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     U->pf = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n, sizeof(amps_int)));
     U->work = AMPS__CAST(double *, amps__calloc(ctx, (size_t)n * (size_t)U->nthr, sizeof(double)));
     U->work2 = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
+    U->xrows = F->height > 0 && (double)F->height * AMPS__VB < (double)n ? F->height * AMPS__VB : n;
+    U->xb = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->nthr * (size_t)U->xrows * AMPS__VB, sizeof(double)));
+    U->lmap = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)U->nthr * (size_t)n, sizeof(amps_int)));
+    U->clo = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)U->nthr * (size_t)n, sizeof(amps_int)));
     U->pd = AMPS__CAST(amps__pdelta *, amps__malloc(ctx, (size_t)U->cappd, sizeof(amps__pdelta)));
     U->pc = AMPS__CAST(amps__pcon *, amps__malloc(ctx, (size_t)U->cappc, sizeof(amps__pcon)));
     U->vval = AMPS__CAST(double *, amps__malloc(ctx, vcap, sizeof(double)));
@@ -757,7 +765,7 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     U->dval = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->dcap, sizeof(double)));
     U->kj = AMPS__CAST(amps__kjour *, amps__malloc(ctx, (size_t)U->cappc, sizeof(amps__kjour)));
     U->rv = AMPS__CAST(double *, amps__malloc(ctx, 2 * (size_t)capN, sizeof(double)));
-    if (!U->f || !U->x || !U->upos || !U->iwork || !U->ct || !U->fct || !U->isd || !U->pf || !U->work || !U->work2 || !U->pd || !U->pc ||
+    if (!U->f || !U->x || !U->upos || !U->iwork || !U->ct || !U->fct || !U->isd || !U->pf || !U->work || !U->work2 || !U->xb || !U->lmap || !U->clo || !U->pd || !U->pc ||
         !U->vval || !U->vidx || !U->dcol || !U->dval || !U->kj || !U->rv)
         goto fail;
     if (amps_marker_init(ctx, &U->mk, n > 0 ? n : 1) || amps_marker_init(ctx, &U->mkN, capN > 0 ? capN : 1)) goto fail;
@@ -766,6 +774,7 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     if (!U->G || !U->LU) goto fail;
     if (amps__grow_u(ctx, U, capu)) goto fail;
     for (j = 0; j < capN; j++) U->upos[j] = -1;
+    for (j = 0; j < n * U->nthr; j++) U->lmap[j] = -1;
     for (j = 0; j < n; j++) {
         U->isd[j] = 1.0 / sqrt(F->D[j]);
         sdiag += F->D[j];
@@ -994,21 +1003,62 @@ static amps_int amps__path_len(const amps_factor *F, amps_int p) {
     return len;
 }
 
-/* W column of permuted index p: widx = path p -> root (ascending), wval = D^{-1/2} L^{-1} e_p on
-   it. x is an n-vector of zeros, restored to zeros. The rows of L(:, k) for k on the path lie on
-   the path, so the forward solve never leaves it. */
-static void amps__wcol(const amps_factor *F, const double *isd, amps_int p, double *wval, amps_int *widx, double *x) {
-    amps_int len = 0, t, e, k;
-    for (k = p; k != -1; k = F->parent[k]) widx[len++] = k;
-    x[p] = 1.0;
-    for (t = 0; t < len; t++) {
-        double xk;
-        k = widx[t];
-        xk = x[k];
-        if (xk != 0.0)
-            for (e = F->Lp[k]; e < F->Lp[k + 1]; e++) x[F->Li[e]] -= F->Lx[e] * xk;
-        wval[t] = xk * isd[k];
-        x[k] = 0.0;
+/* W columns (W = D^{-1/2} L^{-1} e_p on the root path of p, ascending) of the U positions
+   list[0..nb-1], written at voff/vlen. The columns are split into chunks of at most AMPS__VB,
+   one chunk per thread at a time; a chunk is one forward solve over the union of its paths
+   (ascending = topological), X(t, j) row-major over the chunk, so each column of L on the
+   union is read once per chunk. The rows of L(:, k) lie on the path of k, so no solve leaves
+   the union. Workspace per thread: xb (xrows * AMPS__VB), lmap (n, -1 outside use), clo (n). */
+static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
+    const amps_factor *F = U->F;
+    amps_int nchunk, csize, ch;
+    if (nb <= 0) return;
+    csize = (nb + U->nthr - 1) / U->nthr;
+    if (csize > AMPS__VB) csize = AMPS__VB;
+    nchunk = (nb + csize - 1) / csize;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) num_threads(U->nthr) if (nchunk > 1)
+#endif
+    for (ch = 0; ch < nchunk; ch++) {
+#ifdef _OPENMP
+        int th = omp_get_thread_num();
+#else
+        int th = 0;
+#endif
+        double *X = U->xb + (size_t)th * (size_t)U->xrows * AMPS__VB;
+        amps_int *lmap = U->lmap + (size_t)th * (size_t)U->n, *clo = U->clo + (size_t)th * (size_t)U->n;
+        amps_int j0 = ch * csize, m = nb - j0 < csize ? nb - j0 : csize, nc = 0, j, t, e, k;
+        /* union of the root paths, ascending */
+        for (j = 0; j < m; j++)
+            for (k = F->iperm[U->uidx[list[j0 + j]]]; k != -1 && lmap[k] < 0; k = F->parent[k]) { lmap[k] = 0; clo[nc++] = k; }
+        qsort(clo, (size_t)nc, sizeof(amps_int), amps__int_cmp);
+        for (t = 0; t < nc; t++) lmap[clo[t]] = t;
+        memset(X, 0, sizeof(double) * (size_t)nc * (size_t)m);
+        for (j = 0; j < m; j++) X[(size_t)lmap[F->iperm[U->uidx[list[j0 + j]]]] * (size_t)m + (size_t)j] = 1.0;
+        /* X := L^{-1} X on the union */
+        for (t = 0; t < nc; t++) {
+            const double *xk = X + (size_t)t * (size_t)m;
+            int nz = 0;
+            k = clo[t];
+            for (j = 0; j < m; j++) nz |= xk[j] != 0.0;
+            if (!nz) continue;
+            for (e = F->Lp[k]; e < F->Lp[k + 1]; e++) {
+                double l = F->Lx[e], *xr = X + (size_t)lmap[F->Li[e]] * (size_t)m;
+                for (j = 0; j < m; j++) xr[j] -= l * xk[j];
+            }
+        }
+        /* gather each column along its own path, scaled by D^{-1/2} */
+        for (j = 0; j < m; j++) {
+            amps_int aa = list[j0 + j], len = 0;
+            double *wv = U->vval + U->voff[aa];
+            amps_int *wi = U->vidx + U->voff[aa];
+            for (k = F->iperm[U->uidx[aa]]; k != -1; k = F->parent[k]) {
+                wi[len] = k;
+                wv[len] = X[(size_t)lmap[k] * (size_t)m + (size_t)j] * U->isd[k];
+                len++;
+            }
+        }
+        for (t = 0; t < nc; t++) lmap[clo[t]] = -1;
     }
 }
 
@@ -1350,7 +1400,7 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
         if (amps__realloc(ctx, (void **)&U->vval, cap, sizeof(double)) || amps__realloc(ctx, (void **)&U->vidx, cap, sizeof(amps_int))) { s = AMPS_ERR_OOM; goto fail; }
         U->vcap = cap;
     }
-    /* Step 1: W columns of the new base positions, in parallel */
+    /* Step 1: W columns of the new base positions, in batches over the union of their paths */
     {
         amps_int nb = 0, *list = U->iwork;
         for (a = u_old; a < U->u; a++)
@@ -1360,18 +1410,7 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
                 U->vused += (size_t)U->vlen[a];
                 list[nb++] = a;
             }
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 1) num_threads(U->nthr) if (nb > 1)
-#endif
-        for (k = 0; k < nb; k++) {
-#ifdef _OPENMP
-            double *x = U->work + (size_t)omp_get_thread_num() * (size_t)U->n;
-#else
-            double *x = U->work;
-#endif
-            amps_int aa = list[k];
-            amps__wcol(U->F, U->isd, U->F->iperm[U->uidx[aa]], U->vval + U->voff[aa], U->vidx + U->voff[aa], x);
-        }
+        amps__wcols(U, list, nb);
     }
     t1 = amps__now(); U->st.t_step[1] = t1 - t0; t0 = t1;
     /* Step 2: trapezoidal augmentation of G (Eq. 3.25-3.27), both triangles stored */
