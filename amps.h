@@ -1003,6 +1003,29 @@ static amps_int amps__path_len(const amps_factor *F, amps_int p) {
     return len;
 }
 
+/* X := L^{-1} X restricted to the ascending node list clo[0..nc-1] (closed under the elimination
+   tree's parents), X row-major with W columns, row t for node clo[t], lmap: node -> row. */
+#define AMPS__WSOLVE(W)                                                                        \
+    static void amps__wsolve##W(const amps_factor *F, const amps_int *clo, amps_int nc,         \
+                                const amps_int *lmap, double *X) {                             \
+        amps_int t, e, j;                                                                      \
+        for (t = 0; t < nc; t++) {                                                             \
+            const double *xk = X + (size_t)t * W;                                              \
+            amps_int k = clo[t];                                                               \
+            int nz = 0;                                                                        \
+            for (j = 0; j < W; j++) nz |= xk[j] != 0.0;                                        \
+            if (!nz) continue;                                                                 \
+            for (e = F->Lp[k]; e < F->Lp[k + 1]; e++) {                                        \
+                double l = F->Lx[e], *xr = X + (size_t)lmap[F->Li[e]] * W;                     \
+                for (j = 0; j < W; j++) xr[j] -= l * xk[j];                                    \
+            }                                                                                  \
+        }                                                                                      \
+    }
+AMPS__WSOLVE(4)
+AMPS__WSOLVE(8)
+AMPS__WSOLVE(16)
+#undef AMPS__WSOLVE
+
 /* W columns (W = D^{-1/2} L^{-1} e_p on the root path of p, ascending) of the U positions
    list[0..nb-1], written at voff/vlen. The columns are split into chunks of at most AMPS__VB,
    one chunk per thread at a time; a chunk is one forward solve over the union of its paths
@@ -1027,26 +1050,19 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
 #endif
         double *X = U->xb + (size_t)th * (size_t)U->xrows * AMPS__VB;
         amps_int *lmap = U->lmap + (size_t)th * (size_t)U->n, *clo = U->clo + (size_t)th * (size_t)U->n;
-        amps_int j0 = ch * csize, m = nb - j0 < csize ? nb - j0 : csize, nc = 0, j, t, e, k;
+        amps_int j0 = ch * csize, m = nb - j0 < csize ? nb - j0 : csize, nc = 0, j, t, k, mw;
         /* union of the root paths, ascending */
         for (j = 0; j < m; j++)
             for (k = F->iperm[U->uidx[list[j0 + j]]]; k != -1 && lmap[k] < 0; k = F->parent[k]) { lmap[k] = 0; clo[nc++] = k; }
         qsort(clo, (size_t)nc, sizeof(amps_int), amps__int_cmp);
         for (t = 0; t < nc; t++) lmap[clo[t]] = t;
-        memset(X, 0, sizeof(double) * (size_t)nc * (size_t)m);
-        for (j = 0; j < m; j++) X[(size_t)lmap[F->iperm[U->uidx[list[j0 + j]]]] * (size_t)m + (size_t)j] = 1.0;
-        /* X := L^{-1} X on the union */
-        for (t = 0; t < nc; t++) {
-            const double *xk = X + (size_t)t * (size_t)m;
-            int nz = 0;
-            k = clo[t];
-            for (j = 0; j < m; j++) nz |= xk[j] != 0.0;
-            if (!nz) continue;
-            for (e = F->Lp[k]; e < F->Lp[k + 1]; e++) {
-                double l = F->Lx[e], *xr = X + (size_t)lmap[F->Li[e]] * (size_t)m;
-                for (j = 0; j < m; j++) xr[j] -= l * xk[j];
-            }
-        }
+        mw = m <= 4 ? 4 : (m <= 8 ? 8 : AMPS__VB);
+        memset(X, 0, sizeof(double) * (size_t)nc * (size_t)mw);
+        for (j = 0; j < m; j++) X[(size_t)lmap[F->iperm[U->uidx[list[j0 + j]]]] * (size_t)mw + (size_t)j] = 1.0;
+        /* X := L^{-1} X on the union, with a fixed row width mw >= m (zero padding) */
+        if (m <= 4) amps__wsolve4(F, clo, nc, lmap, X);
+        else if (m <= 8) amps__wsolve8(F, clo, nc, lmap, X);
+        else amps__wsolve16(F, clo, nc, lmap, X);
         /* gather each column along its own path, scaled by D^{-1/2} */
         for (j = 0; j < m; j++) {
             amps_int aa = list[j0 + j], len = 0;
@@ -1054,7 +1070,7 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
             amps_int *wi = U->vidx + U->voff[aa];
             for (k = F->iperm[U->uidx[aa]]; k != -1; k = F->parent[k]) {
                 wi[len] = k;
-                wv[len] = X[(size_t)lmap[k] * (size_t)m + (size_t)j] * U->isd[k];
+                wv[len] = X[(size_t)lmap[k] * (size_t)mw + (size_t)j] * U->isd[k];
                 len++;
             }
         }
