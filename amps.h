@@ -1010,9 +1010,10 @@ static amps_int amps__path_len(const amps_factor *F, amps_int p) {
                                 const amps_int *lmap, double *X) {                             \
         amps_int t, e, j;                                                                      \
         for (t = 0; t < nc; t++) {                                                             \
-            const double *xk = X + (size_t)t * W;                                              \
+            double xk[W];                                                                      \
             amps_int k = clo[t];                                                               \
             int nz = 0;                                                                        \
+            memcpy(xk, X + (size_t)t * W, sizeof(xk));                                         \
             for (j = 0; j < W; j++) nz |= xk[j] != 0.0;                                        \
             if (!nz) continue;                                                                 \
             for (e = F->Lp[k]; e < F->Lp[k + 1]; e++) {                                        \
