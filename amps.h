@@ -1037,7 +1037,13 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
     const amps_factor *F = U->F;
     amps_int nchunk, csize, ch;
     if (nb <= 0) return;
-    csize = (nb + U->nthr - 1) / U->nthr;
+    {   /* threads only when the work (entries of L on one path, times nb) is worth a fork */
+        double work = 0;
+        amps_int k;
+        for (k = F->iperm[U->uidx[list[0]]]; k != -1; k = F->parent[k]) work += (double)(F->Lp[k + 1] - F->Lp[k]);
+        work *= (double)nb;
+        csize = work > 2e6 ? (nb + U->nthr - 1) / U->nthr : nb;
+    }
     if (csize > AMPS__VB) csize = AMPS__VB;
     nchunk = (nb + csize - 1) / csize;
 #ifdef _OPENMP
