@@ -237,9 +237,9 @@ typedef struct amps_update_opts {
     int grow;               /* 1: grow capacities on demand (may allocate in update calls) */
     amps_formulation formulation;
     double singular_tol;    /* pivot of the dense system below tol * column norm is singular; default 1e-12 */
-    int refine;             /* 1 (default): one refinement step on the residual of the modified rows,
-                               inside the same full solve (adds a partial backward solve over
-                               closure(S u C u neighbours) and O(|S u C|^2)) */
+    int refine;             /* refinement steps on the residual of the modified rows inside the same
+                               full solve (default 1; each adds a partial backward solve over
+                               closure(S u C u neighbours) and O(|S u C|^2)); 0 = none */
     int eq320;              /* 1: take x_S from the small system (Eq. 3.20); default 0 (see bench/RESULTS.md) */
 } amps_update_opts;
 
@@ -1741,10 +1741,13 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
         double *sv = U->work;
         for (k = 0; k < n; k++) sv[k] = U->ct[k] * U->isd[k];
         amps__scatter_w(U, wv, sv);
-        if (U->refine && u > 0) {
-            amps__refine(U, sv, wv);
-            amps__scatter_w(U, U->wd, sv);
-            for (a = 0; a < u; a++) { wv[a] += U->wd[a]; yv[a] += U->yd[a]; }
+        if (u > 0) {
+            int it;
+            for (it = 0; it < U->refine; it++) {
+                amps__refine(U, sv, wv);
+                amps__scatter_w(U, U->wd, sv);
+                for (a = 0; a < u; a++) { wv[a] += U->wd[a]; yv[a] += U->yd[a]; }
+            }
         }
         amps_ltsolve(F, sv);
         for (k = 0; k < n; k++) { U->x[F->perm[k]] = sv[k]; sv[k] = 0.0; }

@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# amps_replay on every shipped scenario (exit 0, residuals small, outputs written), the README
+# example, and malformed scenarios (each stops with "file:line: message" and a nonzero exit).
+B=${AMPS_BUILD:-build/default}
+R="$B/amps_replay"
+pass=0; fail=0
+ok() { pass=$((pass+1)); }
+bad() { fail=$((fail+1)); echo "FAIL test_replay: $*"; }
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+for s in examples/*.scn; do
+  name=$(basename "$s" .scn)
+  if (cd "$tmp" && "$OLDPWD/$R" "$OLDPWD/$s") > "$tmp/$name.out" 2>&1; then ok; else bad "$s exited nonzero: $(tail -3 "$tmp/$name.out")"; continue; fi
+  grep -q '^summary:' "$tmp/$name.out" && ok || bad "$s: no summary line"
+  worst=$(sed -n 's/.*worst residual \([0-9.e+-]*\).*/\1/p' "$tmp/$name.out" | tail -1)
+  if [ -n "$worst" ] && awk -v r="$worst" 'BEGIN{exit !(r < 1e-9)}'; then ok; else bad "$s: worst residual '$worst'"; fi
+  for f in $(sed -n 's/^\(dump\|write\) \([^ #]*\).*/\2/p' "$s"); do [ -s "$tmp/$f" ] && ok || bad "$s: $f not written"; done
+  if [ -f "$tmp/$name.csv" ]; then
+    n=$(($(wc -l < "$tmp/$name.csv") - 1)); m=$(sed -n 's/^dump: .* (\([0-9]*\) nodes)/\1/p' "$tmp/$name.out")
+    [ "$n" = "$m" ] && ok || bad "$s: csv has $n rows, replay said $m nodes"
+    head -1 "$tmp/$name.csv" | grep -q '^node,ux,uy,uz$' && ok || bad "$s: csv header"
+  fi
+done
+"$B/readme_example" > "$tmp/readme.out" 2>&1 && grep -q "top centre node moved" "$tmp/readme.out" && ok || bad "readme example: $(cat "$tmp/readme.out")"
+# malformed scenarios: name|content|expected line|expected text
+while IFS='|' read -r name line want text; do
+  [ -z "$name" ] && continue
+  printf '%b' "$line" > "$tmp/$name.scn"
+  out=$("$R" "$tmp/$name.scn" 2>&1); rc=$?
+  if [ $rc -ne 0 ] && printf '%s' "$out" | grep -q "$name.scn:$want: .*$text"; then ok; else bad "$name: rc=$rc out=$out"; fi
+done <<'CASES'
+unknown|mesh beam 4\nfix z lt 0.5\nfrobnicate 3\n|3|unknown command
+badnum|mesh beam 4\nforce 3 1 x 0\n|2|bad number
+range|mesh beam 4\nfix z lt 0.5\npin 100000 0 0 0\n|3|out of range
+nomesh|solve\n|1|no mesh
+matlate|mesh beam 4\nfix z lt 0.5\nsolve\nmaterial 10 0.3\n|4|only before the first solve
+badaxis|mesh beam 4\nfix w lt 0.5\n|2|bad axis
+pinfixed|mesh beam 4\nfix z lt 0.5\npin 0 0 0 0\n|3|fixed
+missing|mesh nosuchfile.node\n|1|
+badmat|mesh beam 4\nmaterial -1 0.3\n|2|material
+args|mesh beam 4\ncut 3 0 0 0\n|2|usage
+unspd|mesh beam 4\nsolve\n|2|solve
+CASES
+# comments and blank lines anywhere; release of an unpinned node does nothing
+printf 'mesh beam 4 # comment\n\n# whole-line comment\nfix z lt 0.5\nrelease 60\nforce 99 0 0 1 # tip\nsolve\n' > "$tmp/ok.scn"
+"$R" "$tmp/ok.scn" > "$tmp/ok.out" 2>&1 && ok || bad "comments: $(cat "$tmp/ok.out")"
+echo "test_replay: $pass passed, $fail failed"
+[ $fail -eq 0 ]
