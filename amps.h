@@ -1507,11 +1507,11 @@ static amps_status amps__lx_xyz(amps__lex *L, int cross, double *x) {
     return s;
 }
 
-/* Checks a count read from the token at line `line`: 0 <= n, n * 4 fits amps_int, and n
-   records of at least mintok tokens fit in the rest of the buffer (so sizes stay bounded by
-   the file size). */
+/* Checks a count just read: 0 <= n, n * 4 fits amps_int, and n records of mintok tokens
+   (at least one byte each) fit in the rest of the buffer, so that sizes allocated from counts
+   stay proportional to the file size. */
 static amps_status amps__lx_count(amps__lex *L, long long n, int mintok, const char *what) {
-    long long room = (long long)(L->end - L->p) / (2 * mintok) + 1;
+    long long room = (long long)(L->end - L->p) / mintok + 1;
     if (n < 0) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "negative %s count %lld", what, n);
     if (n > room || n > (long long)(amps__fem_imax() / 4))
         return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "%s count %lld exceeds what the file can hold", what, n);
