@@ -281,13 +281,15 @@ AMPS_API double amps_mesh_tet_stiffness(const amps_mesh *m, amps_int t, double K
 AMPS_API amps_csc *amps_mesh_assemble(amps_ctx *ctx, const amps_mesh *m, const amps_int *dof, amps_int ndof);
 /* Cuts at node v with the plane through p with normal nrm: v gets a copy v' = nnode (same
    reference coordinates, origin[v'] = origin[v]), and every tet containing v whose reference
-   centroid c has (c - p) . nrm < 0 (strictly; a tie keeps v) now uses v' instead of v.
-   moved (room for amps_mesh_degree(m, v)) receives those tets, ascending; *nmoved their number;
-   *new_node = v' (new_node, nmoved may be NULL). Cost O(degree of v); allocates only when
-   nnode == node_cap (then grows; on failure the mesh is unchanged).
+   centroid c = (x_a + x_b + x_c + x_d) / 4 has sum_k (c_k - p_k) nrm_k < 0 (strictly; a tie
+   keeps v) now uses v' instead of v. Element matrices do not change: the rows and columns of v
+   in the moved tets' Ke now belong to v'.
+   moved (room for amps_mesh_degree(m, v); also used as scratch) receives those tets, ascending;
+   *nmoved their number; *new_node = v' (new_node, nmoved may be NULL). Cost O(degree of v);
+   allocates only when nnode == node_cap (grows by half; on failure the mesh is unchanged).
    If all or none of the tets would move: nothing changes, *nmoved = 0, *new_node = -1 and
    AMPS_WARN_NOOP is returned. Errors: AMPS_ERR_INDEX (v), AMPS_ERR_VALUE (NaN/Inf in p or nrm),
-   AMPS_ERR_ARG (NULL pointer, zero normal). */
+   AMPS_ERR_ARG (NULL pointer, zero normal), AMPS_ERR_OOM / AMPS_ERR_CAPACITY (growth). */
 AMPS_API amps_status amps_mesh_cut(amps_ctx *ctx, amps_mesh *m, amps_int v, const double p[3], const double nrm[3],
                                    amps_int *new_node, amps_int *moved, amps_int *nmoved);
 /* Per-tet stress for displacements disp (3 per node): sigma (6 per tet), von_mises (1 per tet),

@@ -235,6 +235,8 @@ static void test_malformed_medit(void) {
     t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n2\n1 2 3 4 0\nEnd\n"), AMPS_ERR_PARSE, "m.mesh:12:", "fewer tets than declared");
     t_expect(&ctx, t_medit(&ctx, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\nTetrahedra\n1\n1 2 3 4 0\n"), AMPS_ERR_PARSE, "m.mesh:6:", "fewer vertices than declared");
     t_expect(&ctx, t_medit(&ctx, "Vertices\n4\n0 0 0 0\n1 0 nan 0\n"), AMPS_ERR_PARSE, "m.mesh:4:", "NaN");
+    t_expect(&ctx, t_medit(&ctx, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1e400 0 0\n0 0 1 0\n"), AMPS_ERR_PARSE, "m.mesh:5:", "Inf");
+    t_expect(&ctx, t_medit(&ctx, "Vertices\r\n4\r\n0 0 0 0\r\n\r\n1 0 0 0\r\n0 1 0 0\r\n0 0 1 0\r\nTetrahedra\r\n1\r\n1 2 3 4\r\n"), AMPS_ERR_PARSE, "m.mesh:10:", "missing reference, CRLF");
     t_expect(&ctx, t_medit(&ctx, "Vertices\n-4\n"), AMPS_ERR_PARSE, "m.mesh:2:", "negative count");
     t_expect(&ctx, t_medit(&ctx, "Vertices\n123456789012\n0 0 0 0\n"), AMPS_ERR_PARSE, "m.mesh:2:", "absurd count");
     t_expect(&ctx, t_medit(&ctx, "Tetrahedra\n1\n1 2 3 4 0\n" M_V), AMPS_ERR_PARSE, "m.mesh:1:", "Tetrahedra before Vertices");
