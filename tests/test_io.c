@@ -491,6 +491,17 @@ static void test_corruption(void) {
                 else if (f == 2) m = amps_mesh_read_medit_mem(&ctx, exact, n, "m.mesh");
                 else m = amps_mesh_read_tetgen_mem(&ctx, exact, n, "t.node", T_ELE1, strlen(T_ELE1), "t.ele");
                 parsed += m != NULL;
+                if (m && parsed % 10 == 1) { /* what parses survives a write / read round trip */
+                    char path[700];
+                    amps_mesh *r;
+                    t_path(path, f == 2 ? "fz.mesh" : "fz.msh");
+                    if (f == 2) amps_write_medit(&ctx, path, m);
+                    else amps_write_gmsh(&ctx, path, m, f == 0 ? 4 : 2);
+                    r = amps_mesh_read(&ctx, path);
+                    if (!t_same_mesh(r, m)) bad++;
+                    amps_mesh_free(&ctx, r);
+                    remove(path);
+                }
                 t_contract(&ctx, m, f < 2 ? "g.msh" : f == 2 ? "m.mesh" : "t.node", &bad);
                 free(exact);
             }

@@ -4,6 +4,7 @@
 # replays the committed corpus (regression check). New corpus entries go to
 # build/fuzz/corpus/<reader>/, crashers to build/fuzz/crash-<reader>-*.
 #   bash tests/fuzz/run.sh [seconds] [reader ...]     readers: tetgen gmsh medit
+# Environment: CC (default clang), MAX_LEN (largest input, default 4096).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 secs=${1:-60}
@@ -25,7 +26,7 @@ for r in $readers; do
   else
     mkdir -p "$out/corpus/$r"
     echo "== $r: fuzzing for $secs s"
-    "$bin" -max_total_time="$secs" -max_len=4096 -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 \
+    "$bin" -max_total_time="$secs" -max_len="${MAX_LEN:-4096}" -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 \
         -artifact_prefix="$out/crash-$r-" $dict "$out/corpus/$r" "tests/fuzz/corpus/$r" 2>&1 \
       | grep -E "stat::number_of_executed_units|stat::new_units_added|ERROR|SUMMARY|Test unit written|DONE" || true
     if ls "$out"/crash-"$r"-* >/dev/null 2>&1; then echo "$r: crashers in $out/crash-$r-*"; status=1; fi
