@@ -348,6 +348,40 @@ static void test_mesh_create(void) {
     }
 }
 
+/* amps_mesh_check detects each kind of corruption (fields are restored after each case). */
+static void test_check(void) {
+    amps_ctx ctx; amps_mesh *m; amps_int s, moved[32], nm, vc;
+    double p[3] = {0.5, 0.5, 0.5}, n[3] = {1, 0, 0}, x;
+    amps_ctx_init(&ctx);
+    m = amps_mesh_grid(&ctx, 2, 2, 2, 1, 1, 1);
+    if (!m) { CHECK(0, "grid"); return; }
+    amps_mesh_cut(&ctx, m, 0, p, n, &vc, moved, &nm);
+    CHECK(amps_mesh_check(&ctx, m) == AMPS_OK, "valid mesh: %s", ctx.msg);
+#define T_BREAK(field, val, what)                                                                                   \
+    do {                                                                                                            \
+        s = field; field = val;                                                                                     \
+        CHECK(amps_mesh_check(&ctx, m) == AMPS_ERR_MESH, "check misses: %s", what);                                 \
+        field = s;                                                                                                  \
+    } while (0)
+    T_BREAK(m->tet[5], 99, "node out of range");
+    T_BREAK(m->tet[5], m->tet[4], "repeated node");
+    T_BREAK(m->origin[3], 2, "origin of a file node");
+    T_BREAK(m->origin[8], 8, "origin of a copy");
+    T_BREAK(m->inc_len[3], m->inc_len[3] + 1, "slot overlap");
+    T_BREAK(m->inc_len[3], 4 * m->ntet, "slot out of range");
+    T_BREAK(m->inc_len[3], m->inc_len[3] - 1, "entry missing");
+    T_BREAK(m->inc[m->inc_ptr[7]], m->inc[m->inc_ptr[7] + 1], "not ascending");
+    T_BREAK(m->inc[m->inc_ptr[7]], 77, "invalid tet");
+    T_BREAK(m->inc[m->inc_ptr[8]], m->inc[m->inc_ptr[0]], "tet without the node");
+    T_BREAK(m->nfile, m->nnode + 1, "counts");
+#undef T_BREAK
+    x = m->xyz[3 * 8]; m->xyz[3 * 8] = 5;
+    CHECK(amps_mesh_check(&ctx, m) == AMPS_ERR_MESH, "check misses a moved copy");
+    m->xyz[3 * 8] = x;
+    CHECK(amps_mesh_check(&ctx, m) == AMPS_OK, "restored");
+    amps_mesh_free(&ctx, m);
+}
+
 static void test_select(void) {
     amps_ctx ctx; amps_mesh *m; amps_int out[200], n, k; int ok = 1;
     unsigned char fixed[100];
@@ -769,6 +803,7 @@ int main(void) {
     test_element();
     test_eig();
     test_mesh_create();
+    test_check();
     test_select();
     test_fe_util_meshes();
     test_assembly();

@@ -151,6 +151,7 @@ static void test_malformed_tetgen(void) {
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "2 4 0\n0 0 1 2 3\n"), AMPS_ERR_PARSE, "t.ele:2:", "fewer tets than declared");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 2 3\n1 0 1 2 3\n"), AMPS_ERR_PARSE, "t.ele:3:", "more tets than declared");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "-1 4 0\n"), AMPS_ERR_PARSE, "t.ele:1:", "negative tet count");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 -3\n0 0 1 2 3\n"), AMPS_ERR_PARSE, "t.ele:1:", "negative attribute count");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "0 4 0\n"), AMPS_ERR_PARSE, "t.ele:1:", "zero tets");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "# x\n1 4 0\n0 0 1 2 2\n"), AMPS_ERR_MESH, "t.ele:3:", "degenerate tet");
     t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 2 0 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_MESH, "t.ele:2:", "flat tet");
@@ -193,6 +194,8 @@ static void test_malformed_gmsh(void) {
     t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 2 2 0 1 1 2 3\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:14:", "no tetrahedra");
     t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Elements\n1\n1 4 2 0 1 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:4:", "$Elements before $Nodes");
     t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES G_NODES), AMPS_ERR_PARSE, "g.msh:11:", "duplicate $Nodes");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_HEAD), AMPS_ERR_PARSE, "g.msh:4:", "duplicate $MeshFormat");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n0\n$EndElements\n$Elements\n"), AMPS_ERR_PARSE, "g.msh:14:", "duplicate $Elements");
     t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Comments\nhello\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:4:", "unterminated section");
     t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 4 2 0 1 1 2 3 3\n$EndElements\n"), AMPS_ERR_MESH, "g.msh:13:", "degenerate");
     /* 4.1 */
@@ -243,6 +246,7 @@ static void test_malformed_medit(void) {
     t_expect(&ctx, t_medit(&ctx, M_V "End\n"), AMPS_ERR_PARSE, "m.mesh:9:", "no Tetrahedra");
     t_expect(&ctx, t_medit(&ctx, "MeshVersionFormatted 2\n5\n"), AMPS_ERR_PARSE, "m.mesh:2:", "number instead of keyword");
     t_expect(&ctx, t_medit(&ctx, M_V M_V), AMPS_ERR_PARSE, "m.mesh:11:", "duplicate Vertices");
+    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n0\n\nTetrahedra 0\n"), AMPS_ERR_PARSE, "m.mesh:12:", "duplicate Tetrahedra");
     t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n1 2 3 4 0.5\n"), AMPS_ERR_PARSE, "m.mesh:11:", "fractional reference");
     t_expect(&ctx, t_medit(&ctx, "Vertices\r\n4\r\n0 0 0 0\r\n1 0 0 0\r\n0 1 0 0\r\n0 0 0 0\r\nTetrahedra\r\n1\r\n1 2 3 4 0\r\n"), AMPS_ERR_MESH, "m.mesh:9:", "degenerate");
 #undef M_V
