@@ -1,0 +1,10 @@
+/* libFuzzer target: MEDIT .mesh reader on a memory buffer. */
+#include "fuzz_common.h"
+
+int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size);
+int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size) {
+    amps_ctx ctx;
+    amps_ctx_init(&ctx);
+    fuzz_check(&ctx, amps_mesh_read_medit_mem(&ctx, (const char *)data, size, "fuzz.mesh"), "fuzz.mesh");
+    return 0;
+}

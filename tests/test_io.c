@@ -1,0 +1,559 @@
+/* Mesh readers and writers: round trips, TetGen numbering bases, Gmsh 2.2 / 4.1 with mixed
+   element types, malformed input (status and file:line), random corruption, allocation
+   failures, and a well-formed VTU file. Temporary files go next to the test binary. */
+#include <string.h>
+#include "t_alloc.h"
+#define AMPS_IMPLEMENTATION
+#include "amps.h"
+#include "amps_test.h"
+
+static char g_dir[600];
+
+static void t_path(char *out, const char *name) { snprintf(out, 700, "%s/%s", g_dir, name); }
+
+static int t_write(const char *path, const char *s, size_t n) {
+    FILE *f = fopen(path, "wb");
+    if (!f) return 0;
+    fwrite(s, 1, n, f);
+    return fclose(f) == 0;
+}
+
+static char *t_slurp(const char *path, size_t *len) {
+    FILE *f = fopen(path, "rb");
+    char *b; long n;
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END); n = ftell(f); fseek(f, 0, SEEK_SET);
+    b = (char *)malloc((size_t)n + 1);
+    if (fread(b, 1, (size_t)n, f) != (size_t)n) { free(b); fclose(f); return NULL; }
+    b[n] = 0; fclose(f);
+    if (len) *len = (size_t)n;
+    return b;
+}
+
+/* Readers on exact-size heap copies (no NUL terminator), so overreads are caught by ASan. */
+static amps_mesh *t_gmsh(amps_ctx *ctx, const char *s) {
+    size_t n = strlen(s); char *b = (char *)malloc(n ? n : 1); amps_mesh *m;
+    memcpy(b, s, n); m = amps_mesh_read_gmsh_mem(ctx, b, n, "g.msh"); free(b); return m;
+}
+static amps_mesh *t_medit(amps_ctx *ctx, const char *s) {
+    size_t n = strlen(s); char *b = (char *)malloc(n ? n : 1); amps_mesh *m;
+    memcpy(b, s, n); m = amps_mesh_read_medit_mem(ctx, b, n, "m.mesh"); free(b); return m;
+}
+static amps_mesh *t_tetgen(amps_ctx *ctx, const char *node, const char *ele) {
+    size_t n = strlen(node), e = strlen(ele); char *b = (char *)malloc(n ? n : 1), *c = (char *)malloc(e ? e : 1); amps_mesh *m;
+    memcpy(b, node, n); memcpy(c, ele, e);
+    m = amps_mesh_read_tetgen_mem(ctx, b, n, "t.node", c, e, "t.ele");
+    free(b); free(c); return m;
+}
+
+/* m is NULL, ctx has status st and a message starting with prefix (e.g. "g.msh:13:"). */
+static void t_expect(amps_ctx *ctx, amps_mesh *m, amps_status st, const char *prefix, const char *what) {
+    CHECK(!m && ctx->status == st && !strncmp(ctx->msg, prefix, strlen(prefix)), "%s: want %d '%s', got %s (%d: %s)", what, (int)st, prefix,
+          m ? "a mesh" : "NULL", (int)ctx->status, ctx->msg);
+    amps_mesh_free(ctx, m);
+}
+
+static int t_same_mesh(const amps_mesh *a, const amps_mesh *b) {
+    return a && b && a->nnode == b->nnode && a->ntet == b->ntet && t_reldiff((int)(3 * a->nnode), a->xyz, b->xyz) == 0 &&
+           t_norm((int)(3 * a->nnode), a->xyz) == t_norm((int)(3 * b->nnode), b->xyz) && !memcmp(a->tet, b->tet, sizeof(amps_int) * 4 * a->ntet);
+}
+
+/* ---- fixtures ---- */
+
+static const char *G22 =
+    "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"
+    "$Elements\n1\n1 4 2 0 1 1 2 3 4\n$EndElements\n";
+
+static const char *G22_MIXED =
+    "$MeshFormat\r\n2.2 0 8\r\n$EndMeshFormat\r\n$PhysicalNames\r\n2\r\n2 1 \"skin $EndNodes\"\r\n3 2 \"body\"\r\n$EndPhysicalNames\r\n"
+    "$Nodes\r\n6\r\n10 0 0 0\r\n20 1 0 0\r\n30 0 1 0\r\n40 0 0 1\r\n7 1 1 1\r\n5 0.5 0.5 -1\r\n$EndNodes\r\n"
+    "$Elements\r\n6\r\n1 15 2 0 1 10\r\n2 1 2 0 1 10 20\r\n3 2 2 1 1 10 20 30\r\n4 4 2 2 1 10 20 30 40\r\n"
+    "5 4 3 2 1 0 20 30 40 7\r\n6 4 0 10 30 20 5\r\n$EndElements\r\n";
+
+static const char *G41_MIXED =
+    "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Entities\n1 0 0 1\n1 0 0 0 0\n1 0 0 0 1 1 1 1 0 0\n$EndEntities\n"
+    "$Nodes\n3 6 5 40\n0 1 0 1\n10\n0 0 0\n2 1 1 2\n20\n30\n1 0 0 0.5 0.5\n0 1 0 0.25 0.75\n3 1 0 3\n40\n7\n5\n0 0 1\n1 1 1\n0.5 0.5 -1\n$EndNodes\n"
+    "$Elements\n3 5 1 5\n0 1 15 1\n1 10\n2 1 2 1\n2 10 20 30\n3 1 4 3\n3 10 20 30 40\n4 20 30 40 7\n5 10 30 20 5\n$EndElements\n";
+
+static const double MIXED_XYZ[18] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1, 0.5, 0.5, -1};
+static const amps_int MIXED_TET[12] = {0, 1, 2, 3, 1, 2, 3, 4, 0, 2, 1, 5};
+
+static const char *M_BASE =
+    "MeshVersionFormatted 2\nDimension 3\nVertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\nTetrahedra\n1\n1 2 3 4 0\nEnd\n";
+
+static const char *M_MIXED =
+    "MeshVersionFormatted 2\r\n# comment line\r\nDimension\r\n3\r\nVertices\r\n6\r\n0 0 0 1\r\n1 0 0 1\r\n0 1 0 1   # trailing comment\r\n"
+    "0 0 1 2\r\n1 1 1 2\r\n0.5 0.5 -1 3\r\nEdges\r\n1\r\n1 2 0\r\nTriangles\r\n2\r\n1 2 3 1\r\n2 3 4 1\r\nRequiredVertices 1 3\r\n"
+    "Tetrahedra\r\n3\r\n1 2 3 4 1\r\n2 3 4 5 7\r\n1 3 2 6 7\r\nCorners\r\n2\r\n1 2\r\nEnd\r\nanything after End is ignored\r\n";
+
+static const char *T_NODE4 = "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n";
+static const char *T_ELE1 = "1 4 0\n0 0 1 2 3\n";
+
+static void test_valid_inputs(void) {
+    amps_ctx ctx; amps_mesh *m, *ref;
+    amps_ctx_init(&ctx);
+    ref = amps_mesh_create(&ctx, 6, MIXED_XYZ, 3, MIXED_TET);
+    m = t_gmsh(&ctx, G22_MIXED);
+    CHECK(t_same_mesh(m, ref), "gmsh 2.2 mixed types, tags, CRLF: %s", ctx.msg);
+    amps_mesh_free(&ctx, m);
+    m = t_gmsh(&ctx, G41_MIXED);
+    CHECK(t_same_mesh(m, ref), "gmsh 4.1 mixed types, blocks, parametric nodes: %s", ctx.msg);
+    amps_mesh_free(&ctx, m);
+    m = t_medit(&ctx, M_MIXED);
+    CHECK(t_same_mesh(m, ref), "medit mixed keywords, comments, CRLF: %s", ctx.msg);
+    amps_mesh_free(&ctx, m);
+    /* TetGen: 1-based, attributes, markers, comments, 10-node tets */
+    m = t_tetgen(&ctx,
+                 "# points\n6 3 1 1\n1 0 0 0 0.5 1\n2 1 0 0 0.5 1\n\n3 0 1 0 0.5 0\n4 0 0 1 0.5 0 # last attr\n5 1 1 1 2 1\n6 0.5 0.5 -1 0 0\n# end\n",
+                 "# tets, 10 nodes, one attribute\n3 10 1\n1 1 2 3 4 1 2 3 4 5 1 7\n2 2 3 4 5 1 1 1 1 1 1 8\n3 1 3 2 6 6 6 6 6 6 6 0\n");
+    CHECK(t_same_mesh(m, ref), "tetgen 1-based, 10-node: %s", ctx.msg);
+    amps_mesh_free(&ctx, m);
+    /* TetGen: 0-based, CRLF, header without optional fields */
+    m = t_tetgen(&ctx, "6\r\n0 0 0 0\r\n1 1 0 0\r\n2 0 1 0\r\n3 0 0 1\r\n4 1 1 1\r\n5 0.5 0.5 -1\r\n",
+                 "3\r\n0 0 1 2 3\r\n1 1 2 3 4\r\n2 0 2 1 5\r\n");
+    CHECK(t_same_mesh(m, ref), "tetgen 0-based, CRLF: %s", ctx.msg);
+    amps_mesh_free(&ctx, m);
+    amps_mesh_free(&ctx, ref);
+}
+
+/* ---- malformed input: status and line ---- */
+
+static void test_malformed_tetgen(void) {
+    amps_ctx ctx;
+    amps_ctx_init(&ctx);
+    t_expect(&ctx, t_tetgen(&ctx, "", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "empty node file");
+    t_expect(&ctx, t_tetgen(&ctx, "# only a comment\n\n", T_ELE1), AMPS_ERR_PARSE, "t.node:2:", "node file without data");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:3:", "truncated node file");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0", T_ELE1), AMPS_ERR_PARSE, "t.node:3:", "truncated mid-line");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 1 1 1\n", T_ELE1), AMPS_ERR_PARSE, "t.node:6:", "too many points");
+    t_expect(&ctx, t_tetgen(&ctx, "-4 3 0 0\n0 0 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "negative count");
+    t_expect(&ctx, t_tetgen(&ctx, "99999999999 3 0 0\n0 0 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "absurd count");
+    t_expect(&ctx, t_tetgen(&ctx, "99999999999999999999999 3\n", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "overflowing count");
+    t_expect(&ctx, t_tetgen(&ctx, "0 3 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "zero points");
+    t_expect(&ctx, t_tetgen(&ctx, "4 2 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "dimension 2");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 7\n", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "bad marker flag");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 nan 0 0\n2 0 1 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_PARSE, "t.node:3:", "NaN");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1e999 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_PARSE, "t.node:4:", "overflow to Inf");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 -inf 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_PARSE, "t.node:4:", "-inf");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 abc 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_PARSE, "t.node:4:", "non-numeric");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n2 0 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:2:", "first number 2");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n2 1 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:3:", "out of sequence");
+    t_expect(&ctx, t_tetgen(&ctx, "# c\n\n4 3 0 0\n0 0 0 0\n\n1 x 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:6:", "line count with comments");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\r\n0 0 0 0\r\n1 1 0 0\r\n2 0 1 0\r\n3 0 0 z\r\n", T_ELE1), AMPS_ERR_PARSE, "t.node:5:", "CRLF line count");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, ""), AMPS_ERR_PARSE, "t.ele:1:", "empty ele");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 2 4\n"), AMPS_ERR_PARSE, "t.ele:2:", "index out of range");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 2 -1\n"), AMPS_ERR_PARSE, "t.ele:2:", "negative index");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n", "1 4 0\n1 0 1 2 3\n"), AMPS_ERR_PARSE, "t.ele:2:", "0 in 1-based");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 2\n"), AMPS_ERR_PARSE, "t.ele:2:", "missing index");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 x 3\n"), AMPS_ERR_PARSE, "t.ele:2:", "non-numeric index");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 2.0 3\n"), AMPS_ERR_PARSE, "t.ele:2:", "fractional index");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 5 0\n0 0 1 2 3 3\n"), AMPS_ERR_PARSE, "t.ele:1:", "5 nodes per tet");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "2 4 0\n0 0 1 2 3\n"), AMPS_ERR_PARSE, "t.ele:2:", "fewer tets than declared");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 2 3\n1 0 1 2 3\n"), AMPS_ERR_PARSE, "t.ele:3:", "more tets than declared");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "-1 4 0\n"), AMPS_ERR_PARSE, "t.ele:1:", "negative tet count");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 -3\n0 0 1 2 3\n"), AMPS_ERR_PARSE, "t.ele:1:", "negative attribute count");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "0 4 0\n"), AMPS_ERR_PARSE, "t.ele:1:", "zero tets");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "# x\n1 4 0\n0 0 1 2 2\n"), AMPS_ERR_MESH, "t.ele:3:", "degenerate tet");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 2 0 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_MESH, "t.ele:2:", "flat tet");
+}
+
+static void test_malformed_gmsh(void) {
+    amps_ctx ctx;
+    char buf[1000];
+    amps_ctx_init(&ctx);
+#define G_HEAD "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n"
+#define G_NODES "$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"
+    {
+        amps_mesh *m = t_gmsh(&ctx, G22);
+        CHECK(m != NULL, "base file: %s", ctx.msg);
+        amps_mesh_free(&ctx, m);
+    }
+    t_expect(&ctx, t_gmsh(&ctx, ""), AMPS_ERR_PARSE, "g.msh:1:", "empty");
+    t_expect(&ctx, t_gmsh(&ctx, "\n\n\n"), AMPS_ERR_PARSE, "g.msh:3:", "blank");
+    t_expect(&ctx, t_gmsh(&ctx, "hello\n"), AMPS_ERR_PARSE, "g.msh:1:", "garbage");
+    t_expect(&ctx, t_gmsh(&ctx, G_NODES), AMPS_ERR_PARSE, "g.msh:1:", "no $MeshFormat");
+    t_expect(&ctx, t_gmsh(&ctx, "$MeshFormat\n2.2 1 8\n\x01\x00\x00\x00\n$EndMeshFormat\n"), AMPS_ERR_PARSE, "g.msh:2:", "binary");
+    CHECK(strstr(ctx.msg, "binary") != NULL, "binary message: %s", ctx.msg);
+    t_expect(&ctx, t_gmsh(&ctx, "$MeshFormat\n3.0 0 8\n$EndMeshFormat\n"), AMPS_ERR_PARSE, "g.msh:2:", "version 3");
+    t_expect(&ctx, t_gmsh(&ctx, "$MeshFormat\n4 0 8\n$EndMeshFormat\n"), AMPS_ERR_PARSE, "g.msh:2:", "version 4.0");
+    t_expect(&ctx, t_gmsh(&ctx, "$MeshFormat\n2.2 0 8\n$Nodes\n"), AMPS_ERR_PARSE, "g.msh:3:", "missing $EndMeshFormat");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n3\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:9:", "node count too small");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n5\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:10:", "node count too large");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n-4\n"), AMPS_ERR_PARSE, "g.msh:5:", "negative node count");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n1000000000\n1 0 0 0\n"), AMPS_ERR_PARSE, "g.msh:5:", "absurd node count");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n4\n1 0 0 0\n1 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:7:", "duplicate tag");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 NaN 0\n4 0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:8:", "NaN");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\r\n4\r\n1 0 0 0\r\n2 1 0 0\r\n3 0 0 0\r\n4 0 0 Infinity\r\n$EndNodes\r\n"), AMPS_ERR_PARSE, "g.msh:9:", "Inf CRLF");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 4 2 0 1 1 2 3 9\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:13:", "undefined tag");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 4 2 0 1 1 2 3\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:13:", "missing node");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n"), AMPS_ERR_PARSE, "g.msh:12:", "truncated elements");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 x 2 0 1 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:13:", "non-numeric type");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n-1\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:12:", "negative element count");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n2\n1 4 2 0 1 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:14:", "element count too large");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 4 -2 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:13:", "negative tag count");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 2 2 0 1 1 2 3\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:14:", "no tetrahedra");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Elements\n1\n1 4 2 0 1 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:4:", "$Elements before $Nodes");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES G_NODES), AMPS_ERR_PARSE, "g.msh:11:", "duplicate $Nodes");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_HEAD), AMPS_ERR_PARSE, "g.msh:4:", "duplicate $MeshFormat");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n0\n$EndElements\n$Elements\n"), AMPS_ERR_PARSE, "g.msh:14:", "duplicate $Elements");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Comments\nhello\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:4:", "unterminated section");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 4 2 0 1 1 2 3 3\n$EndElements\n"), AMPS_ERR_MESH, "g.msh:13:", "degenerate");
+    /* 4.1 */
+#define G4_HEAD "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n"
+#define G4_NODES "$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n"
+    {
+        amps_mesh *m = t_gmsh(&ctx, G4_HEAD G4_NODES "$Elements\n1 1 1 1\n3 1 4 1\n1 1 2 3 4\n$EndElements\n");
+        CHECK(m != NULL, "4.1 base: %s", ctx.msg);
+        amps_mesh_free(&ctx, m);
+    }
+    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD "$Nodes\n1 5 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:15:", "4.1 node count mismatch");
+    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD "$Nodes\n1 4 1 4\n3 1 0 5\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:6:", "4.1 block too large");
+    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD "$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n"), AMPS_ERR_PARSE, "g.msh:13:", "4.1 truncated coordinates");
+    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD G4_NODES "$Elements\n1 1 1 1\n3 1 4 1\n1 1 2 3 5\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:19:", "4.1 undefined tag");
+    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD G4_NODES "$Elements\n1 2 1 2\n3 1 4 1\n1 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:20:", "4.1 element count mismatch");
+    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD G4_NODES "$Elements\n1 3 1 3\n2 1 2 3\n1 1 2 3\n"), AMPS_ERR_PARSE, "g.msh:19:", "4.1 truncated block");
+    snprintf(buf, sizeof(buf), "%s", G4_HEAD "$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n9999999999 1 1 1\n");
+    t_expect(&ctx, t_gmsh(&ctx, buf), AMPS_ERR_PARSE, "g.msh:17:", "4.1 absurd block count");
+#undef G_HEAD
+#undef G_NODES
+#undef G4_HEAD
+#undef G4_NODES
+}
+
+static void test_malformed_medit(void) {
+    amps_ctx ctx;
+    amps_ctx_init(&ctx);
+#define M_V "MeshVersionFormatted 2\nDimension 3\nVertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\n"
+    {
+        amps_mesh *m = t_medit(&ctx, M_BASE);
+        CHECK(m != NULL, "medit base: %s", ctx.msg);
+        amps_mesh_free(&ctx, m);
+    }
+    t_expect(&ctx, t_medit(&ctx, ""), AMPS_ERR_PARSE, "m.mesh:1:", "empty");
+    t_expect(&ctx, t_medit(&ctx, "MeshVersionFormatted 2\nDimension 2\n"), AMPS_ERR_PARSE, "m.mesh:2:", "2D");
+    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n0 2 3 4 0\nEnd\n"), AMPS_ERR_PARSE, "m.mesh:11:", "index 0");
+    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n1 2 3 5 0\nEnd\n"), AMPS_ERR_PARSE, "m.mesh:11:", "index 5");
+    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n1 2 x 4 0\nEnd\n"), AMPS_ERR_PARSE, "m.mesh:11:", "non-numeric index");
+    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n1 2 3"), AMPS_ERR_PARSE, "m.mesh:11:", "truncated tet");
+    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n2\n1 2 3 4 0\nEnd\n"), AMPS_ERR_PARSE, "m.mesh:12:", "fewer tets than declared");
+    t_expect(&ctx, t_medit(&ctx, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\nTetrahedra\n1\n1 2 3 4 0\n"), AMPS_ERR_PARSE, "m.mesh:6:", "fewer vertices than declared");
+    t_expect(&ctx, t_medit(&ctx, "Vertices\n4\n0 0 0 0\n1 0 nan 0\n"), AMPS_ERR_PARSE, "m.mesh:4:", "NaN");
+    t_expect(&ctx, t_medit(&ctx, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1e400 0 0\n0 0 1 0\n"), AMPS_ERR_PARSE, "m.mesh:5:", "Inf");
+    t_expect(&ctx, t_medit(&ctx, "Vertices\r\n4\r\n0 0 0 0\r\n\r\n1 0 0 0\r\n0 1 0 0\r\n0 0 1 0\r\nTetrahedra\r\n1\r\n1 2 3 4\r\n"), AMPS_ERR_PARSE, "m.mesh:10:", "missing reference, CRLF");
+    t_expect(&ctx, t_medit(&ctx, "Vertices\n-4\n"), AMPS_ERR_PARSE, "m.mesh:2:", "negative count");
+    t_expect(&ctx, t_medit(&ctx, "Vertices\n123456789012\n0 0 0 0\n"), AMPS_ERR_PARSE, "m.mesh:2:", "absurd count");
+    t_expect(&ctx, t_medit(&ctx, "Tetrahedra\n1\n1 2 3 4 0\n" M_V), AMPS_ERR_PARSE, "m.mesh:1:", "Tetrahedra before Vertices");
+    t_expect(&ctx, t_medit(&ctx, M_V "End\n"), AMPS_ERR_PARSE, "m.mesh:9:", "no Tetrahedra");
+    t_expect(&ctx, t_medit(&ctx, "MeshVersionFormatted 2\n5\n"), AMPS_ERR_PARSE, "m.mesh:2:", "number instead of keyword");
+    t_expect(&ctx, t_medit(&ctx, M_V M_V), AMPS_ERR_PARSE, "m.mesh:11:", "duplicate Vertices");
+    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n0\n\nTetrahedra 0\n"), AMPS_ERR_PARSE, "m.mesh:12:", "duplicate Tetrahedra");
+    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n1 2 3 4 0.5\n"), AMPS_ERR_PARSE, "m.mesh:11:", "fractional reference");
+    t_expect(&ctx, t_medit(&ctx, "Vertices\r\n4\r\n0 0 0 0\r\n1 0 0 0\r\n0 1 0 0\r\n0 0 0 0\r\nTetrahedra\r\n1\r\n1 2 3 4 0\r\n"), AMPS_ERR_MESH, "m.mesh:9:", "degenerate");
+#undef M_V
+}
+
+/* ---- round trips through files ---- */
+
+static void test_roundtrip(void) {
+    amps_ctx ctx; amps_mesh *m, *r;
+    char p1[700], p2[700];
+    double p[3] = {0.5, 0.5, 1.0}, n[3] = {0.3, 0.1, 1};
+    amps_int moved[64], nm, vc, v;
+    int base, ver;
+    amps_ctx_init(&ctx);
+    m = amps_mesh_brick(&ctx, 2);
+    if (!m) { CHECK(0, "brick"); return; }
+    for (v = 0; v < m->nnode; v++) if (m->xyz[3 * v + 2] == 1.0) amps_mesh_cut(&ctx, m, v, p, n, &vc, moved, &nm);
+    CHECK(m->nnode > m->nfile, "cuts made copies");
+    for (base = 0; base < 2; base++) {
+        t_path(p1, base ? "rt1" : "rt0");
+        CHECK(amps_write_tetgen(&ctx, p1, m, base) == AMPS_OK, "write tetgen %d: %s", base, ctx.msg);
+        t_path(p1, base ? "rt1.node" : "rt0.node");
+        t_path(p2, base ? "rt1.ele" : "rt0.ele");
+        r = amps_mesh_read(&ctx, p1);
+        CHECK(t_same_mesh(r, m), "tetgen base %d via .node: %s", base, ctx.msg);
+        amps_mesh_free(&ctx, r);
+        r = amps_mesh_read(&ctx, p2);
+        CHECK(t_same_mesh(r, m), "tetgen base %d via .ele: %s", base, ctx.msg);
+        amps_mesh_free(&ctx, r);
+        remove(p1); remove(p2);
+    }
+    for (ver = 2; ver <= 4; ver += 2) {
+        t_path(p1, ver == 2 ? "rt22.msh" : "rt41.MSH");
+        CHECK(amps_write_gmsh(&ctx, p1, m, ver) == AMPS_OK, "write gmsh %d: %s", ver, ctx.msg);
+        r = amps_mesh_read(&ctx, p1);
+        CHECK(t_same_mesh(r, m), "gmsh %d round trip: %s", ver, ctx.msg);
+        amps_mesh_free(&ctx, r);
+        remove(p1);
+    }
+    t_path(p1, "rt.mesh");
+    CHECK(amps_write_medit(&ctx, p1, m) == AMPS_OK, "write medit: %s", ctx.msg);
+    r = amps_mesh_read(&ctx, p1);
+    CHECK(t_same_mesh(r, m), "medit round trip: %s", ctx.msg);
+    amps_mesh_free(&ctx, r);
+    remove(p1);
+    /* file-level errors */
+    t_path(p1, "does_not_exist.msh");
+    t_expect(&ctx, amps_mesh_read(&ctx, p1), AMPS_ERR_IO, p1, "missing file");
+    t_path(p1, "x.vtk");
+    t_expect(&ctx, amps_mesh_read(&ctx, p1), AMPS_ERR_ARG, p1, "unknown extension");
+    t_path(p1, "lonely.node");
+    t_write(p1, T_NODE4, strlen(T_NODE4));
+    t_path(p2, "lonely.ele");
+    t_expect(&ctx, amps_mesh_read(&ctx, p1), AMPS_ERR_IO, p2, "missing .ele");
+    remove(p1);
+    t_path(p1, "bad.msh");
+    t_write(p1, G22, strlen(G22) - 30);
+    t_expect(&ctx, amps_mesh_read(&ctx, p1), AMPS_ERR_PARSE, p1, "file message names the path");
+    remove(p1);
+    t_path(p1, "no_such_dir/x.msh");
+    CHECK(amps_write_gmsh(&ctx, p1, m, 2) == AMPS_ERR_IO && strstr(ctx.msg, p1), "write to a missing directory: %s", ctx.msg);
+    CHECK(amps_write_gmsh(&ctx, p1, m, 3) == AMPS_ERR_ARG, "gmsh version 3");
+    CHECK(amps_write_tetgen(&ctx, p1, m, 2) == AMPS_ERR_ARG, "tetgen base 2");
+    amps_mesh_free(&ctx, m);
+}
+
+/* ---- VTU ---- */
+
+/* Minimal XML check: balanced tags, quoted attributes, one root element named root.
+   Returns 1 if well-formed. */
+static int t_xml_ok(const char *s, const char *root) {
+    char stack[32][64];
+    int depth = 0, roots = 0;
+    const char *p = s;
+    while ((p = strchr(p, '<')) != NULL) {
+        const char *e = strchr(p, '>'), *q;
+        int quotes = 0, close, n;
+        if (!e) return 0;
+        for (q = p; q < e; q++) if (*q == '"') quotes++;
+        if (quotes % 2) return 0;
+        if (p[1] == '?') { if (e[-1] != '?') return 0; p = e + 1; continue; }
+        close = p[1] == '/';
+        q = p + 1 + close;
+        for (n = 0; q + n < e && q[n] != ' ' && q[n] != '/' && n < 63; n++) {}
+        if (n == 0) return 0;
+        if (close) {
+            if (depth == 0 || (int)strlen(stack[depth - 1]) != n || strncmp(stack[depth - 1], q, (size_t)n)) return 0;
+            depth--;
+        } else if (e[-1] != '/') {
+            if (depth == 32) return 0;
+            if (depth == 0) { roots++; if ((int)strlen(root) != n || strncmp(root, q, (size_t)n)) return 0; }
+            memcpy(stack[depth], q, (size_t)n); stack[depth][n] = 0; depth++;
+        }
+        p = e + 1;
+    }
+    return depth == 0 && roots == 1;
+}
+
+/* Number of whitespace-separated values in the DataArray named name; sum of their values. */
+static long t_array_count(const char *s, const char *name, double *sum) {
+    char key[100];
+    const char *p, *e;
+    long n = 0;
+    snprintf(key, sizeof(key), "Name=\"%s\"", name);
+    p = strstr(s, key);
+    if (!p) return -1;
+    p = strchr(p, '>') + 1;
+    e = strstr(p, "</DataArray>");
+    *sum = 0;
+    while (p < e) {
+        char *end;
+        double v = strtod(p, &end);
+        if (end == p) { p++; continue; }
+        if (end > e) break;
+        n++; *sum += v; p = end;
+    }
+    return n;
+}
+
+static void test_vtu(void) {
+    amps_ctx ctx; amps_mesh *m;
+    char path[700], script[700], cmd[2200];
+    double p[3] = {0, 0, 2}, n[3] = {0, 0, 1}, *disp, *vm, *pr, sum;
+    amps_int moved[64], nm, vc, v, t, ncut = 0;
+    size_t len;
+    char *txt;
+    amps_ctx_init(&ctx);
+    m = amps_mesh_beam(&ctx, 4);
+    if (!m) { CHECK(0, "beam"); return; }
+    for (v = 50; v < 55; v++) amps_mesh_cut(&ctx, m, v, p, n, &vc, moved, &nm);
+    for (t = 0; t < m->ntet; t++) {
+        int k, c = 0;
+        for (k = 0; k < 4; k++) c |= m->tet[4 * t + k] >= m->nfile;
+        ncut += c;
+    }
+    disp = (double *)malloc(sizeof(double) * 3 * m->nnode);
+    vm = (double *)malloc(sizeof(double) * m->ntet);
+    pr = (double *)malloc(sizeof(double) * 3 * m->ntet);
+    for (v = 0; v < m->nnode; v++) { disp[3 * v] = 0.01 * m->xyz[3 * v + 2]; disp[3 * v + 1] = 0; disp[3 * v + 2] = v >= m->nfile ? -0.1 : 0; }
+    CHECK(amps_mesh_stress(&ctx, m, disp, NULL, vm, pr) == AMPS_OK, "stress");
+    t_path(path, "out.vtu");
+    CHECK(amps_write_vtu(&ctx, path, m, disp, vm, pr) == AMPS_OK, "write vtu: %s", ctx.msg);
+    txt = t_slurp(path, &len);
+    CHECK(txt != NULL, "read back vtu");
+    if (txt) {
+        char head[200];
+        CHECK(t_xml_ok(txt, "VTKFile"), "vtu not well-formed");
+        snprintf(head, sizeof(head), "NumberOfPoints=\"%ld\" NumberOfCells=\"%ld\"", (long)m->nnode, (long)m->ntet);
+        CHECK(strstr(txt, head) != NULL, "piece header");
+        CHECK(t_array_count(txt, "connectivity", &sum) == 4 * m->ntet, "connectivity");
+        CHECK(t_array_count(txt, "offsets", &sum) == m->ntet, "offsets");
+        CHECK(t_array_count(txt, "types", &sum) == m->ntet && sum == 10.0 * m->ntet, "types");
+        CHECK(t_array_count(txt, "displacement", &sum) == 3 * m->nnode, "displacement");
+        CHECK(t_array_count(txt, "origin", &sum) == m->nnode, "origin");
+        CHECK(t_array_count(txt, "von_mises", &sum) == m->ntet, "von_mises");
+        CHECK(t_array_count(txt, "principal_stress", &sum) == 3 * m->ntet, "principal");
+        CHECK(t_array_count(txt, "cut", &sum) == m->ntet && sum == (double)ncut && ncut > 0, "cut flags %g vs %d", sum, (int)ncut);
+        free(txt);
+    }
+    /* python3's XML parser, when available (the test passes without it) */
+    if (system("python3 -c 'import xml.etree.ElementTree' >/dev/null 2>&1") == 0) {
+        FILE *f;
+        t_path(script, "check_vtu.py");
+        f = fopen(script, "w");
+        if (f) {
+            fprintf(f, "import sys, xml.etree.ElementTree as ET\n"
+                       "r = ET.parse(sys.argv[1]).getroot()\n"
+                       "assert r.tag == 'VTKFile' and r.get('type') == 'UnstructuredGrid'\n"
+                       "pc = r.find('UnstructuredGrid/Piece')\n"
+                       "n, m = int(pc.get('NumberOfPoints')), int(pc.get('NumberOfCells'))\n"
+                       "arr = {a.get('Name'): a for a in pc.iter('DataArray')}\n"
+                       "assert len(pc.find('Points/DataArray').text.split()) == 3 * n\n"
+                       "assert len(arr['connectivity'].text.split()) == 4 * m\n"
+                       "assert len(arr['displacement'].text.split()) == 3 * n\n"
+                       "assert len(arr['von_mises'].text.split()) == m\n"
+                       "assert len(arr['cut'].text.split()) == m\n"
+                       "assert max(int(x) for x in arr['connectivity'].text.split()) < n\n");
+            fclose(f);
+            snprintf(cmd, sizeof(cmd), "python3 '%s' '%s'", script, path);
+            CHECK(system(cmd) == 0, "python3 xml check failed");
+            remove(script);
+        }
+    }
+    /* without optional arrays */
+    CHECK(amps_write_vtu(&ctx, path, m, NULL, NULL, NULL) == AMPS_OK, "vtu without data");
+    txt = t_slurp(path, &len);
+    CHECK(txt && t_xml_ok(txt, "VTKFile") && !strstr(txt, "displacement") && strstr(txt, "Name=\"cut\""), "minimal vtu");
+    free(txt);
+    remove(path);
+    free(disp); free(vm); free(pr);
+    amps_mesh_free(&ctx, m);
+}
+
+/* ---- robustness: random corruption never crashes and keeps the contract ---- */
+
+static void t_contract(amps_ctx *ctx, amps_mesh *m, const char *name, int *bad) {
+    if (m) {
+        if (amps_mesh_check(ctx, m) != AMPS_OK) (*bad)++;
+        amps_mesh_free(ctx, m);
+    } else {
+        /* TetGen reports element errors in the .ele file */
+        int named = !strncmp(ctx->msg, name, strlen(name)) || (name[0] == 't' && !strncmp(ctx->msg, "t.ele:", 6));
+        if (ctx->status == AMPS_OK || !ctx->msg[0] || ((ctx->status == AMPS_ERR_PARSE || ctx->status == AMPS_ERR_MESH) && !named)) {
+            (*bad)++;
+            if (getenv("T_VERBOSE")) fprintf(stderr, "contract: %s %d %s\n", name, (int)ctx->status, ctx->msg);
+        }
+    }
+}
+
+static void test_corruption(void) {
+    static const char *pieces[] = {"\n", " ", "\r\n", "0", "-1", "4", "9", "nan", "1e999", "$EndNodes", "$Nodes", "Vertices", "Tetrahedra", "#", "x", "\0", "99999999999"};
+    const char *src[3];
+    int f, trial, bad = 0, parsed = 0;
+    amps_ctx ctx;
+    amps_ctx_init(&ctx);
+    src[0] = G41_MIXED; src[1] = G22_MIXED; src[2] = M_MIXED;
+    t_seed(7);
+    for (f = 0; f < 4; f++) {
+        const char *s = f < 3 ? src[f] : T_NODE4;
+        size_t n0 = strlen(s);
+        for (trial = 0; trial < 3000; trial++) {
+            char *b = (char *)malloc(n0 + 64);
+            size_t n = n0, k;
+            int edits = 1 + t_int(4), e;
+            amps_mesh *m;
+            memcpy(b, s, n0);
+            for (e = 0; e < edits; e++) {
+                int kind = t_unif() < 0.3 ? 0 : 1 + t_int(3);
+                size_t at = n ? (size_t)t_int((int)n) : 0;
+                if (kind == 0 && n) b[at] = (char)t_int(256);                          /* flip a byte */
+                else if (kind == 1 && n) { memmove(b + at, b + at + 1, n - at - 1); n--; } /* delete */
+                else if (kind == 2) n = at;                                            /* truncate */
+                else {                                                                 /* insert a token */
+                    const char *pc = pieces[t_int((int)(sizeof(pieces) / sizeof(pieces[0])))];
+                    size_t l = pc[0] ? strlen(pc) : 1;
+                    if (n + l > n0 + 60) continue;
+                    memmove(b + at + l, b + at, n - at);
+                    for (k = 0; k < l; k++) b[at + k] = pc[k];
+                    n += l;
+                }
+            }
+            {
+                char *exact = (char *)malloc(n ? n : 1);
+                memcpy(exact, b, n);
+                if (f < 2) m = amps_mesh_read_gmsh_mem(&ctx, exact, n, "g.msh");
+                else if (f == 2) m = amps_mesh_read_medit_mem(&ctx, exact, n, "m.mesh");
+                else m = amps_mesh_read_tetgen_mem(&ctx, exact, n, "t.node", T_ELE1, strlen(T_ELE1), "t.ele");
+                parsed += m != NULL;
+                if (m && parsed % 10 == 1) { /* what parses survives a write / read round trip */
+                    char path[700];
+                    amps_mesh *r;
+                    t_path(path, f == 2 ? "fz.mesh" : "fz.msh");
+                    if (f == 2) amps_write_medit(&ctx, path, m);
+                    else amps_write_gmsh(&ctx, path, m, f == 0 ? 4 : 2);
+                    r = amps_mesh_read(&ctx, path);
+                    if (!t_same_mesh(r, m)) bad++;
+                    amps_mesh_free(&ctx, r);
+                    remove(path);
+                }
+                t_contract(&ctx, m, f < 2 ? "g.msh" : f == 2 ? "m.mesh" : "t.node", &bad);
+                free(exact);
+            }
+            free(b);
+        }
+    }
+    CHECK(bad == 0, "corrupted inputs broke the contract %d times", bad);
+    CHECK(parsed > 100, "some corrupted inputs still parse (%d)", parsed);
+}
+
+/* ---- allocation failures inside the readers ---- */
+
+static void test_reader_oom(void) {
+    amps_ctx ctx;
+    int f, k, fails;
+    amps_ctx_init(&ctx);
+    ctx.alloc_user = &t_al;
+    for (f = 0; f < 4; f++) {
+        long base = t_al.live;
+        amps_mesh *m = NULL;
+        for (fails = 0, k = 0; k < 200; k++) {
+            t_al.fail_at = k;
+            if (f == 0) m = t_gmsh(&ctx, G22_MIXED);
+            else if (f == 1) m = t_gmsh(&ctx, G41_MIXED);
+            else if (f == 2) m = t_medit(&ctx, M_MIXED);
+            else m = t_tetgen(&ctx, T_NODE4, T_ELE1);
+            t_al.fail_at = -1;
+            if (m) break;
+            fails++;
+            if (ctx.status != AMPS_ERR_OOM || t_al.live != base) { CHECK(0, "reader %d, failure %d: status %d leak %ld", f, k, (int)ctx.status, t_al.live - base); break; }
+        }
+        CHECK(m && fails >= 3, "reader %d: %d failure paths", f, fails);
+        amps_mesh_free(&ctx, m);
+        CHECK(t_al.live == base, "reader %d leaked", f);
+    }
+}
+
+int main(int argc, char **argv) {
+    const char *slash = argc > 0 ? strrchr(argv[0], '/') : NULL;
+    if (slash) snprintf(g_dir, sizeof(g_dir), "%.*s", (int)(slash - argv[0]), argv[0]);
+    else snprintf(g_dir, sizeof(g_dir), ".");
+    test_valid_inputs();
+    test_malformed_tetgen();
+    test_malformed_gmsh();
+    test_malformed_medit();
+    test_roundtrip();
+    test_vtu();
+    test_corruption();
+    test_reader_oom();
+    return amps_t_end("test_io");
+}
