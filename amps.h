@@ -404,6 +404,65 @@ AMPS_API double amps_tet_stress(const double X[12], double E, double nu, const d
                                 double *von_mises, double principal[3]);
 /* Eigenvalues (descending) of the symmetric matrix [s0 s3 s5; s3 s1 s4; s5 s4 s2] (closed form). */
 AMPS_API void amps_sym3_eig(const double s[6], double lam[3]);
+
+/* @@API scene: owned by engine */
+/* ---- the scene: a mesh with fixed nodes, forces, pins and cuts, solved by the update engine ----
+   Node displacements are kept exact with one factorization of the initial stiffness matrix
+   (fixed nodes eliminated); every cut, pin and release becomes an update of the engine:
+   a cut changes the rows of v, its copy v' and the nodes of the tets that moved, computed from
+   the element stiffness of those tets only. Lifecycle: create, fix nodes and set materials,
+   then any sequence of force / pin / release / cut / solve (the first of these factors K).
+   Allocation: amps_scene_prepare (or the first change) allocates everything; later calls
+   allocate only when a capacity is exceeded and opts.update.grow is set (the default). */
+typedef struct amps_scene amps_scene;
+
+typedef struct amps_scene_opts {
+    amps_order_opts order;      /* ordering of K (default: ND guided by the node coordinates) */
+    amps_update_opts update;    /* engine options (default: amps_update_opts_default, grow = 1) */
+} amps_scene_opts;
+
+AMPS_API void amps_scene_opts_default(amps_scene_opts *o);
+/* Scene over mesh m, which it takes over (it is cut by the scene and freed with it). */
+AMPS_API amps_scene *amps_scene_create(amps_ctx *ctx, amps_mesh *m, const amps_scene_opts *opts);
+AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S);
+AMPS_API const amps_mesh *amps_scene_mesh(const amps_scene *S);
+/* Sets the material of every tet (before the factorization only). */
+AMPS_API amps_status amps_scene_set_material(amps_ctx *ctx, amps_scene *S, double E, double nu);
+/* Fixes nodes (zero displacement, eliminated from the system); before the factorization only.
+   amps_scene_fix_where fixes the nodes whose coordinate axis (0, 1, 2) is below / above value. */
+AMPS_API amps_status amps_scene_fix(amps_ctx *ctx, amps_scene *S, amps_int nv, const amps_int *v);
+AMPS_API amps_status amps_scene_fix_where(amps_ctx *ctx, amps_scene *S, int axis, amps_cmp cmp, double value, amps_int *count);
+/* Assembles and factors K (ordering, symbolic, numeric) and creates the engine. */
+AMPS_API amps_status amps_scene_prepare(amps_ctx *ctx, amps_scene *S);
+/* Sets (replaces) the external force on node v; no effect on fixed nodes. */
+AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, const double f[3]);
+/* Holds node v at displacement u (again to move it); AMPS_ERR_ARG for a fixed node. */
+AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, const double u[3]);
+/* Releases a pin; does nothing for a node that is not pinned. */
+AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v);
+/* Cut at node v with the plane (p, nrm) (semantics of amps_mesh_cut). The copy v' starts free
+   (no pin, no force) with v's displacement, and is fixed if v is. AMPS_WARN_NOOP if the plane
+   leaves one side empty. A cut that leaves a piece held by nothing returns
+   AMPS_ERR_SINGULAR_UPDATE and the scene is as it was. */
+AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3], const double nrm[3],
+                                    amps_int *new_node);
+/* Solves for the displacements of every node. */
+AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S);
+/* Displacements of the last solve, 3 per node (nodes created since: their origin's values). */
+AMPS_API const double *amps_scene_displacements(const amps_scene *S);
+/* Reaction force the pin of node v exerts (K^ x - f at its DOFs); zero if v is not pinned. */
+AMPS_API amps_status amps_scene_reaction(amps_ctx *ctx, const amps_scene *S, amps_int v, double r[3]);
+/* Relative residual of the reduced system (fixed and pinned DOFs eliminated) of the last solve. */
+AMPS_API amps_status amps_scene_residual(amps_ctx *ctx, amps_scene *S, double *relres);
+/* Per-tet stresses of the last solve (see amps_mesh_stress); outputs may be NULL. */
+AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, double *sigma, double *von_mises, double *principal);
+/* Equations of the current system (free DOFs of the initial mesh plus those of cut copies). */
+AMPS_API amps_int amps_scene_ndof(const amps_scene *S);
+/* The engine (for statistics) and the base factor; NULL before the factorization. */
+AMPS_API amps_update *amps_scene_engine(const amps_scene *S);
+AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S);
+/* Undoes the last cut of m: vc = m->nnode - 1 is the copy of v, moved its tets (ascending). */
+AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, amps_int vc, const amps_int *moved, amps_int nmoved);
 #endif /* AMPS_NO_FEM */
 
 /* =================================== I/O =================================== */
@@ -2810,6 +2869,402 @@ AMPS_API amps_status amps_mesh_cut(amps_ctx *ctx, amps_mesh *m, amps_int v, cons
     if (new_node) *new_node = vc;
     if (nmoved) *nmoved = nm;
     return AMPS_OK;
+}
+
+/* @@SECTION scene: owned by engine */
+
+struct amps_scene {
+    amps_mesh *m;
+    amps_scene_opts o;
+    int prepared;
+    amps_int cap;                 /* node capacity of the per-node arrays */
+    unsigned char *fixed, *pinned;
+    double *pinval, *force, *disp; /* 3 per node */
+    amps_int *dof;                /* 3 per node: equation or -1 */
+    amps_int ndof0;               /* equations of the initial system */
+    amps_csc *K;
+    amps_factor *F;
+    amps_update *U;
+    /* cut workspace (sized by the largest node degree) */
+    amps_int maxdeg;
+    amps_int *moved, *ldof, *ri, *ci;
+    double *lk, *vx;
+};
+
+AMPS_API void amps_scene_opts_default(amps_scene_opts *o) {
+    if (!o) return;
+    memset(o, 0, sizeof(*o));
+    o->order.method = AMPS_ORDER_AUTO;
+    o->order.block = 3;
+    amps_update_opts_default(&o->update);
+    o->update.grow = 1;
+}
+
+AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
+    if (!S) return;
+    amps_update_free(ctx, S->U);
+    amps_factor_free(ctx, S->F);
+    amps_csc_free(ctx, S->K);
+    amps_mesh_free(ctx, S->m);
+    amps__free(ctx, S->fixed); amps__free(ctx, S->pinned); amps__free(ctx, S->pinval);
+    amps__free(ctx, S->force); amps__free(ctx, S->disp); amps__free(ctx, S->dof);
+    amps__free(ctx, S->moved); amps__free(ctx, S->ldof); amps__free(ctx, S->ri); amps__free(ctx, S->ci);
+    amps__free(ctx, S->lk); amps__free(ctx, S->vx);
+    amps__free(ctx, S);
+}
+
+/* Grows the per-node arrays to cap nodes (new entries zero, dof -1). All-or-nothing in effect:
+   arrays already grown stay valid. */
+static amps_status amps__scene_grow(amps_ctx *ctx, amps_scene *S, amps_int cap) {
+    amps_int v, old = S->cap;
+    size_t c = (size_t)cap;
+    if (amps__realloc(ctx, (void **)&S->fixed, c, 1) || amps__realloc(ctx, (void **)&S->pinned, c, 1) ||
+        amps__realloc(ctx, (void **)&S->pinval, 3 * c, sizeof(double)) || amps__realloc(ctx, (void **)&S->force, 3 * c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&S->disp, 3 * c, sizeof(double)) || amps__realloc(ctx, (void **)&S->dof, 3 * c, sizeof(amps_int)))
+        return AMPS_ERR_OOM;
+    for (v = old; v < cap; v++) {
+        int d;
+        S->fixed[v] = 0; S->pinned[v] = 0;
+        for (d = 0; d < 3; d++) { S->pinval[3 * v + d] = 0; S->force[3 * v + d] = 0; S->disp[3 * v + d] = 0; S->dof[3 * v + d] = -1; }
+    }
+    S->cap = cap;
+    return AMPS_OK;
+}
+
+AMPS_API amps_scene *amps_scene_create(amps_ctx *ctx, amps_mesh *m, const amps_scene_opts *opts) {
+    amps_scene *S;
+    if (!m) { amps__err(ctx, AMPS_ERR_ARG, "amps_scene_create: NULL mesh"); return NULL; }
+    S = AMPS__CAST(amps_scene *, amps__calloc(ctx, 1, sizeof(amps_scene)));
+    if (!S) return NULL;
+    if (opts) S->o = *opts; else amps_scene_opts_default(&S->o);
+    if (amps__scene_grow(ctx, S, m->node_cap > m->nnode ? m->node_cap : m->nnode + 1)) {
+        amps__err(ctx, AMPS_ERR_OOM, "amps_scene_create: out of memory");
+        S->m = NULL;
+        amps_scene_free(ctx, S);
+        return NULL;
+    }
+    S->m = m;
+    return S;
+}
+
+AMPS_API const amps_mesh *amps_scene_mesh(const amps_scene *S) { return S ? S->m : NULL; }
+AMPS_API amps_update *amps_scene_engine(const amps_scene *S) { return S ? S->U : NULL; }
+AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S) { return S ? S->F : NULL; }
+AMPS_API amps_int amps_scene_ndof(const amps_scene *S) { return S && S->U ? amps_update_dim(S->U) : (S ? S->ndof0 : 0); }
+
+AMPS_API amps_status amps_scene_set_material(amps_ctx *ctx, amps_scene *S, double E, double nu) {
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_set_material: NULL scene");
+    if (S->prepared) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_set_material: the system is already factored");
+    return amps_mesh_set_material(ctx, S->m, E, nu);
+}
+
+AMPS_API amps_status amps_scene_fix(amps_ctx *ctx, amps_scene *S, amps_int nv, const amps_int *v) {
+    amps_int k;
+    if (!S || nv < 0 || (nv > 0 && !v)) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_fix: bad arguments");
+    if (S->prepared) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_fix: the system is already factored (fix nodes before the first change or solve)");
+    for (k = 0; k < nv; k++)
+        if (v[k] < 0 || v[k] >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_fix: node %ld out of range [0, %ld)", (long)v[k], (long)S->m->nnode);
+    for (k = 0; k < nv; k++) S->fixed[v[k]] = 1;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_fix_where(amps_ctx *ctx, amps_scene *S, int axis, amps_cmp cmp, double value, amps_int *count) {
+    amps_int v, c = 0;
+    if (!S || axis < 0 || axis > 2 || !amps__isfinite(value)) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_fix_where: bad axis or value");
+    if (S->prepared) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_fix_where: the system is already factored");
+    for (v = 0; v < S->m->nnode; v++) {
+        double x = S->m->xyz[3 * v + axis];
+        if (cmp == AMPS_LT ? x < value : x > value) { S->fixed[v] = 1; c++; }
+    }
+    if (count) *count = c;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_prepare(amps_ctx *ctx, amps_scene *S) {
+    amps_int n, v, k, maxdeg = 0, nfree = 0;
+    double *coords = NULL;
+    amps_order_opts ord;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_prepare: NULL scene");
+    if (S->prepared) return AMPS_OK;
+    n = amps_mesh_number_dofs(S->m, S->fixed, S->dof);
+    if (n == 0) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_prepare: every node is fixed; nothing to solve");
+    S->K = amps_mesh_assemble(ctx, S->m, S->dof, n);
+    if (!S->K) goto fail;
+    /* coordinates of the free nodes, one per block of 3 equations, for the ordering */
+    coords = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
+    if (!coords) goto fail;
+    for (v = 0; v < S->m->nnode; v++)
+        if (S->dof[3 * v] >= 0) { for (k = 0; k < 3; k++) coords[3 * nfree + k] = S->m->xyz[3 * v + k]; nfree++; }
+    ord = S->o.order;
+    if (!ord.coords && ord.block == 3 && 3 * nfree == n) ord.coords = coords;
+    S->F = amps_analyze(ctx, S->K, AMPS_UPPER, &ord);
+    amps__free(ctx, coords); coords = NULL;
+    if (!S->F) goto fail;
+    if (amps_factorize(ctx, S->F, S->K, AMPS_UPPER) != AMPS_OK) {
+        if (ctx) {
+            char msg[256];
+            memcpy(msg, ctx->msg, sizeof(msg));
+            amps__err(ctx, AMPS_ERR_NOT_SPD, "amps_scene_prepare: the stiffness matrix is singular (is the model held? fix some nodes): %s", msg);
+        }
+        goto fail;
+    }
+    S->U = amps_update_create(ctx, S->K, AMPS_UPPER, S->F, &S->o.update);
+    if (!S->U) goto fail;
+    for (v = 0; v < S->m->nnode; v++) { amps_int d = amps_mesh_degree(S->m, v); if (d > maxdeg) maxdeg = d; }
+    S->maxdeg = maxdeg;
+    {
+        size_t nl = (size_t)(12 * maxdeg + 3), ne = nl * nl;
+        S->moved = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)maxdeg + 1, sizeof(amps_int)));
+        S->ldof = AMPS__CAST(amps_int *, amps__malloc(ctx, nl, sizeof(amps_int)));
+        S->lk = AMPS__CAST(double *, amps__calloc(ctx, ne, sizeof(double)));
+        S->ri = AMPS__CAST(amps_int *, amps__malloc(ctx, ne, sizeof(amps_int)));
+        S->ci = AMPS__CAST(amps_int *, amps__malloc(ctx, ne, sizeof(amps_int)));
+        S->vx = AMPS__CAST(double *, amps__malloc(ctx, ne, sizeof(double)));
+        if (!S->moved || !S->ldof || !S->lk || !S->ri || !S->ci || !S->vx) goto fail;
+    }
+    S->ndof0 = n;
+    /* forces set before the factorization */
+    for (v = 0; v < S->m->nnode; v++)
+        for (k = 0; k < 3; k++)
+            if (S->dof[3 * v + k] >= 0 && S->force[3 * v + k] != 0.0) {
+                amps_int i = S->dof[3 * v + k];
+                if (amps_update_set_force(ctx, S->U, 1, &i, S->force + 3 * v + k)) goto fail;
+            }
+    for (v = 0; v < S->m->nnode; v++)
+        if (S->pinned[v] && amps_update_constrain(ctx, S->U, 3, S->dof + 3 * v, S->pinval + 3 * v)) goto fail;
+    if (amps_update_commit(ctx, S->U)) goto fail;
+    S->prepared = 1;
+    return AMPS_OK;
+fail:
+    amps__free(ctx, coords);
+    amps_update_free(ctx, S->U); S->U = NULL;
+    amps_factor_free(ctx, S->F); S->F = NULL;
+    amps_csc_free(ctx, S->K); S->K = NULL;
+    amps__free(ctx, S->moved); amps__free(ctx, S->ldof); amps__free(ctx, S->lk);
+    amps__free(ctx, S->ri); amps__free(ctx, S->ci); amps__free(ctx, S->vx);
+    S->moved = NULL; S->ldof = NULL; S->lk = NULL; S->ri = NULL; S->ci = NULL; S->vx = NULL;
+    for (v = 0; v < 3 * S->m->nnode; v++) S->dof[v] = -1;
+    return ctx && ctx->status ? ctx->status : AMPS_ERR_OOM;
+}
+
+static amps_status amps__scene_node(amps_ctx *ctx, amps_scene *S, amps_int v, const char *fn) {
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL scene", fn);
+    if (v < 0 || v >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "%s: node %ld out of range [0, %ld)", fn, (long)v, (long)S->m->nnode);
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, const double f[3]) {
+    amps_int k, idx[3], m = 0;
+    double val[3];
+    amps_status s;
+    if (!f) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_force: NULL force");
+    for (k = 0; k < 3; k++) if (!amps__isfinite(f[k])) return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_force: non-finite force on node %ld", (long)v);
+    if ((s = amps__scene_node(ctx, S, v, "amps_scene_force")) != AMPS_OK) return s;
+    for (k = 0; k < 3; k++) {
+        S->force[3 * v + k] = f[k];
+        if (S->prepared && S->dof[3 * v + k] >= 0) { idx[m] = S->dof[3 * v + k]; val[m] = f[k]; m++; }
+    }
+    return S->prepared ? amps_update_set_force(ctx, S->U, m, idx, val) : AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, const double u[3]) {
+    amps_int k, idx[3];
+    amps_status s;
+    if (!u) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_pin: NULL displacement");
+    for (k = 0; k < 3; k++) if (!amps__isfinite(u[k])) return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_pin: non-finite displacement for node %ld", (long)v);
+    if ((s = amps__scene_node(ctx, S, v, "amps_scene_pin")) != AMPS_OK) return s;
+    if (S->fixed[v]) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_pin: node %ld is fixed", (long)v);
+    if (amps_mesh_degree(S->m, v) == 0) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_pin: node %ld belongs to no tetrahedron", (long)v);
+    if (!S->prepared) {
+        S->pinned[v] = 1;
+        for (k = 0; k < 3; k++) S->pinval[3 * v + k] = u[k];
+        return AMPS_OK;
+    }
+    for (k = 0; k < 3; k++) idx[k] = S->dof[3 * v + k];
+    if ((s = amps_update_constrain(ctx, S->U, 3, idx, u)) != AMPS_OK) return s;
+    if (!S->pinned[v] && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s;
+    S->pinned[v] = 1;
+    for (k = 0; k < 3; k++) S->pinval[3 * v + k] = u[k];
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v) {
+    amps_int k, idx[3];
+    amps_status s;
+    if ((s = amps__scene_node(ctx, S, v, "amps_scene_release")) != AMPS_OK) return s;
+    if (!S->pinned[v]) return AMPS_OK;
+    if (!S->prepared) { S->pinned[v] = 0; return AMPS_OK; }
+    for (k = 0; k < 3; k++) idx[k] = S->dof[3 * v + k];
+    if ((s = amps_update_release(ctx, S->U, 3, idx)) != AMPS_OK) return s;
+    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
+        char msg[256];
+        memcpy(msg, ctx ? ctx->msg : "", ctx ? sizeof(msg) : 1);
+        return amps__err(ctx, s, "amps_scene_release: releasing node %ld leaves a piece held by nothing (%s)", (long)v, msg);
+    }
+    S->pinned[v] = 0;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, amps_int vc, const amps_int *moved, amps_int nmoved) {
+    amps_int base, keep, i, j, w, k;
+    int q;
+    if (!m || vc != m->nnode - 1 || v < 0 || v >= vc || m->inc_len[vc] != nmoved || m->inc_ptr[vc] != m->inc_ptr[v] + m->inc_len[v])
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_uncut: node %ld is not the last copy of node %ld", (long)vc, (long)v);
+    for (k = 0; k < nmoved; k++)
+        for (q = 0; q < 4; q++)
+            if (m->tet[4 * moved[k] + q] == vc) m->tet[4 * moved[k] + q] = v;
+    /* merge v's kept tets and the moved ones back into one ascending slot, from the back */
+    base = m->inc_ptr[v]; keep = m->inc_len[v];
+    i = keep - 1; j = nmoved - 1; w = keep + nmoved - 1;
+    while (j >= 0) {
+        if (i >= 0 && m->inc[base + i] > moved[j]) m->inc[base + w--] = m->inc[base + i--];
+        else m->inc[base + w--] = moved[j--];
+    }
+    m->inc_len[v] = keep + nmoved;
+    m->inc_len[vc] = 0; m->inc_ptr[vc] = 0;
+    m->nnode--;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3], const double nrm[3],
+                                    amps_int *new_node) {
+    amps_int vc, nmoved = 0, k, nl = 0, nz = 0, first = -1, a, b;
+    amps_status s;
+    amps_mesh *m;
+    if (new_node) *new_node = -1;
+    if ((s = amps__scene_node(ctx, S, v, "amps_scene_cut")) != AMPS_OK) return s;
+    m = S->m;
+    if (S->prepared && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s;   /* earlier changes first */
+    if (m->nnode + 1 > S->cap) {
+        if (!S->o.update.grow) return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_scene_cut: node capacity %ld reached", (long)S->cap);
+        if (amps__scene_grow(ctx, S, 2 * S->cap + 16)) return AMPS_ERR_OOM;
+    }
+    if (!S->prepared) {
+        /* before the factorization a cut is topology only: K is assembled from the cut mesh */
+        amps_int deg = amps_mesh_degree(m, v), *mv = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)deg + 1, sizeof(amps_int)));
+        if (!mv) return AMPS_ERR_OOM;
+        s = amps_mesh_cut(ctx, m, v, p, nrm, &vc, mv, &nmoved);
+        amps__free(ctx, mv);
+        if (s != AMPS_OK) return s;
+        S->fixed[vc] = S->fixed[v];
+        for (k = 0; k < 3; k++) S->disp[3 * vc + k] = S->disp[3 * v + k];
+        if (new_node) *new_node = vc;
+        return AMPS_OK;
+    }
+    s = amps_mesh_cut(ctx, m, v, p, nrm, &vc, S->moved, &nmoved);
+    if (s != AMPS_OK) return s;                                         /* includes the no-op */
+    S->fixed[vc] = S->fixed[v];
+    S->pinned[vc] = 0;
+    for (k = 0; k < 3; k++) { S->pinval[3 * vc + k] = 0; S->force[3 * vc + k] = 0; S->disp[3 * vc + k] = S->disp[3 * v + k]; S->dof[3 * vc + k] = -1; }
+    if (!S->fixed[v] && S->dof[3 * v] >= 0) {
+        if ((s = amps_update_add_dofs(ctx, S->U, 3, &first)) != AMPS_OK) goto undo_engine;
+        for (k = 0; k < 3; k++) S->dof[3 * vc + k] = first + k;
+    }
+    /* local equations of the moved tets (with v and v'), then
+       sum over moved tets of Ke scattered with v' minus Ke scattered with v */
+    for (k = 0; k < nmoved; k++) {
+        int q, d;
+        for (q = 0; q < 4; q++) {
+            amps_int node = m->tet[4 * S->moved[k] + q];
+            for (d = 0; d < 3; d++) {
+                amps_int e = S->dof[3 * node + d], t;
+                if (e < 0) continue;
+                for (t = 0; t < nl && S->ldof[t] != e; t++) {}
+                if (t == nl) S->ldof[nl++] = e;
+                if (node == vc) {
+                    amps_int e2 = S->dof[3 * v + d];
+                    for (t = 0; t < nl && S->ldof[t] != e2; t++) {}
+                    if (t == nl && e2 >= 0) S->ldof[nl++] = e2;
+                }
+            }
+        }
+    }
+    for (a = 0; a < nl * nl; a++) S->lk[a] = 0.0;
+    for (k = 0; k < nmoved; k++) {
+        double Ke[144];
+        amps_int loc_new[12], loc_old[12];
+        int q, d, pass;
+        amps_mesh_tet_stiffness(m, S->moved[k], Ke);
+        for (q = 0; q < 4; q++) {
+            amps_int node = m->tet[4 * S->moved[k] + q];
+            for (d = 0; d < 3; d++) {
+                amps_int en = S->dof[3 * node + d], eo = node == vc ? S->dof[3 * v + d] : en, t;
+                loc_new[3 * q + d] = -1; loc_old[3 * q + d] = -1;
+                for (t = 0; t < nl; t++) { if (S->ldof[t] == en) loc_new[3 * q + d] = t; if (S->ldof[t] == eo) loc_old[3 * q + d] = t; }
+                if (en < 0) loc_new[3 * q + d] = -1;
+                if (eo < 0) loc_old[3 * q + d] = -1;
+            }
+        }
+        for (pass = 0; pass < 2; pass++) {
+            const amps_int *loc = pass ? loc_new : loc_old;
+            double sg = pass ? 1.0 : -1.0;
+            for (a = 0; a < 12; a++) {
+                if (loc[a] < 0) continue;
+                for (b = 0; b < 12; b++) if (loc[b] >= 0) S->lk[loc[a] * nl + loc[b]] += sg * Ke[12 * a + b];
+            }
+        }
+    }
+    for (a = 0; a < nl; a++)
+        for (b = a; b < nl; b++) {
+            double val = S->lk[a * nl + b];
+            if (val == 0.0) continue;
+            S->ri[nz] = S->ldof[a]; S->ci[nz] = S->ldof[b]; S->vx[nz] = val; nz++;
+        }
+    if ((s = amps_update_add(ctx, S->U, nz, S->ri, S->ci, S->vx)) != AMPS_OK) goto undo_engine;
+    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
+        if (s == AMPS_ERR_SINGULAR_UPDATE)
+            amps__err(ctx, s, "amps_scene_cut: the cut at node %ld leaves a piece held by nothing; the cut was undone", (long)v);
+        goto undo;                                                       /* the engine rolled back */
+    }
+    if (new_node) *new_node = vc;
+    return AMPS_OK;
+undo_engine:
+    amps_update_discard(S->U);
+undo:
+    for (k = 0; k < 3; k++) S->dof[3 * vc + k] = -1;
+    S->fixed[vc] = 0;
+    {
+        amps_ctx c2;
+        amps_ctx_init(&c2);
+        (void)amps_mesh_uncut(&c2, m, v, vc, S->moved, nmoved);
+    }
+    return s;
+}
+
+AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S) {
+    amps_status s;
+    const double *x;
+    amps_int v, k;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve: NULL scene");
+    if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if ((s = amps_update_solve(ctx, S->U, NULL)) != AMPS_OK) return s;
+    x = amps_update_solution(S->U);
+    for (v = 0; v < S->m->nnode; v++)
+        for (k = 0; k < 3; k++) {
+            amps_int e = S->dof[3 * v + k];
+            S->disp[3 * v + k] = e >= 0 ? x[e] : 0.0;
+        }
+    return AMPS_OK;
+}
+
+AMPS_API const double *amps_scene_displacements(const amps_scene *S) { return S ? S->disp : NULL; }
+
+AMPS_API amps_status amps_scene_reaction(amps_ctx *ctx, const amps_scene *S, amps_int v, double r[3]) {
+    int k;
+    if (!S || !r) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_reaction: NULL argument");
+    if (v < 0 || v >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_reaction: node %ld out of range", (long)v);
+    for (k = 0; k < 3; k++) r[k] = (S->U && S->pinned[v]) ? amps_update_reaction(S->U, S->dof[3 * v + k]) : 0.0;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_residual(amps_ctx *ctx, amps_scene *S, double *relres) {
+    if (!S || !S->U) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_residual: nothing solved yet");
+    return amps_update_residual(ctx, S->U, relres);
+}
+
+AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, double *sigma, double *von_mises, double *principal) {
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_stress: NULL scene");
+    return amps_mesh_stress(ctx, S->m, S->disp, sigma, von_mises, principal);
 }
 #endif /* AMPS_NO_FEM */
 
