@@ -782,6 +782,65 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
 
 /* ------------------------------ nested dissection ------------------------------ */
 
+/* Tuning of the nested dissection. */
+#ifndef AMPS__ND_FMLO
+#define AMPS__ND_FMLO 25
+#endif
+#ifndef AMPS__ND_FMHI
+#define AMPS__ND_FMHI 150
+#endif
+#ifndef AMPS__ND_PASS
+#define AMPS__ND_PASS 8
+#endif
+#ifndef AMPS__ND_LEAF
+#define AMPS__ND_LEAF 200        /* parts of at most this many vertices are ordered by AMD */
+#endif
+#ifndef AMPS__ND_COARSE
+#define AMPS__ND_COARSE 120      /* coarsest graph size of the multilevel bisection */
+#endif
+#ifndef AMPS__ND_TRIES
+#define AMPS__ND_TRIES 6         /* initial bisections tried on the coarsest graph */
+#endif
+#ifndef AMPS__ND_BAL
+#define AMPS__ND_BAL 0.60        /* a part may hold at most this fraction of the total weight */
+#endif
+#ifndef AMPS__ND_BOTH
+#define AMPS__ND_BOTH 1
+#endif
+#ifndef AMPS__ND_ONE
+#define AMPS__ND_ONE 1
+#endif
+#ifndef AMPS__ND_MID
+#define AMPS__ND_MID 5
+#endif
+#ifndef AMPS__ND_MIDN
+#define AMPS__ND_MIDN 2000
+#endif
+#ifndef AMPS__ND_MIDF
+#define AMPS__ND_MIDF 16
+#endif
+#ifndef AMPS__ND_MIDL
+#define AMPS__ND_MIDL 4
+#endif
+#ifndef AMPS__ND_RUNS
+#define AMPS__ND_RUNS 1
+#endif
+#ifndef AMPS__ND_RUNS_XYZ
+#define AMPS__ND_RUNS_XYZ 1
+#endif
+#ifndef AMPS__ND_GEO
+#define AMPS__ND_GEO 0
+#endif
+#ifndef AMPS__ND_CGEO
+#define AMPS__ND_CGEO 1
+#endif
+#ifndef AMPS__ND_HALO
+#define AMPS__ND_HALO 1
+#endif
+#ifndef AMPS__ND_WIN
+#define AMPS__ND_WIN 0.10        /* plane cuts: lighter side holds at least 1/2 - this */
+#endif
+
 /* Weighted graph for nested dissection: CSR adjacency (symmetric, no self loops), vertex weights,
    optional edge weights (NULL = 1) and coordinates (3 per vertex, may be NULL). */
 typedef struct amps__ndg {
@@ -889,12 +948,13 @@ static int amps__sep_better(amps_int s, amps_int a, amps_int b, amps_int bs, amp
 static void amps__nd_fm(const amps__ndg *g, amps_int *where, amps_int *pw, amps_int maxpw, amps__fmws *W, int npass) {
     amps_int n = g->n, v, u, x, p, q, nlog, bestlog, bs, b0, b1, nbad, limit;
     const amps_int *vw = g->vw;
-    int pass;
+    int pass, idle = 0, side = -1;
     limit = n / 100;
-    if (limit < 25) limit = 25;
-    if (limit > 150) limit = 150;
+    if (limit < AMPS__ND_FMLO) limit = AMPS__ND_FMLO;
+    if (limit > AMPS__ND_FMHI) limit = AMPS__ND_FMHI;
     for (pass = 0; pass < npass; pass++) {
         amps_int s0 = pw[2], m0 = pw[0] > pw[1] ? pw[0] : pw[1];
+        if (AMPS__ND_ONE) side = (pass & 1) ? (pw[0] < pw[1] ? 1 : 0) : (pw[0] < pw[1] ? 0 : 1);
         W->H[0].size = 0; W->H[1].size = 0;
         for (v = 0; v < n; v++) {
             W->lock[v] = 0;
@@ -913,6 +973,8 @@ static void amps__nd_fm(const amps__ndg *g, amps_int *where, amps_int *pw, amps_
             ok1 = t1 >= 0 && pw[1] + vw[t1] <= maxpw;
             if (pw[0] > maxpw && t1 >= 0) { ok1 = 1; ok0 = 0; }      /* restore balance first */
             else if (pw[1] > maxpw && t0 >= 0) { ok0 = 1; ok1 = 0; }
+            if (side == 0) ok1 = 0;
+            else if (side == 1) ok0 = 0;
             if (ok0 && ok1) {
                 amps_int k0 = W->H[0].key[t0], k1 = W->H[1].key[t1];
                 a = k0 > k1 ? 0 : k1 > k0 ? 1 : (pw[0] < pw[1] ? 0 : 1);
@@ -965,7 +1027,11 @@ static void amps__nd_fm(const amps__ndg *g, amps_int *where, amps_int *pw, amps_
         }
         W->H[0].size = 0; W->H[1].size = 0;
         for (v = 0; v < n; v++) W->H[0].pos[v] = W->H[1].pos[v] = -1;
-        if (!amps__sep_better(pw[2], pw[0], pw[1], s0, m0, m0, maxpw) || bestlog == 0) break;
+        if (!amps__sep_better(pw[2], pw[0], pw[1], s0, m0, m0, maxpw) || bestlog == 0) {
+            if (side < 0 || ++idle >= 2) break;
+        } else {
+            idle = 0;
+        }
     }
 }
 
@@ -978,9 +1044,9 @@ static void amps__nd_sep_from_cut(const amps__ndg *g, amps_int *where, amps_int 
             if (where[g->i[p]] != where[v]) { bw[where[v]] += g->vw[v]; break; }
     side = bw[0] <= bw[1] ? 0 : 1;
     for (v = 0; v < g->n; v++) {
-        if (where[v] != side) continue;
+        if (where[v] != side && !AMPS__ND_BOTH) continue;
         for (p = g->p[v]; p < g->p[v + 1]; p++)
-            if (where[g->i[p]] == 1 - side) { where[v] = 3; break; }
+            if (where[g->i[p]] == 1 - where[v]) { where[v] = 3; break; }
     }
     pw[0] = pw[1] = pw[2] = 0;
     for (v = 0; v < g->n; v++) {
@@ -1140,12 +1206,6 @@ static int amps__keyv_cmp(const void *a, const void *b) {
     return (x->v > y->v) - (x->v < y->v);
 }
 
-/* Tuning of the nested dissection. */
-#define AMPS__ND_LEAF 200        /* parts of at most this many vertices are ordered by AMD */
-#define AMPS__ND_COARSE 120      /* coarsest graph size of the multilevel bisection */
-#define AMPS__ND_TRIES 6         /* initial bisections tried on the coarsest graph */
-#define AMPS__ND_BAL 0.60        /* a part may hold at most this fraction of the total weight */
-#define AMPS__ND_WIN 0.10        /* plane cuts: lighter side holds at least 1/2 - this */
 
 /* Plane-cut bisection of g (with coordinates): for each direction (coordinate and principal
    axes) sweeps the sorted projections and keeps the split inside the balance window with the
@@ -1218,16 +1278,24 @@ static void amps__nd_geo(const amps__ndg *g, amps_int *where, amps_int *pw, amps
 }
 
 /* Multilevel vertex bisection of g: heavy-edge coarsening, greedy growing + FM on the coarsest
-   graph, FM refinement while projecting back. where/pw receive the result; wa, wb (n) are
-   workspace. */
+   graph, FM refinement while projecting back. Graphs of at least AMPS__ND_MIDN vertices are first
+   coarsened to about 1/AMPS__ND_MIDF of their size, where nmid independent bisections are tried
+   and the best is kept. where/pw receive the result; wa, wb (n) are workspace. */
 static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amps_int *pw, amps_int maxpw,
-                               amps__fmws *W, amps_int *wa, amps_int *wb, unsigned long long *rng) {
+                               amps__fmws *W, amps_int *wa, amps_int *wb, unsigned long long *rng, int nmid) {
     amps__ndg lev[64];
-    int nl = 1, t, l;
-    amps_int v, bestpw[3] = {0, 0, 0}, *cw, *fw;
+    int nl = 1, t, l, maxl = 64;
+    amps_int v, bestpw[3] = {0, 0, 0}, *cw, *fw, target = AMPS__ND_COARSE;
     amps_status s = AMPS_OK;
     lev[0] = *g;
-    while (lev[nl - 1].n > AMPS__ND_COARSE && nl < 64) {
+    if (nmid > 1 && g->n >= AMPS__ND_MIDN) {
+        target = g->n / AMPS__ND_MIDF;
+        if (target < AMPS__ND_COARSE) target = AMPS__ND_COARSE;
+        maxl = 1 + AMPS__ND_MIDL;
+    } else {
+        nmid = 0;
+    }
+    while (lev[nl - 1].n > target && nl < maxl) {
         if ((s = amps__nd_coarsen(ctx, &lev[nl - 1], &lev[nl], rng)) != AMPS_OK) break;
         if (lev[nl].n > 0.9 * lev[nl - 1].n) {
             amps__ndg_free(ctx, &lev[nl]);
@@ -1236,33 +1304,59 @@ static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amp
         }
         nl++;
     }
-    if (s != AMPS_OK) {
-        for (l = 1; l < nl; l++) amps__ndg_free(ctx, &lev[l]);
-        amps__free(ctx, lev[0].cmap);
-        g->cmap = NULL;
-        return s;
-    }
-    /* coarsest graph: several greedy growings, each refined; keep the best in wa */
-    {
+    if (s == AMPS_OK && nmid > 0 && nl > 1) {
+        /* several independent bisections of the intermediate graph; the best goes to wa */
         amps__ndg *c = &lev[nl - 1];
-        for (t = 0; t < AMPS__ND_TRIES; t++) {
+        amps_int *cw2 = (amps_int *)amps__malloc(ctx, 2 * (size_t)c->n, sizeof(amps_int));
+        if (!cw2) s = AMPS_ERR_OOM;
+        for (t = 0; t < nmid && s == AMPS_OK; t++) {
+            amps_int lpw[3];
+            if ((s = amps__nd_ml(ctx, c, cw2, lpw, maxpw, W, cw2 + c->n, wb, rng, 1)) != AMPS_OK) break;
+            if (t == 0 || amps__sep_better(lpw[2], lpw[0], lpw[1], bestpw[2], bestpw[0], bestpw[1], maxpw)) {
+                bestpw[0] = lpw[0]; bestpw[1] = lpw[1]; bestpw[2] = lpw[2];
+                memcpy(wa, cw2, sizeof(amps_int) * (size_t)c->n);
+            }
+        }
+        amps__free(ctx, cw2);
+    } else if (s == AMPS_OK) {
+        /* coarsest graph: plane cuts (with coordinates) and several greedy growings, each refined;
+           keep the best in wa */
+        amps__ndg *c = &lev[nl - 1];
+        t = 0;
+        if (c->xyz && AMPS__ND_CGEO) {
+            amps__keyv *kv = (amps__keyv *)amps__malloc(ctx, (size_t)c->n, sizeof(amps__keyv));
+            amps_int *ws = (amps_int *)amps__malloc(ctx, 3 * (size_t)c->n, sizeof(amps_int));
+            if (kv && ws) {
+                amps__nd_geo(c, wa, bestpw, maxpw, W, kv, ws, ws + c->n, ws + 2 * c->n);
+                t = 1;
+            }
+            amps__free(ctx, kv); amps__free(ctx, ws);
+            if (!t) s = amps__err(ctx, AMPS_ERR_OOM, "amps_nd: out of memory");
+        }
+        for (; t < AMPS__ND_TRIES + (c->xyz && AMPS__ND_CGEO) && s == AMPS_OK; t++) {
             amps_int lpw[3], seed = amps__rand(rng, c->n);
             if (t == 0) seed = amps__nd_far(c, seed, wb, where);
             amps__nd_grow(c, seed, wb, where, rng);
             amps__nd_sep_from_cut(c, wb, lpw);
-            amps__nd_fm(c, wb, lpw, maxpw, W, 8);
+            amps__nd_fm(c, wb, lpw, maxpw, W, AMPS__ND_PASS);
             if (t == 0 || amps__sep_better(lpw[2], lpw[0], lpw[1], bestpw[2], bestpw[0], bestpw[1], maxpw)) {
                 bestpw[0] = lpw[0]; bestpw[1] = lpw[1]; bestpw[2] = lpw[2];
                 memcpy(wa, wb, sizeof(amps_int) * (size_t)c->n);
             }
         }
     }
+    if (s != AMPS_OK) {
+        for (l = 1; l < nl; l++) amps__ndg_free(ctx, &lev[l]);
+        amps__free(ctx, lev[0].cmap);
+        g->cmap = NULL;
+        return s;
+    }
     cw = wa; fw = wb;
     pw[0] = bestpw[0]; pw[1] = bestpw[1]; pw[2] = bestpw[2];
     for (l = nl - 2; l >= 0; l--) {
         amps_int *tmp;
         for (v = 0; v < lev[l].n; v++) fw[v] = cw[lev[l].cmap[v]];
-        amps__nd_fm(&lev[l], fw, pw, maxpw, W, 8);
+        amps__nd_fm(&lev[l], fw, pw, maxpw, W, AMPS__ND_PASS);
         tmp = cw; cw = fw; fw = tmp;
     }
     memcpy(where, cw, sizeof(amps_int) * (size_t)g->n);
@@ -1270,6 +1364,53 @@ static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amp
     amps__free(ctx, lev[0].cmap);
     g->cmap = NULL;
     return AMPS_OK;
+}
+
+/* AMD ordering of the part vs[0..m-1] of graph G (weights vw, NULL = 1) with its halo: the
+   outside neighbours (vertices of enclosing separators, eliminated later) count in the degrees
+   but are not ordered. Reorders vs in place. loc (n, all -1) is restored; lord has room for m. */
+static amps_status amps__nd_leaf(amps_ctx *ctx, const amps_int *Gp, const amps_int *Gi, const amps_int *vw, amps_int *vs,
+                                 amps_int m, amps_int *loc, amps_int *lord) {
+    amps_int k, p, v, u, h = 0, dsum = 0, *lp = NULL, *li = NULL, *lw = NULL, *hv = NULL;
+    amps_status s = AMPS_OK;
+    for (k = 0; k < m; k++) dsum += Gp[vs[k] + 1] - Gp[vs[k]];
+    hv = (amps_int *)amps__malloc(ctx, (size_t)dsum + 1, sizeof(amps_int));
+    if (!hv) return AMPS_ERR_OOM;
+    for (k = 0; k < m; k++) loc[vs[k]] = k;
+    for (k = 0; k < m; k++)
+        for (v = vs[k], p = Gp[v]; p < Gp[v + 1]; p++)
+            if (loc[u = Gi[p]] < 0) { loc[u] = m + h; hv[h++] = u; }
+    lp = (amps_int *)amps__malloc(ctx, (size_t)(m + h) + 1, sizeof(amps_int));
+    li = (amps_int *)amps__malloc(ctx, 2 * (size_t)dsum + 1, sizeof(amps_int));
+    lw = (amps_int *)amps__malloc(ctx, (size_t)(m + h) + 1, sizeof(amps_int));
+    if (!lp || !li || !lw) { s = AMPS_ERR_OOM; goto done; }
+    /* part vertices keep all their edges; halo vertices get their edges into the part */
+    for (k = 0; k <= m + h; k++) lp[k] = 0;
+    for (k = 0; k < m; k++)
+        for (v = vs[k], p = Gp[v]; p < Gp[v + 1]; p++) {
+            lp[k + 1]++;
+            if ((u = loc[Gi[p]]) >= m) lp[u + 1]++;
+        }
+    for (k = 0; k < m + h; k++) lp[k + 1] += lp[k];
+    for (k = 0; k < m + h; k++) lw[k] = lp[k]; /* fill pointers */
+    for (k = 0; k < m; k++)
+        for (v = vs[k], p = Gp[v]; p < Gp[v + 1]; p++) {
+            u = loc[Gi[p]];
+            li[lw[k]++] = u;
+            if (u >= m) li[lw[u]++] = k;
+        }
+    for (k = 0; k < m; k++) lw[k] = vw ? vw[vs[k]] : 1;
+    for (k = 0; k < h; k++) lw[m + k] = vw ? vw[hv[k]] : 1;
+    s = amps__amd_core(ctx, m + h, lp, li, lw, m, 0, lord);
+    if (s == AMPS_OK) {
+        for (k = 0; k < m; k++) lord[k] = vs[lord[k]];
+        memcpy(vs, lord, sizeof(amps_int) * (size_t)m);
+    }
+done:
+    for (k = 0; k < m; k++) loc[vs[k]] = -1;
+    for (k = 0; k < h; k++) loc[hv[k]] = -1;
+    amps__free(ctx, lp); amps__free(ctx, li); amps__free(ctx, lw); amps__free(ctx, hv);
+    return s;
 }
 
 /* Nested dissection of a clean symmetric graph with vertex weights vw (NULL = 1) and optional
@@ -1349,11 +1490,25 @@ static amps_status amps__nd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp, 
         pw[0] = pw[1] = 0; pw[2] = tot;
         if (m > AMPS__ND_LEAF) {
             maxpw = (amps_int)(AMPS__ND_BAL * tot);
-            if (xyz) amps__nd_geo(&sub, where, pw, maxpw, &W, kv, cnt, lord, wa);
-            else if ((s = amps__nd_ml(ctx, &sub, where, pw, maxpw, &W, wa, wb, &rng)) != AMPS_OK) goto done;
+            int r, have = 0;
+            if (xyz && AMPS__ND_GEO) { amps__nd_geo(&sub, where, pw, maxpw, &W, kv, cnt, lord, wa); have = 1; }
+            for (r = 0; r < (xyz ? AMPS__ND_RUNS_XYZ : AMPS__ND_RUNS); r++) {
+                amps_int lpw[3];
+                if ((s = amps__nd_ml(ctx, &sub, lord, lpw, maxpw, &W, wa, wb, &rng, AMPS__ND_MID)) != AMPS_OK) goto done;
+                if (!have || amps__sep_better(lpw[2], lpw[0], lpw[1], pw[2], pw[0], pw[1], maxpw)) {
+                    memcpy(where, lord, sizeof(amps_int) * (size_t)m);
+                    pw[0] = lpw[0]; pw[1] = lpw[1]; pw[2] = lpw[2];
+                    have = 1;
+                }
+            }
         }
         if (pw[0] == 0 || pw[1] == 0) {
             /* small or inseparable part: AMD */
+            if (AMPS__ND_HALO) {
+                amps__ndg_free(ctx, &sub);
+                if ((s = amps__nd_leaf(ctx, Gp, Gi, vw, order + lo, m, loc, lord)) != AMPS_OK) goto done;
+                continue;
+            }
             if ((s = amps__amd_core(ctx, m, sub.p, sub.i, sub.vw, m, 0, lord)) != AMPS_OK) goto done;
             for (k = 0; k < m; k++) tmpv[k] = order[lo + lord[k]];
         } else {
