@@ -793,7 +793,7 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
 #define AMPS__ND_PASS 8
 #endif
 #ifndef AMPS__ND_LEAF
-#define AMPS__ND_LEAF 200        /* parts of at most this many vertices are ordered by AMD */
+#define AMPS__ND_LEAF 100        /* parts of at most this many vertices are ordered by AMD */
 #endif
 #ifndef AMPS__ND_COARSE
 #define AMPS__ND_COARSE 120      /* coarsest graph size of the multilevel bisection */
