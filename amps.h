@@ -386,6 +386,7 @@ static amps_status amps__graph_sym(amps_ctx *ctx, const char *fn, amps_int n, co
     amps_int **pp[5];
     size_t len[5];
     amps_status s;
+    int sorted = 1;
     if (n > 0 && !Ap) return amps__err(ctx, AMPS_ERR_ARG, "%s: column pointer array is NULL", fn);
     if (n > 0 && Ap[0] != 0) return amps__err(ctx, AMPS_ERR_PATTERN, "%s: column pointer p[0] = %ld, must be 0", fn, (long)Ap[0]);
     for (j = 0; j < n; j++)
@@ -403,7 +404,28 @@ static amps_status amps__graph_sym(amps_ctx *ctx, const char *fn, amps_int n, co
             if ((stype > 0 && i > j) || (stype < 0 && i < j))
                 return amps__err(ctx, AMPS_ERR_PATTERN, "%s: entry (%ld,%ld) is outside the %s triangle", fn, (long)i,
                                  (long)j, stype > 0 ? "upper" : "lower");
+            if (p > Ap[j] && i <= Ai[p - 1]) sorted = 0;
         }
+    if (stype != 0 && sorted) {
+        /* one triangle, rows strictly increasing: no duplicates, and sweeping the columns in order
+           appends to every row in increasing order */
+        Gp = (amps_int *)amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int));
+        w = (amps_int *)amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int));
+        if (!Gp || !w) { amps__free(ctx, Gp); amps__free(ctx, w); return AMPS_ERR_OOM; }
+        for (j = 0; j <= n; j++) Gp[j] = 0;
+        for (j = 0; j < n; j++)
+            for (p = Ap[j]; p < Ap[j + 1]; p++)
+                if (Ai[p] != j) { Gp[Ai[p] + 1]++; Gp[j + 1]++; }
+        for (j = 0; j < n; j++) { Gp[j + 1] += Gp[j]; w[j] = Gp[j]; }
+        Gi = (amps_int *)amps__malloc(ctx, (size_t)Gp[n], sizeof(amps_int));
+        if (!Gi) { amps__free(ctx, Gp); amps__free(ctx, w); return AMPS_ERR_OOM; }
+        for (j = 0; j < n; j++)
+            for (p = Ap[j]; p < Ap[j + 1]; p++)
+                if ((i = Ai[p]) != j) { Gi[w[i]++] = j; Gi[w[j]++] = i; }
+        amps__free(ctx, w);
+        *Gp_out = Gp; *Gi_out = Gi;
+        return AMPS_OK;
+    }
     pp[0] = &Cp; pp[1] = &Ci; pp[2] = &w; pp[3] = &mk; pp[4] = &Gp;
     len[0] = (size_t)n + 1; len[1] = 2 * (size_t)nz; len[2] = (size_t)n + 1; len[3] = (size_t)n + 1; len[4] = (size_t)n + 1;
     if ((s = amps__ialloc(ctx, 5, pp, len)) != AMPS_OK) return s;
@@ -463,9 +485,11 @@ static amps_int amps__graph_runs(amps_int n, const amps_int *Gp, const amps_int 
 }
 
 /* Quotient graph of G for the groups gfirst[0..ng] (consecutive vertex ranges): node adjacency
-   without self loops or duplicates, and weights (group sizes). Allocates *Qp, *Qi, *Qw. */
+   without self loops or duplicates, and weights (group sizes). same: the members of each group
+   have identical closed neighbourhoods (only the first is scanned). Allocates *Qp, *Qi, *Qw. */
 static amps_status amps__graph_quotient(amps_ctx *ctx, amps_int n, const amps_int *Gp, const amps_int *Gi, amps_int ng,
-                                        const amps_int *gfirst, amps_int **Qp_out, amps_int **Qi_out, amps_int **Qw_out) {
+                                        const amps_int *gfirst, int same, amps_int **Qp_out, amps_int **Qi_out,
+                                        amps_int **Qw_out) {
     amps_int g, j, p, h, nz, *gid = NULL, *mk = NULL, *Qp = NULL, *Qi = NULL, *Qw = NULL;
     amps_int **pp[4];
     size_t len[4];
@@ -480,7 +504,7 @@ static amps_status amps__graph_quotient(amps_ctx *ctx, amps_int n, const amps_in
     }
     for (nz = 0, g = 0; g < ng; g++) {
         Qp[g] = nz;
-        for (j = gfirst[g]; j < gfirst[g + 1]; j++)
+        for (j = gfirst[g]; j < (same ? gfirst[g] + 1 : gfirst[g + 1]); j++)
             for (p = Gp[j]; p < Gp[j + 1]; p++)
                 if ((h = gid[Gi[p]]) != g && mk[h] != g) { mk[h] = g; nz++; }
     }
@@ -489,7 +513,7 @@ static amps_status amps__graph_quotient(amps_ctx *ctx, amps_int n, const amps_in
     if (!Qi) { amps__free(ctx, gid); amps__free(ctx, mk); amps__free(ctx, Qp); amps__free(ctx, Qw); return AMPS_ERR_OOM; }
     for (g = 0; g < ng; g++) mk[g] = -1;
     for (nz = 0, g = 0; g < ng; g++)
-        for (j = gfirst[g]; j < gfirst[g + 1]; j++)
+        for (j = gfirst[g]; j < (same ? gfirst[g] + 1 : gfirst[g + 1]); j++)
             for (p = Gp[j]; p < Gp[j + 1]; p++)
                 if ((h = gid[Gi[p]]) != g && mk[h] != g) { mk[h] = g; Qi[nz++] = h; }
     amps__free(ctx, gid); amps__free(ctx, mk);
@@ -782,64 +806,16 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
 
 /* ------------------------------ nested dissection ------------------------------ */
 
-/* Tuning of the nested dissection. */
-#ifndef AMPS__ND_FMLO
-#define AMPS__ND_FMLO 25
-#endif
-#ifndef AMPS__ND_FMHI
-#define AMPS__ND_FMHI 150
-#endif
-#ifndef AMPS__ND_PASS
-#define AMPS__ND_PASS 8
-#endif
-#ifndef AMPS__ND_LEAF
-#define AMPS__ND_LEAF 100        /* parts of at most this many vertices are ordered by AMD */
-#endif
-#ifndef AMPS__ND_COARSE
-#define AMPS__ND_COARSE 120      /* coarsest graph size of the multilevel bisection */
-#endif
-#ifndef AMPS__ND_TRIES
-#define AMPS__ND_TRIES 6         /* initial bisections tried on the coarsest graph */
-#endif
-#ifndef AMPS__ND_BAL
-#define AMPS__ND_BAL 0.60        /* a part may hold at most this fraction of the total weight */
-#endif
-#ifndef AMPS__ND_BOTH
-#define AMPS__ND_BOTH 1
-#endif
-#ifndef AMPS__ND_ONE
-#define AMPS__ND_ONE 1
-#endif
-#ifndef AMPS__ND_MID
-#define AMPS__ND_MID 5
-#endif
-#ifndef AMPS__ND_MIDN
-#define AMPS__ND_MIDN 2000
-#endif
-#ifndef AMPS__ND_MIDF
-#define AMPS__ND_MIDF 16
-#endif
-#ifndef AMPS__ND_MIDL
-#define AMPS__ND_MIDL 4
-#endif
-#ifndef AMPS__ND_RUNS
-#define AMPS__ND_RUNS 1
-#endif
-#ifndef AMPS__ND_RUNS_XYZ
-#define AMPS__ND_RUNS_XYZ 1
-#endif
-#ifndef AMPS__ND_GEO
-#define AMPS__ND_GEO 0
-#endif
-#ifndef AMPS__ND_CGEO
-#define AMPS__ND_CGEO 1
-#endif
-#ifndef AMPS__ND_HALO
-#define AMPS__ND_HALO 1
-#endif
-#ifndef AMPS__ND_WIN
-#define AMPS__ND_WIN 0.10        /* plane cuts: lighter side holds at least 1/2 - this */
-#endif
+/* Tuning of the nested dissection (measured on FE meshes against METIS 5). */
+#define AMPS__ND_LEAF 100     /* parts of at most this many nodes are ordered by AMD */
+#define AMPS__ND_BAL 0.60     /* each side of a bisection holds at most this share of the weight */
+#define AMPS__ND_COARSE 120   /* size of the coarsest graph of a multilevel bisection */
+#define AMPS__ND_TRIES 6      /* greedy growings tried on the coarsest graph */
+#define AMPS__ND_MIDN 2000    /* graphs this large are bisected AMPS__ND_MID times at an */
+#define AMPS__ND_MID 5        /* intermediate level of at most AMPS__ND_MIDL coarsenings */
+#define AMPS__ND_MIDL 4       /* (about n/16 vertices), keeping the best */
+#define AMPS__ND_PASS 10      /* refinement passes per level */
+#define AMPS__ND_WIN 0.10     /* plane cuts: each side holds 1/2 -+ this share */
 
 /* Weighted graph for nested dissection: CSR adjacency (symmetric, no self loops), vertex weights,
    optional edge weights (NULL = 1) and coordinates (3 per vertex, may be NULL). */
@@ -911,23 +887,20 @@ static void amps__heap_set(amps__heap *H, amps_int v, amps_int key) {
 /* Workspace of the separator refinement, sized for graphs of up to n vertices. */
 typedef struct amps__fmws {
     amps_int n;
-    amps__heap H[2];
-    amps_int *mem, *ed[2], *lock, *logv, *logw;
+    amps__heap H;
+    amps_int *mem, *ed, *lock, *sl, *sl2, *logv, *logw;
 } amps__fmws;
 
 static amps_status amps__fmws_init(amps_ctx *ctx, amps__fmws *W, amps_int n) {
     amps_int k, *m;
-    m = (amps_int *)amps__malloc(ctx, 13 * ((size_t)n + 1), sizeof(amps_int));
+    size_t n1 = (size_t)n + 1;
+    m = (amps_int *)amps__malloc(ctx, 11 * n1, sizeof(amps_int));
     if (!m) return AMPS_ERR_OOM;
     W->n = n; W->mem = m;
-    for (k = 0; k < 2; k++) {
-        W->H[k].size = 0; W->H[k].h = m; m += n + 1; W->H[k].pos = m; m += n + 1; W->H[k].key = m; m += n + 1;
-        W->ed[k] = m; m += n + 1;
-    }
-    W->lock = m; m += n + 1;
-    W->logv = m; m += 2 * ((size_t)n + 1);
-    W->logw = m;
-    for (k = 0; k < n; k++) { W->H[0].pos[k] = -1; W->H[1].pos[k] = -1; }
+    W->H.size = 0; W->H.h = m; W->H.pos = m + n1; W->H.key = m + 2 * n1;
+    W->ed = m + 3 * n1; W->lock = m + 4 * n1; W->sl = m + 5 * n1; W->sl2 = m + 6 * n1;
+    W->logv = m + 7 * n1; W->logw = m + 9 * n1;
+    for (k = 0; k < n; k++) { W->H.pos[k] = -1; W->lock[k] = 0; }
     return AMPS_OK;
 }
 
@@ -942,75 +915,58 @@ static int amps__sep_better(amps_int s, amps_int a, amps_int b, amps_int bs, amp
     return m < bm;
 }
 
-/* Vertex-separator refinement (two-sided Fiduccia-Mattheyses): where[v] in {0,1,2} (2 =
-   separator), pw[0..2] part weights (updated). Moving a separator vertex to one side pulls its
-   neighbours on the other side into the separator; the best state of each pass is kept. */
+/* Vertex-separator refinement (Fiduccia-Mattheyses, one-sided passes alternating between the
+   lighter and the heavier side): where[v] in {0,1,2} (2 = separator), pw[0..2] part weights
+   (updated). Moving a separator vertex to side a pulls its neighbours on the other side into the
+   separator; the best state of each pass is kept. */
 static void amps__nd_fm(const amps__ndg *g, amps_int *where, amps_int *pw, amps_int maxpw, amps__fmws *W, int npass) {
-    amps_int n = g->n, v, u, x, p, q, nlog, bestlog, bs, b0, b1, nbad, limit;
+    amps_int n = g->n, v, u, x, p, q, k, nlog, nlogmax, bestlog, bs, b0, b1, nbad, limit, ns = 0, *ed = W->ed;
     const amps_int *vw = g->vw;
-    int pass, idle = 0, side = -1;
-    limit = n / 100;
-    if (limit < AMPS__ND_FMLO) limit = AMPS__ND_FMLO;
-    if (limit > AMPS__ND_FMHI) limit = AMPS__ND_FMHI;
+    amps__heap *H = &W->H;
+    int pass, idle = 0, a, b;
+    limit = n / 100; /* moves without improvement before a pass stops */
+    if (limit < 25) limit = 25;
+    if (limit > 150) limit = 150;
+    for (v = 0; v < n; v++)
+        if (where[v] == 2) W->sl[ns++] = v;
     for (pass = 0; pass < npass; pass++) {
-        amps_int s0 = pw[2], m0 = pw[0] > pw[1] ? pw[0] : pw[1];
-        if (AMPS__ND_ONE) side = (pass & 1) ? (pw[0] < pw[1] ? 1 : 0) : (pw[0] < pw[1] ? 0 : 1);
-        W->H[0].size = 0; W->H[1].size = 0;
-        for (v = 0; v < n; v++) {
-            W->lock[v] = 0;
-            if (where[v] != 2) continue;
-            W->ed[0][v] = W->ed[1][v] = 0;
+        amps_int s0 = pw[2], m0 = pw[0] > pw[1] ? pw[0] : pw[1], *t;
+        a = (pass & 1) ? (pw[0] < pw[1] ? 1 : 0) : (pw[0] < pw[1] ? 0 : 1);
+        b = 1 - a;
+        H->size = 0;
+        for (k = 0; k < ns; k++) {
+            v = W->sl[k];
+            ed[v] = 0;
             for (p = g->p[v]; p < g->p[v + 1]; p++)
-                if (where[u = g->i[p]] < 2) W->ed[where[u]][v] += vw[u];
-            amps__heap_push(&W->H[0], v, vw[v] - W->ed[1][v]);
-            amps__heap_push(&W->H[1], v, vw[v] - W->ed[0][v]);
+                if (where[g->i[p]] == b) ed[v] += vw[g->i[p]];
+            amps__heap_push(H, v, vw[v] - ed[v]);
         }
-        nlog = 0; bestlog = 0; bs = pw[2]; b0 = pw[0]; b1 = pw[1]; nbad = 0;
-        for (;;) {
-            amps_int t0 = W->H[0].size ? W->H[0].h[0] : -1, t1 = W->H[1].size ? W->H[1].h[0] : -1;
-            int ok0, ok1, a;
-            ok0 = t0 >= 0 && pw[0] + vw[t0] <= maxpw;
-            ok1 = t1 >= 0 && pw[1] + vw[t1] <= maxpw;
-            if (pw[0] > maxpw && t1 >= 0) { ok1 = 1; ok0 = 0; }      /* restore balance first */
-            else if (pw[1] > maxpw && t0 >= 0) { ok0 = 1; ok1 = 0; }
-            if (side == 0) ok1 = 0;
-            else if (side == 1) ok0 = 0;
-            if (ok0 && ok1) {
-                amps_int k0 = W->H[0].key[t0], k1 = W->H[1].key[t1];
-                a = k0 > k1 ? 0 : k1 > k0 ? 1 : (pw[0] < pw[1] ? 0 : 1);
-            } else if (ok0) a = 0;
-            else if (ok1) a = 1;
-            else break;
-            v = a ? t1 : t0;
+        nlog = 0; bestlog = 0; bs = pw[2]; b0 = pw[0]; b1 = pw[1]; nbad = 0; nlogmax = 0;
+        while (H->size > 0) {
+            v = H->h[0];
+            if (pw[a] + vw[v] > maxpw) break;
             /* move v from the separator to side a */
-            amps__heap_del(&W->H[0], v); amps__heap_del(&W->H[1], v);
+            amps__heap_del(H, v);
             W->logv[nlog] = v; W->logw[nlog++] = 2;
             where[v] = a; pw[2] -= vw[v]; pw[a] += vw[v]; W->lock[v] = 1;
             for (p = g->p[v]; p < g->p[v + 1]; p++) {
                 u = g->i[p];
-                if (where[u] == 2) {
-                    W->ed[a][u] += vw[v];
-                    amps__heap_set(&W->H[1 - a], u, vw[u] - W->ed[a][u]);
-                } else if (where[u] == 1 - a) {
-                    /* u joins the separator */
-                    W->logv[nlog] = u; W->logw[nlog++] = 1 - a;
-                    where[u] = 2; pw[1 - a] -= vw[u]; pw[2] += vw[u];
-                    W->ed[0][u] = W->ed[1][u] = 0;
-                    for (q = g->p[u]; q < g->p[u + 1]; q++) {
-                        x = g->i[q];
-                        if (where[x] == 2) {
-                            W->ed[1 - a][x] -= vw[u];
-                            amps__heap_set(&W->H[a], x, vw[x] - W->ed[1 - a][x]);
-                        } else {
-                            W->ed[where[x]][u] += vw[x];
-                        }
-                    }
-                    if (!W->lock[u]) {
-                        amps__heap_push(&W->H[0], u, vw[u] - W->ed[1][u]);
-                        amps__heap_push(&W->H[1], u, vw[u] - W->ed[0][u]);
+                if (where[u] != b) continue;
+                /* u joins the separator */
+                W->logv[nlog] = u; W->logw[nlog++] = b;
+                where[u] = 2; pw[b] -= vw[u]; pw[2] += vw[u];
+                ed[u] = 0;
+                for (q = g->p[u]; q < g->p[u + 1]; q++) {
+                    x = g->i[q];
+                    if (where[x] == 2) {
+                        if (H->pos[x] >= 0) { ed[x] -= vw[u]; amps__heap_set(H, x, vw[x] - ed[x]); }
+                    } else if (where[x] == b) {
+                        ed[u] += vw[x];
                     }
                 }
+                amps__heap_push(H, u, vw[u] - ed[u]);
             }
+            if (nlog > nlogmax) nlogmax = nlog;
             if (amps__sep_better(pw[2], pw[0], pw[1], bs, b0, b1, maxpw)) {
                 bs = pw[2]; b0 = pw[0]; b1 = pw[1]; bestlog = nlog; nbad = 0;
             } else if (++nbad > limit) {
@@ -1025,34 +981,37 @@ static void amps__nd_fm(const amps__ndg *g, amps_int *where, amps_int *pw, amps_
             where[v] = W->logw[nlog];
             pw[where[v]] += vw[v];
         }
-        W->H[0].size = 0; W->H[1].size = 0;
-        for (v = 0; v < n; v++) W->H[0].pos[v] = W->H[1].pos[v] = -1;
+        for (k = 0; k < H->size; k++) H->pos[H->h[k]] = -1;
+        H->size = 0;
+        /* separator list: old separator plus touched vertices still in it (lock marks duplicates) */
+        for (k = 0; k < nlogmax; k++) W->lock[W->logv[k]] = 0;
+        t = W->sl2; q = 0;
+        for (k = 0; k < ns + nlogmax; k++) {
+            v = k < ns ? W->sl[k] : W->logv[k - ns];
+            if (where[v] == 2 && !W->lock[v]) { W->lock[v] = 1; t[q++] = v; }
+        }
+        for (k = 0; k < q; k++) W->lock[t[k]] = 0;
+        W->sl2 = W->sl; W->sl = t; ns = q;
         if (!amps__sep_better(pw[2], pw[0], pw[1], s0, m0, m0, maxpw) || bestlog == 0) {
-            if (side < 0 || ++idle >= 2) break;
+            if (++idle >= 2) break;
         } else {
             idle = 0;
         }
     }
 }
 
-/* Turns a 2-way partition (where 0/1) into a vertex separator: the boundary vertices of the side
-   whose boundary weighs less join the separator. Sets pw[0..2]. */
+/* Turns a 2-way partition (where 0/1) into a vertex separator: every vertex still adjacent to
+   the other side, visited in index order, joins the separator (a greedy cover of the cut edges).
+   Sets pw[0..2]. */
 static void amps__nd_sep_from_cut(const amps__ndg *g, amps_int *where, amps_int *pw) {
-    amps_int v, p, bw[2] = {0, 0}, side;
-    for (v = 0; v < g->n; v++)
-        for (p = g->p[v]; p < g->p[v + 1]; p++)
-            if (where[g->i[p]] != where[v]) { bw[where[v]] += g->vw[v]; break; }
-    side = bw[0] <= bw[1] ? 0 : 1;
+    amps_int v, p;
     for (v = 0; v < g->n; v++) {
-        if (where[v] != side && !AMPS__ND_BOTH) continue;
+        if (where[v] == 2) continue;
         for (p = g->p[v]; p < g->p[v + 1]; p++)
-            if (where[g->i[p]] == 1 - where[v]) { where[v] = 3; break; }
+            if (where[g->i[p]] == 1 - where[v]) { where[v] = 2; break; }
     }
     pw[0] = pw[1] = pw[2] = 0;
-    for (v = 0; v < g->n; v++) {
-        if (where[v] == 3) where[v] = 2;
-        pw[where[v]] += g->vw[v];
-    }
+    for (v = 0; v < g->n; v++) pw[where[v]] += g->vw[v];
 }
 
 /* Grows side 0 by breadth-first search from seed until it holds half the weight (where 0/1);
@@ -1279,7 +1238,7 @@ static void amps__nd_geo(const amps__ndg *g, amps_int *where, amps_int *pw, amps
 
 /* Multilevel vertex bisection of g: heavy-edge coarsening, greedy growing + FM on the coarsest
    graph, FM refinement while projecting back. Graphs of at least AMPS__ND_MIDN vertices are first
-   coarsened to about 1/AMPS__ND_MIDF of their size, where nmid independent bisections are tried
+   coarsened to about 1/16 of their size, where nmid independent bisections are tried
    and the best is kept. where/pw receive the result; wa, wb (n) are workspace. */
 static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amps_int *pw, amps_int maxpw,
                                amps__fmws *W, amps_int *wa, amps_int *wb, unsigned long long *rng, int nmid) {
@@ -1289,7 +1248,7 @@ static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amp
     amps_status s = AMPS_OK;
     lev[0] = *g;
     if (nmid > 1 && g->n >= AMPS__ND_MIDN) {
-        target = g->n / AMPS__ND_MIDF;
+        target = g->n / 16;
         if (target < AMPS__ND_COARSE) target = AMPS__ND_COARSE;
         maxl = 1 + AMPS__ND_MIDL;
     } else {
@@ -1323,7 +1282,7 @@ static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amp
            keep the best in wa */
         amps__ndg *c = &lev[nl - 1];
         t = 0;
-        if (c->xyz && AMPS__ND_CGEO) {
+        if (c->xyz) {
             amps__keyv *kv = (amps__keyv *)amps__malloc(ctx, (size_t)c->n, sizeof(amps__keyv));
             amps_int *ws = (amps_int *)amps__malloc(ctx, 3 * (size_t)c->n, sizeof(amps_int));
             if (kv && ws) {
@@ -1333,7 +1292,7 @@ static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amp
             amps__free(ctx, kv); amps__free(ctx, ws);
             if (!t) s = amps__err(ctx, AMPS_ERR_OOM, "amps_nd: out of memory");
         }
-        for (; t < AMPS__ND_TRIES + (c->xyz && AMPS__ND_CGEO) && s == AMPS_OK; t++) {
+        for (; t < AMPS__ND_TRIES + (c->xyz != NULL) && s == AMPS_OK; t++) {
             amps_int lpw[3], seed = amps__rand(rng, c->n);
             if (t == 0) seed = amps__nd_far(c, seed, wb, where);
             amps__nd_grow(c, seed, wb, where, rng);
@@ -1419,7 +1378,6 @@ done:
 static amps_status amps__nd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp, const amps_int *Gi, const amps_int *vw,
                                  const double *xyz, amps_int *order) {
     amps_int *loc = NULL, *stk = NULL, *where = NULL, *wa = NULL, *wb = NULL, *tmpv = NULL, *lord = NULL, *cnt = NULL;
-    amps__keyv *kv = NULL;
     amps__fmws W;
     amps__ndg sub;
     amps_int k, v, p, nstk = 0;
@@ -1434,13 +1392,16 @@ static amps_status amps__nd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp, 
     for (k = 0; k < 8; k++) len[k] = (size_t)n + 1;
     len[1] = 2 * ((size_t)n + 1);
     if ((s = amps__ialloc(ctx, 8, pp, len)) != AMPS_OK) return s;
-    if (xyz) kv = (amps__keyv *)amps__malloc(ctx, (size_t)n, sizeof(amps__keyv));
-    if ((xyz && !kv) || amps__fmws_init(ctx, &W, n) != AMPS_OK) { s = AMPS_ERR_OOM; goto done; }
+    if (amps__fmws_init(ctx, &W, n) != AMPS_OK) { s = AMPS_ERR_OOM; goto done; }
     for (k = 0; k < n; k++) { order[k] = k; loc[k] = -1; }
     stk[nstk++] = 0; stk[nstk++] = n;
     while (nstk > 0) {
         amps_int hi = stk[--nstk], lo = stk[--nstk], m = hi - lo, nz = 0, ncomp, pw[3], maxpw, tot = 0;
         if (m <= 1) continue;
+        if (m <= AMPS__ND_LEAF) {
+            if ((s = amps__nd_leaf(ctx, Gp, Gi, vw, order + lo, m, loc, lord)) != AMPS_OK) goto done;
+            continue;
+        }
         /* induced subgraph of order[lo..hi) */
         for (k = 0; k < m; k++) loc[order[lo + k]] = k;
         for (k = 0; k < m; k++)
@@ -1487,46 +1448,27 @@ static amps_status amps__nd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp, 
             amps__ndg_free(ctx, &sub);
             continue;
         }
-        pw[0] = pw[1] = 0; pw[2] = tot;
-        if (m > AMPS__ND_LEAF) {
-            maxpw = (amps_int)(AMPS__ND_BAL * tot);
-            int r, have = 0;
-            if (xyz && AMPS__ND_GEO) { amps__nd_geo(&sub, where, pw, maxpw, &W, kv, cnt, lord, wa); have = 1; }
-            for (r = 0; r < (xyz ? AMPS__ND_RUNS_XYZ : AMPS__ND_RUNS); r++) {
-                amps_int lpw[3];
-                if ((s = amps__nd_ml(ctx, &sub, lord, lpw, maxpw, &W, wa, wb, &rng, AMPS__ND_MID)) != AMPS_OK) goto done;
-                if (!have || amps__sep_better(lpw[2], lpw[0], lpw[1], pw[2], pw[0], pw[1], maxpw)) {
-                    memcpy(where, lord, sizeof(amps_int) * (size_t)m);
-                    pw[0] = lpw[0]; pw[1] = lpw[1]; pw[2] = lpw[2];
-                    have = 1;
-                }
-            }
+        maxpw = (amps_int)(AMPS__ND_BAL * tot);
+        if ((s = amps__nd_ml(ctx, &sub, where, pw, maxpw, &W, wa, wb, &rng, AMPS__ND_MID)) != AMPS_OK) goto done;
+        amps__ndg_free(ctx, &sub);
+        if (pw[0] == 0 || pw[1] == 0) { /* inseparable (e.g. a clique) */
+            if ((s = amps__nd_leaf(ctx, Gp, Gi, vw, order + lo, m, loc, lord)) != AMPS_OK) goto done;
+            continue;
         }
-        if (pw[0] == 0 || pw[1] == 0) {
-            /* small or inseparable part: AMD */
-            if (AMPS__ND_HALO) {
-                amps__ndg_free(ctx, &sub);
-                if ((s = amps__nd_leaf(ctx, Gp, Gi, vw, order + lo, m, loc, lord)) != AMPS_OK) goto done;
-                continue;
-            }
-            if ((s = amps__amd_core(ctx, m, sub.p, sub.i, sub.vw, m, 0, lord)) != AMPS_OK) goto done;
-            for (k = 0; k < m; k++) tmpv[k] = order[lo + lord[k]];
-        } else {
+        {
             amps_int c[3];
-            c[0] = 0; c[1] = 0; c[2] = 0;
+            c[0] = c[1] = c[2] = 0;
             for (k = 0; k < m; k++) c[where[k]]++;
-            c[2] = c[0] + c[1]; c[1] = c[0]; c[0] = 0;
+            c[2] = c[0] + c[1]; c[1] = c[0]; c[0] = 0; /* start of each part: 0, 1, separator */
             if (c[1] > 1) { stk[nstk++] = lo; stk[nstk++] = lo + c[1]; }
             if (c[2] - c[1] > 1) { stk[nstk++] = lo + c[1]; stk[nstk++] = lo + c[2]; }
             for (k = 0; k < m; k++) tmpv[c[where[k]]++] = order[lo + k];
         }
         memcpy(order + lo, tmpv, sizeof(amps_int) * (size_t)m);
-        amps__ndg_free(ctx, &sub);
     }
 done:
     amps__ndg_free(ctx, &sub);
     amps__free(ctx, W.mem);
-    amps__free(ctx, kv);
     amps__free(ctx, loc); amps__free(ctx, stk); amps__free(ctx, where); amps__free(ctx, wa); amps__free(ctx, wb);
     amps__free(ctx, tmpv); amps__free(ctx, lord); amps__free(ctx, cnt);
     if (s == AMPS_ERR_OOM && ctx && ctx->status != AMPS_ERR_OOM) amps__err(ctx, s, "amps_nd: out of memory");
@@ -1643,7 +1585,7 @@ static amps_status amps__order_graph(amps_ctx *ctx, const char *fn, amps_int n, 
     if (block == 0) ng = amps__graph_runs(n, Gp, Gi, gfirst);
     else { ng = n / block; for (k = 0; k <= ng; k++) gfirst[k] = k * block; }
     if (ng < n) {
-        if ((s = amps__graph_quotient(ctx, n, Gp, Gi, ng, gfirst, &Qp, &Qi, &Qw)) != AMPS_OK) goto done;
+        if ((s = amps__graph_quotient(ctx, n, Gp, Gi, ng, gfirst, block == 0, &Qp, &Qi, &Qw)) != AMPS_OK) goto done;
         P = Qp; I = Qi;
     } else {
         P = Gp; I = Gi;

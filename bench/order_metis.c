@@ -18,6 +18,7 @@ int main(int argc, char **argv) {
     amps_order_opts o;
     amps_ordering meths[2] = {AMPS_ORDER_METIS, AMPS_ORDER_AUTO};
     amps_ctx_init(&ctx);
+    (void)ref_solve; /* shared header helper not needed here */
     dof = (int *)malloc(sizeof(int) * 3 * mesh.nn);
     n = fe_number(&mesh, NULL, dof);
     nz = fe_assemble(&mesh, dof, 1.0, 0.3, &ti, &tj, &tx);
