@@ -115,7 +115,7 @@ AMPS_API void amps_csc_symv(const amps_csc *A, amps_stype stype, const double *x
 /* ================================= ordering ================================= */
 
 typedef enum amps_ordering {
-    AMPS_ORDER_AUTO = 0,     /* ND when coordinates are given or METIS built in, else AMD */
+    AMPS_ORDER_AUTO = 0,     /* least fill (symbolic count) of AMD, ND and METIS (when built in) */
     AMPS_ORDER_NATURAL,      /* identity */
     AMPS_ORDER_GIVEN,        /* opts->perm */
     AMPS_ORDER_AMD,          /* our approximate minimum degree */
@@ -128,15 +128,25 @@ typedef struct amps_order_opts {
     const amps_int *perm;    /* GIVEN: perm[k] = original index eliminated k-th */
     amps_int block;          /* DOFs per node (3 for 3D elasticity): order the compressed node graph
                                 and expand; 0 = detect identical consecutive columns, 1 = none */
-    const double *coords;    /* optional: 3 coordinates per node (per block) for ND */
+    const double *coords;    /* optional: 3 coordinates per node (per block) for ND; per unknown
+                                when block = 0 (a detected node takes its first unknown's) */
 } amps_order_opts;
 
-/* perm (size n) = fill-reducing ordering of symmetric A (stype part): perm[k] = original index k-th. */
+/* perm (size n) = fill-reducing ordering of symmetric A (stype part): perm[k] = original index k-th.
+   Only the pattern of A is used; entries outside the stype triangle are rejected (any entry is
+   accepted for AMPS_FULL, whose pattern is symmetrized). The nodes' unknowns stay consecutive and
+   ascending. AMD/ND/METIS/AUTO orders are postordered (same fill, contiguous supernodes).
+   Errors: AMPS_ERR_ARG (NULL, shapes, options, GIVEN not a permutation), AMPS_ERR_INDEX (row index
+   or GIVEN entry out of range), AMPS_ERR_PATTERN (pointers, triangle), AMPS_ERR_VALUE (coords not
+   finite), AMPS_ERR_UNSUPPORTED (METIS without AMPS_USE_METIS), AMPS_ERR_OOM. perm is written
+   only on success. */
 AMPS_API amps_status amps_order(amps_ctx *ctx, const amps_csc *A, amps_stype stype,
                                 const amps_order_opts *opts, amps_int *perm);
-/* AMD on a symmetric graph given in CSC with both triangles (diagonal entries ignored). */
+/* AMD on a symmetric graph given in CSC with both triangles (diagonal entries ignored; a pattern
+   given as one triangle is symmetrized). */
 AMPS_API amps_status amps_amd(amps_ctx *ctx, amps_int n, const amps_int *Ap, const amps_int *Ai, amps_int *perm);
-/* Nested dissection on the same kind of graph; xyz (3n, may be NULL) guides the bisections. */
+/* Nested dissection on the same kind of graph; xyz (3n, may be NULL) guides the bisections.
+   Vertices with identical closed neighbourhoods (consecutive) are ordered together. */
 AMPS_API amps_status amps_nd(amps_ctx *ctx, amps_int n, const amps_int *Ap, const amps_int *Ai,
                              const double *xyz, amps_int *perm);
 
@@ -568,6 +578,7 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
     if (n <= 0 || nfree <= 0) return AMPS_OK;
     ntot = 0;
     for (i = 0; i < n; i++) ntot += vw ? vw[i] : 1;
+    if ((double)nz + nz / 5 + 2.0 * n + 16 > (double)AMPS__IMAX) return amps__err(ctx, AMPS_ERR_OOM, "graph too large for AMD (%ld entries)", (long)nz);
     iwlen = nz + nz / 5 + 2 * n + 16;
     need = 17 * (size_t)n + (size_t)ntot + 8;
     mem = (amps_int *)amps__malloc(ctx, need, sizeof(amps_int));
@@ -1093,7 +1104,7 @@ static amps_status amps__nd_coarsen(amps_ctx *ctx, amps__ndg *g, amps__ndg *c, u
     if (!c->p || !c->vw || !c->i || !c->ew || (g->xyz && !c->xyz)) {
         amps__ndg_free(ctx, c); amps__free(ctx, match); amps__free(ctx, perm); amps__free(ctx, mk);
         amps__free(ctx, g->cmap); g->cmap = NULL;
-        return amps__err(ctx, AMPS_ERR_OOM, "amps_nd: out of memory coarsening a graph of %ld vertices", (long)n);
+        return amps__err(ctx, AMPS_ERR_OOM, "out of memory coarsening a graph of %ld vertices", (long)n);
     }
     for (k = 0; k < nc; k++) mk[k] = -1;
     for (nz = 0, k = 0; k < nc; k++) {
@@ -1290,7 +1301,7 @@ static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amp
                 t = 1;
             }
             amps__free(ctx, kv); amps__free(ctx, ws);
-            if (!t) s = amps__err(ctx, AMPS_ERR_OOM, "amps_nd: out of memory");
+            if (!t) s = AMPS_ERR_OOM;
         }
         for (; t < AMPS__ND_TRIES + (c->xyz != NULL) && s == AMPS_OK; t++) {
             amps_int lpw[3], seed = amps__rand(rng, c->n);
@@ -1471,7 +1482,6 @@ done:
     amps__free(ctx, W.mem);
     amps__free(ctx, loc); amps__free(ctx, stk); amps__free(ctx, where); amps__free(ctx, wa); amps__free(ctx, wb);
     amps__free(ctx, tmpv); amps__free(ctx, lord); amps__free(ctx, cnt);
-    if (s == AMPS_ERR_OOM && ctx && ctx->status != AMPS_ERR_OOM) amps__err(ctx, s, "amps_nd: out of memory");
     return s;
 }
 
@@ -1544,7 +1554,7 @@ static amps_status amps__metis(amps_ctx *ctx, amps_int n, const amps_int *Gp, co
     amps_int k, nz = Gp[n];
     int r;
     if ((amps_int)(idx_t)n != n || (amps_int)(idx_t)nz != nz)
-        return amps__err(ctx, AMPS_ERR_UNSUPPORTED, "amps_order: graph too large for METIS idx_t");
+        return amps__err(ctx, AMPS_ERR_UNSUPPORTED, "graph too large for METIS idx_t");
     xadj = (idx_t *)amps__malloc(ctx, (size_t)n + 1, sizeof(idx_t));
     adj = (idx_t *)amps__malloc(ctx, (size_t)nz, sizeof(idx_t));
     w = (idx_t *)amps__malloc(ctx, (size_t)n, sizeof(idx_t));
@@ -1552,7 +1562,7 @@ static amps_status amps__metis(amps_ctx *ctx, amps_int n, const amps_int *Gp, co
     ip = (idx_t *)amps__malloc(ctx, (size_t)n, sizeof(idx_t));
     if (!xadj || !adj || !w || !mp || !ip) {
         amps__free(ctx, xadj); amps__free(ctx, adj); amps__free(ctx, w); amps__free(ctx, mp); amps__free(ctx, ip);
-        return amps__err(ctx, AMPS_ERR_OOM, "amps_order: out of memory for METIS");
+        return amps__err(ctx, AMPS_ERR_OOM, "out of memory for METIS");
     }
     for (k = 0; k <= n; k++) xadj[k] = (idx_t)Gp[k];
     for (k = 0; k < nz; k++) adj[k] = (idx_t)Gi[k];
@@ -1564,17 +1574,30 @@ static amps_status amps__metis(amps_ctx *ctx, amps_int n, const amps_int *Gp, co
         for (k = 0; k < n; k++) order[k] = (amps_int)mp[k];
     amps__free(ctx, xadj); amps__free(ctx, adj); amps__free(ctx, w); amps__free(ctx, mp); amps__free(ctx, ip);
     if (r != METIS_OK) return amps__err(ctx, r == METIS_ERROR_MEMORY ? AMPS_ERR_OOM : AMPS_ERR_ARG,
-                                        "amps_order: METIS_NodeND failed (status %d)", r);
+                                        "METIS_NodeND failed (status %d)", r);
     return AMPS_OK;
 }
 #endif
 
+/* Prefixes the message of a failure reported by an internal routine with "fn: ". */
+static amps_status amps__order_fail(amps_ctx *ctx, const char *fn, amps_status s) {
+    size_t l = strlen(fn);
+    if (ctx && s != AMPS_OK && (strncmp(ctx->msg, fn, l) != 0 || ctx->msg[l] != ':')) {
+        char tmp[sizeof(ctx->msg)];
+        memcpy(tmp, ctx->msg, sizeof(tmp));
+        tmp[sizeof(tmp) - 1] = 0;
+        amps__err(ctx, s, "%s: %s", fn, tmp[0] ? tmp : amps_status_str(s));
+    }
+    return s;
+}
+
 /* Orders graph G (n vertices, clean and symmetric) by method after compressing it into nodes
    (block b >= 1: b consecutive vertices; 0: runs of identical closed neighbourhoods) and expands
    the node order into perm (n). coords: 3 per node (b >= 1) or per vertex (b = 0), may be NULL.
-   post: replace the node order by its elimination-tree postorder. */
-static amps_status amps__order_graph(amps_ctx *ctx, const char *fn, amps_int n, const amps_int *Gp, const amps_int *Gi,
-                                     int method, amps_int block, const double *coords, int post, amps_int *perm) {
+   post: replace the node order by its elimination-tree postorder. Failures: AMPS_ERR_OOM (or a
+   METIS error) with the message of the routine that failed. */
+static amps_status amps__order_graph(amps_ctx *ctx, amps_int n, const amps_int *Gp, const amps_int *Gi, int method,
+                                     amps_int block, const double *coords, int post, amps_int *perm) {
     amps_int *gfirst = NULL, *Qp = NULL, *Qi = NULL, *Qw = NULL, *ord = NULL, *ord2 = NULL, *wk = NULL, ng, k, j, q;
     const amps_int *P, *I;
     double *xyz = NULL;
@@ -1647,7 +1670,6 @@ static amps_status amps__order_graph(amps_ctx *ctx, const char *fn, amps_int n, 
     for (q = 0, k = 0; k < ng; k++)
         for (j = gfirst[ord[k]]; j < gfirst[ord[k] + 1]; j++) perm[q++] = j;
 done:
-    if (s == AMPS_ERR_OOM && ctx && ctx->status != AMPS_ERR_OOM) amps__err(ctx, s, "%s: out of memory", fn);
     amps__free(ctx, gfirst); amps__free(ctx, Qp); amps__free(ctx, Qi); amps__free(ctx, Qw);
     amps__free(ctx, xyz); amps__free(ctx, ord); amps__free(ctx, ord2); amps__free(ctx, wk);
     return s;
@@ -1685,9 +1707,9 @@ AMPS_API amps_status amps_order(amps_ctx *ctx, const amps_csc *A, amps_stype sty
                 return amps__err(ctx, AMPS_ERR_VALUE, "%s: coordinate %ld of node %ld is not finite", fn, (long)(k % 3),
                                  (long)(k / 3));
     }
-    if ((s = amps__graph_sym(ctx, fn, n, A->p, A->i, (int)stype, &Gp, &Gi)) != AMPS_OK) return s;
+    if ((s = amps__graph_sym(ctx, fn, n, A->p, A->i, (int)stype, &Gp, &Gi)) != AMPS_OK) return amps__order_fail(ctx, fn, s);
     out = (amps_int *)amps__malloc(ctx, (size_t)n, sizeof(amps_int));
-    if (!out) { amps__free(ctx, Gp); amps__free(ctx, Gi); return amps__err(ctx, AMPS_ERR_OOM, "%s: out of memory", fn); }
+    if (!out) { amps__free(ctx, Gp); amps__free(ctx, Gi); return amps__order_fail(ctx, fn, AMPS_ERR_OOM); }
     if (method == AMPS_ORDER_NATURAL) {
         for (k = 0; k < n; k++) out[k] = k;
     } else if (method == AMPS_ORDER_GIVEN) {
@@ -1705,7 +1727,7 @@ AMPS_API amps_status amps_order(amps_ctx *ctx, const amps_csc *A, amps_stype sty
         }
         if (s == AMPS_OK) memcpy(out, g, sizeof(amps_int) * (size_t)n);
     } else if (n > 0) {
-        s = amps__order_graph(ctx, fn, n, Gp, Gi, (int)method, block, coords, 1, out);
+        s = amps__order_fail(ctx, fn, amps__order_graph(ctx, n, Gp, Gi, (int)method, block, coords, 1, out));
     }
     if (s == AMPS_OK && n > 0) memcpy(perm, out, sizeof(amps_int) * (size_t)n);
     amps__free(ctx, Gp); amps__free(ctx, Gi); amps__free(ctx, out);
@@ -1717,11 +1739,11 @@ AMPS_API amps_status amps_amd(amps_ctx *ctx, amps_int n, const amps_int *Ap, con
     amps_status s;
     if (n < 0) return amps__err(ctx, AMPS_ERR_ARG, "amps_amd: n = %ld is negative", (long)n);
     if (n > 0 && !perm) return amps__err(ctx, AMPS_ERR_ARG, "amps_amd: output perm is NULL");
-    if ((s = amps__graph_sym(ctx, "amps_amd", n, Ap, Ai, 0, &Gp, &Gi)) != AMPS_OK) return s;
+    if ((s = amps__graph_sym(ctx, "amps_amd", n, Ap, Ai, 0, &Gp, &Gi)) != AMPS_OK) return amps__order_fail(ctx, "amps_amd", s);
     out = (amps_int *)amps__malloc(ctx, (size_t)n, sizeof(amps_int));
-    if (!out) s = amps__err(ctx, AMPS_ERR_OOM, "amps_amd: out of memory");
-    else if ((s = amps__amd_core(ctx, n, Gp, Gi, NULL, n, 0, out)) != AMPS_OK) amps__err(ctx, s, "amps_amd: out of memory");
-    else if (n > 0) memcpy(perm, out, sizeof(amps_int) * (size_t)n);
+    if (!out) s = AMPS_ERR_OOM;
+    else if ((s = amps__amd_core(ctx, n, Gp, Gi, NULL, n, 0, out)) == AMPS_OK && n > 0) memcpy(perm, out, sizeof(amps_int) * (size_t)n);
+    amps__order_fail(ctx, "amps_amd", s);
     amps__free(ctx, Gp); amps__free(ctx, Gi); amps__free(ctx, out);
     return s;
 }
@@ -1737,11 +1759,12 @@ AMPS_API amps_status amps_nd(amps_ctx *ctx, amps_int n, const amps_int *Ap, cons
             if (!amps__isfinite(xyz[k]))
                 return amps__err(ctx, AMPS_ERR_VALUE, "amps_nd: coordinate %ld of vertex %ld is not finite", (long)(k % 3),
                                  (long)(k / 3));
-    if ((s = amps__graph_sym(ctx, "amps_nd", n, Ap, Ai, 0, &Gp, &Gi)) != AMPS_OK) return s;
+    if ((s = amps__graph_sym(ctx, "amps_nd", n, Ap, Ai, 0, &Gp, &Gi)) != AMPS_OK) return amps__order_fail(ctx, "amps_nd", s);
     out = (amps_int *)amps__malloc(ctx, (size_t)n, sizeof(amps_int));
-    if (!out) s = amps__err(ctx, AMPS_ERR_OOM, "amps_nd: out of memory");
-    else if (n > 0 && (s = amps__order_graph(ctx, "amps_nd", n, Gp, Gi, AMPS_ORDER_ND, 0, xyz, 1, out)) == AMPS_OK)
+    if (!out) s = AMPS_ERR_OOM;
+    else if (n > 0 && (s = amps__order_graph(ctx, n, Gp, Gi, AMPS_ORDER_ND, 0, xyz, 1, out)) == AMPS_OK)
         memcpy(perm, out, sizeof(amps_int) * (size_t)n);
+    amps__order_fail(ctx, "amps_nd", s);
     amps__free(ctx, Gp); amps__free(ctx, Gi); amps__free(ctx, out);
     return s;
 }

@@ -497,6 +497,7 @@ static void test_alloc_failures(void) {
     int *perm = (int *)malloc(sizeof(int) * m.n), k, variant, bad = 0, tried = 0;
     for (variant = 0; variant < 6; variant++) {
         long f;
+        const char *prefix = variant < 4 ? "amps_order: " : variant == 4 ? "amps_amd: " : "amps_nd: ";
         for (f = 0;; f++) {
             int r;
             amps_ctx_init(&ctx);
@@ -518,7 +519,8 @@ static void test_alloc_failures(void) {
                 break;
             }
             for (k = 0; k < m.n && perm[k] == -9; k++) {}
-            if (r != AMPS_ERR_OOM || ctx.status != AMPS_ERR_OOM || k < m.n || !strstr(ctx.msg, "memory")) {
+            if (r != AMPS_ERR_OOM || ctx.status != AMPS_ERR_OOM || k < m.n || !strstr(ctx.msg, "memory") ||
+                strncmp(ctx.msg, prefix, strlen(prefix))) {
                 bad++;
                 CHECK(0, "variant %d, failing allocation %ld: status %d, '%s', perm %s", variant, f, r, ctx.msg,
                       k < m.n ? "changed" : "unchanged");
