@@ -825,7 +825,7 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
 #define AMPS__ND_MIDN 2000    /* graphs this large are bisected AMPS__ND_MID times at an */
 #define AMPS__ND_MID 5        /* intermediate level of at most AMPS__ND_MIDL coarsenings */
 #define AMPS__ND_MIDL 4       /* (about n/16 vertices), keeping the best */
-#define AMPS__ND_PASS 10      /* refinement passes per level */
+#define AMPS__ND_PASS 8       /* refinement passes per level */
 #define AMPS__ND_WIN 0.10     /* plane cuts: each side holds 1/2 -+ this share */
 
 /* Weighted graph for nested dissection: CSR adjacency (symmetric, no self loops), vertex weights,
@@ -1179,13 +1179,13 @@ static int amps__keyv_cmp(const void *a, const void *b) {
 
 /* Plane-cut bisection of g (with coordinates): for each direction (coordinate and principal
    axes) sweeps the sorted projections and keeps the split inside the balance window with the
-   lightest one-sided boundary; that boundary becomes the separator, refined by FM. The best
-   refined separator is returned in where/pw. kv (n), cnt, rank, tmpw (n) are workspace. */
+   lightest one-sided boundary; the best split over all directions gives the separator, refined by
+   FM. Result in where/pw. kv, cnt, rank (n) are workspace. */
 static void amps__nd_geo(const amps__ndg *g, amps_int *where, amps_int *pw, amps_int maxpw, amps__fmws *W,
-                         amps__keyv *kv, amps_int *cnt, amps_int *rank, amps_int *tmpw) {
+                         amps__keyv *kv, amps_int *cnt, amps_int *rank) {
     amps_int n = g->n, v, u, p, k, tot = 0, d, bk;
     double cen[3] = {0, 0, 0}, C[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0}, V[9], dir[6][3];
-    amps_int best[3] = {-1, 0, 0};
+    amps_int best = 0;
     int haveb = 0;
     for (v = 0; v < n; v++) {
         tot += g->vw[v];
@@ -1204,7 +1204,6 @@ static void amps__nd_geo(const amps__ndg *g, amps_int *where, amps_int *pw, amps
     for (d = 0; d < 6; d++) {
         amps_int wa = 0, bndA = 0, bndB = 0, bs = -1;
         double lo = tot * (0.5 - AMPS__ND_WIN), hi = tot * (0.5 + AMPS__ND_WIN), bgap = 0;
-        amps_int lpw[3];
         for (v = 0; v < n; v++) {
             kv[v].k = dir[d][0] * g->xyz[3 * v] + dir[d][1] * g->xyz[3 * v + 1] + dir[d][2] * g->xyz[3 * v + 2];
             kv[v].v = v;
@@ -1230,21 +1229,14 @@ static void amps__nd_geo(const amps__ndg *g, amps_int *where, amps_int *pw, amps
                 if (bs < 0 || s < bs || (s == bs && gap < bgap)) { bs = s; bk = k; bgap = gap; }
             }
         }
-        if (bk < 0) continue;
-        for (v = 0; v < n; v++) tmpw[v] = rank[v] <= bk ? 0 : 1;
-        amps__nd_sep_from_cut(g, tmpw, lpw);
-        amps__nd_fm(g, tmpw, lpw, maxpw, W, 8);
-        if (!haveb || amps__sep_better(lpw[2], lpw[0], lpw[1], best[0], best[1], best[2], maxpw)) {
-            haveb = 1;
-            best[0] = lpw[2]; best[1] = lpw[0]; best[2] = lpw[1];
-            memcpy(where, tmpw, sizeof(amps_int) * (size_t)n);
-            pw[0] = lpw[0]; pw[1] = lpw[1]; pw[2] = lpw[2];
-        }
+        if (bk < 0 || (haveb && bs >= best)) continue;
+        haveb = 1; best = bs;
+        for (v = 0; v < n; v++) where[v] = rank[v] <= bk ? 0 : 1;
     }
-    if (!haveb) { /* no split in the window (should not happen): halve the index range */
+    if (!haveb) /* no split in the window (cannot happen with positive weights): halve the index range */
         for (v = 0; v < n; v++) where[v] = v < n / 2 ? 0 : 1;
-        amps__nd_sep_from_cut(g, where, pw);
-    }
+    amps__nd_sep_from_cut(g, where, pw);
+    amps__nd_fm(g, where, pw, maxpw, W, AMPS__ND_PASS);
 }
 
 /* Multilevel vertex bisection of g: heavy-edge coarsening, greedy growing + FM on the coarsest
@@ -1295,9 +1287,9 @@ static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amp
         t = 0;
         if (c->xyz) {
             amps__keyv *kv = (amps__keyv *)amps__malloc(ctx, (size_t)c->n, sizeof(amps__keyv));
-            amps_int *ws = (amps_int *)amps__malloc(ctx, 3 * (size_t)c->n, sizeof(amps_int));
+            amps_int *ws = (amps_int *)amps__malloc(ctx, 2 * (size_t)c->n, sizeof(amps_int));
             if (kv && ws) {
-                amps__nd_geo(c, wa, bestpw, maxpw, W, kv, ws, ws + c->n, ws + 2 * c->n);
+                amps__nd_geo(c, wa, bestpw, maxpw, W, kv, ws, ws + c->n);
                 t = 1;
             }
             amps__free(ctx, kv); amps__free(ctx, ws);
