@@ -601,6 +601,46 @@ static void test_solve(void) {
     t_free_mat(&m); fe_free(&mesh);
 }
 
+/* Clique, star, path and a 2D grid (no node blocks): valid orderings, and fill close to the
+   obvious optimum (path, star) or to CHOLMOD's METIS (grid). */
+static void test_shapes(void) {
+    amps_ctx ctx;
+    int shape, k, j, r;
+    amps_ordering meths[] = {AMPS_ORDER_AUTO, AMPS_ORDER_AMD, AMPS_ORDER_ND};
+    amps_ctx_init(&ctx);
+    for (shape = 0; shape < 4; shape++) {
+        int n = shape == 0 ? 150 : shape == 3 ? 3600 : 2000, nz = 0, cap = shape == 0 ? n * (n + 1) / 2 : 3 * n;
+        int *ti = (int *)malloc(sizeof(int) * cap), *tj = (int *)malloc(sizeof(int) * cap), *perm = (int *)malloc(sizeof(int) * n);
+        const char *name = shape == 0 ? "clique" : shape == 1 ? "star" : shape == 2 ? "path" : "grid 60x60";
+        tmat m;
+        for (j = 0; j < n; j++) {
+            ti[nz] = tj[nz] = j; nz++;
+            if (shape == 0) for (k = 0; k < j; k++) { ti[nz] = k; tj[nz++] = j; }
+            if (shape == 1 && j > 0) { ti[nz] = 0; tj[nz++] = j; }
+            if (shape == 2 && j > 0) { ti[nz] = j - 1; tj[nz++] = j; }
+            if (shape == 3) {
+                if (j % 60 > 0) { ti[nz] = j - 1; tj[nz++] = j; }
+                if (j >= 60) { ti[nz] = j - 60; tj[nz++] = j; }
+            }
+        }
+        m = t_from_upper(n, nz, ti, tj, NULL);
+        for (k = 0; k < 3; k++) {
+            double f;
+            r = t_order(&ctx, &m, AMPS_UPPER, meths[k], shape == 3 ? 1 : 0, NULL, perm);
+            f = r == AMPS_OK && t_is_perm(n, perm) ? t_fill(&m, perm) : -1;
+            CHECK(f > 0, "%s %s: %d %s", name, mname(meths[k]), r, ctx.msg);
+            if (shape == 0) CHECK(f == n * (n + 1.0) / 2, "clique %s fill %.0f", mname(meths[k]), f);
+            if (shape == 1) CHECK(f == 2.0 * n - 1, "star %s fill %.0f (optimum %d)", mname(meths[k]), f, 2 * n - 1);
+            if (shape == 2) CHECK(f <= 3.0 * n, "path %s fill %.0f", mname(meths[k]), f);
+            if (shape == 3 && meths[k] == AMPS_ORDER_ND) {
+                double ref = ref_nnzL(n, m.up, m.ui, m.ux, NULL, CHOLMOD_METIS, NULL);
+                CHECK(f <= 1.15 * ref, "grid ND fill %.0f vs CHOLMOD METIS %.0f", f, ref);
+            }
+        }
+        free(ti); free(tj); free(perm); t_free_mat(&m);
+    }
+}
+
 int main(void) {
     test_methods();
     test_given();
@@ -612,6 +652,7 @@ int main(void) {
     test_invalid();
     test_alloc_failures();
     test_random();
+    test_shapes();
     test_solve();
     return amps_t_end("test_ordering");
 }
