@@ -50,6 +50,14 @@ static void check_matrix(const char *name, const amps_csc *A, const int *perm) {
                                relerr(Lp[n], F->Lx, Lx), relerr(n, F->D, D), tl, td);
         free(sx); free(sd);
     }
+    {   /* solution against CHOLMOD's */
+        double *b = (double *)malloc(sizeof(double) * n), *x = (double *)malloc(sizeof(double) * n);
+        double *xr = (double *)malloc(sizeof(double) * n), *w = (double *)malloc(sizeof(double) * n);
+        for (j = 0; j < n; j++) b[j] = cos(0.3 * j) + 0.25;
+        CHECK(amps_solve(&ctx, F, b, x, w) == AMPS_OK && ref_solve(n, A->p, A->i, A->x, F->perm, 1, b, xr) == 0, "%s: solve", name);
+        CHECK(t_reldiff(n, x, xr) <= 1e-6 && t_norm(n, x) > 0, "%s: solution differs from CHOLMOD's by %g", name, t_reldiff(n, x, xr));
+        free(b); free(x); free(xr); free(w);
+    }
     amps_factor_inertia(F, &npos, &nneg, &nzero);
     CHECK(npos == n && nneg == 0 && nzero == 0, "%s: inertia %d %d %d", name, (int)npos, (int)nneg, (int)nzero);
     /* elimination tree = first off-diagonal row of each column; height = longest path */
