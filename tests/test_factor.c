@@ -134,22 +134,22 @@ int main(void) {
     amps_ctx_init(&ctx);
     /* random matrices: diagonally dominant and B^T B + shift, several sizes and densities */
     {
-        static const int sizes[] = {1, 2, 7, 60, 500, 3000};
+        static const int sizes[] = {1, 2, 7, 60, 500, 1500}, degs[] = {1, 2, 4, 6, 5, 3};
         for (k = 0; k < 6; k++) {
             int n = sizes[k];
-            A = m_rand(&ctx, n, 4 + k, 1.1, 0, 100 + k);
+            A = m_rand(&ctx, n, degs[k], 1.1, 0, 100 + k);
             perm = m_cholmod_perm(A, CHOLMOD_AMD);
             sprintf(name, "rand_dd n=%d", n);
             check_matrix(name, A, perm);
             check_matrix(name, A, NULL);
             free(perm); amps_csc_free(&ctx, A);
-            A = m_btb(&ctx, n, 2 * n, k < 3 ? 2 : 5, 1e-2, 200 + k);
+            A = m_btb(&ctx, n, 2 * n, k < 3 ? 2 : 4, 1e-2, 200 + k);
             perm = m_cholmod_perm(A, CHOLMOD_AMD);
             sprintf(name, "btb n=%d", n);
             check_matrix(name, A, perm);
             free(perm); amps_csc_free(&ctx, A);
         }
-        A = m_rand(&ctx, 400, 60, 1.1, 0, 7);
+        A = m_rand(&ctx, 300, 40, 1.1, 0, 7);
         perm = m_cholmod_perm(A, CHOLMOD_AMD);
         check_matrix("rand dense-ish", A, perm);
         free(perm); amps_csc_free(&ctx, A);
