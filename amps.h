@@ -163,8 +163,10 @@ typedef struct amps_factor {
    opts may be NULL (AMPS_ORDER_AUTO, block detection). */
 AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts);
 /* Numeric LDL^T of A, which must have the pattern given to amps_analyze (values may differ).
-   AMPS_ERR_NOT_SPD names the failing column in the original numbering; F is then not numeric.
-   Allocates nothing. */
+   A pivot must be finite and exceed AMPS_PIVOT_TOL (default 1e-12) times the column's diagonal entry
+   of A, else AMPS_ERR_NOT_SPD names the failing column in the original numbering; F is then not
+   numeric. Uses ctx->nthreads OpenMP threads (at most the count at amps_analyze); the result does
+   not depend on the thread count. Allocates nothing. */
 AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_csc *A, amps_stype stype);
 AMPS_API void amps_factor_free(amps_ctx *ctx, amps_factor *F);
 /* Number of entries of L, counting the unit diagonal. */
@@ -623,11 +625,16 @@ typedef struct amps__fpriv {
     amps_int nthr;                /* threads with workspace */
     amps_int *iwork;              /* nthr * 2n: relmap and row list per thread */
     amps_int *fail;               /* nsub + 1: failing permuted column per subtree (top last), or -1 */
+    double pargroup;              /* top groups with (entries of their columns) x (width) >= this run on all threads */
     double touch;                 /* AMPS_COUNT_TOUCH: L entries read by sparse/partial solves */
 } amps__fpriv;
 
-/* Relative pivot threshold: pivot d of column c is accepted iff d > AMPS__PIVTOL * A(c,c). */
-#define AMPS__PIVTOL 1e-13
+/* Relative pivot threshold: pivot d of column c is accepted iff d > AMPS_PIVOT_TOL * A(c,c) (original
+   diagonal). Rounding leaves the zero pivots of a singular matrix (e.g. the rigid-body modes of an
+   unsupported FE model) at about 1e-16..1e-9 * A(c,c) with either sign. */
+#ifndef AMPS_PIVOT_TOL
+#define AMPS_PIVOT_TOL 1e-12
+#endif
 /* Gather-update kernels: for p in [0,m): d_t[rel[Si[p]]] -= sum_k s_k[p] * W[4k+t], k < KC, t < TC. */
 static void amps__kern11(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
                          double *const *d) {
@@ -957,6 +964,12 @@ static void amps__colcounts(amps_int n, const amps_int *parent, const amps_int *
     for (k = 0; k < n; k++) { j = post[k]; if (parent[j] >= 0) cc[parent[j]] += cc[j]; }
 }
 
+#ifndef AMPS__SBLK
+#define AMPS__SBLK 64 /* superblock width (multiple of 4) in the parallel factorization of a group */
+#endif
+#ifndef AMPS__PARGROUP
+#define AMPS__PARGROUP 2e6
+#endif
 #ifndef AMPS__NSUB
 #define AMPS__NSUB 8 /* split the tree until no subtree has more than 1/AMPS__NSUB of the subtree work */
 #endif
@@ -1203,6 +1216,7 @@ AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype 
     P->iwork = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nthr * 2, (size_t)n * sizeof(amps_int)));
     if (!P->iwork) goto oom;
     P->hash = amps__pattern_hash(A);
+    P->pargroup = AMPS__PARGROUP;
     amps__free(ctx, Up); amps__free(ctx, Ui); amps__free(ctx, Cr); amps__free(ctx, tw); amps__free(ctx, cc);
     amps__free(ctx, gpar); amps__free(ctx, gw); amps__free(ctx, cand);
     return F;
@@ -1226,19 +1240,37 @@ static void amps__link(const amps_factor *F, amps__fpriv *P, amps_int K, amps_in
     P->head[tg] = K;
 }
 
-/* Applies finished group K to group J (last column e): for targets t = S_K[q] <= e and rows r = S_K[p],
-   p >= q: L(r,t) D(t) -= sum_k L(r,k) D(k) L(t,k) (D(t) for r = t). rel maps rows of J to
-   offsets from Lx + Lp[t] + (e - t). Advances gpos[K] past J. */
-static void amps__update(amps_factor *F, amps__fpriv *P, amps_int K, amps_int e, const amps_int *rel) {
+/* Position in S_K of the first row after e (K's rows up to e start at gpos[K]). */
+static amps_int amps__span(const amps_factor *F, const amps__fpriv *P, amps_int K, amps_int e) {
+    amps_int ke = P->gs[K + 1] - 1, nK = F->Lp[ke + 1] - F->Lp[ke], b = P->gpos[K];
+    const amps_int *SK = F->Li + F->Lp[ke];
+    while (b < nK && SK[b] <= e) b++;
+    return b;
+}
+
+/* Thread (of T) owning target column t of the group starting at s: blocks of 4 columns, cyclic. */
+#define AMPS__OWNER(t, s, T) ((int)((((t) - (s)) >> 2) % (amps_int)(T)))
+
+/* Applies finished group K to group J = [s, e] for the targets t = S_K[q], q in [a, b), owned by thread
+   tid of T: for rows r = S_K[p], p >= q: L(r,t) D(t) -= sum_k L(r,k) D(k) L(t,k) (D(t) for r = t).
+   rel maps rows of J to offsets from Lx + Lp[t] + (e - t). Each entry gets the same arithmetic for
+   every T. */
+static void amps__update(amps_factor *F, const amps__fpriv *P, amps_int K, amps_int s, amps_int e, amps_int a,
+                         amps_int b, const amps_int *rel, int tid, int T) {
     const amps_int *Lp = F->Lp;
     double *Lx = F->Lx, *D = F->D;
     amps_int ks = P->gs[K], ke = P->gs[K + 1] - 1, nK = Lp[ke + 1] - Lp[ke];
     const amps_int *SK = F->Li + Lp[ke];
-    amps_int a = P->gpos[K], b = a, q0, k0, i, k, pp;
-    while (b < nK && SK[b] <= e) b++;
-    for (q0 = a; q0 < b; q0 += 4) {
-        amps_int tc = b - q0 < 4 ? b - q0 : 4, q1 = q0 + tc;
+    amps_int q0, q1, k0, i, k, pp;
+    for (q0 = a; q0 < b; q0 = q1) {
+        amps_int tc;
         double *dst[4];
+        if (T > 1) {
+            while (q0 < b && AMPS__OWNER(SK[q0], s, T) != tid) q0++;
+            if (q0 >= b) break;
+        }
+        for (q1 = q0 + 1; q1 < b && q1 - q0 < 4 && (T == 1 || AMPS__OWNER(SK[q1], s, T) == tid); q1++) {}
+        tc = q1 - q0;
         for (i = 0; i < tc; i++) dst[i] = Lx + Lp[SK[q0 + i]] + (e - SK[q0 + i]);
         for (k0 = ks; k0 <= ke; k0 += 4) {
             amps_int kc = ke + 1 - k0 < 4 ? ke + 1 - k0 : 4;
@@ -1250,89 +1282,197 @@ static void amps__update(amps_factor *F, amps__fpriv *P, amps_int K, amps_int e,
                 srq[k] = src[k] + q1;
             }
             for (i = 0; i < tc; i++) {
-                double s = 0;
-                for (k = 0; k < kc; k++) s += src[k][q0 + i] * W[4 * k + i];
-                D[SK[q0 + i]] -= s;
+                double sm = 0;
+                for (k = 0; k < kc; k++) sm += src[k][q0 + i] * W[4 * k + i];
+                D[SK[q0 + i]] -= sm;
                 for (pp = q0 + i + 1; pp < q1; pp++) {
-                    s = 0;
-                    for (k = 0; k < kc; k++) s += src[k][pp] * W[4 * k + i];
-                    dst[i][rel[SK[pp]]] -= s;
+                    sm = 0;
+                    for (k = 0; k < kc; k++) sm += src[k][pp] * W[4 * k + i];
+                    dst[i][rel[SK[pp]]] -= sm;
                 }
             }
             amps__kern[kc - 1][tc - 1](nK - q1, SK + q1, rel, srq, W, dst);
         }
     }
-    P->gpos[K] = b;
 }
 
-/* Numeric work of group J: scatter A, apply the queued groups, factor the columns of J (left-looking
-   over panels of 4 columns, right-looking inside a panel), queue J. Returns -1 or the permuted
-   column with an unacceptable pivot. iw: 2n ints of thread workspace. */
-static amps_int amps__fgroup(amps_factor *F, amps__fpriv *P, const double *Ax, amps_int J, amps_int *iw, amps_int sub) {
-    const amps_int *Lp = F->Lp, *Li = F->Li;
-    double *Lx = F->Lx, *D = F->D;
-    amps_int s = P->gs[J], e = P->gs[J + 1] - 1, nJ = Lp[e + 1] - Lp[e], c, q, K, c0, k0, i, k, pp;
-    const amps_int *SJ = Li + Lp[e];
-    amps_int *rel = iw, *rows = iw + F->n;
-    memset(Lx + Lp[s], 0, sizeof(double) * (size_t)(Lp[e + 1] - Lp[s]));
-    for (c = s; c <= e; c++) {
-        D[c] = P->dsrc[c] >= 0 ? Ax[P->dsrc[c]] : 0.0;
+/* Zeroes columns [c0, c1] of L and D and scatters the entries of A into them. */
+static void amps__scatter(amps_factor *F, const amps__fpriv *P, const double *Ax, amps_int c0, amps_int c1) {
+    amps_int c, q;
+    double *Lx = F->Lx;
+    memset(Lx + F->Lp[c0], 0, sizeof(double) * (size_t)(F->Lp[c1 + 1] - F->Lp[c0]));
+    for (c = c0; c <= c1; c++) {
+        F->D[c] = P->dsrc[c] >= 0 ? Ax[P->dsrc[c]] : 0.0;
         for (q = P->Sp[c]; q < P->Sp[c + 1]; q++) Lx[P->Sdst[q]] = Ax[P->Ssrc[q]];
-        rel[c] = c - e - 1;
     }
+}
+
+/* rel: row r of group J = [s, e] -> offset of (r, t) from Lx + Lp[t] + (e - t), for any t < r in J;
+   rows (if J is wider than 4): rows of J, then S_J. */
+static void amps__rowmaps(const amps_factor *F, amps_int s, amps_int e, amps_int *rel, amps_int *rows) {
+    amps_int c, q, nJ = F->Lp[e + 1] - F->Lp[e];
+    const amps_int *SJ = F->Li + F->Lp[e];
+    for (c = s; c <= e; c++) rel[c] = c - e - 1;
     for (q = 0; q < nJ; q++) rel[SJ[q]] = q;
-    while ((K = P->head[J]) >= 0) {
-        P->head[J] = P->next[K];
-        amps__update(F, P, K, e, rel);
-        amps__link(F, P, K, sub);
-    }
     if (e - s >= 4) {
         for (c = s; c <= e; c++) rows[c - s] = c;
         memcpy(rows + (e - s + 1), SJ, sizeof(amps_int) * (size_t)nJ);
     }
+}
+
+/* Updates of panel [c0, c0+tc) of group J = [s, e] from its columns [klo, khi) (khi <= c0; klo - s a
+   multiple of 4), for the rows [r0, r1) of the m rows below the panel (rows c0+tc..e, then S_J). */
+static void amps__panel_rect(amps_factor *F, amps_int s, amps_int e, amps_int klo, amps_int khi, amps_int c0, amps_int tc,
+                             const amps_int *rows, const amps_int *rel, amps_int r0, amps_int r1) {
+    const amps_int *Lp = F->Lp;
+    double *Lx = F->Lx, *D = F->D;
+    amps_int c1 = c0 + tc, k0, k, i;
+    double *dst[4];
+    if (r1 <= r0) return;
+    for (i = 0; i < tc; i++) dst[i] = Lx + Lp[c0 + i] + (e - c0 - i);
+    for (k0 = klo; k0 < khi; k0 += 4) {
+        amps_int kc = khi - k0 < 4 ? khi - k0 : 4;
+        const double *srq[4];
+        double W[16];
+        for (k = 0; k < kc; k++) {
+            const double *src = Lx + Lp[k0 + k] + (c0 - k0 - k - 1); /* row c0 of column k0+k */
+            for (i = 0; i < tc; i++) W[4 * k + i] = D[k0 + k] * src[i];
+            srq[k] = src + tc + r0;
+        }
+        amps__kern[kc - 1][tc - 1](r1 - r0, rows + (c1 - s) + r0, rel, srq, W, dst);
+    }
+}
+
+/* Panel [c0, c0+tc) of group J = [s, e]: updates of its diagonal block from columns [klo, khi); then, if
+   fact, its LDL^T (right-looking inside the panel; all its updates must be applied). Returns -1 or the
+   permuted column whose pivot is unacceptable. */
+static amps_int amps__panel_factor(amps_factor *F, const amps__fpriv *P, const double *Ax, amps_int e, amps_int klo,
+                                   amps_int khi, amps_int c0, amps_int tc, const amps_int *rel, int fact) {
+    const amps_int *Lp = F->Lp;
+    double *Lx = F->Lx, *D = F->D;
+    amps_int c1 = c0 + tc, k0, k, i, pp, c;
+    double *dst[4];
+    for (i = 0; i < tc; i++) dst[i] = Lx + Lp[c0 + i] + (e - c0 - i);
+    for (k0 = klo; k0 < khi; k0 += 4) {
+        amps_int kc = khi - k0 < 4 ? khi - k0 : 4;
+        const double *src[4];
+        double W[16];
+        for (k = 0; k < kc; k++) {
+            src[k] = Lx + Lp[k0 + k] + (c0 - k0 - k - 1);
+            for (i = 0; i < tc; i++) W[4 * k + i] = D[k0 + k] * src[k][i];
+        }
+        for (i = 0; i < tc; i++) {
+            double sm = 0;
+            for (k = 0; k < kc; k++) sm += src[k][i] * W[4 * k + i];
+            D[c0 + i] -= sm;
+            for (pp = i + 1; pp < tc; pp++) {
+                sm = 0;
+                for (k = 0; k < kc; k++) sm += src[k][pp] * W[4 * k + i];
+                dst[i][rel[c0 + pp]] -= sm;
+            }
+        }
+    }
+    for (c = c0; fact && c < c1; c++) {
+        double d = D[c], acc = P->dsrc[c] >= 0 ? Ax[P->dsrc[c]] : 0.0, *Lc = Lx + Lp[c];
+        amps_int len = Lp[c + 1] - Lp[c], c2, o;
+        if (!(acc > 0.0) || !(d > AMPS_PIVOT_TOL * acc) || !amps__isfinite(d)) return c;
+        for (c2 = c + 1; c2 < c1; c2++) {
+            double v = Lc[c2 - c - 1], lv = v / d, *L2 = Lx + Lp[c2];
+            const double *Ls = Lc + (c2 - c);
+            amps_int len2 = Lp[c2 + 1] - Lp[c2];
+            D[c2] -= v * lv;
+            for (o = 0; o < len2; o++) L2[o] -= Ls[o] * lv;
+        }
+        for (o = 0; o < len; o++) Lc[o] /= d;
+    }
+    return -1;
+}
+
+/* Numeric work of group J: scatter A, apply the queued groups, factor the columns of J (left-looking
+   over panels of 4 columns), queue J. Returns -1 or the permuted column with an unacceptable pivot.
+   iw: 2n ints of thread workspace. */
+static amps_int amps__fgroup(amps_factor *F, amps__fpriv *P, const double *Ax, amps_int J, amps_int *iw, amps_int sub) {
+    amps_int s = P->gs[J], e = P->gs[J + 1] - 1, nJ = F->Lp[e + 1] - F->Lp[e], K, c0, bad;
+    amps_int *rel = iw, *rows = iw + F->n;
+    amps__scatter(F, P, Ax, s, e);
+    amps__rowmaps(F, s, e, rel, rows);
+    while ((K = P->head[J]) >= 0) {
+        amps_int b = amps__span(F, P, K, e);
+        P->head[J] = P->next[K];
+        amps__update(F, P, K, s, e, P->gpos[K], b, rel, 0, 1);
+        P->gpos[K] = b;
+        amps__link(F, P, K, sub);
+    }
     for (c0 = s; c0 <= e; c0 += 4) {
-        amps_int tc = e + 1 - c0 < 4 ? e + 1 - c0 : 4, c1 = c0 + tc;
-        double *dst[4];
-        for (i = 0; i < tc; i++) dst[i] = Lx + Lp[c0 + i] + (e - c0 - i);
-        for (k0 = s; k0 < c0; k0 += 4) {
-            amps_int kc = c0 - k0 < 4 ? c0 - k0 : 4;
-            const double *src[4], *srq[4];
-            double W[16];
-            for (k = 0; k < kc; k++) {
-                src[k] = Lx + Lp[k0 + k] + (c0 - k0 - k - 1); /* row c0 of column k0+k */
-                for (i = 0; i < tc; i++) W[4 * k + i] = D[k0 + k] * src[k][i];
-                srq[k] = src[k] + tc;
-            }
-            for (i = 0; i < tc; i++) {
-                double sm = 0;
-                for (k = 0; k < kc; k++) sm += src[k][i] * W[4 * k + i];
-                D[c0 + i] -= sm;
-                for (pp = i + 1; pp < tc; pp++) {
-                    sm = 0;
-                    for (k = 0; k < kc; k++) sm += src[k][pp] * W[4 * k + i];
-                    dst[i][rel[c0 + pp]] -= sm;
-                }
-            }
-            amps__kern[kc - 1][tc - 1]((e - c1 + 1) + nJ, rows + (c1 - s), rel, srq, W, dst);
-        }
-        for (c = c0; c < c1; c++) {
-            double d = D[c], acc = P->dsrc[c] >= 0 ? Ax[P->dsrc[c]] : 0.0, *Lc = Lx + Lp[c];
-            amps_int len = Lp[c + 1] - Lp[c], c2, o;
-            if (!(acc > 0.0) || !(d > AMPS__PIVTOL * acc) || !amps__isfinite(d)) return c;
-            for (c2 = c + 1; c2 < c1; c2++) {
-                double v = Lc[c2 - c - 1], lv = v / d, *L2 = Lx + Lp[c2];
-                const double *Ls = Lc + (c2 - c);
-                amps_int len2 = Lp[c2 + 1] - Lp[c2];
-                D[c2] -= v * lv;
-                for (o = 0; o < len2; o++) L2[o] -= Ls[o] * lv;
-            }
-            for (o = 0; o < len; o++) Lc[o] /= d;
-        }
+        amps_int tc = e + 1 - c0 < 4 ? e + 1 - c0 : 4;
+        amps__panel_rect(F, s, e, s, c0, c0, tc, rows, rel, 0, (e - c0 - tc + 1) + nJ);
+        bad = amps__panel_factor(F, P, Ax, e, s, c0, c0, tc, rel, 1);
+        if (bad >= 0) return bad;
     }
     P->gpos[J] = 0;
     amps__link(F, P, J, sub);
     return -1;
 }
+
+#ifdef _OPENMP
+/* amps__fgroup for a top-part group on nt threads: targets of the queued updates and panels of a
+   superblock are split by 4-column blocks; same arithmetic per entry as amps__fgroup (the k chunks
+   stay aligned at s). Uses the workspace of threads 0 and 1. */
+static amps_int amps__fgroup_par(amps_factor *F, amps__fpriv *P, const double *Ax, amps_int J, int nt) {
+    amps_int s = P->gs[J], e = P->gs[J + 1] - 1, nJ = F->Lp[e + 1] - F->Lp[e], n = F->n, cnt = 0, bad = -1;
+    amps_int *rel = P->iwork, *rows = P->iwork + n, *kl = P->iwork + 2 * n, *kb = P->iwork + 3 * n;
+#pragma omp parallel num_threads(nt)
+    {
+        int tid = omp_get_thread_num(), T = omp_get_num_threads();
+        amps_int c, i, c0, cb;
+#pragma omp for schedule(static)
+        for (c = s; c <= e; c++) amps__scatter(F, P, Ax, c, c);
+#pragma omp single
+        {
+            amps_int K;
+            amps__rowmaps(F, s, e, rel, rows);
+            while ((K = P->head[J]) >= 0) {
+                P->head[J] = P->next[K];
+                kl[cnt] = K;
+                kb[cnt++] = amps__span(F, P, K, e);
+            }
+        }
+        for (i = 0; i < cnt; i++) amps__update(F, P, kl[i], s, e, P->gpos[kl[i]], kb[i], rel, tid, T);
+#pragma omp barrier
+#pragma omp single
+        for (i = 0; i < cnt; i++) {
+            P->gpos[kl[i]] = kb[i];
+            amps__link(F, P, kl[i], -1);
+        }
+        /* superblocks of AMPS__SBLK columns: updates from the columns before it in parallel (panels
+           owned cyclically), then its own factorization on one thread */
+        for (cb = s; cb <= e; cb += AMPS__SBLK) {
+            amps_int ce = cb + AMPS__SBLK <= e + 1 ? cb + AMPS__SBLK : e + 1, ip;
+            if (cb > s) {
+                for (c0 = cb, ip = 0; c0 < ce; c0 += 4, ip++) {
+                    amps_int tc = ce - c0 < 4 ? ce - c0 : 4;
+                    if (ip % T != tid) continue;
+                    amps__panel_rect(F, s, e, s, cb, c0, tc, rows, rel, 0, (e - c0 - tc + 1) + nJ);
+                    amps__panel_factor(F, P, Ax, e, s, cb, c0, tc, rel, 0);
+                }
+#pragma omp barrier
+            }
+#pragma omp single
+            for (c0 = cb; c0 < ce && bad < 0; c0 += 4) {
+                amps_int tc = ce - c0 < 4 ? ce - c0 : 4;
+                amps__panel_rect(F, s, e, cb, c0, c0, tc, rows, rel, 0, (e - c0 - tc + 1) + nJ);
+                bad = amps__panel_factor(F, P, Ax, e, cb, c0, c0, tc, rel, 1);
+            }
+            if (bad >= 0) break;
+        }
+    }
+    if (bad < 0) {
+        P->gpos[J] = 0;
+        amps__link(F, P, J, -1);
+    }
+    return bad;
+}
+#endif
 
 AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_csc *A, amps_stype stype) {
     amps__fpriv *P;
@@ -1383,7 +1523,19 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
     if (bad < 0) {
         for (g = 0; g < P->ng; g++)
             if (P->gsub[g] >= 0) amps__link(F, P, g, -1);
-        for (k = 0; k < P->ntop && bad < 0; k++) bad = amps__fgroup(F, P, Ax, P->topg[k], P->iwork, -1);
+        int ntp = amps__nthreads(ctx, P->nthr);
+        (void)ntp;
+        for (k = 0; k < P->ntop && bad < 0; k++) {
+            amps_int J = P->topg[k], s = P->gs[J], e = P->gs[J + 1] - 1;
+#ifdef _OPENMP
+            if (ntp > 1 && (double)(F->Lp[e + 1] - F->Lp[s]) * (double)(e - s + 1) >= P->pargroup) {
+                bad = amps__fgroup_par(F, P, Ax, J, ntp);
+                continue;
+            }
+#endif
+            (void)s; (void)e;
+            bad = amps__fgroup(F, P, Ax, J, P->iwork, -1);
+        }
     }
     if (bad >= 0) {
         amps_int p;

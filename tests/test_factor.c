@@ -198,6 +198,10 @@ int main(void) {
         perm = m_cholmod_perm(A, CHOLMOD_METIS);
         check_not_spd("floating brick", A, perm);
         free(perm); amps_csc_free(&ctx, A);
+        A = m_fe(&ctx, fe_brick(11), 0); /* all pivots positive, the smallest at 1e-13 of its diagonal */
+        perm = m_cholmod_perm(A, CHOLMOD_METIS);
+        check_not_spd("floating brick R=11", A, perm);
+        free(perm); amps_csc_free(&ctx, A);
     }
     /* misuse: pattern or stype differing from the analysis, bad orderings */
     {
