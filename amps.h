@@ -1554,9 +1554,11 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
 /* @@SECTION solve: owned by core */
 
 AMPS_API amps_status amps_marker_init(amps_ctx *ctx, amps_marker *m, amps_int n) {
+    amps_int *mark;
     if (!m || n < 0) return amps__err(ctx, AMPS_ERR_ARG, "amps_marker_init: %s", m ? "negative size" : "NULL marker");
-    m->mark = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)n, sizeof(amps_int)));
-    if (!m->mark) { m->n = 0; m->stamp = 1; return amps__err(ctx, AMPS_ERR_OOM, "amps_marker_init: out of memory (n %lld)", (long long)n); }
+    mark = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)n, sizeof(amps_int)));
+    if (!mark) return amps__err(ctx, AMPS_ERR_OOM, "amps_marker_init: out of memory (n %lld)", (long long)n);
+    m->mark = mark;
     m->n = n;
     m->stamp = 1;
     return AMPS_OK;

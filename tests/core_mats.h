@@ -4,7 +4,7 @@
 #define CORE_MATS_H
 
 /* P1 elasticity stiffness of mesh m (upper triangle). fix: 0 = no node fixed, 1 = nodes at z = 0 fixed. */
-static amps_csc *m_fe(amps_ctx *ctx, fe_mesh m, int fix) {
+REF_UNUSED static amps_csc *m_fe(amps_ctx *ctx, fe_mesh m, int fix) {
     int *fixed = (int *)calloc((size_t)m.nn, sizeof(int)), *dof = (int *)malloc(sizeof(int) * 3 * (size_t)m.nn);
     int *ti, *tj, v, n, nz;
     double *tx;
@@ -20,7 +20,7 @@ static amps_csc *m_fe(amps_ctx *ctx, fe_mesh m, int fix) {
 
 /* Random symmetric n x n, about deg off-diagonal entries per column in [-1,1]; diagonal = dd * (row sum of
    |offdiag|) + 1 when dd > 0 (diagonally dominant), else the diagonal given by diag. Upper triangle. */
-static amps_csc *m_rand(amps_ctx *ctx, int n, int deg, double dd, double diag, unsigned long long seed) {
+REF_UNUSED static amps_csc *m_rand(amps_ctx *ctx, int n, int deg, double dd, double diag, unsigned long long seed) {
     int nz = 0, k, cap = n * (deg + 1) + 1;
     int *ti = (int *)malloc(sizeof(int) * (size_t)cap), *tj = (int *)malloc(sizeof(int) * (size_t)cap);
     double *tx = (double *)malloc(sizeof(double) * (size_t)cap), *rs = (double *)calloc((size_t)n + 1, sizeof(double));
@@ -40,7 +40,7 @@ static amps_csc *m_rand(amps_ctx *ctx, int n, int deg, double dd, double diag, u
 }
 
 /* B^T B + shift I for a random m x n B with k entries per row (SPD, not diagonally dominant). Upper. */
-static amps_csc *m_btb(amps_ctx *ctx, int n, int m, int k, double shift, unsigned long long seed) {
+REF_UNUSED static amps_csc *m_btb(amps_ctx *ctx, int n, int m, int k, double shift, unsigned long long seed) {
     int cap = m * k * k + n, nz = 0, r, a, b;
     int *ti = (int *)malloc(sizeof(int) * (size_t)cap), *tj = (int *)malloc(sizeof(int) * (size_t)cap);
     double *tx = (double *)malloc(sizeof(double) * (size_t)cap);
@@ -61,7 +61,7 @@ static amps_csc *m_btb(amps_ctx *ctx, int n, int m, int k, double shift, unsigne
 }
 
 /* The same symmetric matrix as upper U, stored as stype (LOWER or FULL). */
-static amps_csc *m_convert(amps_ctx *ctx, const amps_csc *U, amps_stype stype) {
+REF_UNUSED static amps_csc *m_convert(amps_ctx *ctx, const amps_csc *U, amps_stype stype) {
     int n = U->ncol, nz = U->p[n], j, p, k = 0;
     int *ti = (int *)malloc(sizeof(int) * (size_t)(nz + 1)), *tj = (int *)malloc(sizeof(int) * (size_t)(nz + 1));
     double *tx = (double *)malloc(sizeof(double) * (size_t)(nz + 1));
@@ -74,7 +74,7 @@ static amps_csc *m_convert(amps_ctx *ctx, const amps_csc *U, amps_stype stype) {
 }
 
 /* CHOLMOD's own AMD ordering of upper A (malloc'ed). */
-static int *m_cholmod_perm(const amps_csc *A, int method) {
+REF_UNUSED static int *m_cholmod_perm(const amps_csc *A, int method) {
     int *perm = (int *)malloc(sizeof(int) * (size_t)(A->ncol + 1));
     ref_nnzL(A->ncol, A->p, A->i, A->x, NULL, method, perm);
     return perm;

@@ -172,6 +172,17 @@ int main(void) {
             amps_csc_free(&ctx, A);
         }
     }
+    /* empty matrix */
+    {
+        amps_factor *F;
+        double bx = 0, wx = 0;
+        A = amps_csc_from_triplets(&ctx, 0, 0, NULL, NULL, NULL, AMPS_UPPER);
+        F = amps_analyze(&ctx, A, AMPS_UPPER, NULL);
+        CHECK(F && F->n == 0 && amps_factorize(&ctx, F, A, AMPS_UPPER) == AMPS_OK && amps_factor_nnz(F) == 0 &&
+              amps_solve(&ctx, F, &bx, &bx, &wx) == AMPS_OK, "empty matrix: %s", ctx.msg);
+        amps_factor_free(&ctx, F);
+        amps_csc_free(&ctx, A);
+    }
     /* not positive definite */
     {
         int ti[8] = {0, 0, 1, 2, 2, 3}, tj[8] = {0, 1, 1, 2, 3, 3};
