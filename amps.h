@@ -625,6 +625,8 @@ typedef struct amps__fpriv {
     amps_int nthr;                /* threads with workspace */
     amps_int *iwork;              /* nthr * 2n: relmap and row list per thread */
     amps_int *fail;               /* nsub + 1: failing permuted column per subtree (top last), or -1 */
+    double work;                  /* sum of squared column counts (flop estimate) */
+    double parmin;                /* factorizations with less work run on one thread */
     double pargroup;              /* top groups with (entries of their columns) x (width) >= this run on all threads */
     double touch;                 /* AMPS_COUNT_TOUCH: L entries read by sparse/partial solves */
 } amps__fpriv;
@@ -968,7 +970,10 @@ static void amps__colcounts(amps_int n, const amps_int *parent, const amps_int *
 #define AMPS__SBLK 64 /* superblock width (multiple of 4) in the parallel factorization of a group */
 #endif
 #ifndef AMPS__PARGROUP
-#define AMPS__PARGROUP 2e6
+#define AMPS__PARGROUP 2e6 /* top groups with (entries of their columns) x (width) >= this use all threads */
+#endif
+#ifndef AMPS__PARMIN
+#define AMPS__PARMIN 5e7 /* factorizations with a smaller flop estimate run on one thread */
 #endif
 #ifndef AMPS__NSUB
 #define AMPS__NSUB 8 /* split the tree until no subtree has more than 1/AMPS__NSUB of the subtree work */
@@ -1184,7 +1189,7 @@ AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype 
             for (k = chead[g]; k >= 0; k = cnext[k]) cand[ncand++] = k;
             if (ncand > 16 * AMPS__NSUB) break;
         }
-        (void)total;
+        P->work = total;
         /* candidates become subtrees, heaviest first */
         for (i = 1; i < ncand; i++) {
             amps_int t = cand[i], m2 = i;
@@ -1217,6 +1222,7 @@ AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype 
     if (!P->iwork) goto oom;
     P->hash = amps__pattern_hash(A);
     P->pargroup = AMPS__PARGROUP;
+    P->parmin = AMPS__PARMIN;
     amps__free(ctx, Up); amps__free(ctx, Ui); amps__free(ctx, Cr); amps__free(ctx, tw); amps__free(ctx, cc);
     amps__free(ctx, gpar); amps__free(ctx, gw); amps__free(ctx, cand);
     return F;
@@ -1502,7 +1508,7 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
     nsub = P->nsub;
     for (g = 0; g < P->ng; g++) P->head[g] = -1;
     for (i = 0; i <= nsub; i++) P->fail[i] = -1;
-    nt = amps__nthreads(ctx, P->nthr < nsub ? P->nthr : (nsub > 0 ? nsub : 1));
+    nt = P->work < P->parmin ? 1 : amps__nthreads(ctx, P->nthr < nsub ? P->nthr : (nsub > 0 ? nsub : 1));
     (void)nt;
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) num_threads(nt)
@@ -1523,7 +1529,7 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
     if (bad < 0) {
         for (g = 0; g < P->ng; g++)
             if (P->gsub[g] >= 0) amps__link(F, P, g, -1);
-        int ntp = amps__nthreads(ctx, P->nthr);
+        int ntp = P->work < P->parmin ? 1 : amps__nthreads(ctx, P->nthr);
         (void)ntp;
         for (k = 0; k < P->ntop && bad < 0; k++) {
             amps_int J = P->topg[k], s = P->gs[J], e = P->gs[J + 1] - 1;

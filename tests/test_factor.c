@@ -83,12 +83,17 @@ static void check_matrix(const char *name, const amps_csc *A, const int *perm) {
             amps_factor_free(&ctx, F2);
             amps_csc_free(&ctx, B);
         }
-        for (k = 1; k <= 2; k++) {
-            ctx.nthreads = k;
+        /* 1 thread, 2 threads, 2 threads with the parallel paths forced on this small matrix */
+        for (k = 1; k <= 3; k++) {
+            ctx.nthreads = k == 1 ? 1 : 2;
             F2 = amps_analyze(&ctx, A, AMPS_UPPER, &o);
+            if (F2 && k == 3) {
+                ((amps__fpriv *)F2->priv)->parmin = 0;
+                ((amps__fpriv *)F2->priv)->pargroup = 0;
+            }
             CHECK(F2 && amps_factorize(&ctx, F2, A, AMPS_UPPER) == AMPS_OK, "%s: threads %d: %s", name, k, ctx.msg);
             if (F2) CHECK(relerr(F->Lp[n], F2->Lx, F->Lx) <= 1e-14 && relerr(n, F2->D, F->D) <= 1e-14,
-                          "%s: %d threads differ", name, k);
+                          "%s: thread variant %d differs", name, k);
             amps_factor_free(&ctx, F2);
         }
         ctx.nthreads = 0;
@@ -123,6 +128,15 @@ static void check_not_spd(const char *name, const amps_csc *A, const int *perm) 
     s = amps_factorize(&ctx, F, A, AMPS_UPPER);
     CHECK(s == AMPS_ERR_NOT_SPD && ctx.status == AMPS_ERR_NOT_SPD, "%s: status %d (%s)", name, (int)s, ctx.msg);
     CHECK(strstr(ctx.msg, "column") != NULL && F->is_numeric == 0, "%s: message '%s'", name, ctx.msg);
+    {   /* the parallel paths report the same column */
+        char msg[256];
+        memcpy(msg, ctx.msg, sizeof(msg));
+        ctx.nthreads = 2;
+        ((amps__fpriv *)F->priv)->parmin = 0;
+        ((amps__fpriv *)F->priv)->pargroup = 0;
+        s = amps_factorize(&ctx, F, A, AMPS_UPPER);
+        CHECK(s == AMPS_ERR_NOT_SPD && strcmp(msg, ctx.msg) == 0, "%s: 2 threads: '%s' vs '%s'", name, ctx.msg, msg);
+    }
     amps_factor_free(&ctx, F);
 }
 
