@@ -1641,7 +1641,18 @@ static void amps__fwd(const amps_factor *F, amps_int c0, amps_int ke, double *x)
     }
     for (c = c0; c <= ke;) {
         amps_int kc = ke + 1 - c;
-        if (kc >= 4) {
+        if (kc >= 8) {
+            const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1);
+            const double *s2 = Lx + Lp[c + 2] + (ke - c - 2), *s3 = Lx + Lp[c + 3] + (ke - c - 3);
+            const double *s4 = Lx + Lp[c + 4] + (ke - c - 4), *s5 = Lx + Lp[c + 5] + (ke - c - 5);
+            const double *s6 = Lx + Lp[c + 6] + (ke - c - 6), *s7 = Lx + Lp[c + 7] + (ke - c - 7);
+            const double x0 = x[c], x1 = x[c + 1], x2 = x[c + 2], x3 = x[c + 3];
+            const double x4 = x[c + 4], x5 = x[c + 5], x6 = x[c + 6], x7 = x[c + 7];
+            for (p = 0; p < ns; p++)
+                x[S[p]] -= (s0[p] * x0 + s1[p] * x1 + s2[p] * x2 + s3[p] * x3) +
+                           (s4[p] * x4 + s5[p] * x5 + s6[p] * x6 + s7[p] * x7);
+            c += 8;
+        } else if (kc >= 4) {
             const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1);
             const double *s2 = Lx + Lp[c + 2] + (ke - c - 2), *s3 = Lx + Lp[c + 3] + (ke - c - 3);
             const double x0 = x[c], x1 = x[c + 1], x2 = x[c + 2], x3 = x[c + 3];
@@ -1674,7 +1685,21 @@ static void amps__bwd(const amps_factor *F, amps_int c0, amps_int ke, double *x)
     amps_int ns = Lp[ke + 1] - Lp[ke], c, o, p;
     for (c = c0; c <= ke;) {
         amps_int kc = ke + 1 - c;
-        if (kc >= 4) {
+        if (kc >= 8) {
+            const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1);
+            const double *s2 = Lx + Lp[c + 2] + (ke - c - 2), *s3 = Lx + Lp[c + 3] + (ke - c - 3);
+            const double *s4 = Lx + Lp[c + 4] + (ke - c - 4), *s5 = Lx + Lp[c + 5] + (ke - c - 5);
+            const double *s6 = Lx + Lp[c + 6] + (ke - c - 6), *s7 = Lx + Lp[c + 7] + (ke - c - 7);
+            double t0 = 0, t1 = 0, t2 = 0, t3 = 0, t4 = 0, t5 = 0, t6 = 0, t7 = 0;
+            for (p = 0; p < ns; p++) {
+                double xs = x[S[p]];
+                t0 += s0[p] * xs; t1 += s1[p] * xs; t2 += s2[p] * xs; t3 += s3[p] * xs;
+                t4 += s4[p] * xs; t5 += s5[p] * xs; t6 += s6[p] * xs; t7 += s7[p] * xs;
+            }
+            x[c] -= t0; x[c + 1] -= t1; x[c + 2] -= t2; x[c + 3] -= t3;
+            x[c + 4] -= t4; x[c + 5] -= t5; x[c + 6] -= t6; x[c + 7] -= t7;
+            c += 8;
+        } else if (kc >= 4) {
             const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1);
             const double *s2 = Lx + Lp[c + 2] + (ke - c - 2), *s3 = Lx + Lp[c + 3] + (ke - c - 3);
             double t0 = 0, t1 = 0, t2 = 0, t3 = 0;
