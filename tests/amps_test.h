@@ -35,11 +35,6 @@ static unsigned long long t_rand(void) {
 static double t_unif(void) { return (double)(t_rand() >> 11) * (1.0 / 9007199254740992.0); }
 static int t_int(int n) { return (int)(t_rand() % (unsigned long long)n); }
 
-static double t_norm(int n, const double *x) {
-    double s = 0; int i;
-    for (i = 0; i < n; i++) s += x[i] * x[i];
-    return sqrt(s);
-}
 static double t_reldiff(int n, const double *x, const double *y) {
     double s = 0, t = 0; int i;
     for (i = 0; i < n; i++) { s += (x[i] - y[i]) * (x[i] - y[i]); t += y[i] * y[i]; }
