@@ -27,15 +27,20 @@ static int amps_t_end(const char *name) {
 
 /* Deterministic RNG (xorshift64*), so failures reproduce. */
 static unsigned long long amps_t_rng = 88172645463325252ULL;
-static void t_seed(unsigned long long s) { amps_t_rng = s * 2654435761ULL + 1; }
-static unsigned long long t_rand(void) {
+static inline void t_seed(unsigned long long s) { amps_t_rng = s * 2654435761ULL + 1; }
+static inline unsigned long long t_rand(void) {
     amps_t_rng ^= amps_t_rng >> 12; amps_t_rng ^= amps_t_rng << 25; amps_t_rng ^= amps_t_rng >> 27;
     return amps_t_rng * 2685821657736338717ULL;
 }
-static double t_unif(void) { return (double)(t_rand() >> 11) * (1.0 / 9007199254740992.0); }
-static int t_int(int n) { return (int)(t_rand() % (unsigned long long)n); }
+static inline double t_unif(void) { return (double)(t_rand() >> 11) * (1.0 / 9007199254740992.0); }
+static inline int t_int(int n) { return (int)(t_rand() % (unsigned long long)n); }
 
-static double t_reldiff(int n, const double *x, const double *y) {
+static inline double t_norm(int n, const double *x) {
+    double s = 0; int i;
+    for (i = 0; i < n; i++) s += x[i] * x[i];
+    return sqrt(s);
+}
+static inline double t_reldiff(int n, const double *x, const double *y) {
     double s = 0, t = 0; int i;
     for (i = 0; i < n; i++) { s += (x[i] - y[i]) * (x[i] - y[i]); t += y[i] * y[i]; }
     return t > 0 ? sqrt(s / t) : sqrt(s);
