@@ -44,7 +44,8 @@ $(BUILD)/readme_example: examples/readme_example.c amps.h | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< $(LDLIBS)
 
 # The main job: replay the brick incision, write VTU/CSV (and a PNG when gnuplot is there).
-demo: deps-check $(BUILD)/amps_replay
+demo: $(BUILD)/amps_replay
+	@bash tools/deps.sh demo
 	@mkdir -p build/demo
 	cd build/demo && $(abspath $(BUILD))/amps_replay --surface brick_incision.surf $(abspath examples/brick_incision.scn)
 	@bash tools/render.sh build/demo/brick_incision.surf build/demo/brick_incision.png
@@ -68,6 +69,12 @@ deps:
 cxx: | $(BUILD)
 	printf '#define AMPS_IMPLEMENTATION\n#include "amps.h"\nint main(void){amps_ctx c; amps_ctx_init(&c); return 0;}\n' > $(BUILD)/cxx_check.cpp
 	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -c $(BUILD)/cxx_check.cpp -o $(BUILD)/cxx_check.o
+
+bench:
+	bash bench/run.sh full
+
+bench-quick:
+	bash bench/run.sh quick
 
 clean:
 	rm -rf build bench/out

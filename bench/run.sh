@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# Benchmarks of amps.h against CHOLMOD: builds bench/*, fetches and meshes the bunny, runs the
+# factorization and update benchmarks, writes bench/out/*.csv and the tables of bench/RESULTS.md.
+#   bench/run.sh          full run (the meshes of the issues; about 20-30 minutes on 2 cores)
+#   bench/run.sh quick    representative subset (a few minutes)
+set -u
+cd "$(dirname "$0")/.."
+mode=${1:-full}
+bash tools/deps.sh bench || exit 1
+bash bench/get_bunny.sh || exit 1
+mkdir -p bench/out build/bench
+CC=${CC:-cc}
+FLAGS="-std=c99 -O2 -fopenmp -I. -I/usr/include/suitesparse"
+for b in update factor; do
+  [ -f bench/$b.c ] || continue
+  $CC $FLAGS -o build/bench/$b bench/$b.c -lcholmod -lm || exit 1
+done
+log=bench/out/log_$mode.txt
+: > "$log"
+run() { echo "+ $*" | tee -a "$log"; "$@" 2>&1 | tee -a "$log"; }
+if [ "$mode" = quick ]; then
+  meshes_factor="beam:64 brick:12 bench/data/bunny20k.1.node"
+  updates="brick:12:cut:30 beam:256:cut:30 bench/data/bunny20k.1.node:cut:20 brick:12:deform:30"
+else
+  meshes_factor="beam:64 beam:256 beam:1024 brick:8 brick:14 brick:20 bench/data/bunny20k.1.node bench/data/bunny50k.1.node"
+  updates="beam:64:cut:50 beam:256:cut:50 beam:1024:cut:50 brick:8:cut:50 brick:14:cut:50 brick:20:cut:50 bench/data/bunny20k.1.node:cut:50 bench/data/bunny50k.1.node:cut:50 beam:256:deform:50 brick:14:deform:50 bench/data/bunny20k.1.node:deform:50"
+fi
+if [ -x build/bench/factor ]; then
+  for m in $meshes_factor; do run build/bench/factor "$m" bench/out/factor.csv; done
+fi
+for u in $updates; do
+  mesh=${u%:*:*}; rest=${u#"$mesh":}; kind=${rest%%:*}; steps=${rest#*:}
+  name=$(basename "$mesh" | sed 's/\.1\.node$//; s/:/_/')
+  run build/bench/update "$mesh" "$kind" "$steps" "bench/out/update_${kind}_${name}.csv" 5
+done
+{
+  echo "machine: $(uname -m), $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//'), $(free -g | awk '/Mem:/{print $2}') GiB"
+  echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
+  echo "blas: $(readlink -f /usr/lib/x86_64-linux-gnu/libblas.so.3 2>/dev/null)"
+  echo "compiler: $($CC --version | head -1), flags: $FLAGS"
+} > bench/out/machine_$mode.txt
+echo "done: bench/out/ (log $log)"
