@@ -83,6 +83,8 @@ typedef struct amps_ctx {
 
 AMPS_API void amps_ctx_init(amps_ctx *ctx);
 AMPS_API const char *amps_status_str(amps_status s);
+/* Wall-clock seconds (omp_get_wtime) in OpenMP builds, processor time (clock) otherwise. */
+AMPS_API double amps_now(void);
 
 /* =============================== sparse matrix =============================== */
 
@@ -605,6 +607,14 @@ AMPS_API const char *amps_status_str(amps_status s) {
     case AMPS_WARN_NOOP: return "no-op";
     }
     return "unknown status";
+}
+
+AMPS_API double amps_now(void) {
+#ifdef _OPENMP
+    return omp_get_wtime();
+#else
+    return (double)clock() / (double)CLOCKS_PER_SEC;
+#endif
 }
 
 /* Records status s and a printf-style message in ctx; returns s. */
@@ -3628,13 +3638,6 @@ struct amps_update {
     amps_update_stats st;
 };
 
-static double amps__now(void) {
-#ifdef _OPENMP
-    return omp_get_wtime();
-#else
-    return (double)clock() / (double)CLOCKS_PER_SEC;
-#endif
-}
 
 AMPS_API void amps_update_opts_default(amps_update_opts *o) {
     if (!o) return;
@@ -4484,7 +4487,7 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
     double t0, t1;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit: NULL engine");
     if (!U->npd && !U->npc && !U->kpend) return AMPS_OK;
-    t0 = amps__now();
+    t0 = amps_now();
     u_old = U->u; vused_old = U->vused; dused_old = U->dused;
     U->ndj = 0; U->nkj = 0;
     /* 1. new members of U: ends of recorded changes and newly constrained indices */
@@ -4540,7 +4543,7 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
             }
         amps__wcols(U, list, nb);
     }
-    t1 = amps__now(); U->st.t_step[1] = t1 - t0; t0 = t1;
+    t1 = amps_now(); U->st.t_step[1] = t1 - t0; t0 = t1;
     /* Step 2: trapezoidal augmentation of G (Eq. 3.25-3.27), both triangles stored */
     if (U->u > u_old) {
         amps_int b, u = U->u;
@@ -4557,7 +4560,7 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
             }
         }
     }
-    t1 = amps__now(); U->st.t_step[2] = t1 - t0; t0 = t1;
+    t1 = amps_now(); U->st.t_step[2] = t1 - t0; t0 = t1;
     /* Delta: relocate every touched row to the end of the pool with room for its additions
        (old locations stay intact, so a rollback only restores headers) */
     U->rstamp++;
@@ -4634,11 +4637,11 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
         for (q = q0; q < u_old; q++) U->colorder[q] = U->iwork[q];
         for (a = u_old; a < U->u; a++) { U->colorder[a] = a; U->rowperm[a] = a; }
     }
-    t1 = amps__now(); U->st.t_step[3] = t1 - t0; t0 = t1;
+    t1 = amps_now(); U->st.t_step[3] = t1 - t0; t0 = t1;
     U->st.lu_cols = U->u - q0;
     s = amps__lu_extend(U, q0, u_old, &bad);
     if (s == AMPS_ERR_CAPACITY) s = amps__lu_full(U, &bad);     /* multipliers grew: refactor */
-    t1 = amps__now(); U->st.t_step[5] = t1 - t0;
+    t1 = amps_now(); U->st.t_step[5] = t1 - t0;
     if (s != AMPS_OK) {
         amps_int bi = bad >= 0 ? U->uidx[bad] : -1;
         amps__rollback(U, u_old, vused_old, dused_old);
@@ -4821,7 +4824,7 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
     }
     F = U->F; n = U->n; u = U->u;
     r = U->rhs; yv = U->yv; wv = U->wv;
-    t0 = amps__now();
+    t0 = amps_now();
     amps__update_ct(U);
     /* Step 4: r = H^T K-bar^{-1} f^ = W^T ct on base positions, f/sigma on appended ones */
 #ifdef _OPENMP
@@ -4837,10 +4840,10 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
             r[a] = sum;
         } else r[a] = U->f[i] / U->sigma;
     }
-    t1 = amps__now(); U->st.t_step[4] = t1 - t0; t0 = t1;
+    t1 = amps_now(); U->st.t_step[4] = t1 - t0; t0 = t1;
     /* Step 5 */
     amps__dense_step(U, r, 0, yv, wv);
-    t1 = amps__now(); U->st.t_step[5] += t1 - t0; t0 = t1;
+    t1 = amps_now(); U->st.t_step[5] += t1 - t0; t0 = t1;
     /* Step 6: x = K-bar^{-1} (f^ - H w), permuted: L^{-T} D^{-1/2} (ct - sum_a w_a W_a) */
     {
         double *sv = U->work;
@@ -4868,7 +4871,7 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
         amps_int i = U->uidx[a];
         U->react[a] = (U->ukind[a] & AMPS__UCON) ? amps__krow(U, i, U->x) - U->f[i] : 0.0;
     }
-    t1 = amps__now(); U->st.t_step[6] = t1 - t0;
+    t1 = amps_now(); U->st.t_step[6] = t1 - t0;
     U->dirty = 0; U->has_sol = 1; U->solN = U->N;
     U->st.nsolve++;
     if (xout) memcpy(xout, U->x, sizeof(double) * (size_t)U->N);
@@ -6530,6 +6533,23 @@ static amps_status amps__gmsh_end(amps__lex *L, const char *sec, const char *aft
     return AMPS_OK;
 }
 
+/* Head of a $Nodes / $Elements section: rejects a second one (*seen), then reads the entity
+   block count (version 4) and the total count. Nonzero on error (reported in L). */
+static int amps__gmsh_head(amps__lex *L, int version, int *seen, const char *sec, const char *what,
+                           long long *nblk, long long *total) {
+    if (*seen) {
+        amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "duplicate %s section", sec);
+        return 1;
+    }
+    *seen = 1;
+    if (version == 4) {
+        if (amps__lx_int(L, 1, nblk, "entity block count")) return 1;
+        if (amps__lx_count(L, *nblk, 4, "entity block")) return 1;
+        return amps__lx_int(L, 0, total, what) != 0;
+    }
+    return amps__lx_int(L, 1, total, what) != 0;
+}
+
 AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size_t len, const char *name) {
     amps__lex L;
     amps__tetbuf tb;
@@ -6580,19 +6600,8 @@ AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size
             if (amps__gmsh_end(&L, sec, "")) goto done;
         } else if (!strcmp(sec, "Nodes")) {
             long long nblk = 1, total;
-            if (have_nodes) {
-                amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "duplicate $Nodes section");
-                goto done;
-            }
-            have_nodes = 1;
-            if (version == 4) {
-                /* numEntityBlocks numNodes minNodeTag maxNodeTag */
-                if (amps__lx_int(&L, 1, &nblk, "entity block count")) goto done;
-                if (amps__lx_count(&L, nblk, 4, "entity block")) goto done;
-                if (amps__lx_int(&L, 0, &total, "node count")) goto done;
-            } else {
-                if (amps__lx_int(&L, 1, &total, "node count")) goto done;
-            }
+            /* 4.1: numEntityBlocks numNodes minNodeTag maxNodeTag */
+            if (amps__gmsh_head(&L, version, &have_nodes, "$Nodes", "node count", &nblk, &total)) goto done;
             if (amps__lx_count(&L, total, 4, "node")) goto done;
             amps__lx_eol(&L);
             nn = (amps_int)total;
@@ -6654,18 +6663,7 @@ AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size
                 amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "$Elements before $Nodes");
                 goto done;
             }
-            if (have_elems) {
-                amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "duplicate $Elements section");
-                goto done;
-            }
-            have_elems = 1;
-            if (version == 4) {
-                if (amps__lx_int(&L, 1, &nblk, "entity block count")) goto done;
-                if (amps__lx_count(&L, nblk, 4, "entity block")) goto done;
-                if (amps__lx_int(&L, 0, &total, "element count")) goto done;
-            } else {
-                if (amps__lx_int(&L, 1, &total, "element count")) goto done;
-            }
+            if (amps__gmsh_head(&L, version, &have_elems, "$Elements", "element count", &nblk, &total)) goto done;
             if (amps__lx_count(&L, total, 2, "element")) goto done;
             amps__lx_eol(&L);
             if (version == 2) {

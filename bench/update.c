@@ -18,13 +18,6 @@
 #include <string.h>
 #include <math.h>
 
-static double now(void) {
-#ifdef _OPENMP
-    return omp_get_wtime();
-#else
-    return (double)clock() / CLOCKS_PER_SEC;
-#endif
-}
 
 static int cmpd(const void *a, const void *b) {
     double x = *(const double *)a, y = *(const double *)b;
@@ -85,15 +78,15 @@ static chol_result cholmod_step(amps_ctx *ctx, const amps_mesh *m, const unsigne
             }
         free(cp);
     }
-    t0 = now();
+    t0 = amps_now();
     L = cholmod_analyze(A, &c);
     cholmod_factorize(A, L, &c);
     X = cholmod_solve(CHOLMOD_A, L, B, &c);
-    r.t_refactor = now() - t0;
+    r.t_refactor = amps_now() - t0;
     cholmod_free_dense(&X, &c);
-    t0 = now();
+    t0 = amps_now();
     X = cholmod_solve(CHOLMOD_A, L, B, &c);
-    r.t_solve = now() - t0;
+    r.t_solve = amps_now() - t0;
     if (X) {
         double one[2] = {1, 0}, mone[2] = {-1, 0};
         cholmod_dense *R = cholmod_copy_dense(B, &c);
@@ -178,9 +171,9 @@ int main(int argc, char **argv) {
             added++;
         }
     }
-    t_prep = now();
+    t_prep = amps_now();
     if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "first solve: %s\n", ctx.msg); return 1; }
-    t_prep = now() - t_prep;
+    t_prep = amps_now() - t_prep;
     {
         const amps_factor *F = amps_scene_factor(S);
         printf("%s %s: %d nodes, %ld equations, nnz(L) %.0f, tree height %ld, first solve (ordering+factor) %.3f s, path %d nodes\n",
@@ -198,7 +191,7 @@ int main(int argc, char **argv) {
         amps_status s;
         int node = path[st];
         chol_result cr = {-1, -1, -1};
-        t0 = now();
+        t0 = amps_now();
         if (cut) {
             double p[3], nrm[3] = {1, 0, 0};
             amps_int vc;
@@ -213,7 +206,7 @@ int main(int argc, char **argv) {
         }
         if (s != AMPS_OK && s != AMPS_WARN_NOOP) { fprintf(stderr, "step %d: %s\n", st, ctx.msg); continue; }
         if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "solve: %s\n", ctx.msg); return 1; }
-        dt = now() - t0;
+        dt = amps_now() - t0;
         amps_update_get_stats(amps_scene_engine(S), &us);
         amps_scene_residual(&ctx, S, &res);
         t_amps[nt++] = dt;

@@ -44,13 +44,6 @@ typedef struct replay {
     int have_material;
 } replay;
 
-static double now(void) {
-#ifdef _OPENMP
-    return omp_get_wtime();
-#else
-    return (double)clock() / CLOCKS_PER_SEC;
-#endif
-}
 
 static int fail(replay *R, const char *fmt, const char *a) {
     fprintf(stderr, "%s:%d: ", R->file, R->line);
@@ -164,7 +157,7 @@ static int run_line(replay *R, int nt, char **t) {
     amps_int v;
     double x[6];
     int k;
-    double t0 = now();
+    double t0 = amps_now();
     if (!strcmp(c, "mesh")) return cmd_mesh(R, nt, t);
     if (!need_scene(R)) return 1;
     if (!strcmp(c, "material")) {
@@ -193,7 +186,7 @@ static int run_line(replay *R, int nt, char **t) {
         s = !strcmp(c, "force") ? amps_scene_force(&R->ctx, R->S, v, x) : amps_scene_pin(&R->ctx, R->S, v, x);
         if (s != AMPS_OK) return lib_fail(R, c);
         snprintf(R->last_cmd, sizeof(R->last_cmd), "%s %ld", c, (long)v);
-        R->step_time += now() - t0;
+        R->step_time += amps_now() - t0;
         return 0;
     }
     if (!strcmp(c, "release")) {
@@ -204,7 +197,7 @@ static int run_line(replay *R, int nt, char **t) {
             printf("%s:%d: release kept: %s\n", R->file, R->line, R->ctx.msg);
         }
         snprintf(R->last_cmd, sizeof(R->last_cmd), "release %ld", (long)v);
-        R->step_time += now() - t0;
+        R->step_time += amps_now() - t0;
         return 0;
     }
     if (!strcmp(c, "cut")) {
@@ -219,7 +212,7 @@ static int run_line(replay *R, int nt, char **t) {
         else if (s == AMPS_ERR_SINGULAR_UPDATE) printf("%s:%d: cut %ld undone: %s\n", R->file, R->line, (long)v, R->ctx.msg);
         else if (s != AMPS_OK) return lib_fail(R, "cut");
         snprintf(R->last_cmd, sizeof(R->last_cmd), "cut %ld", (long)v);
-        R->step_time += now() - t0;
+        R->step_time += amps_now() - t0;
         return 0;
     }
     if (!strcmp(c, "solve")) {
@@ -228,7 +221,7 @@ static int run_line(replay *R, int nt, char **t) {
         int first = !R->solved;
         if (nt != 1) return fail(R, "%s", "usage: solve");
         if (amps_scene_solve(&R->ctx, R->S) != AMPS_OK) return lib_fail(R, "solve");
-        dt = R->step_time + now() - t0;
+        dt = R->step_time + amps_now() - t0;
         if (first) { print_factor_info(R, dt); }
         R->solved = 1;
         if (R->residual_on) {
