@@ -39,13 +39,6 @@
 
 #define NSPARSE 50   /* random indices for the single-nonzero solves */
 
-static double now(void) {
-#ifdef _OPENMP
-    return omp_get_wtime();
-#else
-    return (double)clock() / CLOCKS_PER_SEC;
-#endif
-}
 
 static int nthreads(void) {
 #ifdef _OPENMP
@@ -84,9 +77,9 @@ static double chol_count(cholmod_sparse *A, int *perm, int ordering, cholmod_com
     c->method[0].ordering = ordering;
     c->postorder = ordering != CHOLMOD_GIVEN;
     c->supernodal = CHOLMOD_SIMPLICIAL;
-    t0 = now();
+    t0 = amps_now();
     L = ordering == CHOLMOD_GIVEN ? cholmod_analyze_p(A, perm, NULL, 0, c) : cholmod_analyze(A, c);
-    if (t) *t = now() - t0;
+    if (t) *t = amps_now() - t0;
     if (!L) die("cholmod_analyze", "failed");
     if (ordering != CHOLMOD_GIVEN && L->ordering != ordering)
         fprintf(stderr, "factor: warning: CHOLMOD used ordering %d instead of %d\n", L->ordering, ordering);
@@ -106,9 +99,9 @@ static int *our_order(amps_ctx *ctx, const amps_csc *K, amps_ordering method, co
     o.method = method;
     o.block = 3;
     o.coords = coords;
-    t0 = now();
+    t0 = amps_now();
     if (amps_order(ctx, K, AMPS_UPPER, &o, p) != AMPS_OK) die("amps_order", ctx->msg);
-    *t = now() - t0;
+    *t = amps_now() - t0;
     for (k = 0; k < K->ncol; k++) ip[k] = (int)p[k];
     free(p);
     return ip;
@@ -207,25 +200,25 @@ int main(int argc, char **argv) {
         amps_int *pg = (amps_int *)malloc(sizeof(amps_int) * (size_t)n);
         for (k = 0; k < n; k++) pg[k] = p_nd[k];
         go.perm = pg;
-        t0 = now();
+        t0 = amps_now();
         F = amps_analyze(&ctx, K, AMPS_UPPER, &go);
-        t_ana = now() - t0;
+        t_ana = amps_now() - t0;
         free(pg);
     }
     if (!F) die("amps_analyze", ctx.msg);
     l_nd_amps = amps_factor_nnz(F);
     if (l_nd_amps != l_nd) fprintf(stderr, "factor: warning: nnz(L) of the ND perm: amps %.0f, CHOLMOD symbolic %.0f\n", l_nd_amps, l_nd);
     for (r = 0, nrep = 3; r < nrep; r++) {
-        t0 = now();
+        t0 = amps_now();
         if (amps_factorize(&ctx, F, K, AMPS_UPPER) != AMPS_OK) die("amps_factorize", ctx.msg);
-        t = now() - t0;
+        t = amps_now() - t0;
         if (r == 0) nrep = NREP(t);
         if (t < t_f) t_f = t;
     }
     for (r = 0; r < 5; r++) {
-        t0 = now();
+        t0 = amps_now();
         if (amps_solve(&ctx, F, b, x, w) != AMPS_OK) die("amps_solve", ctx.msg);
-        t = now() - t0;
+        t = amps_now() - t0;
         if (t < t_s) t_s = t;
     }
     res = relres(K, x, b, w);
@@ -243,14 +236,14 @@ int main(int argc, char **argv) {
         amps_int orig = (amps_int)(rng() % (unsigned long)n), kk = F->iperm[orig], cnt, j;
         double d;
         xs[kk] = 1.0;
-        t0 = now();
+        t0 = amps_now();
         cnt = amps_lsolve_sparse(F, 1, &kk, xs, clos, &mk);
-        t_lsp += now() - t0;
+        t_lsp += amps_now() - t0;
         clos_avg += (double)cnt;
         for (j = 0; j < cnt; j++) xs[clos[j]] = 0.0;
-        t0 = now();
+        t0 = amps_now();
         cnt = amps_ltsolve_partial(F, 1, &kk, y, clos, &mk);
-        t_ltp += now() - t0;
+        t_ltp += amps_now() - t0;
         d = fabs(y[kk] - x[orig]) / (fabs(x[orig]) + 1e-300);
         if (d > err_ltp) err_ltp = d;
         for (j = 0; j < cnt; j++) y[clos[j]] = y0[clos[j]];
@@ -271,37 +264,37 @@ int main(int argc, char **argv) {
     if (!L) die("cholmod_analyze_p (simplicial)", "failed");
     flops = c.fl;
     for (r = 0, nrep = 3; r < nrep; r++) {
-        t0 = now();
+        t0 = amps_now();
         if (!cholmod_factorize(A, L, &c) || L->minor < L->n) die("cholmod_factorize (simplicial)", "failed");
-        t = now() - t0;
+        t = amps_now() - t0;
         if (r == 0) nrep = NREP(t);
         if (t < t_fs) t_fs = t;
     }
     for (r = 0; r < 5; r++) {
-        t0 = now();
+        t0 = amps_now();
         if (!cholmod_solve2(CHOLMOD_A, L, B, NULL, &X, NULL, &Y, &E, &c)) die("cholmod_solve2", "failed");
-        t = now() - t0;
+        t = amps_now() - t0;
         if (t < t_ss) t_ss = t;
     }
     res_s = relres(K, (double *)X->x, b, w);
     cholmod_free_factor(&L, &c);
     /* supernodal LL^T */
     c.supernodal = CHOLMOD_SUPERNODAL;
-    t0 = now();
+    t0 = amps_now();
     L = cholmod_analyze_p(A, p_nd, NULL, 0, &c);
-    t_cana_S = now() - t0;
+    t_cana_S = amps_now() - t0;
     if (!L) die("cholmod_analyze_p (supernodal)", "failed");
     for (r = 0, nrep = 3; r < nrep; r++) {
-        t0 = now();
+        t0 = amps_now();
         if (!cholmod_factorize(A, L, &c) || L->minor < L->n) die("cholmod_factorize (supernodal)", "failed");
-        t = now() - t0;
+        t = amps_now() - t0;
         if (r == 0) nrep = NREP(t);
         if (t < t_fS) t_fS = t;
     }
     for (r = 0; r < 5; r++) {
-        t0 = now();
+        t0 = amps_now();
         if (!cholmod_solve2(CHOLMOD_A, L, B, NULL, &X, NULL, &Y, &E, &c)) die("cholmod_solve2", "failed");
-        t = now() - t0;
+        t = amps_now() - t0;
         if (t < t_sS) t_sS = t;
     }
     res_S = relres(K, (double *)X->x, b, w);
