@@ -973,7 +973,7 @@ static void amps__colcounts(amps_int n, const amps_int *parent, const amps_int *
 #define AMPS__PARGROUP 2e6 /* top groups with (entries of their columns) x (width) >= this use all threads */
 #endif
 #ifndef AMPS__PARMIN
-#define AMPS__PARMIN 5e7 /* factorizations with a smaller flop estimate run on one thread */
+#define AMPS__PARMIN 1e9 /* factorizations with a smaller flop estimate (sum of squared column counts) run on one thread */
 #endif
 #ifndef AMPS__NSUB
 #define AMPS__NSUB 8 /* split the tree until no subtree has more than 1/AMPS__NSUB of the subtree work */
