@@ -160,7 +160,9 @@ typedef struct amps_factor {
 } amps_factor;
 
 /* Ordering + elimination tree + column counts + Lp for symmetric A (stype part); allocates L.
-   opts may be NULL (AMPS_ORDER_AUTO, block detection). */
+   opts may be NULL (AMPS_ORDER_AUTO, block detection). With AMPS_FULL only entries with row <= column
+   are read (A is taken as symmetric). Also builds the pattern Li and the scatter map of A into L, and
+   the workspace of amps_factorize for ctx->nthreads threads (0: the OpenMP default). */
 AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts);
 /* Numeric LDL^T of A, which must have the pattern given to amps_analyze (values may differ).
    A pivot must be finite and exceed AMPS_PIVOT_TOL (default 1e-12) times the column's diagonal entry
