@@ -172,7 +172,9 @@ typedef struct amps_factor {
 } amps_factor;
 
 /* Ordering + elimination tree + column counts + Lp for symmetric A (stype part); allocates L.
-   opts may be NULL (AMPS_ORDER_AUTO, block detection). */
+   opts may be NULL (AMPS_ORDER_AUTO, block detection). With AMPS_FULL only entries with row <= column
+   are read (A is taken as symmetric). Also builds the pattern Li and the scatter map of A into L, and
+   the workspace of amps_factorize for ctx->nthreads threads (0: the OpenMP default). */
 AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts);
 /* Numeric LDL^T of A, which must have the pattern given to amps_analyze (values may differ).
    A pivot must be finite and exceed AMPS_PIVOT_TOL (default 1e-12) times the column's diagonal entry
@@ -2522,6 +2524,198 @@ static const amps__kern_fn amps__kern[4][4] = {
     {amps__kern31, amps__kern32, amps__kern33, amps__kern34},
     {amps__kern41, amps__kern42, amps__kern43, amps__kern44}
 };
+/* Dense variants: d_t[p] -= sum_k s_k[p] * W[4k+t] (rows of a group against its own columns). */
+static void amps__dkern11(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0];
+    double *d0 = d[0];
+    const double w00 = W[0];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p];
+        d0[p] -= l0 * w00;
+    }
+}
+static void amps__dkern12(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0];
+    double *d0 = d[0]; double *d1 = d[1];
+    const double w00 = W[0], w01 = W[1];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p];
+        d0[p] -= l0 * w00;
+        d1[p] -= l0 * w01;
+    }
+}
+static void amps__dkern13(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0];
+    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
+    const double w00 = W[0], w01 = W[1], w02 = W[2];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p];
+        d0[p] -= l0 * w00;
+        d1[p] -= l0 * w01;
+        d2[p] -= l0 * w02;
+    }
+}
+static void amps__dkern14(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0];
+    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
+    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p];
+        d0[p] -= l0 * w00;
+        d1[p] -= l0 * w01;
+        d2[p] -= l0 * w02;
+        d3[p] -= l0 * w03;
+    }
+}
+static void amps__dkern21(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0]; const double *s1 = s[1];
+    double *d0 = d[0];
+    const double w00 = W[0], w10 = W[4];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p], l1 = s1[p];
+        d0[p] -= l0 * w00 + l1 * w10;
+    }
+}
+static void amps__dkern22(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0]; const double *s1 = s[1];
+    double *d0 = d[0]; double *d1 = d[1];
+    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p], l1 = s1[p];
+        d0[p] -= l0 * w00 + l1 * w10;
+        d1[p] -= l0 * w01 + l1 * w11;
+    }
+}
+static void amps__dkern23(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0]; const double *s1 = s[1];
+    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
+    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p], l1 = s1[p];
+        d0[p] -= l0 * w00 + l1 * w10;
+        d1[p] -= l0 * w01 + l1 * w11;
+        d2[p] -= l0 * w02 + l1 * w12;
+    }
+}
+static void amps__dkern24(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0]; const double *s1 = s[1];
+    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
+    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p], l1 = s1[p];
+        d0[p] -= l0 * w00 + l1 * w10;
+        d1[p] -= l0 * w01 + l1 * w11;
+        d2[p] -= l0 * w02 + l1 * w12;
+        d3[p] -= l0 * w03 + l1 * w13;
+    }
+}
+static void amps__dkern31(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
+    double *d0 = d[0];
+    const double w00 = W[0], w10 = W[4], w20 = W[8];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
+        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20;
+    }
+}
+static void amps__dkern32(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
+    double *d0 = d[0]; double *d1 = d[1];
+    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5], w20 = W[8], w21 = W[9];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
+        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20;
+        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21;
+    }
+}
+static void amps__dkern33(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
+    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
+    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6], w20 = W[8], w21 = W[9], w22 = W[10];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
+        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20;
+        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21;
+        d2[p] -= l0 * w02 + l1 * w12 + l2 * w22;
+    }
+}
+static void amps__dkern34(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
+    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
+    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7], w20 = W[8], w21 = W[9], w22 = W[10], w23 = W[11];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
+        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20;
+        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21;
+        d2[p] -= l0 * w02 + l1 * w12 + l2 * w22;
+        d3[p] -= l0 * w03 + l1 * w13 + l2 * w23;
+    }
+}
+static void amps__dkern41(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
+    double *d0 = d[0];
+    const double w00 = W[0], w10 = W[4], w20 = W[8], w30 = W[12];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
+        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
+    }
+}
+static void amps__dkern42(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
+    double *d0 = d[0]; double *d1 = d[1];
+    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5], w20 = W[8], w21 = W[9], w30 = W[12], w31 = W[13];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
+        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
+        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
+    }
+}
+static void amps__dkern43(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
+    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
+    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6], w20 = W[8], w21 = W[9], w22 = W[10], w30 = W[12], w31 = W[13], w32 = W[14];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
+        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
+        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
+        d2[p] -= l0 * w02 + l1 * w12 + l2 * w22 + l3 * w32;
+    }
+}
+static void amps__dkern44(amps_int m, const double *const *s, const double *W, double *const *d) {
+    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
+    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
+    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7], w20 = W[8], w21 = W[9], w22 = W[10], w23 = W[11], w30 = W[12], w31 = W[13], w32 = W[14], w33 = W[15];
+    amps_int p;
+    for (p = 0; p < m; p++) {
+        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
+        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
+        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
+        d2[p] -= l0 * w02 + l1 * w12 + l2 * w22 + l3 * w32;
+        d3[p] -= l0 * w03 + l1 * w13 + l2 * w23 + l3 * w33;
+    }
+}
+typedef void (*amps__dkern_fn)(amps_int, const double *const *, const double *, double *const *);
+static const amps__dkern_fn amps__dkern[4][4] = {
+    {amps__dkern11, amps__dkern12, amps__dkern13, amps__dkern14},
+    {amps__dkern21, amps__dkern22, amps__dkern23, amps__dkern24},
+    {amps__dkern31, amps__dkern32, amps__dkern33, amps__dkern34},
+    {amps__dkern41, amps__dkern42, amps__dkern43, amps__dkern44}
+};
 
 /* FNV-1a style hash of the pattern (p, i) of A. */
 static unsigned long long amps__pattern_hash(const amps_csc *A) {
@@ -2633,7 +2827,7 @@ static void amps__colcounts(amps_int n, const amps_int *parent, const amps_int *
 #define AMPS__PARGROUP 2e6 /* top groups with (entries of their columns) x (width) >= this use all threads */
 #endif
 #ifndef AMPS__PARMIN
-#define AMPS__PARMIN 5e7 /* factorizations with a smaller flop estimate run on one thread */
+#define AMPS__PARMIN 1e9 /* factorizations with a smaller flop estimate (sum of squared column counts) run on one thread */
 #endif
 #ifndef AMPS__NSUB
 #define AMPS__NSUB 8 /* split the tree until no subtree has more than 1/AMPS__NSUB of the subtree work */
@@ -2973,29 +3167,25 @@ static void amps__scatter(amps_factor *F, const amps__fpriv *P, const double *Ax
     }
 }
 
-/* rel: row r of group J = [s, e] -> offset of (r, t) from Lx + Lp[t] + (e - t), for any t < r in J;
-   rows (if J is wider than 4): rows of J, then S_J. */
-static void amps__rowmaps(const amps_factor *F, amps_int s, amps_int e, amps_int *rel, amps_int *rows) {
+/* rel: row r of group J = [s, e] -> offset of (r, t) from Lx + Lp[t] + (e - t), for any t < r in J. */
+static void amps__rowmaps(const amps_factor *F, amps_int s, amps_int e, amps_int *rel) {
     amps_int c, q, nJ = F->Lp[e + 1] - F->Lp[e];
     const amps_int *SJ = F->Li + F->Lp[e];
     for (c = s; c <= e; c++) rel[c] = c - e - 1;
     for (q = 0; q < nJ; q++) rel[SJ[q]] = q;
-    if (e - s >= 4) {
-        for (c = s; c <= e; c++) rows[c - s] = c;
-        memcpy(rows + (e - s + 1), SJ, sizeof(amps_int) * (size_t)nJ);
-    }
 }
 
-/* Updates of panel [c0, c0+tc) of group J = [s, e] from its columns [klo, khi) (khi <= c0; klo - s a
-   multiple of 4), for the rows [r0, r1) of the m rows below the panel (rows c0+tc..e, then S_J). */
-static void amps__panel_rect(amps_factor *F, amps_int s, amps_int e, amps_int klo, amps_int khi, amps_int c0, amps_int tc,
-                             const amps_int *rows, const amps_int *rel, amps_int r0, amps_int r1) {
+/* Updates of panel [c0, c0+tc) of a group from its columns [klo, khi) (khi <= c0; klo - (group start) a
+   multiple of 4), for the rows [r0, r1) of the rows below the panel (the group's rows after the panel,
+   then its S), which are stored consecutively in every column of the group. */
+static void amps__panel_rect(amps_factor *F, amps_int klo, amps_int khi, amps_int c0, amps_int tc, amps_int r0,
+                             amps_int r1) {
     const amps_int *Lp = F->Lp;
     double *Lx = F->Lx, *D = F->D;
     amps_int c1 = c0 + tc, k0, k, i;
     double *dst[4];
     if (r1 <= r0) return;
-    for (i = 0; i < tc; i++) dst[i] = Lx + Lp[c0 + i] + (e - c0 - i);
+    for (i = 0; i < tc; i++) dst[i] = Lx + Lp[c0 + i] + (c1 - c0 - i - 1) + r0;
     for (k0 = klo; k0 < khi; k0 += 4) {
         amps_int kc = khi - k0 < 4 ? khi - k0 : 4;
         const double *srq[4];
@@ -3005,7 +3195,7 @@ static void amps__panel_rect(amps_factor *F, amps_int s, amps_int e, amps_int kl
             for (i = 0; i < tc; i++) W[4 * k + i] = D[k0 + k] * src[i];
             srq[k] = src + tc + r0;
         }
-        amps__kern[kc - 1][tc - 1](r1 - r0, rows + (c1 - s) + r0, rel, srq, W, dst);
+        amps__dkern[kc - 1][tc - 1](r1 - r0, srq, W, dst);
     }
 }
 
@@ -3059,9 +3249,9 @@ static amps_int amps__panel_factor(amps_factor *F, const amps__fpriv *P, const d
    iw: 2n ints of thread workspace. */
 static amps_int amps__fgroup(amps_factor *F, amps__fpriv *P, const double *Ax, amps_int J, amps_int *iw, amps_int sub) {
     amps_int s = P->gs[J], e = P->gs[J + 1] - 1, nJ = F->Lp[e + 1] - F->Lp[e], K, c0, bad;
-    amps_int *rel = iw, *rows = iw + F->n;
+    amps_int *rel = iw;
     amps__scatter(F, P, Ax, s, e);
-    amps__rowmaps(F, s, e, rel, rows);
+    amps__rowmaps(F, s, e, rel);
     while ((K = P->head[J]) >= 0) {
         amps_int b = amps__span(F, P, K, e);
         P->head[J] = P->next[K];
@@ -3071,7 +3261,7 @@ static amps_int amps__fgroup(amps_factor *F, amps__fpriv *P, const double *Ax, a
     }
     for (c0 = s; c0 <= e; c0 += 4) {
         amps_int tc = e + 1 - c0 < 4 ? e + 1 - c0 : 4;
-        amps__panel_rect(F, s, e, s, c0, c0, tc, rows, rel, 0, (e - c0 - tc + 1) + nJ);
+        amps__panel_rect(F, s, c0, c0, tc, 0, (e - c0 - tc + 1) + nJ);
         bad = amps__panel_factor(F, P, Ax, e, s, c0, c0, tc, rel, 1);
         if (bad >= 0) return bad;
     }
@@ -3086,7 +3276,7 @@ static amps_int amps__fgroup(amps_factor *F, amps__fpriv *P, const double *Ax, a
    stay aligned at s). Uses the workspace of threads 0 and 1. */
 static amps_int amps__fgroup_par(amps_factor *F, amps__fpriv *P, const double *Ax, amps_int J, int nt) {
     amps_int s = P->gs[J], e = P->gs[J + 1] - 1, nJ = F->Lp[e + 1] - F->Lp[e], n = F->n, cnt = 0, bad = -1;
-    amps_int *rel = P->iwork, *rows = P->iwork + n, *kl = P->iwork + 2 * n, *kb = P->iwork + 3 * n;
+    amps_int *rel = P->iwork, *kl = P->iwork + 2 * n, *kb = P->iwork + 3 * n;
 #pragma omp parallel num_threads(nt)
     {
         int tid = omp_get_thread_num(), T = omp_get_num_threads();
@@ -3096,7 +3286,7 @@ static amps_int amps__fgroup_par(amps_factor *F, amps__fpriv *P, const double *A
 #pragma omp single
         {
             amps_int K;
-            amps__rowmaps(F, s, e, rel, rows);
+            amps__rowmaps(F, s, e, rel);
             while ((K = P->head[J]) >= 0) {
                 P->head[J] = P->next[K];
                 kl[cnt] = K;
@@ -3118,7 +3308,7 @@ static amps_int amps__fgroup_par(amps_factor *F, amps__fpriv *P, const double *A
                 for (c0 = cb, ip = 0; c0 < ce; c0 += 4, ip++) {
                     amps_int tc = ce - c0 < 4 ? ce - c0 : 4;
                     if (ip % T != tid) continue;
-                    amps__panel_rect(F, s, e, s, cb, c0, tc, rows, rel, 0, (e - c0 - tc + 1) + nJ);
+                    amps__panel_rect(F, s, cb, c0, tc, 0, (e - c0 - tc + 1) + nJ);
                     amps__panel_factor(F, P, Ax, e, s, cb, c0, tc, rel, 0);
                 }
 #pragma omp barrier
@@ -3126,7 +3316,7 @@ static amps_int amps__fgroup_par(amps_factor *F, amps__fpriv *P, const double *A
 #pragma omp single
             for (c0 = cb; c0 < ce && bad < 0; c0 += 4) {
                 amps_int tc = ce - c0 < 4 ? ce - c0 : 4;
-                amps__panel_rect(F, s, e, cb, c0, c0, tc, rows, rel, 0, (e - c0 - tc + 1) + nJ);
+                amps__panel_rect(F, cb, c0, c0, tc, 0, (e - c0 - tc + 1) + nJ);
                 bad = amps__panel_factor(F, P, Ax, e, cb, c0, c0, tc, rel, 1);
             }
             if (bad >= 0) break;

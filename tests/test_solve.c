@@ -187,7 +187,7 @@ int main(void) {
     {
         amps_factor *F;
         amps_marker m;
-        int n, k, t, cnt, cnt2, *cl, *cl2, idx[40];
+        int n, k, j, t, cnt, cnt2, *cl, *cl2, idx[40];
         A = m_fe(&ctx, fe_beam(16), 1);
         perm = m_cholmod_perm(A, CHOLMOD_AMD);
         {
@@ -206,7 +206,8 @@ int main(void) {
             cnt = amps_closure(F, ni, idx, cl, &m);
             cnt2 = brute_closure(F, ni, idx, cl2);
             CHECK(cnt == cnt2 && memcmp(cl, cl2, sizeof(int) * cnt) == 0, "closure %d (stamp %d) differs", t, (int)m.stamp);
-            for (k = 0; k < cnt; k++) CHECK(m.mark[cl[k]] == m.stamp, "closure member %d not marked", cl[k]);
+            for (k = 0, j = 1; k < cnt; k++) j &= m.mark[cl[k]] == m.stamp;
+            CHECK(j, "closure %d: members not marked", t);
         }
         CHECK(amps_closure(F, 0, idx, cl, &m) == 0, "empty closure");
         CHECK(amps_marker_init(&ctx, &m, -1) == AMPS_ERR_ARG, "negative marker size");
