@@ -253,7 +253,7 @@ AMPS_API void amps_touch_reset(const amps_factor *F);
 typedef struct amps_update amps_update;
 
 typedef enum amps_formulation {
-    AMPS_FORM_PRIMAL = 0,   /* unknowns x_S (Eq. 3.8), x_S taken from the small system (Eq. 3.20) */
+    AMPS_FORM_PRIMAL = 0,   /* unknowns x_S (Eq. 3.8); with opts.eq320, x_S taken from the small system (Eq. 3.20) */
     AMPS_FORM_DUAL = 1      /* unknowns the correction forces (Eq. 3.16-3.17) */
 } amps_formulation;
 
