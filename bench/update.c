@@ -2,8 +2,10 @@
 
    usage: update <mesh> <cut|deform> <steps> <out.csv> [cholmod_every]
      mesh: beam:<h> | brick:<R> | path to a TetGen .node / .msh / .mesh file
-   cut:    an advancing planar cut (plane x = centre), one node per step, from the top / free
-           end inward, with opposing forces pulling the two sides apart;
+   cut:    an advancing planar cut: the nodes within half a mesh spacing of the plane x = centre,
+           from the top / free end inward, each cut by the plane x = its own x (steps whose
+           plane would leave a side empty move on to the next node), with opposing forces
+           pulling the two sides apart;
    deform: a pin with a nonzero displacement added on one more node per step.
    Per step it records the AMPS step time (the change + solve), Steps 1-6, |S u C|, the relative
    residual (measured outside the timed step), and, every cholmod_every steps, CHOLMOD on the
@@ -107,7 +109,7 @@ int main(int argc, char **argv) {
     amps_mesh *m;
     amps_scene *S;
     const char *spec, *mode, *out;
-    int steps, every = 5, v, st, axis_len, nn0, npath = 0, *path, cut;
+    int steps, every = 5, v, st, ip, axis_len, nn0, npath = 0, *path, cut;
     double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300}, xc, tol, h;
     unsigned char *fixed0, *pinned;
     double *pinval, *force, t_prep;
@@ -124,6 +126,7 @@ int main(int argc, char **argv) {
     else m = amps_mesh_read(&ctx, spec);
     if (!m) { fprintf(stderr, "%s: %s\n", spec, ctx.msg); return 1; }
     nn0 = (int)m->nnode;
+    if (nn0 <= 0) return 1;
     for (v = 0; v < nn0; v++) { int d; for (d = 0; d < 3; d++) { if (m->xyz[3 * v + d] < lo[d]) lo[d] = m->xyz[3 * v + d]; if (m->xyz[3 * v + d] > hi[d]) hi[d] = m->xyz[3 * v + d]; } }
     /* the long axis is held at its low end (beam, brick: z; bunny: y, its base) */
     axis_len = !strncmp(spec, "beam:", 5) || !strncmp(spec, "brick:", 6) ? 2 : 1;
@@ -185,26 +188,31 @@ int main(int argc, char **argv) {
     t_amps = (double *)malloc(sizeof(double) * (size_t)steps);
     t_chol = (double *)malloc(sizeof(double) * (size_t)steps);
     t_cs = (double *)malloc(sizeof(double) * (size_t)steps);
-    for (st = 0; st < steps && st < npath; st++) {
+    for (st = 0, ip = 0; st < steps && ip < npath; st++) {
         double t0, dt, res = -1;
         amps_update_stats us;
-        amps_status s;
-        int node = path[st];
+        amps_status s = AMPS_WARN_NOOP;
+        int node = -1;
         chol_result cr = {-1, -1, -1};
         t0 = amps_now();
         if (cut) {
-            double p[3], nrm[3] = {1, 0, 0};
-            amps_int vc;
-            memcpy(p, m->xyz + 3 * node, sizeof(p));
-            p[0] = xc;
-            s = amps_scene_cut(&ctx, S, node, p, nrm, &vc);
+            /* the plane through the next path node that the cut actually splits */
+            while (s == AMPS_WARN_NOOP && ip < npath) {
+                double p[3], nrm[3] = {1, 0, 0};
+                amps_int vc;
+                node = path[ip++];
+                memcpy(p, m->xyz + 3 * node, sizeof(p));
+                s = amps_scene_cut(&ctx, S, node, p, nrm, &vc);
+            }
+            if (s == AMPS_WARN_NOOP) break;
         } else {
             double u[3] = {0, 0, 0};
+            node = path[ip++];
             u[axis_len] = -0.01 * (hi[axis_len] - lo[axis_len]);
             s = amps_scene_pin(&ctx, S, node, u);
             if (s == AMPS_OK) { pinned[node] = 1; memcpy(pinval + 3 * node, u, sizeof(u)); }
         }
-        if (s != AMPS_OK && s != AMPS_WARN_NOOP) { fprintf(stderr, "step %d: %s\n", st, ctx.msg); continue; }
+        if (s != AMPS_OK) { fprintf(stderr, "step %d: %s\n", st, ctx.msg); continue; }
         if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "solve: %s\n", ctx.msg); return 1; }
         dt = amps_now() - t0;
         amps_update_get_stats(amps_scene_engine(S), &us);
