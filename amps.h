@@ -479,6 +479,9 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
 AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S);
 /* Displacements of the last solve, 3 per node (nodes created since: their origin's values). */
 AMPS_API const double *amps_scene_displacements(const amps_scene *S);
+/* Deformed positions (reference + displacement of the last solve) of nodes[0..n-1], or of all
+   nodes when nodes is NULL (n ignored), 3 per node into out. */
+AMPS_API amps_status amps_scene_positions(amps_ctx *ctx, const amps_scene *S, amps_int n, const amps_int *nodes, double *out);
 /* Reaction force the pin of node v exerts (K^ x - f at its DOFs); zero if v is not pinned. */
 AMPS_API amps_status amps_scene_reaction(amps_ctx *ctx, const amps_scene *S, amps_int v, double r[3]);
 /* Relative residual of the reduced system (fixed and pinned DOFs eliminated) of the last solve. */
@@ -6316,6 +6319,18 @@ AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S) {
 }
 
 AMPS_API const double *amps_scene_displacements(const amps_scene *S) { return S ? S->disp : NULL; }
+
+AMPS_API amps_status amps_scene_positions(amps_ctx *ctx, const amps_scene *S, amps_int n, const amps_int *nodes, double *out) {
+    amps_int k, d;
+    if (!S || !out) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_positions: NULL argument");
+    if (!nodes) n = S->m->nnode;
+    for (k = 0; k < n; k++) {
+        amps_int v = nodes ? nodes[k] : k;
+        if (v < 0 || v >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_positions: node %ld out of range", (long)v);
+        for (d = 0; d < 3; d++) out[3 * k + d] = S->m->xyz[3 * v + d] + S->disp[3 * v + d];
+    }
+    return AMPS_OK;
+}
 
 AMPS_API amps_status amps_scene_reaction(amps_ctx *ctx, const amps_scene *S, amps_int v, double r[3]) {
     int k;

@@ -132,7 +132,13 @@ int main(int argc, char **argv) {
     axis_len = !strncmp(spec, "beam:", 5) || !strncmp(spec, "brick:", 6) ? 2 : 1;
     fixed0 = (unsigned char *)calloc((size_t)nn0, 1);
     for (v = 0; v < nn0; v++) fixed0[v] = m->xyz[3 * v + axis_len] < lo[axis_len] + 0.04 * (hi[axis_len] - lo[axis_len]) + 1e-12;
-    S = amps_scene_create(&ctx, m, NULL);
+    {
+        amps_scene_opts so;
+        amps_scene_opts_default(&so);
+        if (getenv("AMPS_REFINE")) so.update.refine = atoi(getenv("AMPS_REFINE"));
+        if (getenv("AMPS_DUAL")) so.update.formulation = AMPS_FORM_DUAL;
+        S = amps_scene_create(&ctx, m, &so);
+    }
     amps_scene_set_material(&ctx, S, 1000.0, 0.3);
     {
         amps_int *fl = (amps_int *)malloc(sizeof(amps_int) * (size_t)nn0), nf = 0;

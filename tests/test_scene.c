@@ -96,6 +96,16 @@ static void compare(amps_ctx *ctx, amps_scene *S, const shadow *w, const char *w
         if (res > worst_res) worst_res = res;
     }
     if (err > worst_err) worst_err = err;
+    {   /* deformed positions = reference + displacement, all nodes and a subset */
+        double *pos = (double *)malloc(sizeof(double) * 3 * m->nnode), q[3];
+        amps_int last = m->nnode - 1;
+        CHECK(amps_scene_positions(ctx, S, 0, NULL, pos) == AMPS_OK, "positions");
+        CHECK(pos[3 * last + 2] == m->xyz[3 * last + 2] + amps_scene_displacements(S)[3 * last + 2], "%s: position of the last node", what);
+        CHECK(amps_scene_positions(ctx, S, 1, &last, q) == AMPS_OK && q[0] == pos[3 * last] && q[2] == pos[3 * last + 2], "%s: subset positions", what);
+        last = m->nnode;
+        CHECK(amps_scene_positions(ctx, S, 1, &last, q) == AMPS_ERR_INDEX, "%s: position out of range accepted", what);
+        free(pos);
+    }
     {   /* reactions at pins: nonzero somewhere when a pin moves the model */
         amps_int v;
         for (v = 0; v < m->nnode; v++) {
