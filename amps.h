@@ -2288,8 +2288,9 @@ typedef struct amps__fpriv {
     amps_int *subp, *subg;        /* groups of subtree i: subg[subp[i]..subp[i+1]), ascending */
     amps_int ntop, *topg;         /* groups of the top part, ascending */
     amps_int nthr;                /* threads with workspace */
-    amps_int *iwork;              /* nthr * 2n: relmap and row list per thread */
-    amps_int *fail;               /* nsub + 1: failing permuted column per subtree (top last), or -1 */
+    amps_int *iwork;              /* nthr * 2n: row map of thread i at 2n i; a parallel group keeps its
+                                     update list at 2n..4n */
+    amps_int *fail;               /* nsub + 1: failing permuted column per subtree, or -1 */
     double work;                  /* sum of squared column counts (flop estimate) */
     double parmin;                /* factorizations with less work run on one thread */
     double pargroup;              /* top groups with (entries of their columns) x (width) >= this run on all threads */
