@@ -15,6 +15,8 @@
                           custom allocator; define all three or none. u is amps_ctx.alloc_user.
      AMPS_ASSERT(x)       internal assertion (default assert from <assert.h>)
      AMPS_USE_METIS       enable AMPS_ORDER_METIS (link -lmetis)
+     AMPS_PIVOT_TOL       LDL^T pivots below this times the column's diagonal are "not SPD" (1e-12)
+     AMPS_COUNT_TOUCH     tests: count the L entries the sparse and partial solves read
      AMPS_NO_FEM          leave out the FEM scene (linear algebra only)
      AMPS_NO_STDIO        leave out file readers/writers
      AMPS_NO_THREADS      leave out background threads
