@@ -267,11 +267,15 @@ typedef struct amps_update_opts {
     amps_int cap_pending;   /* changes recorded between commits; default 4096 */
     int grow;               /* 1: grow capacities on demand (may allocate in update calls) */
     amps_formulation formulation;
-    double singular_tol;    /* pivot of the dense system below tol * column norm is singular; default 1e-12 */
+    double singular_tol;    /* pivot of the dense system below tol * column norm is singular; default 1e-15 */
     int refine;             /* refinement steps on the residual of the modified rows inside the same
                                full solve (default 1; each adds a partial backward solve over
                                closure(S u C u neighbours) and O(|S u C|^2)); 0 = none */
     int eq320;              /* 1: take x_S from the small system (Eq. 3.20); default 0 (see bench/RESULTS.md) */
+    double guard_tol;       /* accuracy guard: > 0 computes the relative residual of every solve (one
+                               product with K^) and, while it exceeds guard_tol, refines with the
+                               same factors (each step one more forward and backward solve), at
+                               most 3 steps; 0 (default) = off */
 } amps_update_opts;
 
 /* Per-commit and per-solve measurements (seconds) and sizes. */
@@ -286,6 +290,8 @@ typedef struct amps_update_stats {
     amps_int lu_full;       /* full dense refactorizations so far */
     double vpool_entries;   /* memoized entries of L^{-1} H */
     amps_int ncommit, nsolve;
+    amps_int guard_steps;   /* refinement steps the accuracy guard took in the last solve */
+    double relres;          /* relative residual of the last solve when the guard is on, else -1 */
 } amps_update_stats;
 
 AMPS_API void amps_update_opts_default(amps_update_opts *opts);
@@ -3795,7 +3801,9 @@ struct amps_update {
     const amps_factor *F;
     amps_formulation form;
     double tol, sigma;
-    int grow, nthr, refine, eq320;
+    int grow, nthr, refine, eq320, committed;
+    double guard_tol;                      /* accuracy guard (0: off) */
+    double *ctr, *gbuf;                    /* guard: forward solve of the residual (n), 2 * capN scratch */
     amps_int n, N, kpend, capN;
     amps_int *Kp, *Ki;  double *Kx;        /* base K, both triangles, original numbering */
     double *f;                             /* capN forces */
@@ -3844,7 +3852,7 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
     o->cap_pending = 4096;
     o->grow = 0;
     o->formulation = AMPS_FORM_PRIMAL;
-    o->singular_tol = 1e-12;
+    o->singular_tol = 1e-15;
     o->refine = 1;
     o->eq320 = 0;
 }
@@ -3926,7 +3934,8 @@ static amps_status amps__need_N(amps_ctx *ctx, amps_update *U, amps_int need) {
         amps__realloc(ctx, (void **)&U->x, (size_t)cap, sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->upos, (size_t)cap, sizeof(amps_int)) ||
         amps__realloc(ctx, (void **)&U->iwork, (size_t)(U->n + cap), sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->rv, 2 * (size_t)cap, sizeof(double)))
+        amps__realloc(ctx, (void **)&U->rv, 2 * (size_t)cap, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->gbuf, 2 * (size_t)cap, sizeof(double)))
         return AMPS_ERR_OOM;
     {
         amps_marker m2;
@@ -3970,6 +3979,7 @@ AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     amps__free(ctx, U->G); amps__free(ctx, U->LU); amps__free(ctx, U->cnorm);
     amps__free(ctx, U->rowperm); amps__free(ctx, U->colorder); amps__free(ctx, U->colpos); amps__free(ctx, U->cstamp);
     amps__free(ctx, U->rst); amps__free(ctx, U->rcnt); amps__free(ctx, U->pbuf); amps__free(ctx, U->rv);
+    amps__free(ctx, U->gbuf); amps__free(ctx, U->ctr);
     amps__free(ctx, U->dj); amps__free(ctx, U->kj);
     amps__free(ctx, U->x); amps__free(ctx, U->react); amps__free(ctx, U->z); amps__free(ctx, U->rhs);
     amps__free(ctx, U->tmp); amps__free(ctx, U->yv); amps__free(ctx, U->wv);
@@ -4034,7 +4044,7 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     U = AMPS__CAST(amps_update *, amps__calloc(ctx, 1, sizeof(amps_update)));
     if (!U) return NULL;
     U->F = F; U->form = o.formulation; U->tol = o.singular_tol; U->grow = o.grow;
-    U->refine = o.refine; U->eq320 = o.eq320;
+    U->refine = o.refine; U->eq320 = o.eq320; U->guard_tol = o.guard_tol;
     U->n = n; U->N = n; U->capN = capN; U->capu = 0; U->u = 0;
 #ifdef _OPENMP
     U->nthr = ctx && ctx->nthreads > 0 ? ctx->nthreads : omp_get_max_threads();
@@ -4069,8 +4079,10 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     U->dval = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->dcap, sizeof(double)));
     U->kj = AMPS__CAST(amps__kjour *, amps__malloc(ctx, (size_t)U->cappc, sizeof(amps__kjour)));
     U->rv = AMPS__CAST(double *, amps__malloc(ctx, 2 * (size_t)capN, sizeof(double)));
+    U->gbuf = AMPS__CAST(double *, amps__malloc(ctx, 2 * (size_t)capN, sizeof(double)));
+    U->ctr = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
     if (!U->f || !U->x || !U->upos || !U->iwork || !U->ct || !U->fct || !U->isd || !U->pf || !U->work || !U->work2 || !U->xb || !U->lmap || !U->clo || !U->pd || !U->pc ||
-        !U->vval || !U->vidx || !U->dcol || !U->dval || !U->kj || !U->rv)
+        !U->vval || !U->vidx || !U->dcol || !U->dval || !U->kj || !U->rv || !U->gbuf || !U->ctr)
         goto fail;
     if (amps_marker_init(ctx, &U->mk, n > 0 ? n : 1) || amps_marker_init(ctx, &U->mkN, capN > 0 ? capN : 1)) goto fail;
     U->G = AMPS__CAST(double *, amps__malloc(ctx, 1, sizeof(double)));
@@ -4848,6 +4860,7 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
     U->N += U->kpend; U->kpend = 0;
     U->npd = 0; U->npc = 0;
     U->dirty = 1;
+    U->committed = 1;
     U->st.ncommit++;
     (void)touched;
     return AMPS_OK;
@@ -4969,7 +4982,7 @@ static double amps__krow(const amps_update *U, amps_int i, const double *v) {
 /* Refinement: x~ = K-bar^{-1}(f - H w) on U and its neighbours by a partial backward solve of
    sv (a copy), rho = (f - K^ x~) on the free rows of U, and the correction problem K^ d = H rho
    (d_C = 0) gives wd; afterwards the full solve uses w + wd - rho. x~ is gathered into U->x. */
-static void amps__refine(amps_update *U, const double *sv, const double *wv) {
+static void amps__refine(amps_update *U, const double *sv, const double *wv, const double *fv, int hom, double *x) {
     const amps_factor *F = U->F;
     amps_int u = U->u, n = U->n, a, k, p, nreq = 0, *req = U->iwork, *clo = U->iwork + n, ncl;
     double *s2 = U->work2;
@@ -4989,12 +5002,12 @@ static void amps__refine(amps_update *U, const double *sv, const double *wv) {
     }
     memcpy(s2, sv, sizeof(double) * (size_t)n);
     ncl = amps_ltsolve_partial(F, nreq, req, s2, clo, &U->mk);
-    for (k = 0; k < ncl; k++) U->x[F->perm[clo[k]]] = s2[clo[k]];
-    for (k = n; k < U->N; k++) { a = U->upos[k]; U->x[k] = (U->f[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma; }
-    for (a = 0; a < u; a++) if (U->ukind[a] & AMPS__UCON) U->x[U->uidx[a]] = U->g[a];
+    for (k = 0; k < ncl; k++) x[F->perm[clo[k]]] = s2[clo[k]];
+    for (k = n; k < U->N; k++) { a = U->upos[k]; x[k] = (fv[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma; }
+    for (a = 0; a < u; a++) if (U->ukind[a] & AMPS__UCON) x[U->uidx[a]] = hom ? 0.0 : U->g[a];
     for (a = 0; a < u; a++) {
         amps_int i = U->uidx[a];
-        U->rho[a] = (U->ukind[a] & AMPS__UCON) ? 0.0 : U->f[i] - amps__krow(U, i, U->x);
+        U->rho[a] = (U->ukind[a] & AMPS__UCON) ? 0.0 : fv[i] - amps__krow(U, i, x);
     }
     /* r_d = G rho */
     for (a = 0; a < u; a++) U->rd[a] = 0;
@@ -5007,22 +5020,13 @@ static void amps__refine(amps_update *U, const double *sv, const double *wv) {
     for (a = 0; a < u; a++) U->wd[a] -= U->rho[a];
 }
 
-AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xout) {
-    const amps_factor *F;
-    amps_int u, a, k, n;
-    double t0, t1, *r, *yv, *wv;
-    amps_status s;
-    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve: NULL engine");
-    if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
-    if (!U->dirty && U->has_sol) {
-        if (xout) memcpy(xout, U->x, sizeof(double) * (size_t)U->N);
-        return AMPS_OK;
-    }
-    F = U->F; n = U->n; u = U->u;
-    r = U->rhs; yv = U->yv; wv = U->wv;
-    t0 = amps_now();
-    amps__update_ct(U);
-    /* Step 4: r = H^T K-bar^{-1} f^ = W^T ct on base positions, f/sigma on appended ones */
+/* Steps 4-6 for forces fv (N) with ct = D^{-1/2} L^{-1} P^T fv(0:n) and the prescribed values
+   (hom: zero) into x (N). */
+static void amps__solve_core(amps_update *U, const double *ct, const double *fv, int hom, double *x) {
+    const amps_factor *F = U->F;
+    amps_int u = U->u, n = U->n, a, k;
+    double t0 = amps_now(), t1, *r = U->rhs, *yv = U->yv, *wv = U->wv, *sv = U->work;
+    /* Step 4: r = H^T K-bar^{-1} f = W^T ct on base positions, f/sigma on appended ones */
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 16) num_threads(U->nthr) if (u > 64)
 #endif
@@ -5032,42 +5036,103 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
             const double *w = U->vval + U->voff[a];
             const amps_int *wi = U->vidx + U->voff[a];
             double sum = 0;
-            for (t = 0; t < U->vlen[a]; t++) sum += w[t] * U->ct[wi[t]];
+            for (t = 0; t < U->vlen[a]; t++) sum += w[t] * ct[wi[t]];
             r[a] = sum;
-        } else r[a] = U->f[i] / U->sigma;
+        } else r[a] = fv[i] / U->sigma;
     }
-    t1 = amps_now(); U->st.t_step[4] = t1 - t0; t0 = t1;
+    t1 = amps_now(); U->st.t_step[4] += t1 - t0; t0 = t1;
     /* Step 5 */
-    amps__dense_step(U, r, 0, yv, wv);
+    amps__dense_step(U, r, hom, yv, wv);
     t1 = amps_now(); U->st.t_step[5] += t1 - t0; t0 = t1;
-    /* Step 6: x = K-bar^{-1} (f^ - H w), permuted: L^{-T} D^{-1/2} (ct - sum_a w_a W_a) */
+    /* Step 6: x = K-bar^{-1} (f - H w), permuted: L^{-T} D^{-1/2} (ct - sum_a w_a W_a) */
+    for (k = 0; k < n; k++) sv[k] = ct[k] * U->isd[k];
+    amps__scatter_w(U, wv, sv);
+    if (u > 0) {
+        int it;
+        for (it = 0; it < U->refine; it++) {
+            amps__refine(U, sv, wv, fv, hom, x);
+            amps__scatter_w(U, U->wd, sv);
+            for (a = 0; a < u; a++) { wv[a] += U->wd[a]; yv[a] += U->yd[a]; }
+        }
+    }
+    amps_ltsolve(F, sv);
+    for (k = 0; k < n; k++) { x[F->perm[k]] = sv[k]; sv[k] = 0.0; }
+    for (k = n; k < U->N; k++) {
+        a = U->upos[k];
+        x[k] = (fv[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma;
+    }
+    for (a = 0; a < u; a++)
+        if ((U->ukind[a] & AMPS__UCON) || (U->eq320 && U->form == AMPS_FORM_PRIMAL)) x[U->uidx[a]] = yv[a];
+    U->st.t_step[6] += amps_now() - t0;
+}
+
+static void amps__kmul(const amps_update *U, const double *v, double *y);
+
+/* rho = f - K^ x on the unconstrained rows (0 on C); returns ||rho|| / ||f_F - K^_FC g||. */
+static double amps__residual_vec(amps_update *U, const double *x, double *rho, double *tmp) {
+    amps_int i, a, N = U->N;
+    double num = 0, den = 0;
+    amps__kmul(U, x, rho);
+    for (i = 0; i < N; i++) {
+        a = U->upos[i];
+        rho[i] = (a >= 0 && (U->ukind[a] & AMPS__UCON)) ? 0.0 : U->f[i] - rho[i];
+        num += rho[i] * rho[i];
+    }
+    for (i = 0; i < N; i++) tmp[i] = 0;
+    for (a = 0; a < U->u; a++) if (U->ukind[a] & AMPS__UCON) tmp[U->uidx[a]] = U->g[a];
+    amps__kmul(U, tmp, tmp + N);
+    for (i = 0; i < N; i++) {
+        a = U->upos[i];
+        if (a >= 0 && (U->ukind[a] & AMPS__UCON)) continue;
+        den += (U->f[i] - tmp[N + i]) * (U->f[i] - tmp[N + i]);
+    }
+    return den > 0 ? sqrt(num / den) : sqrt(num);
+}
+
+AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xout) {
+    amps_int a, k;
+    amps_status s;
+    int it;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve: NULL engine");
+    if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
+    if (!U->dirty && U->has_sol) {
+        if (xout) memcpy(xout, U->x, sizeof(double) * (size_t)U->N);
+        return AMPS_OK;
+    }
+    /* the step times: those of the commit (if one happened since the last solve) plus ours */
+    if (!U->committed) for (k = 1; k <= 5; k++) U->st.t_step[k] = 0;
+    U->committed = 0;
+    U->st.t_step[4] = 0; U->st.t_step[6] = 0;
     {
-        double *sv = U->work;
-        for (k = 0; k < n; k++) sv[k] = U->ct[k] * U->isd[k];
-        amps__scatter_w(U, wv, sv);
-        if (u > 0) {
-            int it;
-            for (it = 0; it < U->refine; it++) {
-                amps__refine(U, sv, wv);
-                amps__scatter_w(U, U->wd, sv);
-                for (a = 0; a < u; a++) { wv[a] += U->wd[a]; yv[a] += U->yd[a]; }
-            }
+        double t0 = amps_now();
+        amps__update_ct(U);
+        U->st.t_step[4] += amps_now() - t0;
+    }
+    amps__solve_core(U, U->ct, U->f, 0, U->x);
+    U->st.guard_steps = 0;
+    U->st.relres = -1;
+    /* accuracy guard: the residual of the full system, and refinement steps with the same
+       factors while it is above guard_tol */
+    if (U->guard_tol > 0) {
+        double *rho = U->rv, *dx = U->rv + U->capN, *tmp = U->gbuf;
+        double rel = amps__residual_vec(U, U->x, rho, tmp);
+        for (it = 0; it < 3 && rel > U->guard_tol; it++) {
+            const amps_factor *F = U->F;
+            for (k = 0; k < U->n; k++) U->ctr[k] = rho[F->perm[k]];
+            amps_lsolve(F, U->ctr);
+            for (k = 0; k < U->n; k++) U->ctr[k] *= U->isd[k];
+            amps__solve_core(U, U->ctr, rho, 1, dx);
+            for (k = 0; k < U->N; k++) U->x[k] += dx[k];
+            rel = amps__residual_vec(U, U->x, rho, tmp);
+            U->st.guard_steps++;
         }
-        amps_ltsolve(F, sv);
-        for (k = 0; k < n; k++) { U->x[F->perm[k]] = sv[k]; sv[k] = 0.0; }
-        for (k = n; k < U->N; k++) {
-            a = U->upos[k];
-            U->x[k] = (U->f[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma;
-        }
-        for (a = 0; a < u; a++)
-            if ((U->ukind[a] & AMPS__UCON) || (U->eq320 && U->form == AMPS_FORM_PRIMAL)) U->x[U->uidx[a]] = yv[a];
+        U->st.relres = rel;
     }
     /* reactions (K^ x - f^)_C */
-    for (a = 0; a < u; a++) {
+    for (a = 0; a < U->u; a++) {
         amps_int i = U->uidx[a];
         U->react[a] = (U->ukind[a] & AMPS__UCON) ? amps__krow(U, i, U->x) - U->f[i] : 0.0;
     }
-    t1 = amps_now(); U->st.t_step[6] = t1 - t0;
     U->dirty = 0; U->has_sol = 1; U->solN = U->N;
     U->st.nsolve++;
     if (xout) memcpy(xout, U->x, sizeof(double) * (size_t)U->N);

@@ -137,6 +137,7 @@ int main(int argc, char **argv) {
         amps_scene_opts_default(&so);
         if (getenv("AMPS_REFINE")) so.update.refine = atoi(getenv("AMPS_REFINE"));
         if (getenv("AMPS_DUAL")) so.update.formulation = AMPS_FORM_DUAL;
+        if (getenv("AMPS_GUARD")) so.update.guard_tol = atof(getenv("AMPS_GUARD"));
         S = amps_scene_create(&ctx, m, &so);
     }
     amps_scene_set_material(&ctx, S, 1000.0, 0.3);

@@ -149,7 +149,9 @@ static void model_check(model *m, double tol_err, const char *what) {
     if (rref > m->worst_ref) m->worst_ref = rref;
     CHECK(err <= tol_err, "%s step %d: relative error %.3e > %.1e", what, m->steps, err, tol_err);
     CHECK(res <= 10 * rref + 1e-14, "%s step %d: residual %.3e vs CHOLMOD %.3e", what, m->steps, res, rref);
-    CHECK(fabs(eres - res) <= 0.5 * (eres > res ? eres : res) + 1e-14, "%s step %d: engine residual %.3e vs explicit %.3e", what, m->steps, eres, res);
+    /* two evaluations of a rounding-level residual agree to a factor, or both meet the bound */
+    CHECK(fabs(eres - res) <= 0.5 * (eres > res ? eres : res) + 1e-14 || eres <= 10 * rref + 1e-14,
+          "%s step %d: engine residual %.3e vs explicit %.3e", what, m->steps, eres, res);
     for (k = 0; k < N; k++)
         if (m->con[k]) {
             double re = explicit_reaction(&m->T, x, m->f, k), ra = amps_update_reaction(m->U, k);
@@ -460,6 +462,22 @@ static void test_errors(void) {
     model_free(&m); free(ti); free(tj); free(tx); free(x0); free(x1);
 }
 
+/* The accuracy guard on an elongated, badly conditioned beam: residuals stay within 10x of
+   CHOLMOD's (checked by model_check), the guard reports the residual it reached. */
+static void test_guard(void) {
+    model m; amps_update_opts o; fe_mesh mesh = fe_beam(96);
+    amps_update_stats st;
+    double res;
+    amps_update_opts_default(&o); o.grow = 1; o.guard_tol = 1e-13;
+    fe_model(&m, &mesh, 2, &o);
+    cut_sequence(&m, &mesh, 40, 17, 1e-7);
+    amps_update_get_stats(m.U, &st);
+    amps_update_residual(&m.ctx, m.U, &res);
+    CHECK(st.relres >= 0 && fabs(st.relres - res) <= 0.5 * res + 1e-15, "guard residual %.3e vs %.3e", st.relres, res);
+    report("beam 5x5x96 cuts, guard", &m);
+    model_free(&m); fe_free(&mesh);
+}
+
 /* 1 and 2 threads give the same results. */
 static void test_threads(void) {
 #ifdef _OPENMP
@@ -485,6 +503,7 @@ int main(void) {
     test_errors();
     test_random_sequences();
     test_fe_sequences();
+    test_guard();
     test_threads();
     return amps_t_end("test_update");
 }
