@@ -17,7 +17,7 @@ for b in update factor; do
 done
 log=bench/out/log_$mode.txt
 : > "$log"
-run() { echo "+ $*" | tee -a "$log"; "$@" 2>&1 | tee -a "$log"; }
+run() { echo "+ ${AMPS_GUARD:+AMPS_GUARD=$AMPS_GUARD }${AMPS_DUAL:+AMPS_DUAL=1 }$*" | tee -a "$log"; "$@" 2>&1 | tee -a "$log"; }
 if [ "$mode" = quick ]; then
   meshes_factor="beam:64 brick:12 bench/data/bunny20k.1.node"
   updates="brick:12:cut:30 beam:256:cut:30 bench/data/bunny20k.1.node:cut:20 brick:12:deform:30"
@@ -33,6 +33,11 @@ for u in $updates; do
   name=$(basename "$mesh" | sed 's/\.1\.node$//; s/:/_/')
   run build/bench/update "$mesh" "$kind" "$steps" "bench/out/update_${kind}_${name}.csv" 5
 done
+if [ "$mode" = full ]; then
+  # the accuracy guard on the worst-conditioned beam, and the dual formulation on the bunny
+  AMPS_GUARD=1e-12 run build/bench/update beam:1024 cut 50 bench/out/update_cut_beam_1024_guard.csv 5
+  AMPS_DUAL=1 run build/bench/update bench/data/bunny20k.1.node cut 50 bench/out/update_cut_bunny20k_dual.csv 5
+fi
 {
   echo "machine: $(uname -m), $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//'), $(free -g | awk '/Mem:/{print $2}') GiB"
   echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
