@@ -24,3 +24,14 @@ for f in update_*.csv; do
     printf "| %s | %d | %d | %d | %.2f ms | %.1f ms | %.1fx | %.2f ms | %.2f | %s / %s | %.0f%% / %.0f%% / %.0f%% / %.0f%% |\n",
       name, n, dim, ns, 1e3*ta, 1e3*tc, tc/ta, 1e3*ts, ta/ts, ra, rc, 100*s1, 100*s2, 100*s345, 100*s6 }'
 done
+
+# factor.csv: one row per mesh
+if [ -f factor.csv ]; then
+  echo
+  echo "| mesh | n | nnz(L) ours AMD / CHOLMOD AMD | nnz(L) ours ND / METIS | ordering ND (s) | analyze (s) ours / CHOLMOD | factor (s) ours / simplicial / supernodal | ratio simpl / super | solve (ms) ours / simpl / super | ours / best | 1-index forward solve (us), closure/n | residual ours / simpl / super |"
+  echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
+  tail -n +2 factor.csv | awk -F, '{
+    m = $1; sub(/.*\//, "", m); sub(/\.1\.node$/, "", m)
+    printf "| %s | %d | %.2fM / %.2fM (%.3f) | %.2fM / %.2fM (%.3f) | %.3f | %.3f / %.3f | %.3f / %.3f / %.3f | %.2f / %.2f | %.2f / %.2f / %.2f | %.2f | %.0f, %.3f | %.1e / %.1e / %.1e |\n",
+      m, $3, $5/1e6, $6/1e6, $7, $8/1e6, $9/1e6, $10, $13, $17, $18, $21, $22, $23, $24, $25, 1e3*$26, 1e3*$27, 1e3*$28, $29, 1e6*$30, $32, $34, $35, $36 }'
+fi
