@@ -7174,25 +7174,21 @@ static amps_status amps__read_all(amps_ctx *ctx, const char *path, char **out, s
     return AMPS_OK;
 }
 
-AMPS_API amps_mesh *amps_mesh_read_gmsh(amps_ctx *ctx, const char *path) {
+/* Reads the whole file at path and parses it with a from-memory reader. */
+static amps_mesh *amps__read_with(amps_ctx *ctx, const char *path,
+                                  amps_mesh *(*parse)(amps_ctx *, const char *, size_t, const char *)) {
     char *b;
     size_t n;
     amps_mesh *m;
     if (amps__read_all(ctx, path, &b, &n)) return NULL;
-    m = amps_mesh_read_gmsh_mem(ctx, b, n, path);
+    m = parse(ctx, b, n, path);
     amps__free(ctx, b);
     return m;
 }
 
-AMPS_API amps_mesh *amps_mesh_read_medit(amps_ctx *ctx, const char *path) {
-    char *b;
-    size_t n;
-    amps_mesh *m;
-    if (amps__read_all(ctx, path, &b, &n)) return NULL;
-    m = amps_mesh_read_medit_mem(ctx, b, n, path);
-    amps__free(ctx, b);
-    return m;
-}
+AMPS_API amps_mesh *amps_mesh_read_gmsh(amps_ctx *ctx, const char *path) { return amps__read_with(ctx, path, amps_mesh_read_gmsh_mem); }
+
+AMPS_API amps_mesh *amps_mesh_read_medit(amps_ctx *ctx, const char *path) { return amps__read_with(ctx, path, amps_mesh_read_medit_mem); }
 
 AMPS_API amps_mesh *amps_mesh_read_tetgen(amps_ctx *ctx, const char *node_path, const char *ele_path) {
     char *nb, *eb;
