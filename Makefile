@@ -3,7 +3,6 @@
 #   make test SAN=1    the same under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make test OMP=     the same without OpenMP
 #   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv
-#   make stress        long stability runs (not part of make test)
 #   make deps          install (as root) or list the Debian packages the tests need
 CC      ?= cc
 CXX     ?= c++
@@ -32,7 +31,7 @@ TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
 TEST_SH   := $(wildcard tests/test_*.sh)
 TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example
 
-.PHONY: all test deps deps-check tools demo bench bench-quick stress clean cxx
+.PHONY: all test deps deps-check tools demo bench bench-quick clean cxx
 all: tools
 
 tools: $(TOOLS)
