@@ -2,6 +2,7 @@
 #   make test          build and run every test (last line: "N passed, N failed")
 #   make test SAN=1    the same under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make test OMP=     the same without OpenMP
+#   make demo          the main job: replay examples/brick_incision.scn (VTU, CSV, PNG in build/demo)
 #   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv
 #   make deps          install (as root) or list the Debian packages the tests need
 CC      ?= cc
