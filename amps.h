@@ -4273,25 +4273,30 @@ AMPS_API amps_status amps_update_set_rows(amps_ctx *ctx, amps_update *U, amps_in
     return AMPS_OK;
 }
 
-AMPS_API amps_status amps_update_constrain(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx, const double *val) {
+/* Records constraint changes: x[idx[k]] = val[k], or releases (val NULL). */
+static amps_status amps__record_con(amps_ctx *ctx, amps_update *U, const char *fn, amps_int m, const amps_int *idx,
+                                    const double *val, int release) {
     amps_int k;
     amps_status s;
-    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_constrain: NULL engine");
-    if (m > 0 && !val) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_constrain: NULL values");
-    if ((s = amps__chk_idx(ctx, U, "amps_update_constrain", m, idx, val, 1, &U->mkN)) != AMPS_OK) return s;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL engine", fn);
+    if (!release && m > 0 && !val) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL values", fn);
+    if ((s = amps__chk_idx(ctx, U, fn, m, idx, release ? NULL : val, 1, &U->mkN)) != AMPS_OK) return s;
     if ((s = amps__need_pending(ctx, U, 0, m)) != AMPS_OK) return s;
-    for (k = 0; k < m; k++) { U->pc[U->npc].i = idx[k]; U->pc[U->npc].release = 0; U->pc[U->npc].v = val[k]; U->npc++; }
+    for (k = 0; k < m; k++) {
+        U->pc[U->npc].i = idx[k];
+        U->pc[U->npc].release = release;
+        U->pc[U->npc].v = release ? 0.0 : val[k];
+        U->npc++;
+    }
     return AMPS_OK;
 }
 
+AMPS_API amps_status amps_update_constrain(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx, const double *val) {
+    return amps__record_con(ctx, U, "amps_update_constrain", m, idx, val, 0);
+}
+
 AMPS_API amps_status amps_update_release(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx) {
-    amps_int k;
-    amps_status s;
-    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_release: NULL engine");
-    if ((s = amps__chk_idx(ctx, U, "amps_update_release", m, idx, NULL, 1, &U->mkN)) != AMPS_OK) return s;
-    if ((s = amps__need_pending(ctx, U, 0, m)) != AMPS_OK) return s;
-    for (k = 0; k < m; k++) { U->pc[U->npc].i = idx[k]; U->pc[U->npc].release = 1; U->pc[U->npc].v = 0; U->npc++; }
-    return AMPS_OK;
+    return amps__record_con(ctx, U, "amps_update_release", m, idx, NULL, 1);
 }
 
 AMPS_API amps_status amps_update_set_force(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx, const double *val) {
@@ -4724,8 +4729,9 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
             if (U->upos[i] >= 0 && U->upos[i] < U->u && U->uidx[U->upos[i]] == i) continue;
             a = U->u++;
             U->upos[i] = a; U->uidx[a] = i; U->ukind[a] = 0; U->g[a] = 0;
-            U->dst[a] = 0; U->dln[a] = 0; U->dcp[a] = 0; U->vlen[a] = 0; U->voff[a] = 0;
-            if (i < U->n) vneed += (size_t)amps__path_len(U->F, U->F->iperm[i]);
+            U->dst[a] = 0; U->dln[a] = 0; U->dcp[a] = 0; U->voff[a] = 0;
+            U->vlen[a] = i < U->n ? amps__path_len(U->F, U->F->iperm[i]) : 0;
+            vneed += (size_t)U->vlen[a];
         }
     }
     if (U->vused + vneed > U->vcap) {
@@ -4744,8 +4750,7 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
         amps_int nb = 0, *list = U->iwork;
         for (a = u_old; a < U->u; a++)
             if (U->uidx[a] < U->n) {
-                U->voff[a] = U->vused;
-                U->vlen[a] = amps__path_len(U->F, U->F->iperm[U->uidx[a]]);
+                U->voff[a] = U->vused;              /* vlen was set with the position */
                 U->vused += (size_t)U->vlen[a];
                 list[nb++] = a;
             }
