@@ -79,4 +79,12 @@ REF_UNUSED static int *m_cholmod_perm(const amps_csc *A, int method) {
     ref_nnzL(A->ncol, A->p, A->i, A->x, NULL, method, perm);
     return perm;
 }
+/* Symbolic analysis of A with the given ordering (perm[k] = original index k-th), or the
+   default ordering when perm is NULL. */
+static amps_factor *m_analyze(amps_ctx *ctx, const amps_csc *A, const int *perm) {
+    amps_order_opts o;
+    memset(&o, 0, sizeof(o));
+    o.method = AMPS_ORDER_GIVEN; o.perm = perm;
+    return amps_analyze(ctx, A, AMPS_UPPER, perm ? &o : NULL);
+}
 #endif

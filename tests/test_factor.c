@@ -118,11 +118,9 @@ static void check_matrix(const char *name, const amps_csc *A, const int *perm) {
 
 /* Expects AMPS_ERR_NOT_SPD with a column named in the message. */
 static void check_not_spd(const char *name, const amps_csc *A, const int *perm) {
-    amps_ctx ctx; amps_factor *F; amps_order_opts o; amps_status s;
+    amps_ctx ctx; amps_factor *F; amps_status s;
     amps_ctx_init(&ctx);
-    memset(&o, 0, sizeof(o));
-    o.method = AMPS_ORDER_GIVEN; o.perm = perm;
-    F = amps_analyze(&ctx, A, AMPS_UPPER, perm ? &o : NULL);
+    F = m_analyze(&ctx, A, perm);
     CHECK(F != NULL, "%s: analyze: %s", name, ctx.msg);
     if (!F) return;
     s = amps_factorize(&ctx, F, A, AMPS_UPPER);

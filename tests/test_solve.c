@@ -27,7 +27,7 @@ static int brute_closure(const amps_factor *F, int nidx, const int *idx, int *ou
 }
 
 static void check_solves(const char *name, const amps_csc *A, const int *perm) {
-    amps_ctx ctx; amps_factor *F; amps_order_opts o; amps_marker m;
+    amps_ctx ctx; amps_factor *F; amps_marker m;
     int n = A->ncol, k, j, t, ok;
     double *b = (double *)malloc(sizeof(double) * n), *x = (double *)malloc(sizeof(double) * n);
     double *xr = (double *)malloc(sizeof(double) * n), *w = (double *)malloc(sizeof(double) * n);
@@ -35,9 +35,7 @@ static void check_solves(const char *name, const amps_csc *A, const int *perm) {
     int *cl = (int *)malloc(sizeof(int) * n), *cl2 = (int *)malloc(sizeof(int) * n), idx[8];
     double res, rres;
     amps_ctx_init(&ctx);
-    memset(&o, 0, sizeof(o));
-    o.method = AMPS_ORDER_GIVEN; o.perm = perm;
-    F = amps_analyze(&ctx, A, AMPS_UPPER, perm ? &o : NULL);
+    F = m_analyze(&ctx, A, perm);
     CHECK(F != NULL, "%s: analyze: %s", name, ctx.msg);
     if (!F) return;
     memset(b, 0, sizeof(double) * n);
