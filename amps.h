@@ -224,6 +224,9 @@ AMPS_API amps_int amps_lsolve_sparse(const amps_factor *F, amps_int nb, const am
    are left unchanged (not solved). Returns the closure size. */
 AMPS_API amps_int amps_ltsolve_partial(const amps_factor *F, amps_int nreq, const amps_int *req, double *y,
                                        amps_int *closure, amps_marker *m);
+/* The same backward solve over a closure computed once by amps_closure (ascending, closed
+   under parent): x = L^{-T} y on closure[0..cnt-1] only. Reads L's columns in the closure. */
+AMPS_API void amps_ltsolve_closure(const amps_factor *F, amps_int cnt, const amps_int *closure, double *y);
 /* Solves K X = B for nrhs right-hand sides: columns of B (leading dimension ldb >= n) into X
    (ldx >= n; X may equal B), original numbering. Blocks of 4 columns run in parallel on OpenMP
    threads (ctx->nthreads, else the OpenMP default). work: amps_solve_multi_work(ctx, F, nrhs)
@@ -324,9 +327,25 @@ AMPS_API void amps_update_discard(amps_update *U);
 AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U);
 /* Commits, then solves (Step 6): x (room for amps_update_dim, may be NULL) receives the solution. */
 AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *x);
+/* Watch set: the indices amps_update_solve_watched computes (replaces the previous set; m = 0
+   clears it). closure_L of the watched indices is computed here, once. Allocates the set (and
+   room for a closure of n indices) on the first call or when the set outgrows it. */
+AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx);
+/* Commits, then computes x on the watched indices only: xw[k] = x[idx[k]] (xw may be NULL; the
+   values also land in amps_update_solution, whose other entries are then stale). The backward
+   solve reads L only on closure_L(watched) and, for the local refinement, on the closure of
+   S u C and its neighbours. Updates the reactions too. No accuracy guard. Allocates nothing. */
+AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, double *xw);
+/* Commits, then computes the reaction forces at the constrained indices from the dense system
+   alone (Steps 4-5, no full solve): O(|S u C|^2) when only prescribed values moved, plus a sparse
+   forward solve over closure_L of the changed forces and O(sum of root paths) when forces
+   changed. The haptic path: a pin moved, read its force. amps_update_solution is not updated.
+   Allocates nothing. */
+AMPS_API amps_status amps_update_solve_reactions(amps_ctx *ctx, amps_update *U);
 /* Solution of the last solve (amps_update_dim entries at that time). */
 AMPS_API const double *amps_update_solution(const amps_update *U);
-/* Reaction force (K^ x - f^)[i] at constrained index i after the last solve; 0 if not constrained. */
+/* Reaction force (K^ x - f^)[i] at constrained index i after the last solve (any of the three
+   kinds); 0 if not constrained. */
 AMPS_API double amps_update_reaction(const amps_update *U, amps_int i);
 /* Relative residual of the constrained system after the last solve:
    ||(K^ x - f^)_F|| / ||f^_F - K^_FC x_C||, F = unconstrained indices (one sparse product). */
@@ -3655,8 +3674,15 @@ AMPS_API amps_int amps_lsolve_sparse(const amps_factor *F, amps_int nb, const am
 
 AMPS_API amps_int amps_ltsolve_partial(const amps_factor *F, amps_int nreq, const amps_int *req, double *y,
                                        amps_int *closure, amps_marker *m) {
+    amps_int cnt = amps_closure(F, nreq, req, closure, m);
+    amps_ltsolve_closure(F, cnt, closure, y);
+    return cnt;
+}
+
+AMPS_API void amps_ltsolve_closure(const amps_factor *F, amps_int cnt, const amps_int *closure, double *y) {
     amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
-    amps_int cnt = amps_closure(F, nreq, req, closure, m), k, j, ke, s;
+    amps_int k, j, ke, s;
+    /* closures of columns in one group are contiguous runs: solve each run as one block */
     for (k = cnt - 1; k >= 0; k = j - 1) {
         ke = closure[k];
         s = P ? P->gs[P->cgrp[ke]] : ke;
@@ -3666,7 +3692,6 @@ AMPS_API amps_int amps_ltsolve_partial(const amps_factor *F, amps_int nreq, cons
         if (P) P->touch += (double)(F->Lp[ke + 1] - F->Lp[closure[j]]);
 #endif
     }
-    return cnt;
 }
 
 #ifdef AMPS_COUNT_TOUCH
@@ -3837,8 +3862,13 @@ struct amps_update {
     amps_int *lmap, *clo;                  /* Step 1: nthr * n each (lmap -1 between uses) */
     amps_int *iwork;                       /* n + capN */
     amps_marker mk, mkN;
-    int dirty, has_sol;
+    int dirty, has_sol;                    /* x is stale / x was computed at least once */
+    int rdirty, has_react;                 /* reactions stale / computed */
+    int wdirty;                            /* watched entries of x stale */
     amps_int solN;
+    amps_int nr;                           /* rhs[0..nr-1] = W^T ct is current on base positions */
+    amps_int nw, ncw, capw;                /* watch set: size, |closure_L of its base indices|, capacity */
+    amps_int *widx, *wclo;
     amps_update_stats st;
 };
 
@@ -3986,6 +4016,7 @@ AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     amps__free(ctx, U->sb); amps__free(ctx, U->rd); amps__free(ctx, U->wd); amps__free(ctx, U->yd); amps__free(ctx, U->rho);
     amps__free(ctx, U->work); amps__free(ctx, U->work2); amps__free(ctx, U->iwork);
     amps__free(ctx, U->xb); amps__free(ctx, U->lmap); amps__free(ctx, U->clo);
+    amps__free(ctx, U->widx); amps__free(ctx, U->wclo);
     amps_marker_free(ctx, &U->mk); amps_marker_free(ctx, &U->mkN);
     amps__free(ctx, U);
 }
@@ -4104,7 +4135,7 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
         U->sigma = n > 0 && s > 0 ? s / (double)n : 1.0;
         (void)sdiag;
     }
-    U->dirty = 1;
+    U->dirty = U->rdirty = U->wdirty = 1;
     U->st.dim = n;
     return U;
 fail:
@@ -4312,7 +4343,7 @@ AMPS_API amps_status amps_update_set_force(amps_ctx *ctx, amps_update *U, amps_i
         if (i < U->n) { if (U->npf < U->n) U->pf[U->npf++] = i; else U->pf_all = 1; }
         U->f[i] = val[k];
     }
-    if (m > 0) U->dirty = 1;
+    if (m > 0) U->dirty = U->rdirty = U->wdirty = 1;
     return AMPS_OK;
 }
 
@@ -4681,10 +4712,11 @@ static void amps__rollback(amps_update *U, amps_int u_old, size_t vused_old, amp
     for (k = U->nkj - 1; k >= 0; k--)
         if (U->kj[k].a < u_old) { U->ukind[U->kj[k].a] = U->kj[k].kind; U->g[U->kj[k].a] = U->kj[k].g; }
     U->u = u_old; U->vused = vused_old; U->dused = dused_old;
+    if (U->nr > u_old) U->nr = u_old;
     U->ndj = 0; U->nkj = 0;
     U->npd = 0; U->npc = 0; U->kpend = 0;
     if (U->u > 0) (void)amps__lu_full(U, &bad);   /* the old system was regular */
-    U->dirty = 1;
+    U->dirty = U->rdirty = U->wdirty = 1;
 }
 
 AMPS_API void amps_update_discard(amps_update *U) {
@@ -4864,7 +4896,7 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
     }
     U->N += U->kpend; U->kpend = 0;
     U->npd = 0; U->npc = 0;
-    U->dirty = 1;
+    U->dirty = U->rdirty = U->wdirty = 1;
     U->committed = 1;
     U->st.ncommit++;
     (void)touched;
@@ -4886,6 +4918,7 @@ static void amps__update_ct(amps_update *U) {
     amps_int n = U->n, k, nb = 0, *list = U->iwork, *clo = U->iwork + n;
     double *x = U->work;
     if (U->npf == 0 && !U->pf_all) return;
+    U->nr = 0;
     if (U->pf_all || U->nct_inc >= 1024 || U->npf > n / 8) {
         for (k = 0; k < n; k++) x[k] = U->f[F->perm[k]];
         amps_lsolve(F, x);
@@ -5025,17 +5058,15 @@ static void amps__refine(amps_update *U, const double *sv, const double *wv, con
     for (a = 0; a < u; a++) U->wd[a] -= U->rho[a];
 }
 
-/* Steps 4-6 for forces fv (N) with ct = D^{-1/2} L^{-1} P^T fv(0:n) and the prescribed values
-   (hom: zero) into x (N). */
-static void amps__solve_core(amps_update *U, const double *ct, const double *fv, int hom, double *x) {
-    const amps_factor *F = U->F;
-    amps_int u = U->u, n = U->n, a, k;
-    double t0 = amps_now(), t1, *r = U->rhs, *yv = U->yv, *wv = U->wv, *sv = U->work;
-    /* Step 4: r = H^T K-bar^{-1} f = W^T ct on base positions, f/sigma on appended ones */
+/* Step 4: r = H^T K-bar^{-1} f = W^T ct on base positions, f/sigma on appended ones. With
+   cache (ct is U->ct), the base entries r[0..nr-1] are current and only later ones are formed. */
+static void amps__step4(amps_update *U, const double *ct, const double *fv, int cache, double *r) {
+    amps_int u = U->u, n = U->n, a, a0 = cache ? U->nr : 0;
+    double t0 = amps_now();
 #ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 16) num_threads(U->nthr) if (u > 64)
+#pragma omp parallel for schedule(dynamic, 16) num_threads(U->nthr) if (u - a0 > 64)
 #endif
-    for (a = 0; a < u; a++) {
+    for (a = a0; a < u; a++) {
         amps_int i = U->uidx[a], t;
         if (i < n) {
             const double *w = U->vval + U->voff[a];
@@ -5043,9 +5074,21 @@ static void amps__solve_core(amps_update *U, const double *ct, const double *fv,
             double sum = 0;
             for (t = 0; t < U->vlen[a]; t++) sum += w[t] * ct[wi[t]];
             r[a] = sum;
-        } else r[a] = fv[i] / U->sigma;
+        }
     }
-    t1 = amps_now(); U->st.t_step[4] += t1 - t0; t0 = t1;
+    for (a = 0; a < u; a++) if (U->uidx[a] >= n) r[a] = fv[U->uidx[a]] / U->sigma;
+    if (cache) U->nr = u;
+    U->st.t_step[4] += amps_now() - t0;
+}
+
+/* Steps 4-6 for forces fv (N) with ct = D^{-1/2} L^{-1} P^T fv(0:n) and the prescribed values
+   (hom: zero) into x (N). */
+static void amps__solve_core(amps_update *U, const double *ct, const double *fv, int hom, int watched, double *x) {
+    const amps_factor *F = U->F;
+    amps_int u = U->u, n = U->n, a, k;
+    double t0, t1, *r = hom ? U->rd : U->rhs, *yv = U->yv, *wv = U->wv, *sv = U->work;
+    amps__step4(U, ct, fv, !hom, r);
+    t0 = amps_now();
     /* Step 5 */
     amps__dense_step(U, r, hom, yv, wv);
     t1 = amps_now(); U->st.t_step[5] += t1 - t0; t0 = t1;
@@ -5060,11 +5103,22 @@ static void amps__solve_core(amps_update *U, const double *ct, const double *fv,
             for (a = 0; a < u; a++) { wv[a] += U->wd[a]; yv[a] += U->yd[a]; }
         }
     }
-    amps_ltsolve(F, sv);
-    for (k = 0; k < n; k++) { x[F->perm[k]] = sv[k]; sv[k] = 0.0; }
-    for (k = n; k < U->N; k++) {
-        a = U->upos[k];
-        x[k] = (fv[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma;
+    if (watched) {
+        /* the watched entries only: L^{-T} on their closure */
+        amps_ltsolve_closure(F, U->ncw, U->wclo, sv);
+        for (k = 0; k < U->nw; k++) {
+            amps_int i = U->widx[k];
+            if (i >= n) { a = U->upos[i]; x[i] = (fv[i] - (a >= 0 ? wv[a] : 0.0)) / U->sigma; }
+            else x[i] = sv[F->iperm[i]];
+        }
+        memset(sv, 0, sizeof(double) * (size_t)n);
+    } else {
+        amps_ltsolve(F, sv);
+        for (k = 0; k < n; k++) { x[F->perm[k]] = sv[k]; sv[k] = 0.0; }
+        for (k = n; k < U->N; k++) {
+            a = U->upos[k];
+            x[k] = (fv[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma;
+        }
     }
     for (a = 0; a < u; a++)
         if ((U->ukind[a] & AMPS__UCON) || (U->eq320 && U->form == AMPS_FORM_PRIMAL)) x[U->uidx[a]] = yv[a];
@@ -5094,6 +5148,19 @@ static double amps__residual_vec(amps_update *U, const double *x, double *rho, d
     return den > 0 ? sqrt(num / den) : sqrt(num);
 }
 
+/* Step times of a solve: those of the commit since the last solve (if any) plus its own. */
+static void amps__solve_stats_begin(amps_update *U) {
+    amps_int k;
+    if (!U->committed) for (k = 1; k <= 5; k++) U->st.t_step[k] = 0;
+    U->committed = 0;
+    U->st.t_step[4] = 0; U->st.t_step[6] = 0;
+    {
+        double t0 = amps_now();
+        amps__update_ct(U);
+        U->st.t_step[4] += amps_now() - t0;
+    }
+}
+
 AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xout) {
     amps_int a, k;
     amps_status s;
@@ -5104,16 +5171,8 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
         if (xout) memcpy(xout, U->x, sizeof(double) * (size_t)U->N);
         return AMPS_OK;
     }
-    /* the step times: those of the commit (if one happened since the last solve) plus ours */
-    if (!U->committed) for (k = 1; k <= 5; k++) U->st.t_step[k] = 0;
-    U->committed = 0;
-    U->st.t_step[4] = 0; U->st.t_step[6] = 0;
-    {
-        double t0 = amps_now();
-        amps__update_ct(U);
-        U->st.t_step[4] += amps_now() - t0;
-    }
-    amps__solve_core(U, U->ct, U->f, 0, U->x);
+    amps__solve_stats_begin(U);
+    amps__solve_core(U, U->ct, U->f, 0, 0, U->x);
     U->st.guard_steps = 0;
     U->st.relres = -1;
     /* accuracy guard: the residual of the full system, and refinement steps with the same
@@ -5126,7 +5185,7 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
             for (k = 0; k < U->n; k++) U->ctr[k] = rho[F->perm[k]];
             amps_lsolve(F, U->ctr);
             for (k = 0; k < U->n; k++) U->ctr[k] *= U->isd[k];
-            amps__solve_core(U, U->ctr, rho, 1, dx);
+            amps__solve_core(U, U->ctr, rho, 1, 0, dx);
             for (k = 0; k < U->N; k++) U->x[k] += dx[k];
             rel = amps__residual_vec(U, U->x, rho, tmp);
             U->st.guard_steps++;
@@ -5139,6 +5198,7 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
         U->react[a] = (U->ukind[a] & AMPS__UCON) ? amps__krow(U, i, U->x) - U->f[i] : 0.0;
     }
     U->dirty = 0; U->has_sol = 1; U->solN = U->N;
+    U->rdirty = 0; U->has_react = 1; U->wdirty = 0;
     U->st.nsolve++;
     if (xout) memcpy(xout, U->x, sizeof(double) * (size_t)U->N);
     return AMPS_OK;
@@ -5146,9 +5206,90 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
 
 AMPS_API const double *amps_update_solution(const amps_update *U) { return U ? U->x : NULL; }
 
+/* Reactions (K^ x - f^)_C = (Delta y)_C - w_C from the dense step's y = x_U (F' entries formed
+   as y = r - G w in the dual form) and w. */
+static void amps__small_reactions(amps_update *U, const double *r, double *yv, const double *wv) {
+    amps_int u = U->u, a, b, k;
+    size_t ld = (size_t)U->capu;
+    if (U->form == AMPS_FORM_DUAL)
+        for (a = 0; a < u; a++) {
+            double sum = r[a];
+            if (U->ukind[a] & AMPS__UCON) continue;
+            for (b = 0; b < u; b++) sum -= U->G[(size_t)b * ld + (size_t)a] * wv[b];
+            yv[a] = sum;
+        }
+    for (a = 0; a < u; a++) {
+        double sum = 0;
+        if (!(U->ukind[a] & AMPS__UCON)) { U->react[a] = 0.0; continue; }
+        for (k = 0; k < U->dln[a]; k++) sum += U->dval[U->dst[a] + k] * yv[U->dcol[U->dst[a] + k]];
+        U->react[a] = sum - wv[a];
+    }
+    U->rdirty = 0; U->has_react = 1;
+}
+
+AMPS_API amps_status amps_update_solve_reactions(amps_ctx *ctx, amps_update *U) {
+    amps_status s;
+    double t0;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve_reactions: NULL engine");
+    if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
+    if (!U->rdirty && U->has_react) return AMPS_OK;
+    amps__solve_stats_begin(U);
+    amps__step4(U, U->ct, U->f, 1, U->rhs);
+    t0 = amps_now();
+    amps__dense_step(U, U->rhs, 0, U->yv, U->wv);
+    amps__small_reactions(U, U->rhs, U->yv, U->wv);
+    U->st.t_step[5] += amps_now() - t0;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx) {
+    amps_int k, *wi, *wc, nb = 0;
+    amps_status s;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_watch: NULL engine");
+    if ((s = amps__chk_idx(ctx, U, "amps_update_watch", m, idx, NULL, 1, &U->mkN)) != AMPS_OK) return s;
+    if (m > U->capw || !U->wclo) {
+        wi = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(m > 0 ? m : 1), sizeof(amps_int)));
+        wc = U->wclo ? U->wclo : AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(U->n > 0 ? U->n : 1), sizeof(amps_int)));
+        if (!wi || !wc) {
+            amps__free(ctx, wi);
+            if (wc != U->wclo) amps__free(ctx, wc);
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_update_watch: out of memory for %ld indices", (long)m);
+        }
+        amps__free(ctx, U->widx);
+        U->widx = wi; U->wclo = wc; U->capw = m;
+    }
+    for (k = 0; k < m; k++) {
+        U->widx[k] = idx[k];
+        if (idx[k] < U->n) U->iwork[nb++] = U->F->iperm[idx[k]];
+    }
+    U->nw = m;
+    U->ncw = amps_closure(U->F, nb, U->iwork, U->wclo, &U->mk);
+    U->wdirty = 1;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, double *xw) {
+    amps_status s;
+    amps_int k;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve_watched: NULL engine");
+    for (k = 0; k < U->nw; k++)
+        if (U->widx[k] >= U->N + U->kpend)
+            return amps__err(ctx, AMPS_ERR_INDEX, "amps_update_solve_watched: watched index %ld no longer exists", (long)U->widx[k]);
+    if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
+    if (U->wdirty || !U->has_sol) {
+        amps__solve_stats_begin(U);
+        amps__solve_core(U, U->ct, U->f, 0, 1, U->x);
+        amps__small_reactions(U, U->rhs, U->yv, U->wv);
+        U->wdirty = 0;
+        U->st.nsolve++;
+    }
+    if (xw) for (k = 0; k < U->nw; k++) xw[k] = U->x[U->widx[k]];
+    return AMPS_OK;
+}
+
 AMPS_API double amps_update_reaction(const amps_update *U, amps_int i) {
     amps_int a;
-    if (!U || i < 0 || i >= U->N || !U->has_sol) return 0.0;
+    if (!U || i < 0 || i >= U->N || !U->has_react) return 0.0;
     a = U->upos[i];
     return (a >= 0 && (U->ukind[a] & AMPS__UCON)) ? U->react[a] : 0.0;
 }

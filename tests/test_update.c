@@ -2,6 +2,7 @@
    long random sequences of stiffness changes, new DOFs, constraints and forces on random SPD and
    finite element matrices, node-duplicating cuts of FE meshes, bad input and singular updates. */
 #define AMPS_IMPLEMENTATION
+#define AMPS_COUNT_TOUCH
 #include "amps.h"
 #include "amps_test.h"
 #include "fe_util.h"
@@ -94,6 +95,8 @@ typedef struct model {
     int *con; double *g, *f;
     double worst_err, worst_res, worst_ref;
     int steps, fails;
+    int extra;                  /* 1: also check the reactions-only and watched solves; 2: and the
+                                   L entries the watched solve reads (engine made with refine = 0) */
 } model;
 
 static void model_grow(model *m, int N) {
@@ -130,14 +133,53 @@ static void model_free(model *m) {
     trip_free(&m->T); free(m->con); free(m->g); free(m->f);
 }
 
+/* Before the full solve: reactions from the dense system alone (into r1) and a watched solve
+   of up to 12 indices (into wi, xw; returns their count); with extra == 2 the L entries it
+   reads are at most those of the columns in closure_L(watched). */
+static int model_partial(model *m, double *r1, amps_int *wi, double *xw, const char *what) {
+    int N = m->N, k, nw = 0;
+    unsigned long long h = (unsigned long long)m->steps * 6364136223846793005ULL + 1442695040888963407ULL;
+    amps_status s = amps_update_solve_reactions(&m->ctx, m->U);
+    CHECK(s == AMPS_OK, "%s step %d: reactions-only solve: %s", what, m->steps, m->ctx.msg);
+    for (k = 0; k < N; k++) r1[k] = m->con[k] ? amps_update_reaction(m->U, k) : 0.0;
+    for (k = 0; k < 12; k++) {
+        int i, t, dup = 0;
+        h = h * 6364136223846793005ULL + 1442695040888963407ULL;
+        i = (int)((h >> 33) % (unsigned long long)N);
+        for (t = 0; t < nw; t++) dup |= wi[t] == i;
+        if (!dup) wi[nw++] = i;
+    }
+    CHECK(amps_update_watch(&m->ctx, m->U, nw, wi) == AMPS_OK, "%s: watch: %s", what, m->ctx.msg);
+    amps_touch_reset(m->F);
+    s = amps_update_solve_watched(&m->ctx, m->U, xw);
+    CHECK(s == AMPS_OK, "%s step %d: watched solve: %s", what, m->steps, m->ctx.msg);
+    if (m->extra == 2) {
+        amps_marker mk; amps_int *req = (amps_int *)malloc(sizeof(amps_int) * (m->F->n + 1));
+        amps_int *clo = (amps_int *)malloc(sizeof(amps_int) * (m->F->n + 1)), nb = 0, ncl;
+        double bound = 0;
+        amps_marker_init(&m->ctx, &mk, m->F->n);
+        for (k = 0; k < nw; k++) if (wi[k] < m->F->n) req[nb++] = m->F->iperm[wi[k]];
+        ncl = amps_closure(m->F, nb, req, clo, &mk);
+        for (k = 0; k < ncl; k++) bound += (double)(m->F->Lp[clo[k] + 1] - m->F->Lp[clo[k]]);
+        CHECK(amps_touch_count(m->F) <= bound, "%s step %d: watched solve read %.0f entries of L, closure has %.0f",
+              what, m->steps, amps_touch_count(m->F), bound);
+        amps_marker_free(&m->ctx, &mk); free(req); free(clo);
+    }
+    return nw;
+}
+
 /* Solves with the engine and compares with CHOLMOD; tolerance on the relative error. */
 static void model_check(model *m, double tol_err, const char *what) {
-    int N = m->N, k;
+    int N = m->N, k, nw = 0;
     double *x = (double *)malloc(sizeof(double) * N), *xr = (double *)malloc(sizeof(double) * N), err, res, rref, eres;
-    amps_status s = amps_update_solve(&m->ctx, m->U, x);
+    double *r1 = (double *)malloc(sizeof(double) * N), xw[12];
+    amps_int wi[12];
+    amps_status s;
+    if (m->extra) nw = model_partial(m, r1, wi, xw, what);
+    s = amps_update_solve(&m->ctx, m->U, x);
     m->steps++;
     CHECK(s == AMPS_OK, "%s step %d: solve failed: %s", what, m->steps, m->ctx.msg);
-    if (s != AMPS_OK) { free(x); free(xr); m->fails++; return; }
+    if (s != AMPS_OK) { free(x); free(xr); free(r1); m->fails++; return; }
     CHECK(amps_update_dim(m->U) == N, "%s: dim %d vs %d", what, (int)amps_update_dim(m->U), N);
     rref = ref_constrained(&m->ctx, &m->T, N, m->con, m->g, m->f, xr);
     CHECK(rref >= 0, "%s step %d: CHOLMOD failed", what, m->steps);
@@ -156,8 +198,16 @@ static void model_check(model *m, double tol_err, const char *what) {
         if (m->con[k]) {
             double re = explicit_reaction(&m->T, x, m->f, k), ra = amps_update_reaction(m->U, k);
             CHECK(fabs(re - ra) <= 1e-8 * (1 + fabs(re)), "%s step %d: reaction at %d: %.6e vs %.6e", what, m->steps, k, ra, re);
+            if (m->extra)
+                CHECK(fabs(r1[k] - ra) <= 1e-8 * (1 + fabs(ra)), "%s step %d: reaction at %d from the dense system %.6e vs full solve %.6e",
+                      what, m->steps, k, r1[k], ra);
         }
-    free(x); free(xr);
+    {
+        double xn = t_norm(N, x);
+        for (k = 0; k < nw; k++)
+            CHECK(fabs(xw[k] - x[wi[k]]) <= 1e-10 * xn, "%s step %d: watched x[%d] = %.6e vs full %.6e", what, m->steps, (int)wi[k], xw[k], x[wi[k]]);
+    }
+    free(x); free(xr); free(r1);
 }
 
 /* m->T and the engine get the same symmetric change alpha v v^T on idx[0..k-1]; via set_rows
@@ -371,14 +421,17 @@ static void report(const char *what, const model *m) {
 
 static void test_random_sequences(void) {
     int seed;
-    for (seed = 1; seed <= 3; seed++) {
+    for (seed = 1; seed <= 4; seed++) {
         model m; amps_update_opts o; int nz, *ti, *tj; double *tx;
+        const char *what = seed == 3 ? "random spd (dual)" : seed == 4 ? "random spd (refine 0, touch counts)" : "random spd";
         amps_update_opts_default(&o); o.grow = 1; o.cap_mod = 8; o.cap_new = 4; o.cap_pending = 8;
         o.formulation = seed == 3 ? AMPS_FORM_DUAL : AMPS_FORM_PRIMAL;
+        if (seed == 4) o.refine = 0;
         random_spd(60 + 40 * seed, 100 + seed, &nz, &ti, &tj, &tx);
         CHECK(model_init(&m, 60 + 40 * seed, nz, ti, tj, tx, &o) == 0, "init: %s", m.ctx.msg);
-        random_sequence(&m, 220, 1000 + seed, 1e-10, seed == 3 ? "random spd (dual)" : "random spd");
-        report(seed == 3 ? "random spd (dual)" : "random spd", &m);
+        m.extra = seed == 4 ? 2 : 1;
+        random_sequence(&m, 220, 1000 + seed, 1e-10, what);
+        report(what, &m);
         model_free(&m); free(ti); free(tj); free(tx);
     }
 }
@@ -398,6 +451,7 @@ static void test_fe_sequences(void) {
         amps_update_opts_default(&o); o.grow = 1;
         o.formulation = kind == 2 ? AMPS_FORM_DUAL : AMPS_FORM_PRIMAL;
         fe_model(&m, &mesh, 2, &o);
+        m.extra = 1;
         cut_sequence(&m, &mesh, 60, 5 + kind, 1e-9);
         report(kind == 0 ? "beam 5x5x8 cuts" : kind == 1 ? "brick R=3 cuts" : "beam 5x5x8 cuts (dual)", &m);
         model_free(&m); fe_free(&mesh);
