@@ -504,6 +504,17 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
                                     amps_int *new_node);
 /* Solves for the displacements of every node. */
 AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S);
+/* Watch set: the nodes amps_scene_solve_watched computes (replaces the previous set; nv = 0
+   clears it). A cut of a watched node watches its copy too. Allocates. */
+AMPS_API amps_status amps_scene_watch(amps_ctx *ctx, amps_scene *S, amps_int nv, const amps_int *nodes);
+/* Solves for the displacements of the watched nodes only (amps_update_solve_watched: the
+   backward solve touches closure_L of their DOFs); other entries of amps_scene_displacements
+   keep their last values. Updates the pin reactions. Allocates only the first time after
+   amps_scene_watch or after a cut of a watched node. */
+AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S);
+/* The haptic step: updates the pin reactions (amps_scene_reaction) from the dense system alone,
+   without computing displacements (amps_update_solve_reactions). */
+AMPS_API amps_status amps_scene_solve_forces(amps_ctx *ctx, amps_scene *S);
 /* Displacements of the last solve, 3 per node (nodes created since: their origin's values). */
 AMPS_API const double *amps_scene_displacements(const amps_scene *S);
 /* Deformed positions (reference + displacement of the last solve) of nodes[0..n-1], or of all
@@ -6170,6 +6181,8 @@ struct amps_scene {
     amps_csc *K;
     amps_factor *F;
     amps_update *U;
+    amps_int *wnode, nwn, capwn;  /* watched nodes */
+    int wstale;                   /* the engine's watch set must be rebuilt */
     /* cut workspace (sized by the largest node degree) */
     amps_int maxdeg;
     amps_int *moved, *ldof, *ri, *ci;
@@ -6194,7 +6207,7 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->fixed); amps__free(ctx, S->pinned); amps__free(ctx, S->pinval);
     amps__free(ctx, S->force); amps__free(ctx, S->disp); amps__free(ctx, S->dof);
     amps__free(ctx, S->moved); amps__free(ctx, S->ldof); amps__free(ctx, S->ri); amps__free(ctx, S->ci);
-    amps__free(ctx, S->lk); amps__free(ctx, S->vx);
+    amps__free(ctx, S->lk); amps__free(ctx, S->vx); amps__free(ctx, S->wnode);
     amps__free(ctx, S);
 }
 
@@ -6416,6 +6429,7 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
     amps_int vc, nmoved = 0, k, nl = 0, nz = 0, first = -1, a, b;
     amps_status s;
     amps_mesh *m;
+    int watched;
     if (new_node) *new_node = -1;
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_cut")) != AMPS_OK) return s;
     m = S->m;
@@ -6423,6 +6437,14 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
     if (m->nnode + 1 > S->cap) {
         if (!S->o.update.grow) return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_scene_cut: node capacity %ld reached", (long)S->cap);
         if (amps__scene_grow(ctx, S, 2 * S->cap + 16)) return AMPS_ERR_OOM;
+    }
+    /* a watched node's copy is watched: room for it first */
+    for (k = 0; k < S->nwn && S->wnode[k] != v; k++) {}
+    watched = k < S->nwn;
+    if (watched && S->nwn == S->capwn) {
+        if (amps__realloc(ctx, (void **)&S->wnode, (size_t)S->capwn * 2 + 8, sizeof(amps_int)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_cut: out of memory");
+        S->capwn = S->capwn * 2 + 8;
     }
     if (!S->prepared) {
         /* before the factorization a cut is topology only: K is assembled from the cut mesh */
@@ -6434,6 +6456,7 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
         S->fixed[vc] = S->fixed[v];
         for (k = 0; k < 3; k++) S->disp[3 * vc + k] = S->disp[3 * v + k];
         if (new_node) *new_node = vc;
+        if (watched) { S->wnode[S->nwn++] = vc; S->wstale = 1; }
         return AMPS_OK;
     }
     s = amps_mesh_cut(ctx, m, v, p, nrm, &vc, S->moved, &nmoved);
@@ -6502,6 +6525,7 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
         goto undo;                                                       /* the engine rolled back */
     }
     if (new_node) *new_node = vc;
+    if (watched) { S->wnode[S->nwn++] = vc; S->wstale = 1; }
     return AMPS_OK;
 undo_engine:
     amps_update_discard(S->U);
@@ -6516,20 +6540,76 @@ undo:
     return s;
 }
 
+static void amps__scene_gather(amps_scene *S, amps_int nv, const amps_int *nodes);
+
 AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
-    const double *x;
-    amps_int v, k;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve: NULL scene");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if ((s = amps_update_solve(ctx, S->U, NULL)) != AMPS_OK) return s;
-    x = amps_update_solution(S->U);
-    for (v = 0; v < S->m->nnode; v++)
-        for (k = 0; k < 3; k++) {
-            amps_int e = S->dof[3 * v + k];
-            S->disp[3 * v + k] = e >= 0 ? x[e] : 0.0;
-        }
+    amps__scene_gather(S, 0, NULL);
     return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_watch(amps_ctx *ctx, amps_scene *S, amps_int nv, const amps_int *nodes) {
+    amps_int k;
+    if (!S || nv < 0 || (nv > 0 && !nodes)) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_watch: bad arguments");
+    for (k = 0; k < nv; k++)
+        if (nodes[k] < 0 || nodes[k] >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_watch: node %ld out of range [0, %ld)", (long)nodes[k], (long)S->m->nnode);
+    if (nv > S->capwn) {
+        amps_int *w = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nv, sizeof(amps_int)));
+        if (!w) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_watch: out of memory");
+        amps__free(ctx, S->wnode);
+        S->wnode = w; S->capwn = nv;
+    }
+    for (k = 0; k < nv; k++) S->wnode[k] = nodes[k];
+    S->nwn = nv;
+    S->wstale = 1;
+    return AMPS_OK;
+}
+
+/* Copies the engine's solution into the displacements of nodes[0..nv-1] (all nodes if NULL). */
+static void amps__scene_gather(amps_scene *S, amps_int nv, const amps_int *nodes) {
+    const double *x = amps_update_solution(S->U);
+    amps_int k, d;
+    if (!nodes) nv = S->m->nnode;
+    for (k = 0; k < nv; k++) {
+        amps_int v = nodes ? nodes[k] : k;
+        for (d = 0; d < 3; d++) {
+            amps_int e = S->dof[3 * v + d];
+            S->disp[3 * v + d] = e >= 0 ? x[e] : 0.0;
+        }
+    }
+}
+
+AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S) {
+    amps_status s;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_watched: NULL scene");
+    if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if (S->wstale) {
+        /* the engine watches the equations of the watched nodes */
+        amps_int k, d, m = 0, *idx = AMPS__CAST(amps_int *, amps__malloc(ctx, 3 * (size_t)(S->nwn > 0 ? S->nwn : 1), sizeof(amps_int)));
+        if (!idx) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_solve_watched: out of memory");
+        for (k = 0; k < S->nwn; k++)
+            for (d = 0; d < 3; d++) {
+                amps_int e = S->dof[3 * S->wnode[k] + d];
+                if (e >= 0) idx[m++] = e;
+            }
+        s = amps_update_watch(ctx, S->U, m, idx);
+        amps__free(ctx, idx);
+        if (s != AMPS_OK) return s;
+        S->wstale = 0;
+    }
+    if ((s = amps_update_solve_watched(ctx, S->U, NULL)) != AMPS_OK) return s;
+    amps__scene_gather(S, S->nwn, S->wnode);
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_solve_forces(amps_ctx *ctx, amps_scene *S) {
+    amps_status s;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_forces: NULL scene");
+    if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    return amps_update_solve_reactions(ctx, S->U);
 }
 
 AMPS_API const double *amps_scene_displacements(const amps_scene *S) { return S ? S->disp : NULL; }

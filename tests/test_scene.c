@@ -14,6 +14,7 @@ typedef struct shadow {
     unsigned char *pinned;   /* per node */
     double *pinval, *force;  /* 3 per node */
     int cap;
+    int *watch, nwatch;      /* watched nodes (copies of watched nodes are watched) */
 } shadow;
 
 static void shadow_grow(shadow *w, int n) {
@@ -86,7 +87,15 @@ static double worst_err = 0, worst_res = 0;
 static void compare(amps_ctx *ctx, amps_scene *S, const shadow *w, const char *what, int step) {
     const amps_mesh *m = amps_scene_mesh(S);
     double *u = (double *)malloc(sizeof(double) * 3 * m->nnode), err, res, rref;
-    amps_status s = amps_scene_solve(ctx, S);
+    double *rf = (double *)malloc(sizeof(double) * 3 * m->nnode), *uw = (double *)malloc(sizeof(double) * 3 * (w->nwatch + 1));
+    amps_status s;
+    int k, d;
+    /* the haptic path (reactions from the dense system) and the watched solve, before the full solve */
+    CHECK(amps_scene_solve_forces(ctx, S) == AMPS_OK, "%s step %d: forces-only solve: %s", what, step, ctx->msg);
+    for (k = 0; k < m->nnode; k++) amps_scene_reaction(ctx, S, k, rf + 3 * k);
+    CHECK(amps_scene_solve_watched(ctx, S) == AMPS_OK, "%s step %d: watched solve: %s", what, step, ctx->msg);
+    for (k = 0; k < w->nwatch; k++) memcpy(uw + 3 * k, amps_scene_displacements(S) + 3 * w->watch[k], 3 * sizeof(double));
+    s = amps_scene_solve(ctx, S);
     CHECK(s == AMPS_OK, "%s step %d: solve: %s", what, step, ctx->msg);
     rref = reference(ctx, m, w, u);
     err = t_reldiff(3 * m->nnode, amps_scene_displacements(S), u);
@@ -112,9 +121,20 @@ static void compare(amps_ctx *ctx, amps_scene *S, const shadow *w, const char *w
             double r[3];
             amps_scene_reaction(ctx, S, v, r);
             if (!w->pinned[v]) CHECK(r[0] == 0 && r[1] == 0 && r[2] == 0, "%s: reaction at unpinned node %ld", what, (long)v);
+            for (d = 0; d < 3; d++)
+                CHECK(fabs(r[d] - rf[3 * v + d]) <= 1e-8 * (1 + fabs(r[d])), "%s step %d: reaction at node %ld: forces-only %.6e vs full %.6e",
+                      what, step, (long)v, rf[3 * v + d], r[d]);
         }
     }
-    free(u);
+    {
+        double un = t_norm(3 * m->nnode, amps_scene_displacements(S));
+        for (k = 0; k < w->nwatch; k++)
+            for (d = 0; d < 3; d++)
+                CHECK(fabs(uw[3 * k + d] - amps_scene_displacements(S)[3 * w->watch[k] + d]) <= 1e-10 * un,
+                      "%s step %d: watched node %d: %.6e vs full %.6e", what, step, w->watch[k], uw[3 * k + d],
+                      amps_scene_displacements(S)[3 * w->watch[k] + d]);
+    }
+    free(u); free(rf); free(uw);
 }
 
 /* Random cuts (random planes through nodes, copies included), pins (new, moved, released, on
@@ -134,6 +154,14 @@ static void random_scene(amps_mesh *m0, int fix_axis, double fix_below, int step
     amps_scene_set_material(&ctx, S, 1000.0, 0.3);
     CHECK(amps_scene_fix_where(&ctx, S, fix_axis, AMPS_LT, fix_below, NULL) == AMPS_OK, "fix");
     shadow_grow(&w, m0->nnode);
+    w.watch = (int *)malloc(sizeof(int) * (m0->nnode + steps));
+    {
+        amps_int *wl = (amps_int *)malloc(sizeof(amps_int) * m0->nnode);
+        for (v = 0; v < m0->nnode; v += 5) { w.watch[w.nwatch] = v; wl[w.nwatch++] = v; }
+        CHECK(amps_scene_watch(&ctx, S, w.nwatch, wl) == AMPS_OK, "watch: %s", ctx.msg);
+        v = m0->nnode; CHECK(amps_scene_watch(&ctx, S, 1, &v) == AMPS_ERR_INDEX, "watch out of range accepted");
+        free(wl);
+    }
     for (st = 0; st < steps; st++) {
         const amps_mesh *m = amps_scene_mesh(S);
         int op = t_int(10), nn = m->nnode;
@@ -146,7 +174,11 @@ static void random_scene(amps_mesh *m0, int fix_axis, double fix_below, int step
             for (d = 0; d < 3; d++) { p[d] = m->xyz[3 * v + d]; nrm[d] = t_unif() - 0.5; }
             s = amps_scene_cut(&ctx, S, v, p, nrm, &vc);
             CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP || s == AMPS_ERR_SINGULAR_UPDATE, "%s: cut: %s", what, ctx.msg);
-            if (s == AMPS_OK) { shadow_grow(&w, (int)vc + 1); ncut++; CHECK(vc == nn, "copy index %ld vs %d", (long)vc, nn); }
+            if (s == AMPS_OK) {
+                int k, nw = w.nwatch;
+                shadow_grow(&w, (int)vc + 1); ncut++; CHECK(vc == nn, "copy index %ld vs %d", (long)vc, nn);
+                for (k = 0; k < nw; k++) if (w.watch[k] == v) w.watch[w.nwatch++] = (int)vc;
+            }
             if (s == AMPS_ERR_SINGULAR_UPDATE) CHECK(amps_scene_mesh(S)->nnode == nn, "%s: detached cut not undone", what);
         } else if (op < 6) {
             double u[3];
@@ -175,7 +207,7 @@ static void random_scene(amps_mesh *m0, int fix_axis, double fix_below, int step
     printf("  %-22s steps %d, cuts %d, nodes %ld, worst error %.2e, worst residual %.2e\n", what, steps, ncut,
            (long)amps_scene_mesh(S)->nnode, worst_err, worst_res);
     amps_scene_free(&ctx, S);
-    free(w.fixed0); free(w.pinned); free(w.pinval); free(w.force);
+    free(w.fixed0); free(w.pinned); free(w.pinval); free(w.force); free(w.watch);
 }
 
 /* Two stacked cells held at the bottom: cutting the middle layer along z = 1 detaches the top. */
