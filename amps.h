@@ -336,6 +336,29 @@ AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m
    solve reads L only on closure_L(watched) and, for the local refinement, on the closure of
    S u C and its neighbours. Updates the reactions too. No accuracy guard. Allocates nothing. */
 AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, double *xw);
+/* The same in two phases, for a caller whose second thread runs the backward solve outside the
+   lock it holds for every other engine call (a 60 Hz visual loop beside a 1 kHz haptic loop):
+     amps_update_watched_begin  (under the lock) commits, Steps 4-5 and the right-hand side of the
+                                backward solve into job->y (caller-owned, n = the base order
+                                doubles; amps_update_base_order), and the watched values the dense
+                                system gives into xw (caller-owned, the watch set's size);
+     amps_update_watched_run    (no lock: reads only job and the factor) the backward solve on
+                                closure_L(watched), completing xw;
+     amps_update_watched_end    (under the lock) ends the job.
+   One job at a time; the watch set must not change between begin and end; other engine calls
+   may run meanwhile (the factor the job reads stays alive until end). Allocates nothing. */
+typedef struct amps_update_job {
+    const amps_factor *F;         /* the factor the job reads */
+    amps_int nw, ncw;             /* watched entries, closure size */
+    const amps_int *widx, *wclo;  /* watched indices, their closure (engine-owned) */
+    const unsigned char *wovr;    /* 1: xw[k] was set by begin */
+    double *y, *xw;               /* caller-owned */
+    amps_int n;
+} amps_update_job;
+AMPS_API amps_int amps_update_base_order(const amps_update *U);
+AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, amps_update_job *job, double *y, double *xw);
+AMPS_API void amps_update_watched_run(amps_update_job *job);
+AMPS_API void amps_update_watched_end(amps_update *U, amps_update_job *job);
 /* Commits, then computes the reaction forces at the constrained indices from the dense system
    alone (Steps 4-5, no full solve): O(|S u C|^2) when only prescribed values moved, plus a sparse
    forward solve over closure_L of the changed forces and O(sum of root paths) when forces
@@ -3880,6 +3903,8 @@ struct amps_update {
     amps_int nr;                           /* rhs[0..nr-1] = W^T ct is current on base positions */
     amps_int nw, ncw, capw;                /* watch set: size, |closure_L of its base indices|, capacity */
     amps_int *widx, *wclo;
+    unsigned char *wovr;                   /* watched entry given by the dense system */
+    double *job_y, *job_xw;                /* the two-phase job in progress (NULL: none) */
     amps_update_stats st;
 };
 
@@ -4027,7 +4052,7 @@ AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     amps__free(ctx, U->sb); amps__free(ctx, U->rd); amps__free(ctx, U->wd); amps__free(ctx, U->yd); amps__free(ctx, U->rho);
     amps__free(ctx, U->work); amps__free(ctx, U->work2); amps__free(ctx, U->iwork);
     amps__free(ctx, U->xb); amps__free(ctx, U->lmap); amps__free(ctx, U->clo);
-    amps__free(ctx, U->widx); amps__free(ctx, U->wclo);
+    amps__free(ctx, U->widx); amps__free(ctx, U->wclo); amps__free(ctx, U->wovr);
     amps_marker_free(ctx, &U->mk); amps_marker_free(ctx, &U->mkN);
     amps__free(ctx, U);
 }
@@ -5092,6 +5117,20 @@ static void amps__step4(amps_update *U, const double *ct, const double *fv, int 
     U->st.t_step[4] += amps_now() - t0;
 }
 
+/* Watched entries that do not come from the backward solve: appended DOFs ((f - w) / sigma)
+   and members of U whose value the dense system gives (constrained; eq320). out[k] is set and
+   wovr[k] = 1 for those, wovr[k] = 0 for the others. */
+static void amps__watch_fixed(amps_update *U, const double *fv, double *out) {
+    amps_int k;
+    for (k = 0; k < U->nw; k++) {
+        amps_int i = U->widx[k], a = U->upos[i];
+        U->wovr[k] = 1;
+        if (a >= 0 && ((U->ukind[a] & AMPS__UCON) || (U->eq320 && U->form == AMPS_FORM_PRIMAL))) out[k] = U->yv[a];
+        else if (i >= U->n) out[k] = (fv[i] - (a >= 0 ? U->wv[a] : 0.0)) / U->sigma;
+        else U->wovr[k] = 0;
+    }
+}
+
 /* Steps 4-6 for forces fv (N) with ct = D^{-1/2} L^{-1} P^T fv(0:n) and the prescribed values
    (hom: zero) into x (N). */
 static void amps__solve_core(amps_update *U, const double *ct, const double *fv, int hom, int watched, double *x) {
@@ -5113,6 +5152,14 @@ static void amps__solve_core(amps_update *U, const double *ct, const double *fv,
             amps__scatter_w(U, U->wd, sv);
             for (a = 0; a < u; a++) { wv[a] += U->wd[a]; yv[a] += U->yd[a]; }
         }
+    }
+    if (watched == 2) {
+        /* a two-phase job: the backward solve runs later, in amps_update_watched_run */
+        amps__watch_fixed(U, fv, U->job_xw);
+        memcpy(U->job_y, sv, sizeof(double) * (size_t)n);
+        memset(sv, 0, sizeof(double) * (size_t)n);
+        U->st.t_step[6] += amps_now() - t0;
+        return;
     }
     if (watched) {
         /* the watched entries only: L^{-T} on their closure */
@@ -5258,16 +5305,18 @@ AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m
     amps_status s;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_watch: NULL engine");
     if ((s = amps__chk_idx(ctx, U, "amps_update_watch", m, idx, NULL, 1, &U->mkN)) != AMPS_OK) return s;
+    if (U->job_y) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_watch: a watched-solve job is in progress");
     if (m > U->capw || !U->wclo) {
+        unsigned char *wo = AMPS__CAST(unsigned char *, amps__malloc(ctx, (size_t)(m > 0 ? m : 1), 1));
         wi = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(m > 0 ? m : 1), sizeof(amps_int)));
         wc = U->wclo ? U->wclo : AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(U->n > 0 ? U->n : 1), sizeof(amps_int)));
-        if (!wi || !wc) {
-            amps__free(ctx, wi);
+        if (!wi || !wc || !wo) {
+            amps__free(ctx, wi); amps__free(ctx, wo);
             if (wc != U->wclo) amps__free(ctx, wc);
             return amps__err(ctx, AMPS_ERR_OOM, "amps_update_watch: out of memory for %ld indices", (long)m);
         }
-        amps__free(ctx, U->widx);
-        U->widx = wi; U->wclo = wc; U->capw = m;
+        amps__free(ctx, U->widx); amps__free(ctx, U->wovr);
+        U->widx = wi; U->wclo = wc; U->wovr = wo; U->capw = m;
     }
     for (k = 0; k < m; k++) {
         U->widx[k] = idx[k];
@@ -5277,6 +5326,41 @@ AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m
     U->ncw = amps_closure(U->F, nb, U->iwork, U->wclo, &U->mk);
     U->wdirty = 1;
     return AMPS_OK;
+}
+
+AMPS_API amps_int amps_update_base_order(const amps_update *U) { return U ? U->n : 0; }
+
+AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, amps_update_job *job, double *y, double *xw) {
+    amps_status s;
+    amps_int k;
+    if (!U || !job || !y || (!xw && U->nw > 0)) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_watched_begin: NULL argument");
+    if (U->job_y) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_watched_begin: a job is already in progress");
+    for (k = 0; k < U->nw; k++)
+        if (U->widx[k] >= U->N + U->kpend)
+            return amps__err(ctx, AMPS_ERR_INDEX, "amps_update_watched_begin: watched index %ld no longer exists", (long)U->widx[k]);
+    if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
+    U->job_y = y; U->job_xw = xw;
+    amps__solve_stats_begin(U);
+    amps__solve_core(U, U->ct, U->f, 0, 2, U->x);
+    amps__small_reactions(U, U->rhs, U->yv, U->wv);
+    U->st.nsolve++;
+    job->F = U->F; job->nw = U->nw; job->ncw = U->ncw; job->widx = U->widx; job->wclo = U->wclo;
+    job->wovr = U->wovr; job->y = y; job->xw = xw; job->n = U->n;
+    return AMPS_OK;
+}
+
+AMPS_API void amps_update_watched_run(amps_update_job *job) {
+    amps_int k;
+    if (!job || !job->F) return;
+    amps_ltsolve_closure(job->F, job->ncw, job->wclo, job->y);
+    for (k = 0; k < job->nw; k++)
+        if (!job->wovr[k]) job->xw[k] = job->y[job->F->iperm[job->widx[k]]];
+}
+
+AMPS_API void amps_update_watched_end(amps_update *U, amps_update_job *job) {
+    if (!U || !job) return;
+    U->job_y = NULL; U->job_xw = NULL;
+    job->F = NULL;
 }
 
 AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, double *xw) {
