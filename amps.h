@@ -262,6 +262,25 @@ typedef enum amps_formulation {
     AMPS_FORM_DUAL = 1      /* unknowns the correction forces (Eq. 3.16-3.17) */
 } amps_formulation;
 
+/* Re-factorization (paper 001, Sec. 3.6): the augmentation (S u C, the memoized columns, the
+   dense system) only grows, and every step pays for it. A re-factorization factors the current
+   matrix K^ + sigma P_C (C: the indices constrained at its start, whose rows stay in the
+   augmentation with Delta = -sigma e_i e_i^T) with its own analysis, in a background thread,
+   while updates and solves go on with the old factors. When it is done, the next call that
+   commits (or amps_update_refactor_wait) swaps it in: the changes made since it started (m')
+   are re-expressed on the new base, whose augmentation is then C and m' only. The swap costs a
+   commit of those changes. The indices keep their numbering.
+   Memory: at most two factorizations (and two augmentations) exist at a time; the old ones are
+   freed at the swap. A failed re-factorization (not SPD, out of memory) is reported by
+   amps_update_refactor_wait / the stats and the engine goes on with the old factors.
+   With AMPS_NO_THREADS there is no background thread: AUTO does nothing and start/refactor
+   run synchronously. Custom allocators (AMPS_MALLOC) must then be thread-safe. */
+typedef enum amps_refactor_policy {
+    AMPS_REFACTOR_AUTO = 0,   /* start by the cost model (only with threads) and on request */
+    AMPS_REFACTOR_MANUAL = 1, /* only on request */
+    AMPS_REFACTOR_OFF = 2     /* never */
+} amps_refactor_policy;
+
 typedef struct amps_update_opts {
     amps_int cap_mod;       /* capacity of |S u C| (order of the dense system); default 256 */
     amps_int cap_new;       /* capacity of appended DOFs; default 3 * 256 */
@@ -279,6 +298,12 @@ typedef struct amps_update_opts {
                                product with K^) and, while it exceeds guard_tol, refines with the
                                same factors (each step one more forward and backward solve), at
                                most 3 steps; 0 (default) = off */
+    amps_refactor_policy refactor; /* re-factorization of the current matrix (see below); default AUTO */
+    amps_order_opts refactor_order;/* its ordering; default AUTO with node blocks detected (block 0) */
+    int refactor_threads;   /* OpenMP threads of the background factorization; default 1 */
+    double refactor_ratio;  /* AUTO: start when the extra time the augmentation has cost since the
+                               last base reaches this times the (measured or estimated) cost of a
+                               factorization; default 1 (rent or buy) */
 } amps_update_opts;
 
 /* Per-commit and per-solve measurements (seconds) and sizes. */
@@ -295,6 +320,12 @@ typedef struct amps_update_stats {
     amps_int ncommit, nsolve;
     amps_int guard_steps;   /* refinement steps the accuracy guard took in the last solve */
     double relres;          /* relative residual of the last solve when the guard is on, else -1 */
+    amps_int nrefactor;     /* re-factorizations swapped in */
+    amps_int refactor_failed; /* re-factorizations that failed (the engine kept its factors) */
+    int refactor_running;   /* 1 while one is in progress (started, not yet swapped) */
+    double t_refactor;      /* wall time of the last one, start to ready (background) */
+    double t_swap;          /* time of its swap (inside the call that did it) */
+    double refactor_nnzL;   /* nnz(L) of the current base */
 } amps_update_stats;
 
 AMPS_API void amps_update_opts_default(amps_update_opts *opts);
@@ -374,6 +405,18 @@ AMPS_API double amps_update_reaction(const amps_update *U, amps_int i);
    ||(K^ x - f^)_F|| / ||f^_F - K^_FC x_C||, F = unconstrained indices (one sparse product). */
 AMPS_API amps_status amps_update_residual(amps_ctx *ctx, amps_update *U, double *relres);
 AMPS_API void amps_update_get_stats(const amps_update *U, amps_update_stats *st);
+/* Starts a re-factorization of the current (committed) matrix; returns at once (AMPS_WARN_NOOP
+   if one is already running). Copies the changes of the augmentation (O(|Delta| + N)); may
+   allocate. Without threads it runs synchronously (like amps_update_refactor). */
+AMPS_API amps_status amps_update_refactor_start(amps_ctx *ctx, amps_update *U);
+/* Blocks until the running re-factorization is done and swaps it in. AMPS_OK if swapped (or
+   none running: AMPS_WARN_NOOP); its error (the engine unchanged) if it failed. */
+AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U);
+/* Stops a running re-factorization and frees it; blocks until the thread has stopped (at most
+   one phase: ordering, analysis, factorization or a catch-up commit). */
+AMPS_API void amps_update_refactor_cancel(amps_ctx *ctx, amps_update *U);
+/* Commits, then re-factors synchronously (start + wait). Blocks. */
+AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U);
 
 /* ================================ FEM scene ================================ */
 #ifndef AMPS_NO_FEM
@@ -616,6 +659,9 @@ AMPS_API amps_status amps_write_medit(amps_ctx *ctx, const char *path, const amp
 #include <time.h>
 #ifdef _OPENMP
 #include <omp.h>
+#endif
+#ifndef AMPS_NO_THREADS
+#include <pthread.h>
 #endif
 
 #ifndef AMPS_ASSERT
@@ -3901,6 +3947,13 @@ struct amps_update {
     int wdirty;                            /* watched entries of x stale */
     amps_int solN;
     amps_int nr;                           /* rhs[0..nr-1] = W^T ct is current on base positions */
+    /* re-factorization */
+    amps_update_opts opts;                 /* as created (for the engine of a new base) */
+    amps_factor *Fown; amps_csc *Kown;     /* base factor and matrix owned by the engine (after a swap) */
+    struct amps__bg *bg;                   /* the one in progress, or NULL */
+    double t_fact;                         /* measured (or estimated) factorization time */
+    double t_step0, t_extra;               /* step time after the last swap, extra time since */
+    amps_int u0;                           /* |U| after the last swap */
     amps_int nw, ncw, capw;                /* watch set: size, |closure_L of its base indices|, capacity */
     amps_int *widx, *wclo;
     unsigned char *wovr;                   /* watched entry given by the dense system */
@@ -3921,6 +3974,11 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
     o->singular_tol = 1e-15;
     o->refine = 1;
     o->eq320 = 0;
+    o->refactor = AMPS_REFACTOR_AUTO;
+    o->refactor_order.method = AMPS_ORDER_AUTO;
+    o->refactor_order.block = 0;
+    o->refactor_threads = 1;
+    o->refactor_ratio = 1.0;
 }
 
 /* ---- allocation of the capacity-dependent arrays ---- */
@@ -4033,8 +4091,15 @@ static amps_status amps__need_pending(amps_ctx *ctx, amps_update *U, amps_int nd
     return AMPS_OK;
 }
 
+static void amps__bg_discard(amps_ctx *ctx, amps_update *U);
+static void amps__bg_poll(amps_ctx *ctx, amps_update *U);
+static void amps__bg_log(amps_update *U, amps_int kpend, const amps__pdelta *pd, amps_int npd);
+static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t);
+
 AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     if (!U) return;
+    amps__bg_discard(ctx, U);
+    amps_factor_free(ctx, U->Fown); amps_csc_free(ctx, U->Kown);
     amps__free(ctx, U->Kp); amps__free(ctx, U->Ki); amps__free(ctx, U->Kx);
     amps__free(ctx, U->f); amps__free(ctx, U->ct); amps__free(ctx, U->fct); amps__free(ctx, U->isd); amps__free(ctx, U->pf);
     amps__free(ctx, U->pd); amps__free(ctx, U->pc);
@@ -4112,6 +4177,10 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     if (!U) return NULL;
     U->F = F; U->form = o.formulation; U->tol = o.singular_tol; U->grow = o.grow;
     U->refine = o.refine; U->eq320 = o.eq320; U->guard_tol = o.guard_tol;
+    if (!(o.refactor_ratio > 0)) o.refactor_ratio = 1.0;
+    if (o.refactor_order.method == AMPS_ORDER_GIVEN) o.refactor_order.method = AMPS_ORDER_AUTO;  /* a given perm has the old order */
+    o.refactor_order.perm = NULL; o.refactor_order.coords = NULL;
+    U->opts = o;
     U->n = n; U->N = n; U->capN = capN; U->capu = 0; U->u = 0;
 #ifdef _OPENMP
     U->nthr = ctx && ctx->nthreads > 0 ? ctx->nthreads : omp_get_max_threads();
@@ -4767,7 +4836,7 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
     amps_status s;
     double t0, t1;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit: NULL engine");
-    if (!U->npd && !U->npc && !U->kpend) return AMPS_OK;
+    if (!U->npd && !U->npc && !U->kpend) { if (U->bg) amps__bg_poll(ctx, U); return AMPS_OK; }
     t0 = amps_now();
     u_old = U->u; vused_old = U->vused; dused_old = U->dused;
     U->ndj = 0; U->nkj = 0;
@@ -4930,12 +4999,14 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
                          "amps_update_commit: the updated system is singular (pivot of index %ld below %g of its column); the changes were discarded",
                          (long)bi, U->tol);
     }
+    if (U->bg) amps__bg_log(U, U->kpend, U->pd, U->npd);
     U->N += U->kpend; U->kpend = 0;
     U->npd = 0; U->npc = 0;
     U->dirty = U->rdirty = U->wdirty = 1;
     U->committed = 1;
     U->st.ncommit++;
     (void)touched;
+    if (U->bg) amps__bg_poll(ctx, U);
     return AMPS_OK;
 fail:
     amps__rollback(U, u_old, vused_old, dused_old);
@@ -5259,6 +5330,11 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
     U->rdirty = 0; U->has_react = 1; U->wdirty = 0;
     U->st.nsolve++;
     if (xout) memcpy(xout, U->x, sizeof(double) * (size_t)U->N);
+    {
+        double t = 0;
+        for (k = 1; k <= 6; k++) t += U->st.t_step[k];
+        amps__bg_policy(ctx, U, t);
+    }
     return AMPS_OK;
 }
 
@@ -5442,6 +5518,447 @@ AMPS_API void amps_update_get_stats(const amps_update *U, amps_update_stats *st)
     }
     st->dim = U->N; st->nmod = nm; st->ncon = nc; st->nsys = U->u;
     st->vpool_entries = (double)U->vused;
+    st->refactor_running = U->bg != NULL;
+    st->refactor_nnzL = (double)U->F->Lp[U->F->n] + (double)U->F->n;
+}
+
+/* ---- re-factorization (paper 001, Sec. 3.6) ---- */
+
+/* An entry of the m' log: r >= 0: K^[r,c] += v (and K^[c,r]); r < 0: c DOFs appended. */
+typedef struct amps__lentry { amps_int r, c; double v; } amps__lentry;
+
+enum { AMPS__BG_RUNNING = 1, AMPS__BG_READY = 2, AMPS__BG_FAILED = 3 };
+
+/* Tests may define AMPS_TEST_BG_FAULT(phase) to make phase 1 (analysis), 2 (factorization) or
+   3 (catch-up) of a background re-factorization fail. */
+#ifndef AMPS_TEST_BG_FAULT
+#define AMPS_TEST_BG_FAULT(phase) 0
+#endif
+
+typedef struct amps__bg {
+    /* the snapshot at the start (owned) and the parent's base (immutable until the swap) */
+    amps_int N0, n, nthr;
+    double sigma;
+    amps_int nt; amps_int *ti, *tj; double *tx;  /* K^ - K on the upper triangle, sigma on appended and constrained diagonals */
+    amps_int nc; amps_int *ci; double *cg;       /* constrained indices and values */
+    double *f;                                   /* N0 forces */
+    const amps_int *Kp, *Ki; const double *Kx;
+    amps_update_opts opts;
+    void *alloc_user;
+    /* the m' log: appended by the engine's thread, read by the worker (under mu) */
+    amps__lentry *log; amps_int nlog, caplog, done;
+    /* results */
+    amps_csc *K2; amps_factor *F2; amps_update *U2;
+    amps_status status; char msg[256];
+    double t0, t1;
+    int state, cancel;
+#ifndef AMPS_NO_THREADS
+    pthread_mutex_t mu; pthread_t th; int has_thread;
+#endif
+} amps__bg;
+
+static void amps__bg_lock(amps__bg *b) {
+#ifndef AMPS_NO_THREADS
+    pthread_mutex_lock(&b->mu);
+#else
+    (void)b;
+#endif
+}
+static void amps__bg_unlock(amps__bg *b) {
+#ifndef AMPS_NO_THREADS
+    pthread_mutex_unlock(&b->mu);
+#else
+    (void)b;
+#endif
+}
+
+/* Reads a field shared with the worker under the lock. */
+static int amps__bg_get(amps__bg *b, const int *field) {
+    int v;
+    amps__bg_lock(b); v = *field; amps__bg_unlock(b);
+    return v;
+}
+
+static void amps__bg_free(amps_ctx *ctx, amps__bg *b) {
+    if (!b) return;
+    amps_update_free(ctx, b->U2); amps_factor_free(ctx, b->F2); amps_csc_free(ctx, b->K2);
+    amps__free(ctx, b->ti); amps__free(ctx, b->tj); amps__free(ctx, b->tx);
+    amps__free(ctx, b->ci); amps__free(ctx, b->cg); amps__free(ctx, b->f); amps__free(ctx, b->log);
+#ifndef AMPS_NO_THREADS
+    pthread_mutex_destroy(&b->mu);
+#endif
+    amps__free(ctx, b);
+}
+
+/* Snapshot of the committed K^, constraints and forces of U: O(|Delta| + N). */
+static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U) {
+    amps__bg *b = AMPS__CAST(amps__bg *, amps__calloc(ctx, 1, sizeof(amps__bg)));
+    amps_int a, k, nt = 0, nc = 0, cap;
+    if (!b) return NULL;
+    b->N0 = U->N; b->n = U->n; b->sigma = U->sigma; b->nthr = U->nthr;
+    b->Kp = U->Kp; b->Ki = U->Ki; b->Kx = U->Kx;
+    b->opts = U->opts; b->alloc_user = ctx ? ctx->alloc_user : NULL;
+    for (a = 0; a < U->u; a++) if (U->ukind[a] & AMPS__UCON) nc++;
+    cap = U->dused + (U->N - U->n) + nc + 1;
+    b->ti = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
+    b->tj = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
+    b->tx = AMPS__CAST(double *, amps__malloc(ctx, (size_t)cap, sizeof(double)));
+    b->ci = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nc + 1, sizeof(amps_int)));
+    b->cg = AMPS__CAST(double *, amps__malloc(ctx, (size_t)nc + 1, sizeof(double)));
+    b->f = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->N + 1, sizeof(double)));
+    b->caplog = U->opts.cap_pending > 0 ? 4 * U->opts.cap_pending : 16384;
+    b->log = AMPS__CAST(amps__lentry *, amps__malloc(ctx, (size_t)b->caplog, sizeof(amps__lentry)));
+    if (!b->ti || !b->tj || !b->tx || !b->ci || !b->cg || !b->f || !b->log) { amps__bg_free(ctx, b); return NULL; }
+    for (a = 0; a < U->u; a++) {
+        amps_int i = U->uidx[a];
+        for (k = 0; k < U->dln[a]; k++) {
+            amps_int j = U->uidx[U->dcol[U->dst[a] + k]];
+            if (i > j) continue;                                  /* Delta is stored in both rows */
+            b->ti[nt] = i; b->tj[nt] = j; b->tx[nt] = U->dval[U->dst[a] + k]; nt++;
+        }
+        if (U->ukind[a] & AMPS__UCON) {                           /* + sigma e_i e_i^T */
+            b->ti[nt] = i; b->tj[nt] = i; b->tx[nt] = U->sigma; nt++;
+            b->ci[b->nc] = i; b->cg[b->nc] = U->g[a]; b->nc++;
+        }
+    }
+    for (k = U->n; k < U->N; k++) { b->ti[nt] = k; b->tj[nt] = k; b->tx[nt] = U->sigma; nt++; }   /* K-bar */
+    b->nt = nt;
+    memcpy(b->f, U->f, sizeof(double) * (size_t)U->N);
+#ifndef AMPS_NO_THREADS
+    if (pthread_mutex_init(&b->mu, NULL) != 0) {
+        amps__free(ctx, b->ti); amps__free(ctx, b->tj); amps__free(ctx, b->tx); amps__free(ctx, b->ci);
+        amps__free(ctx, b->cg); amps__free(ctx, b->f); amps__free(ctx, b->log); amps__free(ctx, b);
+        amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_start: cannot create a mutex");
+        return NULL;
+    }
+#endif
+    b->state = AMPS__BG_RUNNING;
+    return b;
+}
+
+/* Records the changes of one commit in the log; on failure the re-factorization is cancelled. */
+static void amps__bg_log(amps_update *U, amps_int kpend, const amps__pdelta *pd, amps_int npd) {
+    amps__bg *b = U->bg;
+    amps_int need, k;
+    amps__bg_lock(b);
+    need = b->nlog + npd + (kpend > 0);
+    if (b->state == AMPS__BG_FAILED) { amps__bg_unlock(b); return; }
+    if (need > b->caplog) {
+        amps_int cap = b->caplog;
+        amps_ctx c2;
+        amps_ctx_init(&c2); c2.alloc_user = b->alloc_user;
+        while (cap < need) cap = cap * 2 + 1024;
+        if (!U->grow || amps__realloc(&c2, (void **)&b->log, (size_t)cap, sizeof(amps__lentry))) {
+            b->cancel = 1;
+            b->status = AMPS_ERR_CAPACITY;
+            memcpy(b->msg, "re-factorization cancelled: its log of changes is full", 55);
+            amps__bg_unlock(b);
+            return;
+        }
+        b->caplog = cap;
+    }
+    if (kpend > 0) { b->log[b->nlog].r = -1; b->log[b->nlog].c = kpend; b->log[b->nlog].v = 0; b->nlog++; }
+    for (k = 0; k < npd; k++) { b->log[b->nlog].r = pd[k].r; b->log[b->nlog].c = pd[k].c; b->log[b->nlog].v = pd[k].v; b->nlog++; }
+    amps__bg_unlock(b);
+}
+
+/* Records log entries e[0..cnt-1] in the engine U2 of the new base (sigma: the parent's). The
+   parent's appended DOFs start with a recorded -sigma diagonal, which the log replays, so U2's
+   own zero row gets +sigma first. */
+static amps_status amps__bg_replay(amps_ctx *ctx, amps_update *U2, const amps__lentry *e, amps_int cnt, double sigma) {
+    amps_int k, j, first;
+    amps_status s;
+    for (k = 0; k < cnt; k++) {
+        if (e[k].r < 0) {
+            if ((s = amps_update_add_dofs(ctx, U2, e[k].c, &first)) != AMPS_OK) return s;
+            for (j = first; j < first + e[k].c; j++)
+                if ((s = amps_update_add(ctx, U2, 1, &j, &j, &sigma)) != AMPS_OK) return s;
+        } else if ((s = amps_update_add(ctx, U2, 1, &e[k].r, &e[k].c, &e[k].v)) != AMPS_OK) return s;
+    }
+    return AMPS_OK;
+}
+
+/* The worker: B = K^(t0) + sigma P_C assembled, ordered, analyzed and factored; the engine of
+   the new base gets the forces, Delta = -sigma on C with the constraints, and catches up with
+   the log while it grows. */
+static void amps__bg_work(amps__bg *b) {
+    amps_ctx c2;
+    amps_int j, p, nz = 0, *ti = NULL, *tj = NULL, round;
+    double *tx = NULL;
+    amps_status s = AMPS_OK;
+    amps_update_opts o2;
+    amps__lentry *chunk = NULL;
+    amps_ctx_init(&c2);
+    c2.alloc_user = b->alloc_user;
+    c2.nthreads = b->opts.refactor_threads > 0 ? b->opts.refactor_threads : 1;
+    b->t0 = amps_now();
+    /* 1. B on the upper triangle */
+    for (j = 0; j < b->n; j++) for (p = b->Kp[j]; p < b->Kp[j + 1]; p++) if (b->Ki[p] <= j) nz++;
+    ti = AMPS__CAST(amps_int *, amps__malloc(&c2, (size_t)(nz + b->nt) + 1, sizeof(amps_int)));
+    tj = AMPS__CAST(amps_int *, amps__malloc(&c2, (size_t)(nz + b->nt) + 1, sizeof(amps_int)));
+    tx = AMPS__CAST(double *, amps__malloc(&c2, (size_t)(nz + b->nt) + 1, sizeof(double)));
+    if (!ti || !tj || !tx) { s = AMPS_ERR_OOM; goto done; }
+    nz = 0;
+    for (j = 0; j < b->n; j++)
+        for (p = b->Kp[j]; p < b->Kp[j + 1]; p++)
+            if (b->Ki[p] <= j) { ti[nz] = b->Ki[p]; tj[nz] = j; tx[nz] = b->Kx[p]; nz++; }
+    memcpy(ti + nz, b->ti, sizeof(amps_int) * (size_t)b->nt);
+    memcpy(tj + nz, b->tj, sizeof(amps_int) * (size_t)b->nt);
+    memcpy(tx + nz, b->tx, sizeof(double) * (size_t)b->nt);
+    b->K2 = amps_csc_from_triplets(&c2, b->N0, nz + b->nt, ti, tj, tx, AMPS_UPPER);
+    amps__free(&c2, ti); amps__free(&c2, tj); amps__free(&c2, tx); ti = tj = NULL; tx = NULL;
+    if (!b->K2) { s = c2.status; goto done; }
+    /* 2. ordering, analysis, factorization */
+    if (amps__bg_get(b, &b->cancel)) { s = AMPS_ERR_STATE; goto done; }
+    if (AMPS_TEST_BG_FAULT(1)) { s = amps__err(&c2, AMPS_ERR_OOM, "injected failure in the analysis"); goto done; }
+    b->F2 = amps_analyze(&c2, b->K2, AMPS_UPPER, &b->opts.refactor_order);
+    if (!b->F2) { s = c2.status; goto done; }
+    if (amps__bg_get(b, &b->cancel)) { s = AMPS_ERR_STATE; goto done; }
+    if (AMPS_TEST_BG_FAULT(2)) { s = amps__err(&c2, AMPS_ERR_NOT_SPD, "injected failure in the factorization"); goto done; }
+    if ((s = amps_factorize(&c2, b->F2, b->K2, AMPS_UPPER)) != AMPS_OK) goto done;
+    if (amps__bg_get(b, &b->cancel)) { s = AMPS_ERR_STATE; goto done; }
+    /* 3. the engine of the new base: forces, C with Delta = -sigma, then the log */
+    o2 = b->opts; o2.grow = 1; o2.refactor = AMPS_REFACTOR_OFF;
+    c2.nthreads = b->nthr;                          /* per-thread buffers for the owner's threads */
+    b->U2 = amps_update_create(&c2, b->K2, AMPS_UPPER, b->F2, &o2);
+    if (!b->U2) { s = c2.status; goto done; }
+    b->U2->nthr = 1;                                /* the catch-up runs on this thread alone */
+    for (j = 0; j < b->N0; j++)
+        if (b->f[j] != 0.0 && (s = amps_update_set_force(&c2, b->U2, 1, &j, b->f + j)) != AMPS_OK) goto done;
+    for (j = 0; j < b->nc; j++) {
+        double ms = -b->sigma;
+        if ((s = amps_update_add(&c2, b->U2, 1, b->ci + j, b->ci + j, &ms)) != AMPS_OK) goto done;
+    }
+    if ((s = amps_update_constrain(&c2, b->U2, b->nc, b->ci, b->cg)) != AMPS_OK) goto done;
+    if ((s = amps_update_commit(&c2, b->U2)) != AMPS_OK) goto done;
+    for (round = 0; round < 8; round++) {
+        amps_int lo, cnt;
+        amps__bg_lock(b);
+        lo = b->done; cnt = b->nlog - lo;
+        if (b->cancel || cnt < 32) { amps__bg_unlock(b); break; }
+        chunk = AMPS__CAST(amps__lentry *, amps__malloc(&c2, (size_t)cnt, sizeof(amps__lentry)));
+        if (chunk) memcpy(chunk, b->log + lo, sizeof(amps__lentry) * (size_t)cnt);
+        amps__bg_unlock(b);
+        if (!chunk) { s = AMPS_ERR_OOM; goto done; }
+        if (AMPS_TEST_BG_FAULT(3)) { s = amps__err(&c2, AMPS_ERR_SINGULAR_UPDATE, "injected failure in the catch-up"); goto done; }
+        if ((s = amps__bg_replay(&c2, b->U2, chunk, cnt, b->sigma)) != AMPS_OK) goto done;
+        if ((s = amps_update_commit(&c2, b->U2)) != AMPS_OK) goto done;
+        amps__free(&c2, chunk); chunk = NULL;
+        amps__bg_lock(b); b->done = lo + cnt; amps__bg_unlock(b);
+    }
+done:
+    amps__free(&c2, ti); amps__free(&c2, tj); amps__free(&c2, tx); amps__free(&c2, chunk);
+    amps__bg_lock(b);
+    if (s == AMPS_OK && b->cancel) s = b->status ? b->status : AMPS_ERR_STATE;
+    if (s != AMPS_OK) {
+        b->status = s;
+        if (!b->msg[0]) memcpy(b->msg, c2.msg, sizeof(b->msg));
+        b->state = AMPS__BG_FAILED;
+    } else b->state = AMPS__BG_READY;
+    b->t1 = amps_now();
+    amps__bg_unlock(b);
+}
+
+#ifndef AMPS_NO_THREADS
+static void *amps__bg_main(void *arg) { amps__bg_work(AMPS__CAST(amps__bg *, arg)); return NULL; }
+#endif
+
+/* Waits for the worker thread to end. */
+static void amps__bg_join(amps__bg *b) {
+#ifndef AMPS_NO_THREADS
+    if (b->has_thread) { pthread_join(b->th, NULL); b->has_thread = 0; }
+#else
+    (void)b;
+#endif
+}
+
+/* Factorization time estimated from the solve time: flops sum_j c_j^2 against 4 sum_j c_j. */
+static double amps__fact_estimate(const amps_factor *F, double t_solve) {
+    double s1 = 0, s2 = 0;
+    amps_int j;
+    for (j = 0; j < F->n; j++) { double c = (double)(F->Lp[j + 1] - F->Lp[j]) + 1; s1 += c; s2 += c * c; }
+    return s1 > 0 ? t_solve * s2 / (4 * s1) : 0;
+}
+
+/* Swaps a ready re-factorization in: the rest of the log, the constraints and forces now, a
+   commit on the new base, then the new base takes the handle's place. The system is unchanged,
+   so the solution, reactions and their freshness carry over. On failure the engine keeps its
+   old factors. */
+static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
+    amps__bg *b = U->bg;
+    amps_update *V = b->U2, old;
+    amps_ctx c2;
+    amps_int lo, cnt, a, i;
+    amps_status s = AMPS_OK;
+    double t0 = amps_now();
+    amps_ctx_init(&c2); c2.alloc_user = ctx ? ctx->alloc_user : NULL;
+    amps__bg_join(b);
+    amps__bg_lock(b); lo = b->done; cnt = b->nlog - lo; amps__bg_unlock(b);
+    V->nthr = U->nthr;
+    if ((s = amps__bg_replay(&c2, V, b->log + lo, cnt, b->sigma)) != AMPS_OK) goto fail;
+    /* constraints and forces as they are now */
+    for (a = 0; a < V->u; a++) {
+        i = V->uidx[a];
+        if ((V->ukind[a] & AMPS__UCON) && !(U->upos[i] >= 0 && (U->ukind[U->upos[i]] & AMPS__UCON)))
+            if ((s = amps_update_release(&c2, V, 1, &i)) != AMPS_OK) goto fail;
+    }
+    for (a = 0; a < U->u; a++) {
+        amps_int a2;
+        i = U->uidx[a];
+        if (!(U->ukind[a] & AMPS__UCON)) continue;
+        a2 = i < V->N ? V->upos[i] : -1;
+        if (a2 < 0 || !(V->ukind[a2] & AMPS__UCON) || V->g[a2] != U->g[a])
+            if ((s = amps_update_constrain(&c2, V, 1, &i, U->g + a)) != AMPS_OK) goto fail;
+    }
+    if ((s = amps_update_commit(&c2, V)) != AMPS_OK) goto fail;
+    for (i = 0; i < U->N; i++)
+        if (V->f[i] != U->f[i] && (s = amps_update_set_force(&c2, V, 1, &i, U->f + i)) != AMPS_OK) goto fail;
+    /* changes recorded but not committed move along (as the log does) */
+    if (U->kpend > 0) {
+        amps__lentry e;
+        e.r = -1; e.c = U->kpend; e.v = 0;
+        if ((s = amps__bg_replay(&c2, V, &e, 1, b->sigma)) != AMPS_OK) goto fail;
+        memcpy(V->f + U->N, U->f + U->N, sizeof(double) * (size_t)U->kpend);
+    }
+    for (a = 0; a < U->npd; a++)
+        if ((s = amps_update_add(&c2, V, 1, &U->pd[a].r, &U->pd[a].c, &U->pd[a].v)) != AMPS_OK) goto fail;
+    for (a = 0; a < U->npc; a++) {
+        s = U->pc[a].release ? amps_update_release(&c2, V, 1, &U->pc[a].i) : amps_update_constrain(&c2, V, 1, &U->pc[a].i, &U->pc[a].v);
+        if (s != AMPS_OK) goto fail;
+    }
+    if (U->wclo && amps__realloc(&c2, (void **)&U->wclo, (size_t)V->n, sizeof(amps_int))) { s = AMPS_ERR_OOM; goto fail; }
+    /* the new base takes the handle's place; the old contents are freed below */
+    old = *U;
+    *U = *V;
+    U->opts = old.opts; U->grow = old.grow; U->nthr = old.nthr;
+    U->bg = NULL;
+    U->widx = old.widx; U->wovr = old.wovr; U->wclo = old.wclo; U->capw = old.capw; U->nw = old.nw;
+    old.widx = NULL; old.wovr = NULL; old.wclo = NULL; old.bg = NULL;
+    U->ncw = 0;
+    if (U->wclo) {
+        amps_int nb = 0, k;
+        for (k = 0; k < U->nw; k++) if (U->widx[k] < U->n) U->iwork[nb++] = U->F->iperm[U->widx[k]];
+        U->ncw = amps_closure(U->F, nb, U->iwork, U->wclo, &U->mk);
+    }
+    memcpy(U->x, old.x, sizeof(double) * (size_t)old.N);
+    for (a = 0; a < U->u; a++) {
+        amps_int ao = old.upos[U->uidx[a]];
+        U->react[a] = ao >= 0 ? old.react[ao] : 0.0;
+    }
+    U->dirty = old.dirty; U->has_sol = old.has_sol; U->rdirty = old.rdirty; U->has_react = old.has_react;
+    U->wdirty = old.wdirty; U->solN = old.solN; U->committed = old.committed;
+    U->st = old.st;
+    U->st.nrefactor++;
+    U->st.t_refactor = b->t1 - b->t0;
+    U->Fown = b->F2; U->Kown = b->K2;
+    b->F2 = NULL; b->K2 = NULL; b->U2 = NULL;
+    U->t_fact = b->t1 - b->t0;
+    U->t_step0 = 0; U->t_extra = 0; U->u0 = U->u;
+    *V = old;
+    amps_update_free(&c2, V);
+    amps__bg_free(&c2, b);
+    U->st.t_swap = amps_now() - t0;
+    return AMPS_OK;
+fail:
+    U->bg = NULL;
+    U->st.refactor_failed++;
+    amps__bg_free(&c2, b);
+    return amps__err(ctx, s, "amps_update: swapping the re-factorization in failed (%s); the engine keeps its factors", c2.msg);
+}
+
+/* At the end of a commit: swaps a ready re-factorization in (not while a watched-solve job
+   runs), drops a failed one; the AUTO policy starts one. Never fails the caller. */
+static void amps__bg_poll(amps_ctx *ctx, amps_update *U) {
+    if (U->bg) {
+        int st = amps__bg_get(U->bg, &U->bg->state);
+        if (st == AMPS__BG_READY && !U->job_y) {
+            amps_ctx c2;
+            amps_ctx_init(&c2); c2.alloc_user = ctx ? ctx->alloc_user : NULL;
+            (void)amps__bg_swap(&c2, U);
+        } else if (st == AMPS__BG_FAILED) {
+            amps__bg_join(U->bg);
+            amps__bg_free(ctx, U->bg);
+            U->bg = NULL;
+            U->st.refactor_failed++;
+        }
+    }
+}
+
+/* AUTO policy after a full solve of step time t (commit + solve): the extra time over the step
+   time after the last swap accumulates; when it reaches refactor_ratio times the cost of a
+   factorization (measured, or estimated from the solve), a re-factorization starts. */
+static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t) {
+#ifndef AMPS_NO_THREADS
+    if (U->opts.refactor != AMPS_REFACTOR_AUTO || U->bg || U->u <= U->u0 + 8) {
+        if (!U->bg && (U->t_step0 == 0 || t < U->t_step0)) U->t_step0 = t;
+        return;
+    }
+    if (U->t_step0 == 0 || t < U->t_step0) U->t_step0 = t;
+    if (U->t_fact == 0) U->t_fact = amps__fact_estimate(U->F, U->st.t_step[6]);
+    U->t_extra += t - U->t_step0;
+    if (U->t_extra >= U->opts.refactor_ratio * U->t_fact) {
+        amps_ctx c2;
+        amps_ctx_init(&c2); c2.alloc_user = ctx ? ctx->alloc_user : NULL;
+        (void)amps_update_refactor_start(&c2, U);
+    }
+#else
+    (void)ctx; (void)U; (void)t;
+#endif
+}
+
+AMPS_API amps_status amps_update_refactor_start(amps_ctx *ctx, amps_update *U) {
+    amps__bg *b;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_refactor_start: NULL engine");
+    if (U->opts.refactor == AMPS_REFACTOR_OFF) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_start: re-factorization is off (opts.refactor)");
+    if (U->bg) return AMPS_WARN_NOOP;
+    b = amps__bg_snapshot(ctx, U);
+    if (!b) return ctx && ctx->status ? ctx->status : AMPS_ERR_OOM;
+    U->bg = b;
+    U->t_extra = 0;
+#ifndef AMPS_NO_THREADS
+    if (pthread_create(&b->th, NULL, amps__bg_main, b) == 0) { b->has_thread = 1; return AMPS_OK; }
+#endif
+    amps__bg_work(b);                           /* no thread: synchronously */
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U) {
+    amps__bg *b;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_refactor_wait: NULL engine");
+    if (!(b = U->bg)) return AMPS_WARN_NOOP;
+    if (U->job_y) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_wait: a watched-solve job is in progress");
+    amps__bg_join(b);
+    if (b->state == AMPS__BG_READY) return amps__bg_swap(ctx, U);
+    {
+        amps_status s = b->status ? b->status : AMPS_ERR_STATE;
+        char msg[256];
+        memcpy(msg, b->msg, sizeof(msg));
+        amps__bg_free(ctx, b);
+        U->bg = NULL;
+        U->st.refactor_failed++;
+        return amps__err(ctx, s, "amps_update_refactor_wait: the re-factorization failed (%s); the engine keeps its factors", msg);
+    }
+}
+
+static void amps__bg_discard(amps_ctx *ctx, amps_update *U) {
+    if (!U->bg) return;
+    amps__bg_lock(U->bg); U->bg->cancel = 1; amps__bg_unlock(U->bg);
+    amps__bg_join(U->bg);
+    amps__bg_free(ctx, U->bg);
+    U->bg = NULL;
+}
+
+AMPS_API void amps_update_refactor_cancel(amps_ctx *ctx, amps_update *U) {
+    if (U) amps__bg_discard(ctx, U);
+}
+
+AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U) {
+    amps_status s;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_refactor: NULL engine");
+    if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
+    if (U->bg) amps_update_refactor_cancel(ctx, U);
+    if ((s = amps_update_refactor_start(ctx, U)) != AMPS_OK) return s;
+    return amps_update_refactor_wait(ctx, U);
 }
 
 /* ================================ FEM scene impl ================================ */

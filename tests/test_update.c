@@ -3,6 +3,9 @@
    finite element matrices, node-duplicating cuts of FE meshes, bad input and singular updates. */
 #define AMPS_IMPLEMENTATION
 #define AMPS_COUNT_TOUCH
+/* failure injection in the background re-factorization: phase t_bg_fault fails */
+static int t_bg_fault = 0;
+#define AMPS_TEST_BG_FAULT(phase) (t_bg_fault == (phase))
 #include "amps.h"
 #include "amps_test.h"
 #include "fe_util.h"
@@ -95,6 +98,8 @@ typedef struct model {
     int *con; double *g, *f;
     double worst_err, worst_res, worst_ref;
     int steps, fails;
+    int bgmode;                 /* 1: start, wait for and cancel re-factorizations at random steps */
+    unsigned long long bgrng;
     int extra;                  /* 1: also check the reactions-only and watched solves; 2: and the
                                    L entries the watched solve reads (engine made with refine = 0) */
 } model;
@@ -187,6 +192,15 @@ static void model_check(model *m, double tol_err, const char *what) {
     double *r1 = (double *)malloc(sizeof(double) * N), xw[12];
     amps_int wi[12];
     amps_status s;
+    if (m->bgmode) {
+        int r;
+        m->bgrng = m->bgrng * 6364136223846793005ULL + 1442695040888963407ULL;
+        r = (int)((m->bgrng >> 33) % 20);
+        if (r < 3) { s = amps_update_refactor_start(&m->ctx, m->U); CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP, "%s: refactor start: %s", what, m->ctx.msg); }
+        else if (r < 5) { s = amps_update_refactor_wait(&m->ctx, m->U); CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP, "%s: refactor wait: %s", what, m->ctx.msg); }
+        else if (r == 5) amps_update_refactor_cancel(&m->ctx, m->U);
+        else if (r == 6) { s = amps_update_refactor(&m->ctx, m->U); CHECK(s == AMPS_OK, "%s: synchronous refactor: %s", what, m->ctx.msg); }
+    }
     if (m->extra) nw = model_partial(m, r1, wi, xw, what);
     s = amps_update_solve(&m->ctx, m->U, x);
     m->steps++;
@@ -428,7 +442,10 @@ static void cut_sequence(model *md, fe_mesh *mesh0, int steps, unsigned long lon
 }
 
 static void report(const char *what, const model *m) {
-    printf("  %-28s steps %4d  worst error %.2e  worst residual %.2e (CHOLMOD %.2e)\n", what, m->steps, m->worst_err, m->worst_res, m->worst_ref);
+    amps_update_stats st;
+    amps_update_get_stats(m->U, &st);
+    printf("  %-28s steps %4d  worst error %.2e  worst residual %.2e (CHOLMOD %.2e)  re-factorizations %d\n", what, m->steps,
+           m->worst_err, m->worst_res, m->worst_ref, (int)st.nrefactor);
 }
 
 static void test_random_sequences(void) {
@@ -544,13 +561,83 @@ static void test_guard(void) {
     model_free(&m); fe_free(&mesh);
 }
 
+/* Re-factorizations started, awaited and cancelled at random steps of random and cut sequences
+   (several in flight over a sequence, swaps between any kinds of change): every step agrees
+   with CHOLMOD. Injected failures in each phase leave the engine on its old factors. */
+static void test_refactor(void) {
+    int seed, ph;
+    for (seed = 1; seed <= 3; seed++) {
+        model m; amps_update_opts o; int nz, *ti, *tj; double *tx;
+        amps_update_stats st;
+        const char *what = seed == 2 ? "refactor: random spd (dual)" : "refactor: random spd";
+        amps_update_opts_default(&o); o.grow = 1; o.cap_mod = 8; o.cap_new = 4; o.cap_pending = 8;
+        o.refactor = seed == 3 ? AMPS_REFACTOR_AUTO : AMPS_REFACTOR_MANUAL;
+        o.formulation = seed == 2 ? AMPS_FORM_DUAL : AMPS_FORM_PRIMAL;
+        random_spd(80, 300 + seed, &nz, &ti, &tj, &tx);
+        CHECK(model_init(&m, 80, nz, ti, tj, tx, &o) == 0, "init: %s", m.ctx.msg);
+        m.bgmode = 1; m.bgrng = (unsigned long long)seed; m.extra = 1;
+        random_sequence(&m, 200, 2000 + seed, 1e-10, what);
+        amps_update_get_stats(m.U, &st);
+        CHECK(st.nrefactor >= 5, "%s: only %d re-factorizations swapped in", what, (int)st.nrefactor);
+        report(what, &m);
+        model_free(&m); free(ti); free(tj); free(tx);
+    }
+    {
+        model m; amps_update_opts o; fe_mesh mesh = fe_brick(3);
+        amps_update_opts_default(&o); o.grow = 1; o.refactor = AMPS_REFACTOR_MANUAL;
+        fe_model(&m, &mesh, 2, &o);
+        m.bgmode = 1; m.bgrng = 7; m.extra = 1;
+        cut_sequence(&m, &mesh, 60, 99, 1e-9);
+        report("refactor: brick R=3 cuts", &m);
+        model_free(&m); fe_free(&mesh);
+    }
+    for (ph = 1; ph <= 3; ph++) {
+        model m; amps_update_opts o; int nz, *ti, *tj; double *tx, *x0, *x1;
+        amps_update_stats st;
+        amps_status s;
+        int idx[3] = {3, 9, 17}; double v[3] = {1, -1, 2};
+        amps_update_opts_default(&o); o.grow = 1; o.refactor = AMPS_REFACTOR_MANUAL;
+        random_spd(60, 400 + ph, &nz, &ti, &tj, &tx);
+        CHECK(model_init(&m, 60, nz, ti, tj, tx, &o) == 0, "init: %s", m.ctx.msg);
+        x0 = (double *)malloc(sizeof(double) * 60); x1 = (double *)malloc(sizeof(double) * 60);
+        change_term(&m, 3, idx, v, 3.0, 0);
+        model_check(&m, 1e-10, "fault");
+        amps_update_solve(&m.ctx, m.U, x0);
+        t_bg_fault = ph;
+        CHECK(amps_update_refactor_start(&m.ctx, m.U) == AMPS_OK, "start: %s", m.ctx.msg);
+        if (ph == 3) {   /* a catch-up needs a log: changes while it runs */
+            int k;
+            for (k = 0; k < 40; k++) { int i2[2] = {k % 60, (k * 7 + 1) % 60}; double v2[2] = {0.5, -0.5}; change_term(&m, 2, i2, v2, 0.1, 0); amps_update_commit(&m.ctx, m.U); }
+        }
+        s = amps_update_refactor_wait(&m.ctx, m.U);
+        t_bg_fault = 0;
+        if (ph < 3) CHECK(s != AMPS_OK && s != AMPS_WARN_NOOP, "phase %d: injected failure not reported", ph);
+        amps_update_get_stats(m.U, &st);
+        CHECK(ph == 3 || (st.nrefactor == 0 && st.refactor_failed == 1 && !st.refactor_running), "phase %d: stats after a failure", ph);
+        model_check(&m, 1e-10, "after an injected failure");
+        if (ph < 3) { amps_update_solve(&m.ctx, m.U, x1); CHECK(t_reldiff(60, x0, x1) < 1e-14, "phase %d: solution changed by a failed re-factorization", ph); }
+        CHECK(amps_update_refactor(&m.ctx, m.U) == AMPS_OK, "phase %d: re-factorization after a failure: %s", ph, m.ctx.msg);
+        model_check(&m, 1e-10, "after a re-factorization");
+        model_free(&m); free(ti); free(tj); free(tx); free(x0); free(x1);
+    }
+    {   /* OFF: explicit calls are refused */
+        model m; amps_update_opts o; int nz, *ti, *tj; double *tx;
+        amps_update_opts_default(&o); o.refactor = AMPS_REFACTOR_OFF;
+        random_spd(30, 9, &nz, &ti, &tj, &tx);
+        CHECK(model_init(&m, 30, nz, ti, tj, tx, &o) == 0, "init: %s", m.ctx.msg);
+        CHECK(amps_update_refactor_start(&m.ctx, m.U) == AMPS_ERR_STATE, "refactor with policy OFF accepted");
+        CHECK(amps_update_refactor_wait(&m.ctx, m.U) == AMPS_WARN_NOOP, "wait with nothing running");
+        model_free(&m); free(ti); free(tj); free(tx);
+    }
+}
+
 /* 1 and 2 threads give the same results. */
 static void test_threads(void) {
 #ifdef _OPENMP
     double *x[2]; int th, N = 0;
     for (th = 1; th <= 2; th++) {
         model m; amps_update_opts o; fe_mesh mesh = fe_beam(8);
-        amps_update_opts_default(&o); o.grow = 1;
+        amps_update_opts_default(&o); o.grow = 1; o.refactor = AMPS_REFACTOR_MANUAL;
         omp_set_num_threads(th);
         fe_model(&m, &mesh, 2, &o);
         cut_sequence(&m, &mesh, 30, 42, 1e-9);
@@ -570,6 +657,7 @@ int main(void) {
     test_random_sequences();
     test_fe_sequences();
     test_guard();
+    test_refactor();
     test_threads();
     return amps_t_end("test_update");
 }
