@@ -2,6 +2,7 @@
 #   make test          build and run every test (last line: "N passed, N failed")
 #   make test SAN=1    the same under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make test OMP=     the same without OpenMP
+#   make tsan          ThreadSanitizer on the tests that run background re-factorizations
 #   make demo          the main job: replay examples/brick_incision.scn (VTU, CSV, PNG in build/demo)
 #   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv
 #   make deps          install (as root) or list the Debian packages the tests need
@@ -16,6 +17,9 @@ SAN     ?=
 ifeq ($(SAN),1)
   SANFLAGS = -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
   BUILD  ?= build/san
+else ifeq ($(SAN),thread)
+  SANFLAGS = -fsanitize=thread
+  BUILD  ?= build/tsan
 else
   SANFLAGS =
 endif
@@ -32,7 +36,7 @@ TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
 TEST_SH   := $(wildcard tests/test_*.sh)
 TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example
 
-.PHONY: all test deps deps-check tools demo bench bench-quick clean cxx
+.PHONY: tsan all test deps deps-check tools demo bench bench-quick clean cxx
 all: tools
 
 tools: $(TOOLS)
@@ -69,6 +73,11 @@ deps:
 cxx: | $(BUILD)
 	printf '#define AMPS_IMPLEMENTATION\n#include "amps.h"\nint main(void){amps_ctx c; amps_ctx_init(&c); return 0;}\n' > $(BUILD)/cxx_check.cpp
 	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -c $(BUILD)/cxx_check.cpp -o $(BUILD)/cxx_check.o
+
+# libgomp is not instrumented, so without OpenMP; the threads are the re-factorization's
+tsan:
+	$(MAKE) SAN=thread OMP= BUILD=build/tsan OPT="-O1 -g" build/tsan/test_update build/tsan/test_scene
+	@TSAN_OPTIONS="halt_on_error=1 suppressions=$(abspath tests/tsan.supp)" AMPS_BUILD=build/tsan bash tests/run.sh build/tsan/test_update build/tsan/test_scene
 
 bench:
 	bash bench/run.sh full

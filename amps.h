@@ -330,7 +330,8 @@ typedef struct amps_update_stats {
 
 AMPS_API void amps_update_opts_default(amps_update_opts *opts);
 /* Engine for base matrix K (stype part, original numbering) and its numeric factor F, which
-   must stay alive and unchanged while the engine uses it. K is copied. Forces start at zero. */
+   must stay alive and unchanged until amps_update_free (after a re-factorization the engine
+   works on its own factor, amps_update_factor). K is copied. Forces start at zero. */
 AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_stype stype,
                                          const amps_factor *F, const amps_update_opts *opts);
 AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U);
@@ -370,8 +371,10 @@ AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, do
 /* The same in two phases, for a caller whose second thread runs the backward solve outside the
    lock it holds for every other engine call (a 60 Hz visual loop beside a 1 kHz haptic loop):
      amps_update_watched_begin  (under the lock) commits, Steps 4-5 and the right-hand side of the
-                                backward solve into job->y (caller-owned, n = the base order
-                                doubles; amps_update_base_order), and the watched values the dense
+                                backward solve into job->y (caller-owned, ylen doubles: at least
+                                amps_update_base_order after the commit, which a re-factorization
+                                raises to the dimension at its start, so amps_update_dim always
+                                suffices; AMPS_ERR_CAPACITY otherwise), and the watched values the dense
                                 system gives into xw (caller-owned, the watch set's size);
      amps_update_watched_run    (no lock: reads only job and the factor) the backward solve on
                                 closure_L(watched), completing xw;
@@ -387,7 +390,7 @@ typedef struct amps_update_job {
     amps_int n;
 } amps_update_job;
 AMPS_API amps_int amps_update_base_order(const amps_update *U);
-AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, amps_update_job *job, double *y, double *xw);
+AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, amps_update_job *job, double *y, amps_int ylen, double *xw);
 AMPS_API void amps_update_watched_run(amps_update_job *job);
 AMPS_API void amps_update_watched_end(amps_update *U, amps_update_job *job);
 /* Commits, then computes the reaction forces at the constrained indices from the dense system
@@ -405,6 +408,8 @@ AMPS_API double amps_update_reaction(const amps_update *U, amps_int i);
    ||(K^ x - f^)_F|| / ||f^_F - K^_FC x_C||, F = unconstrained indices (one sparse product). */
 AMPS_API amps_status amps_update_residual(amps_ctx *ctx, amps_update *U, double *relres);
 AMPS_API void amps_update_get_stats(const amps_update *U, amps_update_stats *st);
+/* The current base factor (the one given at creation until a re-factorization is swapped in). */
+AMPS_API const amps_factor *amps_update_factor(const amps_update *U);
 /* Starts a re-factorization of the current (committed) matrix; returns at once (AMPS_WARN_NOOP
    if one is already running). Copies the changes of the augmentation (O(|Delta| + N)); may
    allocate. Without threads it runs synchronously (like amps_update_refactor). */
@@ -594,7 +599,7 @@ AMPS_API amps_status amps_scene_residual(amps_ctx *ctx, amps_scene *S, double *r
 AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, double *sigma, double *von_mises, double *principal);
 /* Equations of the current system (free DOFs of the initial mesh plus those of cut copies). */
 AMPS_API amps_int amps_scene_ndof(const amps_scene *S);
-/* The engine (for statistics) and the base factor; NULL before the factorization. */
+/* The engine (for statistics) and its current base factor; NULL before the factorization. */
 AMPS_API amps_update *amps_scene_engine(const amps_scene *S);
 AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S);
 /* Undoes the last cut of m: vc = m->nnode - 1 is the copy of v, moved its tets (ascending). */
@@ -5405,8 +5410,9 @@ AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m
 }
 
 AMPS_API amps_int amps_update_base_order(const amps_update *U) { return U ? U->n : 0; }
+AMPS_API const amps_factor *amps_update_factor(const amps_update *U) { return U ? U->F : NULL; }
 
-AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, amps_update_job *job, double *y, double *xw) {
+AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, amps_update_job *job, double *y, amps_int ylen, double *xw) {
     amps_status s;
     amps_int k;
     if (!U || !job || !y || (!xw && U->nw > 0)) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_watched_begin: NULL argument");
@@ -5415,6 +5421,7 @@ AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, am
         if (U->widx[k] >= U->N + U->kpend)
             return amps__err(ctx, AMPS_ERR_INDEX, "amps_update_watched_begin: watched index %ld no longer exists", (long)U->widx[k]);
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
+    if (ylen < U->n) return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update_watched_begin: y has %ld entries, the base order is %ld", (long)ylen, (long)U->n);
     U->job_y = y; U->job_xw = xw;
     amps__solve_stats_begin(U);
     amps__solve_core(U, U->ct, U->f, 0, 2, U->x);
@@ -6848,7 +6855,7 @@ AMPS_API amps_scene *amps_scene_create(amps_ctx *ctx, amps_mesh *m, const amps_s
 
 AMPS_API const amps_mesh *amps_scene_mesh(const amps_scene *S) { return S ? S->m : NULL; }
 AMPS_API amps_update *amps_scene_engine(const amps_scene *S) { return S ? S->U : NULL; }
-AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S) { return S ? S->F : NULL; }
+AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S) { return S && S->U ? amps_update_factor(S->U) : NULL; }
 AMPS_API amps_int amps_scene_ndof(const amps_scene *S) { return S && S->U ? amps_update_dim(S->U) : (S ? S->ndof0 : 0); }
 
 AMPS_API amps_status amps_scene_set_material(amps_ctx *ctx, amps_scene *S, double E, double nu) {

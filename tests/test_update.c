@@ -172,14 +172,17 @@ static int model_partial(model *m, double *r1, amps_int *wi, double *xw, const c
     }
     {   /* the two-phase job gives the same values */
         amps_update_job job;
-        double *y = (double *)malloc(sizeof(double) * (amps_update_base_order(m->U) + 1)), xj[12];
+        double *y = (double *)malloc(sizeof(double) * (amps_update_dim(m->U) + 1)), xj[12];
         CHECK(amps_update_set_force(&m->ctx, m->U, 0, NULL, NULL) == AMPS_OK, "empty force change");
-        s = amps_update_watched_begin(&m->ctx, m->U, &job, y, xj);
+        CHECK(amps_update_watched_begin(&m->ctx, m->U, &job, y, 0, xj) == AMPS_ERR_CAPACITY || amps_update_base_order(m->U) == 0, "short y accepted");
+        s = amps_update_watched_begin(&m->ctx, m->U, &job, y, amps_update_dim(m->U), xj);
         CHECK(s == AMPS_OK, "%s step %d: job begin: %s", what, m->steps, m->ctx.msg);
         CHECK(amps_update_watch(&m->ctx, m->U, nw, wi) == AMPS_ERR_STATE, "watch set changed during a job");
         amps_update_watched_run(&job);
         amps_update_watched_end(m->U, &job);
-        for (k = 0; k < nw; k++) CHECK(xj[k] == xw[k], "%s step %d: job x[%d] = %.17e vs %.17e", what, m->steps, (int)wi[k], xj[k], xw[k]);
+        /* equal up to rounding (a re-factorization may have been swapped in by the job's commit) */
+        for (k = 0; k < nw; k++)
+            CHECK(fabs(xj[k] - xw[k]) <= 1e-12 * (t_norm(nw, xw) + 1e-300), "%s step %d: job x[%d] = %.17e vs %.17e", what, m->steps, (int)wi[k], xj[k], xw[k]);
         free(y);
     }
     return nw;
