@@ -3,6 +3,7 @@
 #   make test SAN=1    the same under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make test OMP=     the same without OpenMP
 #   make tsan          ThreadSanitizer on the tests that run background re-factorizations
+#   make examples      build the examples (build/default/readme_example, haptic_loop)
 #   make demo          the main job: replay examples/brick_incision.scn (VTU, CSV, PNG in build/demo)
 #   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv
 #   make deps          install (as root) or list the Debian packages the tests need
@@ -34,9 +35,9 @@ LDLIBS     = -lm
 TEST_SRC  := $(wildcard tests/test_*.c)
 TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
 TEST_SH   := $(wildcard tests/test_*.sh)
-TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example
+TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example $(BUILD)/haptic_loop
 
-.PHONY: tsan all test deps deps-check tools demo bench bench-quick clean cxx
+.PHONY: tsan all test deps deps-check tools examples demo bench bench-quick clean cxx
 all: tools
 
 tools: $(TOOLS)
@@ -46,6 +47,11 @@ $(BUILD)/amps_replay: tools/amps_replay.c amps.h | $(BUILD)
 
 $(BUILD)/readme_example: examples/readme_example.c amps.h | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< $(LDLIBS)
+
+$(BUILD)/haptic_loop: examples/haptic_loop.c amps.h | $(BUILD)
+	$(CC) $(CFLAGS_ALL) -o $@ $< -lpthread $(LDLIBS)
+
+examples: $(BUILD)/readme_example $(BUILD)/haptic_loop
 
 # The main job: replay the brick incision, write VTU/CSV (and a PNG when gnuplot is there).
 demo: $(BUILD)/amps_replay
@@ -73,6 +79,7 @@ deps:
 cxx: | $(BUILD)
 	printf '#define AMPS_IMPLEMENTATION\n#include "amps.h"\nint main(void){amps_ctx c; amps_ctx_init(&c); return 0;}\n' > $(BUILD)/cxx_check.cpp
 	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -c $(BUILD)/cxx_check.cpp -o $(BUILD)/cxx_check.o
+	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -x c++ -c examples/haptic_loop.c -o $(BUILD)/haptic_loop_cxx.o
 
 # libgomp is not instrumented, so without OpenMP; the threads are the re-factorization's
 tsan:

@@ -38,6 +38,15 @@ if [ "$mode" = full ]; then
   AMPS_GUARD=1e-12 run build/bench/update beam:1024 cut 50 bench/out/update_cut_beam_1024_guard.csv 5
   AMPS_DUAL=1 run build/bench/update bench/data/bunny20k.1.node cut 50 bench/out/update_cut_bunny20k_dual.csv 5
 fi
+# haptic step and watch sets (bench/haptic.c, bench/watch.c; results: bench/RESULTS_haptic.md)
+for b in haptic watch; do $CC $FLAGS -o build/bench/$b bench/$b.c -lm || exit 1; done
+rm -f bench/out/haptic.csv bench/out/watch.csv
+if [ "$mode" = quick ]; then hmesh="brick:12 bench/data/bunny20k.1.node"; hsteps=500; wreps=5
+else hmesh="brick:14 bench/data/bunny20k.1.node bench/data/bunny50k.1.node"; hsteps=2000; wreps=7; fi
+for m in $hmesh; do
+  run build/bench/haptic "$m" $hsteps 10 bench/out/haptic.csv
+  run build/bench/watch "$m" $wreps 10 bench/out/watch.csv
+done
 {
   echo "machine: $(uname -m), $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//'), $(free -g | awk '/Mem:/{print $2}') GiB"
   echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"

@@ -19,17 +19,8 @@
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
+#include "bench_util.h"
 
-
-static int cmpd(const void *a, const void *b) {
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-static double median(double *v, int n) {
-    if (n <= 0) return 0;
-    qsort(v, (size_t)n, sizeof(double), cmpd);
-    return v[n / 2];
-}
 
 /* CHOLMOD on the reduced system of the current mesh: fixed (by origin) and pinned DOFs
    eliminated. Returns times of analyze+factorize+solve and of a second plain solve. */
@@ -109,85 +100,47 @@ int main(int argc, char **argv) {
     amps_mesh *m;
     amps_scene *S;
     const char *spec, *mode, *out;
-    int steps, every = 5, v, st, ip, axis_len, nn0, npath = 0, *path, cut;
-    double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300}, xc, tol, h;
+    int steps, every = 5, st, axis_len, nn0, cut;
+    double lo[3], hi[3];
     unsigned char *fixed0, *pinned;
     double *pinval, *force, t_prep;
     double *t_amps, *t_chol, *t_cs;
     int nt = 0, nc = 0;
+    bu_cut cp;
     FILE *csv;
     if (argc < 5) { fprintf(stderr, "usage: update <beam:h|brick:R|file> <cut|deform> <steps> <out.csv> [cholmod_every]\n"); return 2; }
     spec = argv[1]; mode = argv[2]; steps = atoi(argv[3]); out = argv[4];
     if (argc > 5) every = atoi(argv[5]);
     cut = !strcmp(mode, "cut");
     amps_ctx_init(&ctx);
-    if (!strncmp(spec, "beam:", 5)) m = amps_mesh_beam(&ctx, atoi(spec + 5));
-    else if (!strncmp(spec, "brick:", 6)) m = amps_mesh_brick(&ctx, atoi(spec + 6));
-    else m = amps_mesh_read(&ctx, spec);
+    m = bu_load_mesh(&ctx, spec);
     if (!m) { fprintf(stderr, "%s: %s\n", spec, ctx.msg); return 1; }
     nn0 = (int)m->nnode;
     if (nn0 <= 0) return 1;
-    for (v = 0; v < nn0; v++) { int d; for (d = 0; d < 3; d++) { if (m->xyz[3 * v + d] < lo[d]) lo[d] = m->xyz[3 * v + d]; if (m->xyz[3 * v + d] > hi[d]) hi[d] = m->xyz[3 * v + d]; } }
-    /* the long axis is held at its low end (beam, brick: z; bunny: y, its base) */
-    axis_len = !strncmp(spec, "beam:", 5) || !strncmp(spec, "brick:", 6) ? 2 : 1;
-    fixed0 = (unsigned char *)calloc((size_t)nn0, 1);
-    for (v = 0; v < nn0; v++) fixed0[v] = m->xyz[3 * v + axis_len] < lo[axis_len] + 0.04 * (hi[axis_len] - lo[axis_len]) + 1e-12;
+    bu_bbox(m, lo, hi);
+    axis_len = bu_up_axis(spec);
+    fixed0 = bu_base(m, axis_len, lo, hi);
     {
         amps_scene_opts so;
-        amps_scene_opts_default(&so);
-        if (getenv("AMPS_REFINE")) so.update.refine = atoi(getenv("AMPS_REFINE"));
-        if (getenv("AMPS_DUAL")) so.update.formulation = AMPS_FORM_DUAL;
-        if (getenv("AMPS_GUARD")) so.update.guard_tol = atof(getenv("AMPS_GUARD"));
+        bu_scene_opts(&so);
         S = amps_scene_create(&ctx, m, &so);
     }
     amps_scene_set_material(&ctx, S, 1000.0, 0.3);
-    {
-        amps_int *fl = (amps_int *)malloc(sizeof(amps_int) * (size_t)nn0), nf = 0;
-        for (v = 0; v < nn0; v++) if (fixed0[v]) fl[nf++] = v;
-        amps_scene_fix(&ctx, S, nf, fl);
-        free(fl);
-    }
+    bu_fix(&ctx, S, nn0, fixed0);
     /* the cut path: nodes on (or nearest to) the plane x = xc, from the far end of the long axis */
-    xc = 0.5 * (lo[0] + hi[0]);
-    h = pow((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]) / nn0, 1.0 / 3.0);
-    tol = 0.5 * h;
-    path = (int *)malloc(sizeof(int) * (size_t)nn0);
-    for (v = 0; v < nn0; v++) if (fabs(m->xyz[3 * v] - xc) <= tol && !fixed0[v]) path[npath++] = v;
-    {   /* order: descending long-axis coordinate, then the third axis */
-        int i, j, ax2 = axis_len == 2 ? 1 : 2;
-        for (i = 1; i < npath; i++) {
-            int pv = path[i];
-            for (j = i - 1; j >= 0; j--) {
-                const double *a = m->xyz + 3 * path[j], *b = m->xyz + 3 * pv;
-                if (a[axis_len] > b[axis_len] + 1e-9 || (fabs(a[axis_len] - b[axis_len]) <= 1e-9 && a[ax2] <= b[ax2])) break;
-                path[j + 1] = path[j];
-            }
-            path[j + 1] = pv;
-        }
-    }
+    if (bu_cut_init(&cp, m, fixed0, axis_len, lo, hi)) return 1;
     pinned = (unsigned char *)calloc((size_t)(nn0 + steps + 16), 1);
     pinval = (double *)calloc(3 * (size_t)(nn0 + steps + 16), sizeof(double));
     force = (double *)calloc(3 * (size_t)(nn0 + steps + 16), sizeof(double));
     /* opposing forces near the start of the cut on either side */
-    if (cut && npath > 0) {
-        const double *p0 = m->xyz + 3 * path[0];
-        int added = 0;
-        for (v = 0; v < nn0 && added < 20; v++) {
-            const double *q = m->xyz + 3 * v;
-            double dist = sqrt((q[1] - p0[1]) * (q[1] - p0[1]) + (q[2] - p0[2]) * (q[2] - p0[2]));
-            if (fixed0[v] || fabs(q[0] - xc) < tol || dist > 3 * h) continue;
-            force[3 * v] = q[0] < xc ? -1.0 : 1.0;
-            amps_scene_force(&ctx, S, v, force + 3 * v);
-            added++;
-        }
-    }
+    if (cut) bu_cut_forces(&ctx, S, m, fixed0, &cp, force);
     t_prep = amps_now();
     if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "first solve: %s\n", ctx.msg); return 1; }
     t_prep = amps_now() - t_prep;
     {
         const amps_factor *F = amps_scene_factor(S);
         printf("%s %s: %d nodes, %ld equations, nnz(L) %.0f, tree height %ld, first solve (ordering+factor) %.3f s, path %d nodes\n",
-               spec, mode, nn0, (long)F->n, amps_factor_nnz(F), (long)F->height, t_prep, npath);
+               spec, mode, nn0, (long)F->n, amps_factor_nnz(F), (long)F->height, t_prep, cp.npath);
     }
     csv = fopen(out, "w");
     if (!csv) { fprintf(stderr, "cannot write %s\n", out); return 1; }
@@ -195,7 +148,7 @@ int main(int argc, char **argv) {
     t_amps = (double *)malloc(sizeof(double) * (size_t)steps);
     t_chol = (double *)malloc(sizeof(double) * (size_t)steps);
     t_cs = (double *)malloc(sizeof(double) * (size_t)steps);
-    for (st = 0, ip = 0; st < steps && ip < npath; st++) {
+    for (st = 0; st < steps && cp.ip < cp.npath; st++) {
         double t0, dt, res = -1;
         amps_update_stats us;
         amps_status s = AMPS_WARN_NOOP;
@@ -204,17 +157,11 @@ int main(int argc, char **argv) {
         t0 = amps_now();
         if (cut) {
             /* the plane through the next path node that the cut actually splits */
-            while (s == AMPS_WARN_NOOP && ip < npath) {
-                double p[3], nrm[3] = {1, 0, 0};
-                amps_int vc;
-                node = path[ip++];
-                memcpy(p, m->xyz + 3 * node, sizeof(p));
-                s = amps_scene_cut(&ctx, S, node, p, nrm, &vc);
-            }
+            s = bu_cut_next(&ctx, S, &cp, &node);
             if (s == AMPS_WARN_NOOP) break;
         } else {
             double u[3] = {0, 0, 0};
-            node = path[ip++];
+            node = cp.path[cp.ip++];
             u[axis_len] = -0.01 * (hi[axis_len] - lo[axis_len]);
             s = amps_scene_pin(&ctx, S, node, u);
             if (s == AMPS_OK) { pinned[node] = 1; memcpy(pinval + 3 * node, u, sizeof(u)); }
@@ -235,11 +182,11 @@ int main(int argc, char **argv) {
     }
     fclose(csv);
     {
-        double ma = median(t_amps, nt), mc = median(t_chol, nc), ms = median(t_cs, nc);
+        double ma = bu_median(t_amps, nt), mc = bu_median(t_chol, nc), ms = bu_median(t_cs, nc);
         printf("  steps %d: median AMPS step %.2f ms (%.0f Hz); CHOLMOD analyze+factor+solve %.1f ms (x%.1f); CHOLMOD solve %.2f ms (AMPS step / solve = %.2f)\n",
                nt, 1e3 * ma, 1 / ma, 1e3 * mc, mc / ma, 1e3 * ms, ma / ms);
     }
     amps_scene_free(&ctx, S);
-    free(fixed0); free(pinned); free(pinval); free(force); free(path); free(t_amps); free(t_chol); free(t_cs);
+    free(fixed0); free(pinned); free(pinval); free(force); free(cp.path); free(t_amps); free(t_chol); free(t_cs);
     return 0;
 }

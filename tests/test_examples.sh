@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# Smoke run of examples/haptic_loop (1 s, and 1 s writing VTU frames): exit 0, both loops ran
+# at a positive rate, frames written.
+B=${AMPS_BUILD:-build/default}
+pass=0; fail=0
+ok() { pass=$((pass+1)); }
+bad() { fail=$((fail+1)); echo "FAIL test_examples: $*"; }
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+if "$B/haptic_loop" -t 1 -o "$tmp" > "$tmp/out" 2>&1; then ok; else bad "haptic_loop exited nonzero: $(tail -3 "$tmp/out")"; fi
+for loop in haptic visual; do
+  hz=$(sed -n "s/^$loop: .* = \([0-9.]*\) Hz.*/\1/p" "$tmp/out")
+  if [ -n "$hz" ] && awk -v r="$hz" 'BEGIN{exit !(r > 0)}'; then ok; else bad "$loop rate '$hz': $(tail -3 "$tmp/out")"; fi
+done
+grep -q '^frame ' "$tmp/out" && ok || bad "no frame lines"
+[ -s "$tmp/frame_0000.vtu" ] && ok || bad "frame_0000.vtu not written"
+"$B/haptic_loop" -x > /dev/null 2>&1; [ $? -eq 2 ] && ok || bad "bad option: exit code not 2"
+echo "test_examples: $pass passed, $fail failed"
+[ $fail -eq 0 ]
