@@ -3912,6 +3912,7 @@ struct amps_update {
     amps_formulation form;
     double tol, sigma;
     int grow, nthr, refine, eq320, committed;
+    int nbuf;                              /* threads the per-thread buffers are sized for (>= nthr) */
     double guard_tol;                      /* accuracy guard (0: off) */
     double *ctr, *gbuf;                    /* guard: forward solve of the residual (n), 2 * capN scratch */
     amps_int n, N, kpend, capN;
@@ -4012,7 +4013,7 @@ static amps_status amps__grow_u(amps_ctx *ctx, amps_update *U, amps_int cap) {
         amps__realloc(ctx, (void **)&U->cstamp, c, sizeof(amps_int)) ||
         amps__realloc(ctx, (void **)&U->rst, c, sizeof(amps_int)) ||
         amps__realloc(ctx, (void **)&U->rcnt, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->pbuf, c * (size_t)U->nthr, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->pbuf, c * (size_t)U->nbuf, sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->dj, c, sizeof(amps__djour)) ||
         amps__realloc(ctx, (void **)&U->react, c, sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->z, c, sizeof(double)) ||
@@ -4193,6 +4194,7 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     U->nthr = 1;
 #endif
     if (U->nthr < 1) U->nthr = 1;
+    U->nbuf = U->nthr;
     if (amps__sym_full(ctx, K, stype, &U->Kp, &U->Ki, &U->Kx)) goto fail;
     vcap = o.cap_vpool > 0 ? (size_t)o.cap_vpool : (size_t)capu * (size_t)(F->height > 0 ? F->height : 1);
     U->vcap = vcap;

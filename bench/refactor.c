@@ -1,0 +1,94 @@
+/* bench/refactor: a long advancing cut with and without background re-factorization.
+
+   usage: refactor <mesh> <steps> <on|off> <out.csv>
+     mesh: beam:<h> | brick:<R> | path to a TetGen .node / .msh / .mesh file
+   Setup as in bench/update (base held, opposing forces at the start of the cut). Each step cuts
+   the next node of the path and solves (amps_scene_cut + amps_scene_solve, timed together).
+   When the path is used up it is walked again with the plane normal along the next axis, so
+   nodes are cut repeatedly. Cuts that would detach a piece are undone by the scene and skipped.
+   on: the default policy (AUTO: the cost model starts background re-factorizations); off:
+   refactor = OFF (the augmentation grows for ever).
+   Per step (CSV): step time, |S u C|, re-factorizations swapped in so far, whether one is
+   running, the time of a swap that happened in this step (0 otherwise), the residual every 50
+   steps. The summary compares the median step time of steps 5-15 with that of the last 11. */
+#define AMPS_IMPLEMENTATION
+#include "../amps.h"
+#include "bench_util.h"
+
+int main(int argc, char **argv) {
+    amps_ctx ctx;
+    amps_mesh *m;
+    amps_scene *S;
+    amps_scene_opts so;
+    bu_cut cp;
+    unsigned char *fixed;
+    double lo[3], hi[3], *force, *t, first[11], last[11], worst_res = 0;
+    int steps, on, up, st, pass = 0, nsk = 0, nn;
+    char name[256];
+    FILE *f;
+    if (argc < 5) { fprintf(stderr, "usage: refactor <mesh> <steps> <on|off> <out.csv>\n"); return 2; }
+    steps = atoi(argv[2]); on = strcmp(argv[3], "off") != 0;
+    amps_ctx_init(&ctx);
+    bu_mesh_name(argv[1], name, sizeof(name));
+    if (!(m = bu_load_mesh(&ctx, argv[1]))) { fprintf(stderr, "%s: %s\n", argv[1], ctx.msg); return 1; }
+    nn = (int)m->nnode;
+    bu_bbox(m, lo, hi);
+    up = bu_up_axis(argv[1]);
+    fixed = bu_base(m, up, lo, hi);
+    bu_scene_opts(&so);
+    so.update.refactor = on ? AMPS_REFACTOR_AUTO : AMPS_REFACTOR_OFF;
+    if (getenv("AMPS_REFACTOR_RATIO")) so.update.refactor_ratio = atof(getenv("AMPS_REFACTOR_RATIO"));
+    S = amps_scene_create(&ctx, m, &so);
+    amps_scene_set_material(&ctx, S, 1000.0, 0.3);
+    bu_fix(&ctx, S, nn, fixed);
+    if (bu_cut_init(&cp, m, fixed, up, lo, hi)) return 1;
+    force = (double *)calloc(3 * (size_t)nn, sizeof(double));
+    t = (double *)malloc(sizeof(double) * (size_t)steps);
+    bu_cut_forces(&ctx, S, m, fixed, &cp, force);
+    if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "first solve: %s\n", ctx.msg); return 1; }
+    f = bu_csv(argv[4], "mesh,policy,step,t_step,nsys,nrefactor,running,t_swap,t_refactor,relres");
+    for (st = 0; st < steps; st++) {
+        amps_update_stats us;
+        amps_status s;
+        int node, nref0;
+        double t0, res = -1;
+        amps_update_get_stats(amps_scene_engine(S), &us);
+        nref0 = (int)us.nrefactor;
+        t0 = amps_now();
+        for (;;) {
+            double p[3], nrm[3] = {0, 0, 0};
+            amps_int vc;
+            if (cp.ip >= cp.npath) { cp.ip = 0; pass++; }
+            node = cp.path[cp.ip++];
+            nrm[pass % 3] = 1;
+            memcpy(p, amps_scene_mesh(S)->xyz + 3 * node, sizeof(p));
+            s = amps_scene_cut(&ctx, S, node, p, nrm, &vc);
+            if (s == AMPS_OK) break;
+            if (s != AMPS_WARN_NOOP && s != AMPS_ERR_SINGULAR_UPDATE) { fprintf(stderr, "step %d: cut: %s\n", st, ctx.msg); return 1; }
+            nsk++;
+        }
+        s = amps_scene_solve(&ctx, S);
+        t[st] = amps_now() - t0;
+        if (s != AMPS_OK) { fprintf(stderr, "step %d: solve: %s\n", st, ctx.msg); return 1; }
+        if (st % 50 == 49 && amps_scene_residual(&ctx, S, &res) == AMPS_OK && res > worst_res) worst_res = res;
+        amps_update_get_stats(amps_scene_engine(S), &us);
+        if (f) fprintf(f, "%s,%s,%d,%.6e,%d,%d,%d,%.6e,%.6e,%.3e\n", name, on ? "on" : "off", st + 1, t[st], (int)us.nsys,
+                       (int)us.nrefactor, us.refactor_running, (int)us.nrefactor > nref0 ? us.t_swap : 0.0,
+                       (int)us.nrefactor > nref0 ? us.t_refactor : 0.0, res);
+    }
+    if (f) fclose(f);
+    {
+        amps_update_stats us;
+        int k, nf = 0;
+        for (k = 4; k < 15 && k < steps; k++) first[nf++] = t[k];
+        for (k = 0; k < 11 && k < steps; k++) last[k] = t[steps - 1 - k];
+        amps_update_get_stats(amps_scene_engine(S), &us);
+        printf("%-10s re-factorization %-3s  steps %d (skipped cuts %d)  step 5-15 median %.2f ms, last 11 median %.2f ms, ratio %.2f"
+               "  |S u C| at the end %d  re-factorizations %d (failed %d)  worst residual %.1e\n",
+               name, on ? "on" : "off", steps, nsk, 1e3 * bu_median(first, nf), 1e3 * bu_median(last, steps < 11 ? steps : 11),
+               bu_median(last, steps < 11 ? steps : 11) / bu_median(first, nf), (int)us.nsys, (int)us.nrefactor, (int)us.refactor_failed, worst_res);
+    }
+    amps_scene_free(&ctx, S);
+    free(fixed); free(force); free(t); free(cp.path);
+    return 0;
+}
