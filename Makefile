@@ -2,6 +2,7 @@
 #   make test          build and run every test (last line: "N passed, N failed")
 #   make test SAN=1    the same under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make test OMP=     the same without OpenMP
+#   make switches      AMPS_NO_FEM / NO_STDIO / NO_THREADS combinations: build, tests, object sizes
 #   make demo          the main job: replay examples/brick_incision.scn (VTU, CSV, PNG in build/demo)
 #   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv
 #   make deps          install (as root) or list the Debian packages the tests need
@@ -32,7 +33,7 @@ TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
 TEST_SH   := $(wildcard tests/test_*.sh)
 TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example
 
-.PHONY: all test deps deps-check tools demo bench bench-quick clean cxx
+.PHONY: all test deps deps-check tools demo bench bench-quick clean cxx switches
 all: tools
 
 tools: $(TOOLS)
@@ -69,6 +70,10 @@ deps:
 cxx: | $(BUILD)
 	printf '#define AMPS_IMPLEMENTATION\n#include "amps.h"\nint main(void){amps_ctx c; amps_ctx_init(&c); return 0;}\n' > $(BUILD)/cxx_check.cpp
 	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -c $(BUILD)/cxx_check.cpp -o $(BUILD)/cxx_check.o
+
+# The compile-time switches, each combination built with -Werror, tested and sized (tests/switches.sh).
+switches: deps-check
+	@CC=$(CC) bash tests/switches.sh
 
 bench:
 	bash bench/run.sh full
