@@ -4,6 +4,7 @@
 #   make test OMP=     the same without OpenMP
 #   make tsan          ThreadSanitizer on the tests that run background re-factorizations
 #   make examples      build the examples (build/default/readme_example, haptic_loop)
+#   make switches      AMPS_NO_FEM / NO_STDIO / NO_THREADS combinations: build, tests, object sizes
 #   make demo          the main job: replay examples/brick_incision.scn (VTU, CSV, PNG in build/demo)
 #   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv
 #   make deps          install (as root) or list the Debian packages the tests need
@@ -37,7 +38,7 @@ TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
 TEST_SH   := $(wildcard tests/test_*.sh)
 TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example $(BUILD)/haptic_loop
 
-.PHONY: tsan all test deps deps-check tools examples demo bench bench-quick clean cxx
+.PHONY: tsan all test deps deps-check tools examples demo bench bench-quick clean cxx switches
 all: tools
 
 tools: $(TOOLS)
@@ -85,6 +86,10 @@ cxx: | $(BUILD)
 tsan:
 	$(MAKE) SAN=thread OMP= BUILD=build/tsan OPT="-O1 -g" build/tsan/test_update build/tsan/test_scene
 	@TSAN_OPTIONS="halt_on_error=1 suppressions=$(abspath tests/tsan.supp)" AMPS_BUILD=build/tsan bash tests/run.sh build/tsan/test_update build/tsan/test_scene
+
+# The compile-time switches, each combination built with -Werror, tested and sized (tests/switches.sh).
+switches: deps-check
+	@CC=$(CC) bash tests/switches.sh
 
 bench:
 	bash bench/run.sh full

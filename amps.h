@@ -17,10 +17,13 @@
      AMPS_USE_METIS       enable AMPS_ORDER_METIS (link -lmetis)
      AMPS_PIVOT_TOL       LDL^T pivots below this times the column's diagonal are "not SPD" (1e-12)
      AMPS_COUNT_TOUCH     tests: count the L entries the sparse and partial solves read
-     AMPS_NO_FEM          leave out the FEM scene (linear algebra only)
-     AMPS_NO_STDIO        leave out file readers/writers
-     AMPS_NO_THREADS      leave out background threads
-     OpenMP kernels are used when compiled with -fopenmp (_OPENMP defined).
+     AMPS_NO_FEM          linear algebra only (sparse, ordering, factor, solve, update engine):
+                          leaves out the mesh and element layer, the scene and the mesh I/O
+     AMPS_NO_STDIO        no <stdio.h>: leaves out the file readers and writers (amps_mesh_read*,
+                          amps_write_*); the *_mem readers stay. Error messages never use stdio
+                          (a private formatter, the same in every build).
+     AMPS_NO_THREADS      leave out amps' own background threads (pthreads); OpenMP is separate
+     OpenMP kernels are used when compiled with -fopenmp (_OPENMP defined), else none.
 
    ERRORS
      Every call that can fail takes an amps_ctx* and returns an amps_status (or NULL for
@@ -607,7 +610,7 @@ AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, am
 #endif /* AMPS_NO_FEM */
 
 /* =================================== I/O =================================== */
-#if !defined(AMPS_NO_FEM) && !defined(AMPS_NO_STDIO)
+#ifndef AMPS_NO_FEM
 /* @@API io: owned by fem */
 /* Mesh readers. Nodes are numbered in file order from 0; tets keep file order. Return NULL on
    failure, with AMPS_ERR_PARSE and "file:line: message" in ctx for malformed input (AMPS_ERR_IO
@@ -619,15 +622,16 @@ AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, am
    MEDIT .mesh (ASCII): Dimension 3, Vertices, Tetrahedra; other keywords are skipped.
    amps_mesh_read picks the reader by extension: .node (and the .ele of the same name), .ele
    (and the .node), .msh, .mesh. The *_mem variants parse a buffer of len bytes (no NUL needed);
-   name is used in messages. */
-AMPS_API amps_mesh *amps_mesh_read(amps_ctx *ctx, const char *path);
-AMPS_API amps_mesh *amps_mesh_read_tetgen(amps_ctx *ctx, const char *node_path, const char *ele_path);
-AMPS_API amps_mesh *amps_mesh_read_gmsh(amps_ctx *ctx, const char *path);
-AMPS_API amps_mesh *amps_mesh_read_medit(amps_ctx *ctx, const char *path);
+   name is used in messages. With AMPS_NO_STDIO only the *_mem variants exist. */
 AMPS_API amps_mesh *amps_mesh_read_tetgen_mem(amps_ctx *ctx, const char *node_buf, size_t node_len, const char *node_name,
                                               const char *ele_buf, size_t ele_len, const char *ele_name);
 AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size_t len, const char *name);
 AMPS_API amps_mesh *amps_mesh_read_medit_mem(amps_ctx *ctx, const char *buf, size_t len, const char *name);
+#ifndef AMPS_NO_STDIO
+AMPS_API amps_mesh *amps_mesh_read(amps_ctx *ctx, const char *path);
+AMPS_API amps_mesh *amps_mesh_read_tetgen(amps_ctx *ctx, const char *node_path, const char *ele_path);
+AMPS_API amps_mesh *amps_mesh_read_gmsh(amps_ctx *ctx, const char *path);
+AMPS_API amps_mesh *amps_mesh_read_medit(amps_ctx *ctx, const char *path);
 
 /* VTK XML UnstructuredGrid (ASCII) of the mesh in its reference configuration (copies are
    separate points, so a cut opens under "Warp By Vector"). Point data: "displacement" (disp,
@@ -641,7 +645,8 @@ AMPS_API amps_status amps_write_vtu(amps_ctx *ctx, const char *path, const amps_
 AMPS_API amps_status amps_write_tetgen(amps_ctx *ctx, const char *base, const amps_mesh *m, int first_index);
 AMPS_API amps_status amps_write_gmsh(amps_ctx *ctx, const char *path, const amps_mesh *m, int version);
 AMPS_API amps_status amps_write_medit(amps_ctx *ctx, const char *path, const amps_mesh *m);
-#endif
+#endif /* AMPS_NO_STDIO */
+#endif /* AMPS_NO_FEM */
 
 #ifdef __cplusplus
 }
@@ -660,8 +665,10 @@ AMPS_API amps_status amps_write_medit(amps_ctx *ctx, const char *path, const amp
 #include <string.h>
 #include <math.h>
 #include <stdarg.h>
-#include <stdio.h>
 #include <time.h>
+#if !defined(AMPS_NO_FEM) && !defined(AMPS_NO_STDIO)
+#include <stdio.h> /* file readers and writers only */
+#endif
 #ifdef _OPENMP
 #include <omp.h>
 #endif
@@ -734,13 +741,168 @@ AMPS_API double amps_now(void) {
 #endif
 }
 
-/* Records status s and a printf-style message in ctx; returns s. */
+/* ---- messages: a small printf subset, identical in every build and free of <stdio.h> ----
+   Conversions: %% %c %s %d %u %ld %lu %lld %llu, and %f %e %g with an optional precision
+   (%.3g); no flags or widths. Numbers carry at most 15 significant digits (later ones print as
+   0); otherwise the output is printf's, correctly rounded (tests/test_fmt.c compares the two). */
+
+typedef struct amps__str { char *p, *end; } amps__str; /* cursor; end keeps room for the NUL */
+
+static void amps__puts(amps__str *o, const char *s, size_t n) {
+    while (n-- > 0 && o->p < o->end) *o->p++ = *s++;
+}
+
+static void amps__putc(amps__str *o, char c) {
+    if (o->p < o->end) *o->p++ = c;
+}
+
+/* Decimal digits of u into d (room for 20); returns their number. */
+static int amps__udec(char *d, unsigned long long u) {
+    char t[20];
+    int n = 0, k;
+    do t[n++] = (char)('0' + (int)(u % 10)); while (u /= 10);
+    for (k = 0; k < n; k++) d[k] = t[n - 1 - k];
+    return n;
+}
+
+/* a * 10^k (a > 0) rounded to an integer, ties to even. a * 10^k = (a 2^k) * 5^k, with a 2^k
+   exact, 5^|k| the double-double h + l, and the rounding error e of the product (or quotient)
+   from fma, so that near-ties round as printf's. */
+static double amps__round10(double a, int k) {
+    double h = 1.0, l = 0.0, t, e, r, d;
+    int i;
+    for (i = 0; i < (k < 0 ? -k : k); i++) {
+        t = h * 5.0;
+        l = fma(h, 5.0, -t) + l * 5.0;
+        h = t;
+    }
+    a = ldexp(a, k);
+    if (k >= 0) t = a * h, e = fma(a, h, -t) + a * l;
+    else t = a / h, e = (fma(-t, h, a) - t * l) / h;
+    r = floor(t);
+    d = (t - r - 0.5) + e; /* t - r - 0.5 is 0 or at least ulp(t) > |e| */
+    if (d > 0 || (d == 0 && fmod(r, 2.0) != 0.0)) r += 1.0;
+    return r;
+}
+
+/* The first nd (1..15) significant digits of a > 0 (rounded) into d; returns the decimal
+   exponent of the first. */
+static int amps__sig(double a, int nd, char *d) {
+    double lo = pow(10.0, nd - 1), r = lo;
+    int x = (int)floor(log10(a)), it, k;
+    for (it = 0; it < 4; it++) { /* log10 may be off by one next to a power of 10 */
+        r = amps__round10(a, nd - 1 - x);
+        if (r >= 10.0 * lo) x++;
+        else if (r < lo) x--;
+        else break;
+    }
+    k = amps__udec(d, (unsigned long long)r);
+    while (k < nd) d[k++] = '0';
+    return x;
+}
+
+/* Digits d[0..n-1] (the first of exponent x; the ones after n are 0) as %f with p decimals. */
+static void amps__fixed(amps__str *o, const char *d, int n, int x, int p) {
+    int i;
+    if (x < 0) amps__putc(o, '0');
+    for (i = 0; i <= x; i++) amps__putc(o, i < n ? d[i] : '0');
+    if (p > 0) amps__putc(o, '.');
+    for (i = x + 1; i <= x + p; i++) amps__putc(o, i >= 0 && i < n ? d[i] : '0');
+}
+
+/* v as %f, %e or %g (conv) with precision p (< 0: 6). */
+static void amps__putd(amps__str *o, double v, char conv, int p) {
+    char d[24];
+    int n = 1, x = 0;
+    if (p < 0) p = 6;
+    if (signbit(v)) amps__putc(o, '-');
+    v = fabs(v);
+    if (v != v || v - v != 0) {
+        amps__puts(o, v != v ? "nan" : "inf", 3);
+        return;
+    }
+    d[0] = '0';
+    if (conv == 'f') {
+        if (v > 0) {
+            int nd = (int)floor(log10(v)) + 1 + p;
+            if (nd >= 1) x = amps__sig(v, n = nd < 15 ? nd : 15, d);
+            else if (nd == 0 && amps__round10(v, p) >= 1) x = -p, d[0] = '1'; /* rounds up to 10^-p */
+        }
+        amps__fixed(o, d, n, x, p);
+        return;
+    }
+    if (conv == 'g' && p == 0) p = 1;
+    n = conv == 'g' ? p : p + 1;
+    if (n > 15) n = 15;
+    if (v > 0) x = amps__sig(v, n, d);
+    else n = 1;
+    if (conv == 'g') { /* shortest of the p significant digits */
+        while (n > 1 && d[n - 1] == '0') n--;
+        if (x >= -4 && x < p) {
+            amps__fixed(o, d, n, x, n - 1 - x > 0 ? n - 1 - x : 0);
+            return;
+        }
+        p = n - 1;
+    }
+    amps__fixed(o, d, n, 0, p);
+    amps__putc(o, 'e');
+    amps__putc(o, x < 0 ? '-' : '+');
+    if (x > -10 && x < 10) amps__putc(o, '0');
+    amps__puts(o, d, (size_t)amps__udec(d, (unsigned long long)(x < 0 ? -x : x)));
+}
+
+/* vsnprintf for the conversions above: at most size - 1 characters and a NUL into buf. */
+static void amps__vfmt(char *buf, size_t size, const char *fmt, va_list ap) {
+    amps__str o;
+    char t[24];
+    if (!buf || !size) return;
+    o.p = buf;
+    o.end = buf + size - 1;
+    while (*fmt) {
+        const char *spec = fmt;
+        int p = -1, l = 0;
+        char c;
+        if (*fmt != '%') {
+            amps__putc(&o, *fmt++);
+            continue;
+        }
+        if (*++fmt == '.')
+            for (p = 0; *++fmt >= '0' && *fmt <= '9';) p = 10 * p + (*fmt - '0');
+        while (*fmt == 'l') l++, fmt++;
+        c = *fmt;
+        if (c) fmt++;
+        if (c == 'd') {
+            long long v = l == 0 ? va_arg(ap, int) : l == 1 ? va_arg(ap, long) : va_arg(ap, long long);
+            if (v < 0) amps__putc(&o, '-');
+            amps__puts(&o, t, (size_t)amps__udec(t, v < 0 ? 0ULL - (unsigned long long)v : (unsigned long long)v));
+        } else if (c == 'u') {
+            unsigned long long v = l == 0 ? va_arg(ap, unsigned) : l == 1 ? va_arg(ap, unsigned long) : va_arg(ap, unsigned long long);
+            amps__puts(&o, t, (size_t)amps__udec(t, v));
+        } else if (c == 'f' || c == 'e' || c == 'g') {
+            amps__putd(&o, va_arg(ap, double), c, p);
+        } else if (c == 's') {
+            const char *s = va_arg(ap, const char *);
+            if (!s) s = "(null)";
+            amps__puts(&o, s, strlen(s));
+        } else if (c == 'c') {
+            amps__putc(&o, (char)va_arg(ap, int));
+        } else if (c == '%') {
+            amps__putc(&o, '%');
+        } else {
+            amps__puts(&o, spec, (size_t)(fmt - spec)); /* unsupported: copied as is */
+        }
+    }
+    *o.p = 0;
+}
+
+
+/* Records status s and a message formatted by amps__vfmt in ctx; returns s. */
 static amps_status amps__err(amps_ctx *ctx, amps_status s, const char *fmt, ...) {
     if (ctx) {
         va_list ap;
         ctx->status = s;
         va_start(ap, fmt);
-        vsnprintf(ctx->msg, sizeof(ctx->msg), fmt, ap);
+        amps__vfmt(ctx->msg, sizeof(ctx->msg), fmt, ap);
         va_end(ap);
     }
     return s;
@@ -7256,7 +7418,7 @@ AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, doubl
 #endif /* AMPS_NO_FEM */
 
 /* ==================================== I/O impl ==================================== */
-#if !defined(AMPS_NO_FEM) && !defined(AMPS_NO_STDIO)
+#ifndef AMPS_NO_FEM
 /* @@SECTION io: owned by fem */
 /* ---- tokenizer over a memory buffer, with line numbers ---- */
 
@@ -7335,7 +7497,7 @@ static amps_status amps__lx_err(amps__lex *L, long long line, amps_status s, con
     char msg[200];
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(msg, sizeof(msg), fmt, ap);
+    amps__vfmt(msg, sizeof(msg), fmt, ap);
     va_end(ap);
     return amps__err(L->ctx, s, "%s:%lld: %s", L->name, line, msg);
 }
@@ -7631,10 +7793,19 @@ static amps_status amps__gmsh_node(amps__lex *L, const amps__gtag *tags, amps_in
     return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "element refers to undefined node tag %lld", tg);
 }
 
+/* want = "$End<sec>", truncated to 31 characters. */
+static void amps__gmsh_want(char want[32], const char *sec) {
+    size_t n = strlen(sec);
+    if (n > 27) n = 27;
+    memcpy(want, "$End", 4);
+    memcpy(want + 4, sec, n);
+    want[4 + n] = 0;
+}
+
 /* Expects the token "$End<sec>" at the start of the next non-blank line. */
 static amps_status amps__gmsh_end(amps__lex *L, const char *sec, const char *after) {
     char want[32], sh[40];
-    snprintf(want, sizeof(want), "$End%s", sec);
+    amps__gmsh_want(want, sec);
     if (!amps__lx_tok(L, 1)) return amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "unexpected end of file, expected %s", want);
     if (!amps__lx_is(L, want, 0))
         return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "expected %s%s, found '%s'", want, after, amps__lx_show(L, sh));
@@ -7836,7 +8007,7 @@ AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size
             /* unknown section: skip lines up to $End<sec> */
             char want[32];
             long long start = L.tline;
-            snprintf(want, sizeof(want), "$End%s", sec);
+            amps__gmsh_want(want, sec);
             for (;;) {
                 if (!amps__lx_tok(&L, 1)) {
                     amps__lx_err(&L, start, AMPS_ERR_PARSE, "section $%s is not closed by %s", sec, want);
@@ -7971,6 +8142,7 @@ done:
 }
 
 /* ---- files ---- */
+#ifndef AMPS_NO_STDIO
 
 /* Whole file into a new buffer (*len bytes, NUL-terminated). */
 static amps_status amps__read_all(amps_ctx *ctx, const char *path, char **out, size_t *len) {
@@ -8248,7 +8420,8 @@ AMPS_API amps_status amps_write_medit(amps_ctx *ctx, const char *path, const amp
     amps__pr(&o, "End\n");
     return amps__close_out(ctx, fn, path, &o);
 }
-#endif
+#endif /* AMPS_NO_STDIO */
+#endif /* AMPS_NO_FEM */
 
 #ifdef __cplusplus
 }

@@ -1,6 +1,7 @@
 /* Mesh readers and writers: round trips, TetGen numbering bases, Gmsh 2.2 / 4.1 with mixed
    element types, malformed input (status and file:line), random corruption, allocation
-   failures, and a well-formed VTU file. Temporary files go next to the test binary. */
+   failures, and a well-formed VTU file. Temporary files go next to the test binary.
+   With AMPS_NO_STDIO only the from-memory readers are tested. */
 #include <string.h>
 #include "t_alloc.h"
 #define AMPS_IMPLEMENTATION
@@ -9,6 +10,7 @@
 
 static char g_dir[600];
 
+#ifndef AMPS_NO_STDIO
 static void t_path(char *out, const char *name) { snprintf(out, 700, "%s/%s", g_dir, name); }
 
 static int t_write(const char *path, const char *s, size_t n) {
@@ -29,6 +31,7 @@ static char *t_slurp(const char *path, size_t *len) {
     if (len) *len = (size_t)n;
     return b;
 }
+#endif
 
 /* Readers on exact-size heap copies (no NUL terminator), so overreads are caught by ASan. */
 static amps_mesh *t_gmsh(amps_ctx *ctx, const char *s) {
@@ -252,6 +255,7 @@ static void test_malformed_medit(void) {
 #undef M_V
 }
 
+#ifndef AMPS_NO_STDIO
 /* ---- round trips through files ---- */
 
 static void test_roundtrip(void) {
@@ -439,6 +443,7 @@ static void test_vtu(void) {
     free(disp); free(vm); free(pr);
     amps_mesh_free(&ctx, m);
 }
+#endif /* AMPS_NO_STDIO */
 
 /* ---- robustness: random corruption never crashes and keeps the contract ---- */
 
@@ -495,6 +500,7 @@ static void test_corruption(void) {
                 else if (f == 2) m = amps_mesh_read_medit_mem(&ctx, exact, n, "m.mesh");
                 else m = amps_mesh_read_tetgen_mem(&ctx, exact, n, "t.node", T_ELE1, strlen(T_ELE1), "t.ele");
                 parsed += m != NULL;
+#ifndef AMPS_NO_STDIO
                 if (m && parsed % 10 == 1) { /* what parses survives a write / read round trip */
                     char path[700];
                     amps_mesh *r;
@@ -506,6 +512,7 @@ static void test_corruption(void) {
                     amps_mesh_free(&ctx, r);
                     remove(path);
                 }
+#endif
                 t_contract(&ctx, m, f < 2 ? "g.msh" : f == 2 ? "m.mesh" : "t.node", &bad);
                 free(exact);
             }
@@ -551,8 +558,10 @@ int main(int argc, char **argv) {
     test_malformed_tetgen();
     test_malformed_gmsh();
     test_malformed_medit();
+#ifndef AMPS_NO_STDIO
     test_roundtrip();
     test_vtu();
+#endif
     test_corruption();
     test_reader_oom();
     return amps_t_end("test_io");
