@@ -5943,6 +5943,7 @@ static void amps__bg_join(amps__bg *b) {
 #endif
 }
 
+#ifndef AMPS_NO_THREADS
 /* Factorization time estimated from the solve time: flops sum_j c_j^2 against 4 sum_j c_j. */
 static double amps__fact_estimate(const amps_factor *F, double t_solve) {
     double s1 = 0, s2 = 0;
@@ -5950,6 +5951,7 @@ static double amps__fact_estimate(const amps_factor *F, double t_solve) {
     for (j = 0; j < F->n; j++) { double c = (double)(F->Lp[j + 1] - F->Lp[j]) + 1; s1 += c; s2 += c * c; }
     return s1 > 0 ? t_solve * s2 / (4 * s1) : 0;
 }
+#endif
 
 /* Swaps a ready re-factorization in: the rest of the log, the constraints and forces now, a
    commit on the new base, then the new base takes the handle's place. The system is unchanged,
