@@ -75,7 +75,8 @@ typedef enum amps_status {
     AMPS_ERR_PARSE = -11,           /* malformed file or scenario                            */
     AMPS_ERR_STATE = -12,           /* call not valid in the object's current state          */
     AMPS_ERR_UNSUPPORTED = -13,     /* feature compiled out (e.g. METIS)                     */
-    AMPS_WARN_NOOP = 1              /* success, but nothing was done (e.g. a cut with one empty side) */
+    AMPS_WARN_NOOP = 1,             /* success, but nothing was done (e.g. a cut with one empty side) */
+    AMPS_WARN_INACCURATE = 2        /* solved, but the accuracy guard's tolerance was not reached */
 } amps_status;
 
 /* Caller-owned context: allocator user pointer, thread count, and the last error. */
@@ -300,7 +301,10 @@ typedef struct amps_update_opts {
     double guard_tol;       /* accuracy guard: > 0 computes the relative residual of every solve (one
                                product with K^) and, while it exceeds guard_tol, refines with the
                                same factors (each step one more forward and backward solve), at
-                               most 3 steps; 0 (default) = off */
+                               most 3 steps; if still above, re-factors synchronously (unless
+                               refactor is OFF) and solves again; stats.guard_result says which
+                               happened; AMPS_WARN_INACCURATE if the tolerance was not reached.
+                               0 (default) = off */
     amps_refactor_policy refactor; /* re-factorization of the current matrix (see below); default AUTO */
     amps_order_opts refactor_order;/* its ordering; default AUTO with node blocks detected (block 0) */
     int refactor_threads;   /* OpenMP threads of the background factorization; default 1 */
@@ -322,6 +326,8 @@ typedef struct amps_update_stats {
     double vpool_entries;   /* memoized entries of L^{-1} H */
     amps_int ncommit, nsolve;
     amps_int guard_steps;   /* refinement steps the accuracy guard took in the last solve */
+    int guard_result;       /* last solve: 0 tolerance met at once, 1 after refinement, 2 after a
+                               synchronous re-factorization, 3 not met (AMPS_WARN_INACCURATE) */
     double relres;          /* relative residual of the last solve when the guard is on, else -1 */
     amps_int nrefactor;     /* re-factorizations swapped in */
     amps_int refactor_failed; /* re-factorizations that failed (the engine kept its factors) */
@@ -729,6 +735,7 @@ AMPS_API const char *amps_status_str(amps_status s) {
     case AMPS_ERR_STATE: return "invalid state";
     case AMPS_ERR_UNSUPPORTED: return "unsupported in this build";
     case AMPS_WARN_NOOP: return "no-op";
+    case AMPS_WARN_INACCURATE: return "solved above the accuracy guard's tolerance";
     }
     return "unknown status";
 }
@@ -4075,6 +4082,7 @@ struct amps_update {
     double tol, sigma;
     int grow, nthr, refine, eq320, committed;
     int nbuf;                              /* threads the per-thread buffers are sized for (>= nthr) */
+    int guard_refactoring;                 /* the guard's re-factorization is in progress */
     double guard_tol;                      /* accuracy guard (0: off) */
     double *ctr, *gbuf;                    /* guard: forward solve of the residual (n), 2 * capN scratch */
     amps_int n, N, kpend, capN;
@@ -5471,7 +5479,7 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
     }
     amps__solve_stats_begin(U);
     amps__solve_core(U, U->ct, U->f, 0, 0, U->x);
-    U->st.guard_steps = 0;
+    U->st.guard_steps = 0; U->st.guard_result = 0;
     U->st.relres = -1;
     /* accuracy guard: the residual of the full system, and refinement steps with the same
        factors while it is above guard_tol */
@@ -5489,6 +5497,17 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
             U->st.guard_steps++;
         }
         U->st.relres = rel;
+        U->st.guard_result = rel <= U->guard_tol ? (U->st.guard_steps > 0) : 3;
+        if (rel > U->guard_tol && !U->guard_refactoring && U->opts.refactor != AMPS_REFACTOR_OFF && U->u > 0) {
+            /* the augmentation is the suspect: a fresh base, then the same solve again */
+            amps_status s2;
+            U->guard_refactoring = 1;
+            s2 = amps_update_refactor(ctx, U);
+            if (s2 == AMPS_OK) s2 = amps_update_solve(ctx, U, xout);
+            U->guard_refactoring = 0;
+            if (s2 == AMPS_OK && U->st.guard_result < 3) U->st.guard_result = 2;
+            return s2;
+        }
     }
     /* reactions (K^ x - f^)_C */
     for (a = 0; a < U->u; a++) {
@@ -5504,6 +5523,8 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
         for (k = 1; k <= 6; k++) t += U->st.t_step[k];
         amps__bg_policy(ctx, U, t);
     }
+    if (U->guard_tol > 0 && U->st.guard_result == 3)
+        return amps__err(ctx, AMPS_WARN_INACCURATE, "amps_update_solve: relative residual %.3g above the guard's %.3g", U->st.relres, U->guard_tol);
     return AMPS_OK;
 }
 
@@ -6003,7 +6024,7 @@ static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
     /* the new base takes the handle's place; the old contents are freed below */
     old = *U;
     *U = *V;
-    U->opts = old.opts; U->grow = old.grow; U->nthr = old.nthr;
+    U->opts = old.opts; U->grow = old.grow; U->nthr = old.nthr; U->guard_tol = old.guard_tol;
     U->bg = NULL;
     U->widx = old.widx; U->wovr = old.wovr; U->wclo = old.wclo; U->capw = old.capw; U->nw = old.nw;
     old.widx = NULL; old.wovr = NULL; old.wclo = NULL; old.bg = NULL;

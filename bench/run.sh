@@ -47,6 +47,23 @@ for m in $hmesh; do
   run build/bench/haptic "$m" $hsteps 10 bench/out/haptic.csv
   run build/bench/watch "$m" $wreps 10 bench/out/watch.csv
 done
+# background re-factorization: a long cut with and without (bench/refactor.c)
+$CC $FLAGS -o build/bench/refactor bench/refactor.c -lm || exit 1
+rm -f bench/out/refactor.csv
+if [ "$mode" = quick ]; then rmesh="beam:64"; rsteps=200
+else rmesh="beam:256 bench/data/bunny20k.1.node"; rsteps=1000; fi
+for m in $rmesh; do for p in on off; do run build/bench/refactor "$m" $rsteps $p bench/out/refactor.csv; done; done
+if command -v gnuplot >/dev/null; then
+  for m in $(cut -d, -f1 bench/out/refactor.csv | sort -u | grep -v '^mesh$'); do
+    gnuplot -e "set term pngcairo size 900,600; set out 'bench/out/refactor_$m.png'; set datafile separator ',';
+      set multiplot layout 2,1 title '$m: advancing cut, background re-factorization on / off';
+      set ylabel 'step time (ms)'; set logscale y; set key top left;
+      plot '< grep ^$m, bench/out/refactor.csv | grep ,on,' u 3:(1e3*\$4) w l t 'on', '< grep ^$m, bench/out/refactor.csv | grep ,off,' u 3:(1e3*\$4) w l t 'off';
+      unset logscale y; set ylabel '|S u C|'; set xlabel 'step';
+      plot '< grep ^$m, bench/out/refactor.csv | grep ,on,' u 3:5 w l t 'on', '< grep ^$m, bench/out/refactor.csv | grep ,off,' u 3:5 w l t 'off';
+      unset multiplot" 2>/dev/null || echo "gnuplot failed for $m"
+  done
+fi
 {
   echo "machine: $(uname -m), $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//'), $(free -g | awk '/Mem:/{print $2}') GiB"
   echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
