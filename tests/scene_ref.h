@@ -36,6 +36,8 @@ typedef struct scene_ref_info {
     double err_chol;    /* CHOLMOD's relative error before refinement, against the refined solution */
     double res_ref;     /* relative residual of the reference (after refinement) */
     double res_disp;    /* relative residual of the given displacements (disp), -1 if none */
+    double be_chol;     /* CHOLMOD's normwise backward error ||r|| / (||K||_1 ||x|| + ||b||), before refinement */
+    double be_disp;     /* the same for disp */
     double cond;        /* amps_condest of the reduced matrix (when asked), else -1 */
 } scene_ref_info;
 
@@ -46,14 +48,14 @@ typedef struct scene_ref_info {
 REF_UNUSED static double scene_reference(amps_ctx *ctx, const amps_mesh *m, const shadow *w, int nrefine, const double *disp,
                                          double *u, scene_ref_info *info, int want_cond) {
     int nn = m->nnode, v, d, n, nf = 0, k, *map;
-    unsigned char *fixed = (unsigned char *)malloc(nn);
+    unsigned char *fixed = (unsigned char *)calloc(nn + 1, 1);
     amps_int *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * nn);
     amps_csc *K, *R;
     double *rhs, *x, *x0, *y, *gv, res = -1;
     int *ti, *tj, nz = 0, j, p;
     double *tx;
     scene_ref_info inf;
-    inf.res_chol = inf.err_chol = inf.res_ref = inf.res_disp = inf.cond = -1;
+    inf.res_chol = inf.err_chol = inf.res_ref = inf.res_disp = inf.be_chol = inf.be_disp = inf.cond = -1;
     for (v = 0; v < nn; v++) fixed[v] = w->fixed0[m->origin[v]];
     n = (int)amps_mesh_number_dofs(m, fixed, dof);
     K = amps_mesh_assemble(ctx, m, dof, n);
@@ -82,7 +84,14 @@ REF_UNUSED static double scene_reference(amps_ctx *ctx, const amps_mesh *m, cons
         }
     R = amps_csc_from_triplets(ctx, nf, nz, ti, tj, tx, AMPS_UPPER);
     if (R && ref_solve_refined(nf, R->p, R->i, R->x, rhs, x, nrefine, x0) == 0) {
+        double knorm = 0, nb = t_norm(nf, rhs);
+        for (k = 0; k < nf; k++) y[k] = 0;
+        for (j = 0; j < nf; j++)
+            for (p = R->p[j]; p < R->p[j + 1]; p++) { y[j] += fabs(R->x[p]); if (R->i[p] != j) y[R->i[p]] += fabs(R->x[p]); }
+        for (k = 0; k < nf; k++) if (y[k] > knorm) knorm = y[k];
+        for (k = 0; k < nf; k++) y[k] = 0;
         inf.res_chol = ref_resid(nf, R->p, R->i, R->x, x0, rhs);
+        inf.be_chol = inf.res_chol * nb / (knorm * t_norm(nf, x0) + nb);
         inf.err_chol = t_reldiff(nf, x0, x);
         res = inf.res_ref = ref_resid(nf, R->p, R->i, R->x, x, rhs);
         if (disp) {
@@ -91,6 +100,7 @@ REF_UNUSED static double scene_reference(amps_ctx *ctx, const amps_mesh *m, cons
                 if (e >= 0 && map[e] >= 0) y[map[e]] = disp[3 * v + d];
             }
             inf.res_disp = ref_resid(nf, R->p, R->i, R->x, y, rhs);
+            inf.be_disp = inf.res_disp * nb / (knorm * t_norm(nf, y) + nb);
         }
         if (want_cond && nf > 0) {
             amps_factor *F = amps_analyze(ctx, R, AMPS_UPPER, NULL);
