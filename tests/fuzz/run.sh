@@ -1,15 +1,16 @@
 #!/usr/bin/env bash
-# Builds the libFuzzer targets for the mesh readers and runs each for the given number of
-# seconds (default 60) on its seed corpus tests/fuzz/corpus/<reader>/. With 0 seconds it only
-# replays the committed corpus (regression check). New corpus entries go to
-# build/fuzz/corpus/<reader>/, crashers to build/fuzz/crash-<reader>-*.
-#   bash tests/fuzz/run.sh [seconds] [reader ...]     readers: tetgen gmsh medit
+# Builds the libFuzzer targets (the mesh readers, the scenario parser of tools/amps_replay.c and
+# the update engine's API) and runs each for the given number of seconds (default 60) on its seed
+# corpus tests/fuzz/corpus/<target>/. With 0 seconds it only replays the committed corpus
+# (regression check). New corpus entries go to build/fuzz/corpus/<target>/, crashers to
+# build/fuzz/crash-<target>-*.
+#   bash tests/fuzz/run.sh [seconds] [target ...]     targets: tetgen gmsh medit replay update
 # Environment: CC (default clang), MAX_LEN (largest input, default 4096).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 secs=${1:-60}
 shift || true
-readers=${*:-tetgen gmsh medit}
+readers=${*:-tetgen gmsh medit replay update}
 CC=${CC:-clang}
 out=build/fuzz
 mkdir -p "$out"
