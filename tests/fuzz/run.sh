@@ -15,10 +15,18 @@ CC=${CC:-clang}
 out=build/fuzz
 mkdir -p "$out"
 status=0
+# build every target first, as many at a time as there are cores (the compiles dominate short runs)
+jobs=$(nproc 2>/dev/null || echo 2)
+pids=()
+for r in $readers; do
+  $CC -std=c99 -g -O1 -I. -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
+      -o "$out/fuzz_$r" "tests/fuzz/fuzz_$r.c" -lm &
+  pids+=($!)
+  if [ ${#pids[@]} -ge "$jobs" ]; then wait "${pids[0]}" || exit 1; pids=("${pids[@]:1}"); fi
+done
+for p in "${pids[@]}"; do wait "$p" || exit 1; done
 for r in $readers; do
   bin=$out/fuzz_$r
-  $CC -std=c99 -g -O1 -I. -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
-      -o "$bin" "tests/fuzz/fuzz_$r.c" -lm
   dict=""
   [ -f "tests/fuzz/$r.dict" ] && dict="-dict=tests/fuzz/$r.dict"
   if [ "$secs" = 0 ]; then
