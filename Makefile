@@ -7,6 +7,8 @@
 #   make switches      AMPS_NO_FEM / NO_STDIO / NO_THREADS combinations: build, tests, object sizes
 #   make demo          the main job: replay examples/brick_incision.scn (VTU, CSV, PNG in build/demo)
 #   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv
+#   make stress        the long stress suite (beams to 5x5x4096, 10,000-step runs; CSV/PNG in build/stress)
+#   make fuzz          libFuzzer targets (clang), FUZZ_TIME seconds each (default 60)
 #   make deps          install (as root) or list the Debian packages the tests need
 CC      ?= cc
 CXX     ?= c++
@@ -38,7 +40,11 @@ TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
 TEST_SH   := $(wildcard tests/test_*.sh)
 TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example $(BUILD)/haptic_loop
 
+<<<<<<< HEAD
 .PHONY: tsan all test deps deps-check tools examples demo bench bench-quick clean cxx switches
+=======
+.PHONY: all test deps deps-check tools demo bench bench-quick clean cxx stress fuzz
+>>>>>>> stress
 all: tools
 
 tools: $(TOOLS)
@@ -70,6 +76,15 @@ $(BUILD)/test_%: tests/test_%.c amps.h tests/*.h | $(BUILD)
 
 test: deps-check $(TEST_BIN) $(TOOLS)
 	@AMPS_BUILD=$(BUILD) bash tests/run.sh $(TEST_BIN) $(TEST_SH)
+
+# Long mode of tests/test_stress.c (the short mode is part of make test); the bunny run uses
+# bench/data/bunny20k.1.node (bench/get_bunny.sh) or $$AMPS_BUNNY, else it is skipped.
+stress: $(BUILD)/test_stress
+	./$(BUILD)/test_stress --long
+
+FUZZ_TIME ?= 60
+fuzz:
+	bash tests/fuzz/run.sh $(FUZZ_TIME)
 
 deps-check:
 	@bash tools/deps.sh

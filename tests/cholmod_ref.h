@@ -42,6 +42,49 @@ REF_UNUSED static int ref_solve(int n, const int *Ap, const int *Ai, const doubl
     return ok ? 0 : 1;
 }
 
+/* r = b - A x for symmetric upper A (both triangles applied). */
+REF_UNUSED static void ref_residual_vec(int n, const int *Ap, const int *Ai, const double *Ax, const double *x, const double *b, double *r) {
+    int j, p;
+    for (j = 0; j < n; j++) r[j] = b[j];
+    for (j = 0; j < n; j++)
+        for (p = Ap[j]; p < Ap[j + 1]; p++) {
+            int i = Ai[p];
+            r[i] -= Ax[p] * x[j];
+            if (i != j) r[j] -= Ax[p] * x[i];
+        }
+}
+
+/* Solves A x = b with CHOLMOD (supernodal, its default ordering) followed by nrefine steps of
+   iterative refinement with the same factor (residual in double precision). x0 (may be NULL)
+   receives the unrefined solution. Returns 0 on success. */
+REF_UNUSED static int ref_solve_refined(int n, const int *Ap, const int *Ai, const double *Ax, const double *b, double *x,
+                                        int nrefine, double *x0) {
+    cholmod_common c; cholmod_sparse *A; cholmod_factor *L; cholmod_dense *B, *X = NULL; int ok, it, k;
+    if (n == 0) return 0;
+    cholmod_start(&c);
+    A = ref_sparse(n, Ap, Ai, Ax, &c);
+    L = cholmod_analyze(A, &c);
+    ok = L && cholmod_factorize(A, L, &c) && c.status == CHOLMOD_OK;
+    B = cholmod_allocate_dense(n, 1, n, CHOLMOD_REAL, &c);
+    memcpy(B->x, b, sizeof(double) * n);
+    if (ok) X = cholmod_solve(CHOLMOD_A, L, B, &c);
+    ok = ok && X != NULL;
+    if (ok) {
+        memcpy(x, X->x, sizeof(double) * n);
+        if (x0) memcpy(x0, x, sizeof(double) * n);
+        for (it = 0; it < nrefine && ok; it++) {
+            cholmod_free_dense(&X, &c);
+            ref_residual_vec(n, Ap, Ai, Ax, x, b, (double *)B->x);
+            X = cholmod_solve(CHOLMOD_A, L, B, &c);
+            ok = X != NULL;
+            if (ok) for (k = 0; k < n; k++) x[k] += ((double *)X->x)[k];
+        }
+    }
+    cholmod_free_dense(&X, &c); cholmod_free_dense(&B, &c);
+    cholmod_free_factor(&L, &c); cholmod_free_sparse(&A, &c); cholmod_finish(&c);
+    return ok ? 0 : 1;
+}
+
 /* nnz(L) (with diagonal) for ordering: perm given, or NULL for CHOLMOD AMD (method=CHOLMOD_AMD)
    or METIS (method=CHOLMOD_METIS). If perm_out, receives the ordering CHOLMOD used. */
 REF_UNUSED static double ref_nnzL(int n, const int *Ap, const int *Ai, const double *Ax, const int *perm, int method, int *perm_out) {

@@ -6,81 +6,8 @@
 #include "amps.h"
 #include "amps_test.h"
 #include "cholmod_ref.h"
+#include "scene_ref.h"
 #include <string.h>
-
-/* What the test knows independently of the scene. */
-typedef struct shadow {
-    unsigned char *fixed0;   /* fixed flag of the file nodes */
-    unsigned char *pinned;   /* per node */
-    double *pinval, *force;  /* 3 per node */
-    int cap;
-    int *watch, nwatch;      /* watched nodes (copies of watched nodes are watched) */
-} shadow;
-
-static void shadow_grow(shadow *w, int n) {
-    if (n <= w->cap) return;
-    w->pinned = (unsigned char *)realloc(w->pinned, n);
-    w->pinval = (double *)realloc(w->pinval, sizeof(double) * 3 * n);
-    w->force = (double *)realloc(w->force, sizeof(double) * 3 * n);
-    memset(w->pinned + w->cap, 0, n - w->cap);
-    memset(w->pinval + 3 * w->cap, 0, sizeof(double) * 3 * (n - w->cap));
-    memset(w->force + 3 * w->cap, 0, sizeof(double) * 3 * (n - w->cap));
-    w->cap = n;
-}
-
-/* Reference displacements (3 per node) of the current mesh by CHOLMOD; returns its residual. */
-static double reference(amps_ctx *ctx, const amps_mesh *m, const shadow *w, double *u) {
-    int nn = m->nnode, v, d, n, nf = 0, k, *map;
-    unsigned char *fixed = (unsigned char *)malloc(nn);
-    amps_int *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * nn);
-    amps_csc *K, *R;
-    double *rhs, *x, res = -1, num = 0, den = 0;
-    int *ti, *tj, nz = 0, j, p;
-    double *tx;
-    for (v = 0; v < nn; v++) fixed[v] = w->fixed0[m->origin[v]];
-    n = (int)amps_mesh_number_dofs(m, fixed, dof);
-    K = amps_mesh_assemble(ctx, m, dof, n);
-    map = (int *)malloc(sizeof(int) * (n + 1));
-    for (k = 0; k < n; k++) map[k] = 0;
-    for (v = 0; v < nn; v++) if (w->pinned[v]) for (d = 0; d < 3; d++) map[dof[3 * v + d]] = -1;
-    for (k = 0; k < n; k++) map[k] = map[k] < 0 ? -1 : nf++;
-    rhs = (double *)calloc(nf + 1, sizeof(double)); x = (double *)calloc(nf + 1, sizeof(double));
-    {   /* full vector of pinned values */
-        double *gv = (double *)calloc(n + 1, sizeof(double));
-        for (v = 0; v < nn; v++) for (d = 0; d < 3; d++) {
-            int e = dof[3 * v + d];
-            if (e < 0) continue;
-            if (w->pinned[v]) gv[e] = w->pinval[3 * v + d];
-            else rhs[map[e]] = w->force[3 * v + d];
-        }
-        ti = (int *)malloc(sizeof(int) * (K->p[n] + 1)); tj = (int *)malloc(sizeof(int) * (K->p[n] + 1)); tx = (double *)malloc(sizeof(double) * (K->p[n] + 1));
-        for (j = 0; j < n; j++)
-            for (p = K->p[j]; p < K->p[j + 1]; p++) {
-                int i = K->i[p];
-                double val = K->x[p];
-                if (map[i] >= 0 && map[j] >= 0) { ti[nz] = map[i]; tj[nz] = map[j]; tx[nz] = val; nz++; }
-                else if (map[i] >= 0) rhs[map[i]] -= val * gv[j];
-                else if (map[j] >= 0 && i != j) rhs[map[j]] -= val * gv[i];
-            }
-        R = amps_csc_from_triplets(ctx, nf, nz, ti, tj, tx, AMPS_UPPER);
-        if (R && ref_solve(nf, R->p, R->i, R->x, NULL, 0, rhs, x) == 0) {
-            double *y = (double *)calloc(nf + 1, sizeof(double));
-            amps_csc_symv(R, AMPS_UPPER, x, y);
-            for (k = 0; k < nf; k++) { num += (y[k] - rhs[k]) * (y[k] - rhs[k]); den += rhs[k] * rhs[k]; }
-            res = den > 0 ? sqrt(num / den) : sqrt(num);
-            free(y);
-        }
-        for (v = 0; v < nn; v++) for (d = 0; d < 3; d++) {
-            int e = dof[3 * v + d];
-            u[3 * v + d] = e < 0 ? 0.0 : (map[e] < 0 ? gv[e] : x[map[e]]);
-        }
-        free(gv); free(ti); free(tj); free(tx);
-        amps_csc_free(ctx, R);
-    }
-    amps_csc_free(ctx, K);
-    free(fixed); free(dof); free(map); free(rhs); free(x);
-    return res;
-}
 
 static double worst_err = 0, worst_res = 0;
 
@@ -97,7 +24,7 @@ static void compare(amps_ctx *ctx, amps_scene *S, const shadow *w, const char *w
     for (k = 0; k < w->nwatch; k++) memcpy(uw + 3 * k, amps_scene_displacements(S) + 3 * w->watch[k], 3 * sizeof(double));
     s = amps_scene_solve(ctx, S);
     CHECK(s == AMPS_OK, "%s step %d: solve: %s", what, step, ctx->msg);
-    rref = reference(ctx, m, w, u);
+    rref = scene_reference(ctx, m, w, 0, NULL, u, NULL, 0);
     err = t_reldiff(3 * m->nnode, amps_scene_displacements(S), u);
     CHECK(err <= 1e-10, "%s step %d: relative error %.3e", what, step, err);
     if (amps_scene_residual(ctx, S, &res) == AMPS_OK) {
@@ -207,7 +134,7 @@ static void random_scene(amps_mesh *m0, int fix_axis, double fix_below, int step
     printf("  %-22s steps %d, cuts %d, nodes %ld, worst error %.2e, worst residual %.2e\n", what, steps, ncut,
            (long)amps_scene_mesh(S)->nnode, worst_err, worst_res);
     amps_scene_free(&ctx, S);
-    free(w.fixed0); free(w.pinned); free(w.pinval); free(w.force); free(w.watch);
+    free(w.watch); shadow_free(&w);
 }
 
 /* Two stacked cells held at the bottom: cutting the middle layer along z = 1 detaches the top. */

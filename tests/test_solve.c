@@ -142,6 +142,44 @@ static void check_solves(const char *name, const amps_csc *A, const int *perm) {
     free(b); free(x); free(xr); free(w); free(y); free(z); free(cl); free(cl2);
 }
 
+/* amps_condest against the exact ||K||_1 ||K^{-1}||_1 (n solves): a lower bound within a factor 3,
+   the same with and without caller workspace, lower-stored K, errors. */
+static void check_condest(const char *name, const amps_csc *A) {
+    amps_ctx ctx;
+    int n = A->ncol, j, i;
+    amps_factor *F;
+    double *e = (double *)malloc(sizeof(double) * n), *w = (double *)malloc(sizeof(double) * 3 * n), *cs;
+    double exact_inv = 0, knorm = 0, c1 = -1, c2 = -1, c3 = -1;
+    amps_csc *L;
+    amps_ctx_init(&ctx);
+    L = m_convert(&ctx, A, AMPS_LOWER);
+    F = m_analyze(&ctx, A, NULL);
+    CHECK(F && amps_factorize(&ctx, F, A, AMPS_UPPER) == AMPS_OK, "%s: factor", name);
+    cs = (double *)calloc((size_t)n, sizeof(double));
+    for (j = 0; j < n; j++) {
+        double s = 0;
+        int p;
+        for (p = A->p[j]; p < A->p[j + 1]; p++) { cs[j] += fabs(A->x[p]); if (A->i[p] != j) cs[A->i[p]] += fabs(A->x[p]); }
+        for (i = 0; i < n; i++) e[i] = i == j;
+        amps_solve(&ctx, F, e, e, w);
+        for (i = 0; i < n; i++) s += fabs(e[i]);
+        if (s > exact_inv) exact_inv = s;
+    }
+    for (j = 0; j < n; j++) if (cs[j] > knorm) knorm = cs[j];
+    CHECK(amps_condest(&ctx, A, AMPS_UPPER, F, w, &c1) == AMPS_OK, "%s: condest: %s", name, ctx.msg);
+    CHECK(amps_condest(&ctx, A, AMPS_UPPER, F, NULL, &c2) == AMPS_OK && c2 == c1, "%s: condest without work", name);
+    CHECK(amps_condest(&ctx, L, AMPS_LOWER, F, w, &c3) == AMPS_OK && fabs(c3 - c1) <= 1e-12 * c1, "%s: condest of the lower copy", name);
+    CHECK(c1 <= knorm * exact_inv * (1 + 1e-10) && c1 >= knorm * exact_inv / 3, "%s: condest %.4e vs exact %.4e", name, c1,
+          knorm * exact_inv);
+    printf("  condest %-14s %.4e (exact %.4e)\n", name, c1, knorm * exact_inv);
+    CHECK(amps_condest(&ctx, A, AMPS_UPPER, NULL, w, &c1) == AMPS_ERR_ARG, "%s: NULL factor accepted", name);
+    F->is_numeric = 0;
+    CHECK(amps_condest(&ctx, A, AMPS_UPPER, F, w, &c1) == AMPS_ERR_STATE, "%s: symbolic factor accepted", name);
+    amps_factor_free(&ctx, F);
+    amps_csc_free(&ctx, L);
+    free(e); free(w); free(cs);
+}
+
 int main(void) {
     amps_ctx ctx;
     amps_csc *A;
@@ -180,6 +218,13 @@ int main(void) {
     perm = m_cholmod_perm(A, CHOLMOD_METIS);
     check_solves("brick R=10", A, perm);
     free(perm); amps_csc_free(&ctx, A);
+
+    A = m_fe(&ctx, fe_beam(12), 1);
+    check_condest("beam h=12", A);
+    amps_csc_free(&ctx, A);
+    A = m_btb(&ctx, 300, 600, 4, 1e-3, 5);
+    check_condest("btb n=300", A);
+    amps_csc_free(&ctx, A);
 
     /* closures: sort paths (small: heapsort, large: scan) and stamp wrap-around */
     {

@@ -42,6 +42,7 @@ typedef struct replay {
     char last_cmd[64];
     double E, nu;
     int have_material;
+    int sandbox;         /* fuzzing: no file access (mesh files, dump, write), small meshes only */
 } replay;
 
 
@@ -131,9 +132,11 @@ static int cmd_mesh(replay *R, int nt, char **t) {
     if (nt == 3 && (!strcmp(t[1], "beam") || !strcmp(t[1], "brick"))) {
         amps_int k;
         if (!parse_node(t[2], &k) || k < 1) return fail(R, "bad size '%s'", t[2]);
+        if (R->sandbox && k > 8) return fail(R, "size '%s' too large for the sandbox", t[2]);
         m = !strcmp(t[1], "beam") ? amps_mesh_beam(&R->ctx, k) : amps_mesh_brick(&R->ctx, k);
     } else if (nt == 2) {
         char path[8192];
+        if (R->sandbox) return fail(R, "%s", "mesh files are not read in the sandbox");
         if (t[1][0] == '/') snprintf(path, sizeof(path), "%s", t[1]);
         else snprintf(path, sizeof(path), "%s%s", R->dir, t[1]);
         m = amps_mesh_read(&R->ctx, path);
@@ -254,6 +257,7 @@ static int run_line(replay *R, int nt, char **t) {
         const double *d = amps_scene_displacements(R->S);
         amps_int i;
         if (nt != 2) return fail(R, "%s", "usage: dump <file.csv>");
+        if (R->sandbox) return 0;
         f = fopen(t[1], "w");
         if (!f) return fail(R, "cannot write '%s'", t[1]);
         fprintf(f, "node,ux,uy,uz\n");
@@ -267,6 +271,7 @@ static int run_line(replay *R, int nt, char **t) {
         double *vm, *pr;
         amps_status s;
         if (nt != 2) return fail(R, "%s", "usage: write <file.vtu>");
+        if (R->sandbox) return 0;
         vm = (double *)malloc(sizeof(double) * (m->ntet + 1));
         pr = (double *)malloc(sizeof(double) * 3 * (m->ntet + 1));
         s = amps_scene_stress(&R->ctx, R->S, NULL, vm, pr);
@@ -279,15 +284,62 @@ static int run_line(replay *R, int nt, char **t) {
     return fail(R, "unknown command '%s'", c);
 }
 
+/* Runs the scenario text buf[0..len-1] (no NUL needed) line by line; returns 0 or 1 after the
+   first failing line (message on stderr). Lines longer than 65535 characters fail. */
+static int replay_run_buffer(replay *R, const char *text, size_t len) {
+    char buf[65536];
+    size_t pos = 0;
+    int rc = 0;
+    while (pos < len) {
+        char *tok[MAXTOK], *p = buf, *hash;
+        size_t e = pos, n;
+        int nt = 0;
+        while (e < len && text[e] != '\n') e++;
+        n = e - pos;
+        R->line++;
+        if (n >= sizeof(buf)) return fail(R, "%s", "line too long");
+        memcpy(buf, text + pos, n);
+        buf[n] = 0;
+        pos = e < len ? e + 1 : e;
+        if (strlen(buf) != n) return fail(R, "%s", "NUL character in the line");
+        hash = strchr(buf, '#');
+        if (hash) *hash = 0;
+        while (*p) {
+            while (*p && isspace((unsigned char)*p)) *p++ = 0;
+            if (!*p) break;
+            if (nt == MAXTOK) { nt = MAXTOK + 1; break; }
+            tok[nt++] = p;
+            while (*p && !isspace((unsigned char)*p)) p++;
+        }
+        if (nt == 0) continue;
+        if (nt > MAXTOK) return fail(R, "%s", "too many arguments");
+        if ((rc = run_line(R, nt, tok)) != 0) return rc;
+    }
+    return 0;
+}
+
+/* Fresh replay state (options at their defaults). */
+static void replay_init(replay *R) {
+    memset(R, 0, sizeof(*R));
+    amps_ctx_init(&R->ctx);
+    amps_scene_opts_default(&R->opts);
+}
+
+static void replay_free(replay *R) {
+    free(R->times);
+    amps_scene_free(&R->ctx, R->S);
+    R->times = NULL; R->S = NULL;
+}
+
+#ifndef AMPS_REPLAY_NO_MAIN
 int main(int argc, char **argv) {
     replay R;
     FILE *f;
-    char buf[65536];
+    char *text = NULL;
+    size_t len = 0, cap = 0;
     int a, rc = 0;
     const char *path = NULL, *surface = NULL;
-    memset(&R, 0, sizeof(R));
-    amps_ctx_init(&R.ctx);
-    amps_scene_opts_default(&R.opts);
+    replay_init(&R);
     for (a = 1; a < argc; a++) {
         if (!strcmp(argv[a], "-q")) R.quiet = 1;
         else if (!strcmp(argv[a], "--residual")) R.residual_on = 1;
@@ -323,24 +375,21 @@ int main(int argc, char **argv) {
     }
     f = fopen(path, "r");
     if (!f) { fprintf(stderr, "%s: cannot open\n", path); return 1; }
-    while (fgets(buf, sizeof(buf), f)) {
-        char *tok[MAXTOK], *p = buf, *hash = strchr(buf, '#');
-        int nt = 0;
-        R.line++;
-        if (!strchr(buf, '\n') && !feof(f)) { rc = fail(&R, "%s", "line too long"); break; }
-        if (hash) *hash = 0;
-        while (*p) {
-            while (*p && isspace((unsigned char)*p)) *p++ = 0;
-            if (!*p) break;
-            if (nt == MAXTOK) { nt = MAXTOK + 1; break; }
-            tok[nt++] = p;
-            while (*p && !isspace((unsigned char)*p)) p++;
+    for (;;) {
+        size_t got;
+        if (len == cap) {
+            char *t2 = (char *)realloc(text, cap = 2 * cap + 65536);
+            if (!t2) { fclose(f); free(text); fprintf(stderr, "%s: out of memory\n", path); return 1; }
+            text = t2;
         }
-        if (nt == 0) continue;
-        if (nt > MAXTOK) { rc = fail(&R, "%s", "too many arguments"); break; }
-        if ((rc = run_line(&R, nt, tok)) != 0) break;
+        got = fread(text + len, 1, cap - len, f);
+        len += got;
+        if (got == 0) break;
     }
+    if (ferror(f)) { fclose(f); free(text); fprintf(stderr, "%s: read error\n", path); return 1; }
     fclose(f);
+    rc = replay_run_buffer(&R, text, len);
+    free(text);
     if (rc == 0) {
         if (R.ntimes > 0) {
             double med, worst;
@@ -352,7 +401,7 @@ int main(int argc, char **argv) {
         printf("\n");
         if (surface && R.S) rc = write_surface(&R, surface);
     }
-    free(R.times);
-    amps_scene_free(&R.ctx, R.S);
+    replay_free(&R);
     return rc;
 }
+#endif

@@ -1,23 +1,32 @@
 #!/usr/bin/env bash
-# Builds the libFuzzer targets for the mesh readers and runs each for the given number of
-# seconds (default 60) on its seed corpus tests/fuzz/corpus/<reader>/. With 0 seconds it only
-# replays the committed corpus (regression check). New corpus entries go to
-# build/fuzz/corpus/<reader>/, crashers to build/fuzz/crash-<reader>-*.
-#   bash tests/fuzz/run.sh [seconds] [reader ...]     readers: tetgen gmsh medit
+# Builds the libFuzzer targets (the mesh readers, the scenario parser of tools/amps_replay.c and
+# the update engine's API) and runs each for the given number of seconds (default 60) on its seed
+# corpus tests/fuzz/corpus/<target>/. With 0 seconds it only replays the committed corpus
+# (regression check). New corpus entries go to build/fuzz/corpus/<target>/, crashers to
+# build/fuzz/crash-<target>-*.
+#   bash tests/fuzz/run.sh [seconds] [target ...]     targets: tetgen gmsh medit replay update
 # Environment: CC (default clang), MAX_LEN (largest input, default 4096).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 secs=${1:-60}
 shift || true
-readers=${*:-tetgen gmsh medit}
+readers=${*:-tetgen gmsh medit replay update}
 CC=${CC:-clang}
 out=build/fuzz
 mkdir -p "$out"
 status=0
+# build every target first, as many at a time as there are cores (the compiles dominate short runs)
+jobs=$(nproc 2>/dev/null || echo 2)
+pids=()
+for r in $readers; do
+  $CC -std=c99 -g -O1 -I. -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
+      -o "$out/fuzz_$r" "tests/fuzz/fuzz_$r.c" -lm &
+  pids+=($!)
+  if [ ${#pids[@]} -ge "$jobs" ]; then wait "${pids[0]}" || exit 1; pids=("${pids[@]:1}"); fi
+done
+for p in "${pids[@]}"; do wait "$p" || exit 1; done
 for r in $readers; do
   bin=$out/fuzz_$r
-  $CC -std=c99 -g -O1 -I. -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
-      -o "$bin" "tests/fuzz/fuzz_$r.c" -lm
   dict=""
   [ -f "tests/fuzz/$r.dict" ] && dict="-dict=tests/fuzz/$r.dict"
   if [ "$secs" = 0 ]; then
