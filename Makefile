@@ -40,11 +40,7 @@ TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
 TEST_SH   := $(wildcard tests/test_*.sh)
 TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example $(BUILD)/haptic_loop
 
-<<<<<<< HEAD
-.PHONY: tsan all test deps deps-check tools examples demo bench bench-quick clean cxx switches
-=======
-.PHONY: all test deps deps-check tools demo bench bench-quick clean cxx stress fuzz
->>>>>>> stress
+.PHONY: tsan all test deps deps-check tools examples demo bench bench-quick clean cxx switches stress fuzz
 all: tools
 
 tools: $(TOOLS)

@@ -316,7 +316,8 @@ typedef struct amps_update_opts {
                                happened; AMPS_WARN_INACCURATE if the tolerance was not reached.
                                0 (default) = off */
     amps_refactor_policy refactor; /* re-factorization of the current matrix (see below); default AUTO */
-    amps_order_opts refactor_order;/* its ordering; default AUTO with node blocks detected (block 0) */
+    amps_order_opts refactor_order;/* its ordering; default AMD with node blocks detected (block 0):
+                                      nested dissection without coordinates is much slower */
     int refactor_threads;   /* OpenMP threads of the background factorization; default 1 */
     double refactor_ratio;  /* AUTO: start when the extra time the augmentation has cost since the
                                last base reaches this times the (measured or estimated) cost of a
@@ -4149,7 +4150,7 @@ struct amps_update {
     double tol, sigma;
     int grow, nthr, refine, eq320, committed;
     int nbuf;                              /* threads the per-thread buffers are sized for (>= nthr) */
-    int guard_refactoring;                 /* the guard's re-factorization is in progress */
+    int guard_refactor;                    /* the guard may re-factor (1; the engine of a new base: 1) */
     double guard_tol;                      /* accuracy guard (0: off) */
     double *ctr, *gbuf;                    /* guard: forward solve of the residual (n), 2 * capN scratch */
     amps_int n, N, kpend, capN;
@@ -4218,7 +4219,7 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
     o->refine = 1;
     o->eq320 = 0;
     o->refactor = AMPS_REFACTOR_AUTO;
-    o->refactor_order.method = AMPS_ORDER_AUTO;
+    o->refactor_order.method = AMPS_ORDER_AMD;
     o->refactor_order.block = 0;
     o->refactor_threads = 1;
     o->refactor_ratio = 1.0;
@@ -4419,9 +4420,9 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     U = AMPS__CAST(amps_update *, amps__calloc(ctx, 1, sizeof(amps_update)));
     if (!U) return NULL;
     U->F = F; U->form = o.formulation; U->tol = o.singular_tol; U->grow = o.grow;
-    U->refine = o.refine; U->eq320 = o.eq320; U->guard_tol = o.guard_tol;
+    U->refine = o.refine; U->eq320 = o.eq320; U->guard_tol = o.guard_tol; U->guard_refactor = 1;
     if (!(o.refactor_ratio > 0)) o.refactor_ratio = 1.0;
-    if (o.refactor_order.method == AMPS_ORDER_GIVEN) o.refactor_order.method = AMPS_ORDER_AUTO;  /* a given perm has the old order */
+    if (o.refactor_order.method == AMPS_ORDER_GIVEN) o.refactor_order.method = AMPS_ORDER_AMD;  /* a given perm has the old order */
     o.refactor_order.perm = NULL; o.refactor_order.coords = NULL;
     U->opts = o;
     U->n = n; U->N = n; U->capN = capN; U->capu = 0; U->u = 0;
@@ -5545,13 +5546,14 @@ static void amps__solve_stats_begin(amps_update *U) {
 AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xout) {
     amps_int a, k;
     amps_status s;
-    int it;
+    int it, pass = 0;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve: NULL engine");
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
     if (!U->dirty && U->has_sol) {
         if (xout) memcpy(xout, U->x, sizeof(double) * (size_t)U->N);
         return AMPS_OK;
     }
+again:
     amps__solve_stats_begin(U);
     amps__solve_core(U, U->ct, U->f, 0, 0, U->x);
     U->st.guard_steps = 0; U->st.guard_result = 0;
@@ -5572,16 +5574,11 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
             U->st.guard_steps++;
         }
         U->st.relres = rel;
-        U->st.guard_result = rel <= U->guard_tol ? (U->st.guard_steps > 0) : 3;
-        if (rel > U->guard_tol && !U->guard_refactoring && U->opts.refactor != AMPS_REFACTOR_OFF && U->u > 0) {
+        U->st.guard_result = rel <= U->guard_tol ? (pass ? 2 : U->st.guard_steps > 0) : 3;
+        if (rel > U->guard_tol && pass == 0 && U->guard_refactor && U->opts.refactor != AMPS_REFACTOR_OFF && U->u > 0) {
             /* the augmentation is the suspect: a fresh base, then the same solve again */
-            amps_status s2;
-            U->guard_refactoring = 1;
-            s2 = amps_update_refactor(ctx, U);
-            if (s2 == AMPS_OK) s2 = amps_update_solve(ctx, U, xout);
-            U->guard_refactoring = 0;
-            if (s2 == AMPS_OK && U->st.guard_result < 3) U->st.guard_result = 2;
-            return s2;
+            pass = 1;
+            if (amps_update_refactor(ctx, U) == AMPS_OK) goto again;
         }
     }
     /* reactions (K^ x - f^)_C */
@@ -6063,7 +6060,7 @@ static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
     amps_ctx_init(&c2); c2.alloc_user = ctx ? ctx->alloc_user : NULL;
     amps__bg_join(b);
     amps__bg_lock(b); lo = b->done; cnt = b->nlog - lo; amps__bg_unlock(b);
-    V->nthr = U->nthr;
+    V->nthr = U->nbuf;
     if ((s = amps__bg_replay(&c2, V, b->log + lo, cnt, b->sigma)) != AMPS_OK) goto fail;
     /* constraints and forces as they are now */
     for (a = 0; a < V->u; a++) {
@@ -6099,7 +6096,7 @@ static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
     /* the new base takes the handle's place; the old contents are freed below */
     old = *U;
     *U = *V;
-    U->opts = old.opts; U->grow = old.grow; U->nthr = old.nthr; U->guard_tol = old.guard_tol;
+    U->opts = old.opts; U->grow = old.grow; U->nthr = old.nbuf; U->guard_tol = old.guard_tol;
     U->bg = NULL;
     U->widx = old.widx; U->wovr = old.wovr; U->wclo = old.wclo; U->capw = old.capw; U->nw = old.nw;
     old.widx = NULL; old.wovr = NULL; old.wclo = NULL; old.bg = NULL;
@@ -6130,6 +6127,7 @@ static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
     return AMPS_OK;
 fail:
     U->bg = NULL;
+    U->nthr = U->nbuf;
     U->st.refactor_failed++;
     amps__bg_free(&c2, b);
     return amps__err(ctx, s, "amps_update: swapping the re-factorization in failed (%s); the engine keeps its factors", c2.msg);
@@ -6148,6 +6146,7 @@ static void amps__bg_poll(amps_ctx *ctx, amps_update *U) {
             amps__bg_join(U->bg);
             amps__bg_free(ctx, U->bg);
             U->bg = NULL;
+            U->nthr = U->nbuf;
             U->st.refactor_failed++;
         }
     }
@@ -6185,7 +6184,14 @@ AMPS_API amps_status amps_update_refactor_start(amps_ctx *ctx, amps_update *U) {
     U->bg = b;
     U->t_extra = 0;
 #ifndef AMPS_NO_THREADS
-    if (pthread_create(&b->th, NULL, amps__bg_main, b) == 0) { b->has_thread = 1; return AMPS_OK; }
+    if (pthread_create(&b->th, NULL, amps__bg_main, b) == 0) {
+        /* the worker takes refactor_threads cores: the kernels leave them to it (OpenMP teams
+           that wait on a descheduled thread are slower than fewer threads) */
+        int nt = U->nbuf - (U->opts.refactor_threads > 0 ? U->opts.refactor_threads : 1);
+        U->nthr = nt > 1 ? nt : 1;
+        b->has_thread = 1;
+        return AMPS_OK;
+    }
 #endif
     amps__bg_work(b);                           /* no thread: synchronously */
     return AMPS_OK;
@@ -6204,6 +6210,7 @@ AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U) {
         memcpy(msg, b->msg, sizeof(msg));
         amps__bg_free(ctx, b);
         U->bg = NULL;
+        U->nthr = U->nbuf;
         U->st.refactor_failed++;
         return amps__err(ctx, s, "amps_update_refactor_wait: the re-factorization failed (%s); the engine keeps its factors", msg);
     }
@@ -6215,6 +6222,7 @@ static void amps__bg_discard(amps_ctx *ctx, amps_update *U) {
     amps__bg_join(U->bg);
     amps__bg_free(ctx, U->bg);
     U->bg = NULL;
+    U->nthr = U->nbuf;
 }
 
 AMPS_API void amps_update_refactor_cancel(amps_ctx *ctx, amps_update *U) {
