@@ -37,6 +37,7 @@ static void eng_open(eng *e) {
     e->n = base_K->ncol;
     amps_update_opts_default(&o);
     o.grow = 1; o.cap_mod = 1; o.cap_new = 1; o.cap_pending = 1; o.cap_delta = 1; o.cap_vpool = 1;
+    o.refactor = AMPS_REFACTOR_MANUAL;   /* the counting allocator is single-threaded */
     e->U = amps_update_create(&e->ctx, base_K, AMPS_UPPER, base_F, &o);
     CHECK(e->U != NULL, "engine create: %s", e->ctx.msg);
 }
@@ -239,6 +240,7 @@ static amps_scene *scene_open(amps_ctx *c) {
     m = amps_mesh_brick(c, 2);
     amps_scene_opts_default(&so);
     so.update.cap_mod = 1; so.update.cap_new = 1; so.update.cap_pending = 1; so.update.cap_delta = 1; so.update.cap_vpool = 1;
+    so.update.refactor = AMPS_REFACTOR_MANUAL;   /* the counting allocator is single-threaded */
     S = amps_scene_create(c, m, &so);
     amps_scene_set_material(c, S, 1000, 0.3);
     amps_scene_fix_where(c, S, 2, AMPS_LT, 1e-9, NULL);
