@@ -407,7 +407,6 @@ typedef struct amps_update_job {
     const amps_int *widx, *wclo;  /* watched indices, their closure (engine-owned) */
     const unsigned char *wovr;    /* 1: xw[k] was set by begin */
     double *y, *xw;               /* caller-owned */
-    amps_int n;
 } amps_update_job;
 AMPS_API amps_int amps_update_base_order(const amps_update *U);
 AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, amps_update_job *job, double *y, amps_int ylen, double *xw);
@@ -4150,7 +4149,6 @@ struct amps_update {
     double tol, sigma;
     int grow, nthr, refine, eq320, committed;
     int nbuf;                              /* threads the per-thread buffers are sized for (>= nthr) */
-    int guard_refactor;                    /* the guard may re-factor (1; the engine of a new base: 1) */
     double guard_tol;                      /* accuracy guard (0: off) */
     double *ctr, *gbuf;                    /* guard: forward solve of the residual (n), 2 * capN scratch */
     amps_int n, N, kpend, capN;
@@ -4420,7 +4418,7 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     U = AMPS__CAST(amps_update *, amps__calloc(ctx, 1, sizeof(amps_update)));
     if (!U) return NULL;
     U->F = F; U->form = o.formulation; U->tol = o.singular_tol; U->grow = o.grow;
-    U->refine = o.refine; U->eq320 = o.eq320; U->guard_tol = o.guard_tol; U->guard_refactor = 1;
+    U->refine = o.refine; U->eq320 = o.eq320; U->guard_tol = o.guard_tol;
     if (!(o.refactor_ratio > 0)) o.refactor_ratio = 1.0;
     if (o.refactor_order.method == AMPS_ORDER_GIVEN) o.refactor_order.method = AMPS_ORDER_AMD;  /* a given perm has the old order */
     o.refactor_order.perm = NULL; o.refactor_order.coords = NULL;
@@ -5442,15 +5440,15 @@ static void amps__step4(amps_update *U, const double *ct, const double *fv, int 
 }
 
 /* Watched entries that do not come from the backward solve: appended DOFs ((f - w) / sigma)
-   and members of U whose value the dense system gives (constrained; eq320). out[k] is set and
-   wovr[k] = 1 for those, wovr[k] = 0 for the others. */
-static void amps__watch_fixed(amps_update *U, const double *fv, double *out) {
+   and members of U whose value the dense system gives (constrained; eq320). x[i] is set and
+   wovr[k] = 1 for those (i = widx[k]), wovr[k] = 0 for the others. */
+static void amps__watch_fixed(amps_update *U, const double *fv, double *x) {
     amps_int k;
     for (k = 0; k < U->nw; k++) {
         amps_int i = U->widx[k], a = U->upos[i];
         U->wovr[k] = 1;
-        if (a >= 0 && ((U->ukind[a] & AMPS__UCON) || (U->eq320 && U->form == AMPS_FORM_PRIMAL))) out[k] = U->yv[a];
-        else if (i >= U->n) out[k] = (fv[i] - (a >= 0 ? U->wv[a] : 0.0)) / U->sigma;
+        if (a >= 0 && ((U->ukind[a] & AMPS__UCON) || (U->eq320 && U->form == AMPS_FORM_PRIMAL))) x[i] = U->yv[a];
+        else if (i >= U->n) x[i] = (fv[i] - (a >= 0 ? U->wv[a] : 0.0)) / U->sigma;
         else U->wovr[k] = 0;
     }
 }
@@ -5477,23 +5475,20 @@ static void amps__solve_core(amps_update *U, const double *ct, const double *fv,
             for (a = 0; a < u; a++) { wv[a] += U->wd[a]; yv[a] += U->yd[a]; }
         }
     }
-    if (watched == 2) {
-        /* a two-phase job: the backward solve runs later, in amps_update_watched_run */
-        amps__watch_fixed(U, fv, U->job_xw);
-        memcpy(U->job_y, sv, sizeof(double) * (size_t)n);
+    if (watched) {
+        amps__watch_fixed(U, fv, x);
+        if (watched == 2) {
+            /* a two-phase job: the backward solve runs later, in amps_update_watched_run */
+            for (k = 0; k < U->nw; k++) if (U->wovr[k]) U->job_xw[k] = x[U->widx[k]];
+            memcpy(U->job_y, sv, sizeof(double) * (size_t)n);
+        } else {
+            /* the watched entries only: L^{-T} on their closure */
+            amps_ltsolve_closure(F, U->ncw, U->wclo, sv);
+            for (k = 0; k < U->nw; k++) if (!U->wovr[k]) x[U->widx[k]] = sv[F->iperm[U->widx[k]]];
+        }
         memset(sv, 0, sizeof(double) * (size_t)n);
         U->st.t_step[6] += amps_now() - t0;
         return;
-    }
-    if (watched) {
-        /* the watched entries only: L^{-T} on their closure */
-        amps_ltsolve_closure(F, U->ncw, U->wclo, sv);
-        for (k = 0; k < U->nw; k++) {
-            amps_int i = U->widx[k];
-            if (i >= n) { a = U->upos[i]; x[i] = (fv[i] - (a >= 0 ? wv[a] : 0.0)) / U->sigma; }
-            else x[i] = sv[F->iperm[i]];
-        }
-        memset(sv, 0, sizeof(double) * (size_t)n);
     } else {
         amps_ltsolve(F, sv);
         for (k = 0; k < n; k++) { x[F->perm[k]] = sv[k]; sv[k] = 0.0; }
@@ -5575,7 +5570,7 @@ again:
         }
         U->st.relres = rel;
         U->st.guard_result = rel <= U->guard_tol ? (pass ? 2 : U->st.guard_steps > 0) : 3;
-        if (rel > U->guard_tol && pass == 0 && U->guard_refactor && U->opts.refactor != AMPS_REFACTOR_OFF && U->u > 0) {
+        if (rel > U->guard_tol && pass == 0 && U->opts.refactor != AMPS_REFACTOR_OFF && U->u > 0) {
             /* the augmentation is the suspect: a fresh base, then the same solve again */
             pass = 1;
             if (amps_update_refactor(ctx, U) == AMPS_OK) goto again;
@@ -5667,16 +5662,22 @@ AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m
 }
 
 AMPS_API amps_int amps_update_base_order(const amps_update *U) { return U ? U->n : 0; }
+
+/* Every watched index still exists (DOFs appended later are never removed; a discarded batch is). */
+static amps_status amps__watch_valid(amps_ctx *ctx, const amps_update *U, const char *fn) {
+    amps_int k;
+    for (k = 0; k < U->nw; k++)
+        if (U->widx[k] >= U->N + U->kpend)
+            return amps__err(ctx, AMPS_ERR_INDEX, "%s: watched index %ld no longer exists", fn, (long)U->widx[k]);
+    return AMPS_OK;
+}
 AMPS_API const amps_factor *amps_update_factor(const amps_update *U) { return U ? U->F : NULL; }
 
 AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, amps_update_job *job, double *y, amps_int ylen, double *xw) {
     amps_status s;
-    amps_int k;
     if (!U || !job || !y || (!xw && U->nw > 0)) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_watched_begin: NULL argument");
     if (U->job_y) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_watched_begin: a job is already in progress");
-    for (k = 0; k < U->nw; k++)
-        if (U->widx[k] >= U->N + U->kpend)
-            return amps__err(ctx, AMPS_ERR_INDEX, "amps_update_watched_begin: watched index %ld no longer exists", (long)U->widx[k]);
+    if ((s = amps__watch_valid(ctx, U, "amps_update_watched_begin")) != AMPS_OK) return s;
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
     if (ylen < U->n) return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update_watched_begin: y has %ld entries, the base order is %ld", (long)ylen, (long)U->n);
     U->job_y = y; U->job_xw = xw;
@@ -5685,7 +5686,7 @@ AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, am
     amps__small_reactions(U, U->rhs, U->yv, U->wv);
     U->st.nsolve++;
     job->F = U->F; job->nw = U->nw; job->ncw = U->ncw; job->widx = U->widx; job->wclo = U->wclo;
-    job->wovr = U->wovr; job->y = y; job->xw = xw; job->n = U->n;
+    job->wovr = U->wovr; job->y = y; job->xw = xw;
     return AMPS_OK;
 }
 
@@ -5707,9 +5708,7 @@ AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, do
     amps_status s;
     amps_int k;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve_watched: NULL engine");
-    for (k = 0; k < U->nw; k++)
-        if (U->widx[k] >= U->N + U->kpend)
-            return amps__err(ctx, AMPS_ERR_INDEX, "amps_update_solve_watched: watched index %ld no longer exists", (long)U->widx[k]);
+    if ((s = amps__watch_valid(ctx, U, "amps_update_solve_watched")) != AMPS_OK) return s;
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
     if (U->wdirty || !U->has_sol) {
         amps__solve_stats_begin(U);
@@ -5817,7 +5816,7 @@ typedef struct amps__bg {
     double t0, t1;
     int state, cancel;
 #ifndef AMPS_NO_THREADS
-    pthread_mutex_t mu; pthread_t th; int has_thread;
+    pthread_mutex_t mu; pthread_t th; int has_thread, has_mu;
 #endif
 } amps__bg;
 
@@ -5849,7 +5848,7 @@ static void amps__bg_free(amps_ctx *ctx, amps__bg *b) {
     amps__free(ctx, b->ti); amps__free(ctx, b->tj); amps__free(ctx, b->tx);
     amps__free(ctx, b->ci); amps__free(ctx, b->cg); amps__free(ctx, b->f); amps__free(ctx, b->log);
 #ifndef AMPS_NO_THREADS
-    pthread_mutex_destroy(&b->mu);
+    if (b->has_mu) pthread_mutex_destroy(&b->mu);
 #endif
     amps__free(ctx, b);
 }
@@ -5890,11 +5889,11 @@ static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U) {
     memcpy(b->f, U->f, sizeof(double) * (size_t)U->N);
 #ifndef AMPS_NO_THREADS
     if (pthread_mutex_init(&b->mu, NULL) != 0) {
-        amps__free(ctx, b->ti); amps__free(ctx, b->tj); amps__free(ctx, b->tx); amps__free(ctx, b->ci);
-        amps__free(ctx, b->cg); amps__free(ctx, b->f); amps__free(ctx, b->log); amps__free(ctx, b);
+        amps__bg_free(ctx, b);
         amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_start: cannot create a mutex");
         return NULL;
     }
+    b->has_mu = 1;
 #endif
     b->state = AMPS__BG_RUNNING;
     return b;
@@ -6036,6 +6035,15 @@ static void amps__bg_join(amps__bg *b) {
 #endif
 }
 
+/* Ends the background job of U (joined, freed); the kernels get their threads back. */
+static void amps__bg_end(amps_ctx *ctx, amps_update *U, int failed) {
+    amps__bg_join(U->bg);
+    amps__bg_free(ctx, U->bg);
+    U->bg = NULL;
+    U->nthr = U->nbuf;
+    if (failed) U->st.refactor_failed++;
+}
+
 #ifndef AMPS_NO_THREADS
 /* Factorization time estimated from the solve time: flops sum_j c_j^2 against 4 sum_j c_j. */
 static double amps__fact_estimate(const amps_factor *F, double t_solve) {
@@ -6126,10 +6134,7 @@ static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
     U->st.t_swap = amps_now() - t0;
     return AMPS_OK;
 fail:
-    U->bg = NULL;
-    U->nthr = U->nbuf;
-    U->st.refactor_failed++;
-    amps__bg_free(&c2, b);
+    amps__bg_end(&c2, U, 1);
     return amps__err(ctx, s, "amps_update: swapping the re-factorization in failed (%s); the engine keeps its factors", c2.msg);
 }
 
@@ -6142,13 +6147,7 @@ static void amps__bg_poll(amps_ctx *ctx, amps_update *U) {
             amps_ctx c2;
             amps_ctx_init(&c2); c2.alloc_user = ctx ? ctx->alloc_user : NULL;
             (void)amps__bg_swap(&c2, U);
-        } else if (st == AMPS__BG_FAILED) {
-            amps__bg_join(U->bg);
-            amps__bg_free(ctx, U->bg);
-            U->bg = NULL;
-            U->nthr = U->nbuf;
-            U->st.refactor_failed++;
-        }
+        } else if (st == AMPS__BG_FAILED) amps__bg_end(ctx, U, 1);
     }
 }
 
@@ -6208,10 +6207,7 @@ AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U) {
         amps_status s = b->status ? b->status : AMPS_ERR_STATE;
         char msg[256];
         memcpy(msg, b->msg, sizeof(msg));
-        amps__bg_free(ctx, b);
-        U->bg = NULL;
-        U->nthr = U->nbuf;
-        U->st.refactor_failed++;
+        amps__bg_end(ctx, U, 1);
         return amps__err(ctx, s, "amps_update_refactor_wait: the re-factorization failed (%s); the engine keeps its factors", msg);
     }
 }
@@ -6219,10 +6215,7 @@ AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U) {
 static void amps__bg_discard(amps_ctx *ctx, amps_update *U) {
     if (!U->bg) return;
     amps__bg_lock(U->bg); U->bg->cancel = 1; amps__bg_unlock(U->bg);
-    amps__bg_join(U->bg);
-    amps__bg_free(ctx, U->bg);
-    U->bg = NULL;
-    U->nthr = U->nbuf;
+    amps__bg_end(ctx, U, 0);
 }
 
 AMPS_API void amps_update_refactor_cancel(amps_ctx *ctx, amps_update *U) {

@@ -343,13 +343,33 @@ static amps_mesh *soft_layer(amps_ctx *ctx, int R, double E, double contrast, do
     return m;
 }
 
+/* Worst shape ratio 6 sqrt(2) V / l_max^3 over the tets of m (1 for the regular tet). */
+static double worst_shape(const amps_mesh *m) {
+    double q = 1;
+    amps_int t;
+    for (t = 0; t < m->ntet; t++) {
+        double X[12], G[12], V, lmax = 0, qq;
+        int a, b, d;
+        amps_mesh_tet_coords(m, t, X);
+        V = fabs(amps_tet_gradients(X, G));
+        for (a = 0; a < 4; a++) for (b = a + 1; b < 4; b++) {
+            double l = 0;
+            for (d = 0; d < 3; d++) l += (X[3 * a + d] - X[3 * b + d]) * (X[3 * a + d] - X[3 * b + d]);
+            if (sqrt(l) > lmax) lmax = sqrt(l);
+        }
+        qq = 6 * sqrt(2.0) * V / (lmax * lmax * lmax);
+        if (qq < q) q = qq;
+    }
+    return q;
+}
+
 /* Brick R with every node not on the boundary moved by up to amp spacings in each coordinate
    (the Kuhn tets become badly shaped, some nearly flat). Returns the worst shape ratio
    6 sqrt(2) V / l_max^3 (1 for the regular tet) in *q. */
 static amps_mesh *perturbed_brick(amps_ctx *ctx, int R, double amp, unsigned long long seed, double *q) {
     amps_mesh *m = amps_mesh_brick(ctx, R), *p;
     double h = 1.0 / R, *xyz = (double *)malloc(sizeof(double) * 3 * m->nnode);
-    amps_int v, t;
+    amps_int v;
     t_seed(seed);
     memcpy(xyz, m->xyz, sizeof(double) * 3 * m->nnode);
     for (v = 0; v < m->nnode; v++) {
@@ -360,21 +380,7 @@ static amps_mesh *perturbed_brick(amps_ctx *ctx, int R, double amp, unsigned lon
     p = amps_mesh_create(ctx, m->nnode, xyz, m->ntet, m->tet);
     amps_mesh_free(ctx, m);
     free(xyz);
-    *q = 1;
-    if (!p) return NULL;
-    for (t = 0; t < p->ntet; t++) {
-        double X[12], G[12], V, lmax = 0, qq;
-        int a, b, d;
-        amps_mesh_tet_coords(p, t, X);
-        V = fabs(amps_tet_gradients(X, G));
-        for (a = 0; a < 4; a++) for (b = a + 1; b < 4; b++) {
-            double l = 0;
-            for (d = 0; d < 3; d++) l += (X[3 * a + d] - X[3 * b + d]) * (X[3 * a + d] - X[3 * b + d]);
-            if (sqrt(l) > lmax) lmax = sqrt(l);
-        }
-        qq = 6 * sqrt(2.0) * V / (lmax * lmax * lmax);
-        if (qq < *q) *q = qq;
-    }
+    *q = p ? worst_shape(p) : 1;
     return p;
 }
 
@@ -445,21 +451,7 @@ static void conditioning(void) {
         }
         m = tetgen_slivers(&ctx, long_mode ? 3000 : 600, 8);
         if (m) {
-            amps_int t;
-            double qmin = 1;
-            for (t = 0; t < m->ntet; t++) {
-                double X[12], G[12], V, lmax = 0, qq;
-                int a, b, d;
-                amps_mesh_tet_coords(m, t, X);
-                V = fabs(amps_tet_gradients(X, G));
-                for (a = 0; a < 4; a++) for (b = a + 1; b < 4; b++) {
-                    double l = 0;
-                    for (d = 0; d < 3; d++) l += (X[3 * a + d] - X[3 * b + d]) * (X[3 * a + d] - X[3 * b + d]);
-                    if (sqrt(l) > lmax) lmax = sqrt(l);
-                }
-                qq = 6 * sqrt(2.0) * V / (lmax * lmax * lmax);
-                if (qq < qmin) qmin = qq;
-            }
+            double qmin = worst_shape(m);
             printf("  tetgen Delaunay of random points: %ld nodes, %ld tets, worst shape ratio %.2e\n", (long)m->nnode, (long)m->ntet, qmin);
             run_case("tetgen_slivers", m, 2, 0.1, 1000.0, 0.3, &c);
         } else printf("  tetgen not available or failed: sliver mesh skipped\n");
