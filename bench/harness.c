@@ -8,7 +8,10 @@
    environment: BENCH_AMPS (amps configurations, default "p2,p1,d2,d1": primal/dual, threads),
      BENCH_CG_MAXIT (default 2000), BENCH_GM_MAXIT (default 600), BENCH_GM_RESTART (default 150),
      BENCH_SIMPL_MAXN (CHOLMOD simplicial refactor at the first and last sampled steps when the
-     system has at most this many equations; default 60000).
+     system has at most this many equations; default 60000), BENCH_ITER=0 (no CG / GMRES),
+     BENCH_GUARD (opts.update.guard_tol of the amps.h scenes), BENCH_TMAX (seconds: no new
+     step after this much wall time; the run then ends early, its last step a sampled one only if
+     it happened to be).
    Writes one row per (step, method, tolerance) to out.csv:
      step,method,tol,time,iters,relres,relerr,conv,dim,nsys,t1,t2,t3,t4,t5,t6
    (relerr -1 where no reference was computed) and one row to <out>_meta.csv (sizes, setup times).
@@ -609,7 +612,8 @@ int main(int argc, char **argv) {
     char conf[MAXCONF][8], metapath[1024];
     int steps, every, cut, nconf = 0, k, st, maxdeg = 0, v, ndofc, nL = 0, nsampled = 0;
     int cg_maxit = envi("BENCH_CG_MAXIT", 2000), gm_maxit = envi("BENCH_GM_MAXIT", 600), gm_restart = envi("BENCH_GM_RESTART", 150);
-    int simpl_maxn = envi("BENCH_SIMPL_MAXN", 60000);
+    int simpl_maxn = envi("BENCH_SIMPL_MAXN", 60000), iter = envi("BENCH_ITER", 1);
+    double tmax = getenv("BENCH_TMAX") ? atof(getenv("BENCH_TMAX")) : 0, t_start = amps_now();
     amps_scene *S[MAXCONF];
     amps_mesh *M;
     bscen sc;
@@ -649,6 +653,7 @@ int main(int argc, char **argv) {
         cctx[k].nthreads = conf[k][1] - '0';
         amps_scene_opts_default(&so);
         if (conf[k][0] == 'd') so.update.formulation = AMPS_FORM_DUAL;
+        if (getenv("BENCH_GUARD")) so.update.guard_tol = atof(getenv("BENCH_GUARD"));
         S[k] = bscen_scene(&cctx[k], &sc, spec, &so);
         t0 = amps_now();
         if (amps_scene_solve(&cctx[k], S[k]) != AMPS_OK) bench_die("first solve", cctx[k].msg);
@@ -695,6 +700,7 @@ int main(int argc, char **argv) {
         amps_update_stats us[MAXCONF];
         int sampled, d, fail = 0;
         memcpy(uprev, amps_scene_displacements(S[0]), sizeof(double) * 3 * (size_t)M->nnode);
+        if (tmax > 0 && amps_now() - t_start > tmax) { printf("  stopped after step %d: BENCH_TMAX = %g s reached\n", st - 1, tmax); break; }
         if (!bscen_next(&ctx, &sc, M, &s)) break;
         cur_step = st;
         for (k = 0; k < nconf; k++) {
@@ -750,13 +756,13 @@ int main(int argc, char **argv) {
             }
             put("chol_updown", 0, t_ud, 0, bsys_relres(&Sy, xud, work), bsys_relerr(&Sy, xud, xref), 1, Sy.n, 0, NULL);
             bsys_from_disp(&Sy, uprev, xprev);
-            for (prec = 0; prec < 2; prec++) {
+            for (prec = 0; prec < 2 * iter; prec++) {
                 cg_run(&Sy, xprev, prec, cg_maxit, &sn);
                 for (ti = 0; ti < NTOL; ti++)
                     put(prec ? "cg_jacobi" : "cg_none", tols[ti], sn.t[ti], sn.it[ti], bsys_relres(&Sy, sn.x[ti], work),
                         bsys_relerr(&Sy, sn.x[ti], xref), sn.conv[ti], Sy.n, 0, NULL);
             }
-            for (prec = 0; prec < 3; prec++) {
+            for (prec = 0; prec < 3 * iter; prec++) {
                 static const char *gname[3] = {"gmres_none", "gmres_D", "gmres_tri"};
                 gm_run(&gm, &Sy, Lset, nL, xprev, prec, gm_maxit, gm_restart, &sn);
                 for (ti = 0; ti < NTOL; ti++)

@@ -23,28 +23,33 @@ rm -f $out/factor.csv $out/h_*.csv $out/*.png $out/summary.csv
 run() { echo "+ $*" | tee -a "$log"; "$@" 2>&1 | tee -a "$log"; }
 B20=bench/data/bunny20k.1.node
 B50=bench/data/bunny50k.1.node
-# harness runs: mesh:experiment:steps:every:cg_maxit (every: the sampled steps for the
-# reference, CHOLMOD refactor, CG and GMRES; amps.h and CHOLMOD update/downdate run every step)
+# harness runs: mesh:experiment:steps:every:cg_maxit:tmax (every: the sampled steps for the
+# reference, CHOLMOD refactor, CG and GMRES; amps.h and CHOLMOD update/downdate run every step;
+# tmax: wall-clock seconds after which a run takes no new step, a guard for the time budget)
 if [ "$mode" = quick ]; then
   meshes_factor="beam:64 brick:8"
-  runs="brick:8:cut:20:5:1000 beam:64:cut:20:10:1000 $B20:cut:10:10:300 brick:8:deform:20:10:1000"
+  runs="brick:8:cut:20:5:1000:30 beam:64:cut:20:10:1000:30 $B20:cut:10:10:300:60 brick:8:deform:20:10:1000:30"
 else
   meshes_factor="beam:64 beam:256 beam:1024 brick:8 brick:14 brick:20 $B20 $B50"
   runs=""
-  for m in beam:4 beam:16 beam:64 brick:4 brick:8 brick:12; do runs="$runs $m:cut:50:5:2000 $m:deform:50:5:2000"; done
-  for m in beam:256 brick:16; do runs="$runs $m:cut:50:10:2000 $m:deform:50:10:2000"; done
-  for m in beam:1024 brick:20 $B20 $B50; do runs="$runs $m:cut:50:25:1000 $m:deform:50:25:1000"; done
-  runs="$runs beam:128:cut:500:50:2000"
+  for m in beam:4 beam:16 beam:64 brick:4 brick:8 brick:12; do runs="$runs $m:cut:50:5:2000:60 $m:deform:50:5:2000:60"; done
+  for m in beam:256 brick:16; do runs="$runs $m:cut:50:10:2000:90 $m:deform:50:10:2000:90"; done
+  for m in beam:1024 brick:20 $B20; do runs="$runs $m:cut:50:25:1000:150 $m:deform:50:25:1000:150"; done
+  runs="$runs $B50:cut:50:25:500:240 $B50:deform:50:49:500:180 beam:128:cut:500:50:1000:240"
 fi
 for m in $meshes_factor; do run build/bench/factor "$m" $out/factor.csv; done
 for r in $runs; do
   IFS=: read -r -a f <<< "$r"
   n=${#f[@]}
-  mesh=$(IFS=:; echo "${f[*]:0:n-4}"); kind=${f[n-4]}; steps=${f[n-3]}; every=${f[n-2]}; cgmax=${f[n-1]}
+  mesh=$(IFS=:; echo "${f[*]:0:n-5}"); kind=${f[n-5]}; steps=${f[n-4]}; every=${f[n-3]}; cgmax=${f[n-2]}; tmax=${f[n-1]}
   name=$(basename "$mesh" | sed 's/\.1\.node$//; s/:/_/')
   [ "$steps" -gt 50 ] && name="${name}_long"
-  BENCH_CG_MAXIT=$cgmax run build/bench/harness "$mesh" "$kind" "$steps" "$every" "$out/h_${kind}_${name}.csv"
+  BENCH_CG_MAXIT=$cgmax BENCH_TMAX=$tmax run build/bench/harness "$mesh" "$kind" "$steps" "$every" "$out/h_${kind}_${name}.csv"
 done
+if [ "$mode" = full ]; then
+  # the accuracy guard (opt-in) on the worst-conditioned beam, amps.h only
+  BENCH_GUARD=1e-12 BENCH_AMPS=p2 BENCH_ITER=0 BENCH_TMAX=60 run build/bench/harness beam:1024 cut 50 25 $out/h_cut_beam_1024_guard.csv
+fi
 {
   echo "machine: $(uname -m), $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//'), $(free -g | awk '/Mem:/{print $2}') GiB"
   echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"

@@ -160,6 +160,7 @@ echo
 echo "| run | method | 1e-4 | 1e-6 | 1e-8 | 1e-10 | median iterations at 1e-10 | nc at 1e-8 / 1e-10 |"
 echo "|---|---|---|---|---|---|---|---|"
 for e in cut deform; do for r in $(runs_of $e); do for m in cg_none cg_jacobi gmres_none gmres_D gmres_tri; do
+  [ -n "$(get "$r" $m 1e-10 6)" ] || continue
   line="| $r | $m |"
   for t in 1e-4 1e-6 1e-8 1e-10; do line="$line $(ms "$(get "$r" $m $t 7)") / $(sci "$(get "$r" $m $t 11)") |"; done
   n8=$(( $(get "$r" $m 1e-8 6) - $(get "$r" $m 1e-8 13) )); n10=$(( $(get "$r" $m 1e-10 6) - $(get "$r" $m 1e-10 13) ))
@@ -190,7 +191,7 @@ if command -v gnuplot >/dev/null 2>&1; then
     done
   done
   # Steps 1-6 of amps_p2 (median seconds), cut runs
-  awk -F, '$2 == "cut" && $4 == "amps_p2" { print $1, $17, $18, $19 + $20 + $21, $22 }' summary.csv > "$tmp/steps.dat"
+  awk -F, '$2 == "cut" && $4 == "amps_p2" { s = $17 + $18 + $19 + $20 + $21 + $22; if (s > 0) print $1, 100 * $17 / s, 100 * $18 / s, 100 * ($19 + $20 + $21) / s, 100 * $22 / s }' summary.csv > "$tmp/steps.dat"
   # "plot" with the non-empty ones of: file|options ...
   pl() { local out="" a; for a in "$@"; do [ -s "${a%%|*}" ] && out="$out, '${a%%|*}' ${a#*|}"; done; [ -n "$out" ] && echo "plot ${out#, }" || echo "plot 1 notitle lc rgb 'white'"; }
   runs_cut=$(runs_of cut | tr '\n' ' '); runs_def=$(runs_of deform | tr '\n' ' ')
@@ -232,10 +233,10 @@ if command -v gnuplot >/dev/null 2>&1; then
     done
     echo "unset multiplot; unset logscale"
     echo "set output '$dir/steps.png'"
-    echo "set title 'amps.h (p2) median time of Steps 1-6 per cut run'; set ylabel 'ms'; set xlabel ''"
+    echo "set title 'amps.h (p2): share of Steps 1-6 in the step (medians per step, normalized), cut runs'; set ylabel '%'; set xlabel ''; set yrange [0:100]"
     echo "set style data histograms; set style histogram rowstacked; set style fill solid 0.8 border -1; set boxwidth 0.7"
-    echo "set xtics rotate by -30; set key top left"
-    echo "plot '$tmp/steps.dat' u (1e3*\$2):xtic(1) t 'Step 1 (L^{-1} columns)', '' u (1e3*\$3) t 'Step 2 (inverse principal submatrix)', '' u (1e3*\$4) t 'Steps 3-5 (dense system)', '' u (1e3*\$5) t 'Step 6 (full solution)'"
+    echo "set xtics rotate by -30; set key outside"
+    echo "plot '$tmp/steps.dat' u 2:xtic(1) t 'Step 1 (L^{-1} columns)', '' u 3 t 'Step 2 (inverse principal submatrix)', '' u 4 t 'Steps 3-5 (dense system)', '' u 5 t 'Step 6 (full solution)'"
   } > "$tmp/plots.gp"
   gnuplot "$tmp/plots.gp" 2> "$tmp/gnuplot.err" && plots=1 || sed 's/^/gnuplot: /' "$tmp/gnuplot.err" >&2
   rm -rf "$tmp"
