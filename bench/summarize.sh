@@ -113,8 +113,8 @@ steps (residual in double), both 2-norms over the free DOFs.
 - `cg_none`, `cg_jacobi`: our conjugate gradients on K_FF x_F = b_F (OpenMP products), warm
   started from the previous step's (exact) solution, stopped at ||r|| <= tol ||b_F||
   (tol = 1e-4, 1e-6, 1e-8, 1e-10; one run to the tightest, the time and iterate at which each
-  looser tolerance is met are recorded), capped at 2000 iterations (1000 on the four largest
-  meshes); "nc" counts samples that hit the cap.
+  looser tolerance is met are recorded), capped at 2000 iterations (1000 on the larger meshes
+  and the 500-step run, 500 on bunny50k; see `bench/run.sh`); "nc" counts samples that hit the cap.
 - `gmres_none`, `gmres_D`, `gmres_tri`: paper 001 (Eq. 13-20): the augmented system
   [R J; H 0][a1; a2] = [f^; 0] with R = [K0 0; 0 I] factored once by amps.h, J the current
   columns of the changed DOFs (unit columns for constrained ones), H the matching rows of I;
@@ -130,8 +130,10 @@ steps (residual in double), both 2-norms over the free DOFs.
 Sampling: amps.h and `chol_updown` (stateful) run every step; the reference, `chol_refactor`,
 CG and GMRES run at the sampled steps only: step 1, every k-th step and the last (k per run in
 the tables: 5 on the small meshes, 10 on beam 5x5x256 and brick R=16, 25 on beam 5x5x1024,
-brick R=20 and the bunnies, 50 on the 500-step run), so that `make bench` stays within 30
-minutes on 2 cores. Times are medians over the steps a method ran.
+brick R=20 and the bunnies, 50 on the 500-step run and bunny50k deform), so that `make bench`
+stays within 30 minutes on 2 cores. Each run also has a wall-clock guard (`BENCH_TMAX` in
+`bench/run.sh`, 30-240 s): past it no new step starts, and the "steps" column shows how far the
+run got. Times are medians over the steps a method ran.
 
 EOF
 
