@@ -476,6 +476,16 @@ static int gm_prec_build(gmres *G, int prec, double *tx, int *ti, int *tj, int *
     return 1;
 }
 
+/* y = R^{-1} g for the leading j x j block of the rotated Hessenberg matrix (upper triangular R) */
+static void hess_solve(const double *H, int mr, const double *g, int j, double *y) {
+    int i, k;
+    for (i = j - 1; i >= 0; i--) {
+        y[i] = g[i];
+        for (k = i + 1; k < j; k++) y[i] -= H[i * mr + k] * y[k];
+        y[i] /= H[i * mr + i];
+    }
+}
+
 /* Runs the method for one step to the tightest tolerance; snapshots of the full solution. */
 static void gm_run(gmres *G, const bsys *S, const int *Lset, int m, const double *x0, int prec, int maxit, int restart,
                    snaps *sn) {
@@ -563,7 +573,7 @@ static void gm_run(gmres *G, const bsys *S, const int *Lset, int m, const double
             it++; jj = j + 1;
             res = fabs(g[j + 1]);
             while (ti < NTOL && res <= tols[ti] * nrhs) {   /* a2 = a + Z y, y = H^{-1} g */
-                for (i = j; i >= 0; i--) { y[i] = g[i]; for (k = i + 1; k <= j; k++) y[i] -= H[i * mr + k] * y[k]; y[i] /= H[i * mr + i]; }
+                hess_solve(H, mr, g, j + 1, y);
                 memcpy(a2s[ti], a, sizeof(double) * (size_t)m);
                 for (i = 0; i <= j; i++) for (k = 0; k < m; k++) a2s[ti][k] += y[i] * Z[(size_t)i * m + k];
                 t_snap[ti] = amps_now() - t0 - tpause; sn->it[ti] = it; sn->conv[ti++] = 1;
@@ -571,7 +581,7 @@ static void gm_run(gmres *G, const bsys *S, const int *Lset, int m, const double
             if (ti == NTOL || hn == 0) break;
         }
         if (ti == NTOL) break;
-        for (i = jj - 1; i >= 0; i--) { y[i] = g[i]; for (k = i + 1; k < jj; k++) y[i] -= H[i * mr + k] * y[k]; y[i] /= H[i * mr + i]; }
+        hess_solve(H, mr, g, jj, y);
         for (i = 0; i < jj; i++) for (k = 0; k < m; k++) a[k] += y[i] * Z[(size_t)i * m + k];
         if (it >= maxit) {
             for (; ti < NTOL; ti++) { memcpy(a2s[ti], a, sizeof(double) * (size_t)m); t_snap[ti] = amps_now() - t0 - tpause; sn->it[ti] = it; sn->conv[ti] = 0; }
@@ -609,7 +619,7 @@ static void gm_run(gmres *G, const bsys *S, const int *Lset, int m, const double
 int main(int argc, char **argv) {
     amps_ctx ctx, cctx[MAXCONF];
     const char *spec, *out;
-    char conf[MAXCONF][8], metapath[1024];
+    char conf[MAXCONF][16], metapath[1024];
     int steps, every, cut, nconf = 0, k, st, maxdeg = 0, v, ndofc, nL = 0, nsampled = 0;
     int cg_maxit = envi("BENCH_CG_MAXIT", 2000), gm_maxit = envi("BENCH_GM_MAXIT", 600), gm_restart = envi("BENCH_GM_RESTART", 150);
     int simpl_maxn = envi("BENCH_SIMPL_MAXN", 60000), iter = envi("BENCH_ITER", 1);
@@ -636,7 +646,7 @@ int main(int argc, char **argv) {
         while (*l && nconf < MAXCONF) {
             int len = 0;
             while (l[len] && l[len] != ',' && len < 7) len++;
-            memcpy(conf[nconf], l, (size_t)len); conf[nconf][len] = 0;
+            snprintf(conf[nconf], sizeof(conf[nconf]), "amps_%.*s", len, l);
             nconf++;
             l += len; if (*l == ',') l++;
         }
@@ -650,9 +660,9 @@ int main(int argc, char **argv) {
         amps_scene_opts so;
         double t0;
         amps_ctx_init(&cctx[k]);
-        cctx[k].nthreads = conf[k][1] - '0';
+        cctx[k].nthreads = conf[k][6] - '0';
         amps_scene_opts_default(&so);
-        if (conf[k][0] == 'd') so.update.formulation = AMPS_FORM_DUAL;
+        if (conf[k][5] == 'd') so.update.formulation = AMPS_FORM_DUAL;
         if (getenv("BENCH_GUARD")) so.update.guard_tol = atof(getenv("BENCH_GUARD"));
         S[k] = bscen_scene(&cctx[k], &sc, spec, &so);
         t0 = amps_now();
@@ -735,11 +745,7 @@ int main(int argc, char **argv) {
         t_ud = updown_step(&ud, M, ndof, &s, &sc, S0.Kf, udcon, xud);
         sampled = st == 1 || st % every == 0 || st == steps || sc.ip >= sc.npath;
         if (!sampled) {
-            for (k = 0; k < nconf; k++) {
-                char name[16];
-                snprintf(name, sizeof(name), "amps_%s", conf[k]);
-                put(name, 0, t_conf[k], 0, res_conf[k], -1, 1, us[k].dim, us[k].nsys, us[k].t_step);
-            }
+            for (k = 0; k < nconf; k++) put(conf[k], 0, t_conf[k], 0, res_conf[k], -1, 1, us[k].dim, us[k].nsys, us[k].t_step);
             put("chol_updown", 0, t_ud, 0, -1, -1, 1, ndofc, 0, NULL);
         } else {
             bsys Sy;
@@ -749,10 +755,8 @@ int main(int argc, char **argv) {
             nsampled++;
             reference(&Sy, xref, work, Sy.n <= simpl_maxn && (nsampled == 1 || st == steps));
             for (k = 0; k < nconf; k++) {
-                char name[16];
-                snprintf(name, sizeof(name), "amps_%s", conf[k]);
                 bsys_from_disp(&Sy, amps_scene_displacements(S[k]), x);
-                put(name, 0, t_conf[k], 0, bsys_relres(&Sy, x, work), bsys_relerr(&Sy, x, xref), 1, us[k].dim, us[k].nsys, us[k].t_step);
+                put(conf[k], 0, t_conf[k], 0, bsys_relres(&Sy, x, work), bsys_relerr(&Sy, x, xref), 1, us[k].dim, us[k].nsys, us[k].t_step);
             }
             put("chol_updown", 0, t_ud, 0, bsys_relres(&Sy, xud, work), bsys_relerr(&Sy, xud, xref), 1, Sy.n, 0, NULL);
             bsys_from_disp(&Sy, uprev, xprev);
