@@ -780,6 +780,11 @@ int main(int argc, char **argv) {
         fflush(csv);
     }
     fclose(csv);
+    {
+        double lnz = 0;
+        for (k = 0; k < ud.N; k++) lnz += ((int *)ud.L->nz)[k];
+        printf("  CHOLMOD updown: nnz(L) %.0f initially, %.0f after the run\n", ud.lnz0, lnz);
+    }
     updown_free(&ud);
     gm_free(&ctx, &gm);
     for (k = 0; k < nconf; k++) amps_scene_free(&cctx[k], S[k]);
