@@ -44,7 +44,7 @@ get() { awk -F, -v r="$1" -v m="$2" -v t="$3" -v c="$4" '$1 == r && $4 == m && $
 runs_of() { awk -F, -v e="$1" 'NR > 1 && $2 == e && !seen[$1]++ { print $1 }' summary.csv | sort -t_ -k2,2 -k3,3n; }
 ms() { awk -v x="${1:--1}" 'BEGIN { if (x < 0 || x == "") printf "-"; else if (x < 1e-3) printf "%.3f", 1e3 * x; else if (x < 1) printf "%.2f", 1e3 * x; else printf "%.0f", 1e3 * x }'; }
 sci() { awk -v x="${1:--1}" 'BEGIN { if (x < 0 || x == "") printf "-"; else printf "%.1e", x }'; }
-ratio() { awk -v a="${1:-0}" -v b="${2:-0}" 'BEGIN { if (a > 0 && b > 0) printf "%.1fx", a / b; else printf "-" }'; }
+ratio() { awk -v a="${1:-0}" -v b="${2:-0}" 'BEGIN { if (a > 0 && b > 0) printf (a / b < 10 ? "%.2gx" : "%.0fx"), a / b; else printf "-" }'; }
 
 cat <<EOF
 # amps.h benchmark results
@@ -281,12 +281,12 @@ awk -F, '
       if (E[r, "amps_p2"] > emax) { emax = E[r, "amps_p2"]; er = r }
       if (R[r, "amps_p2"] > 10 * R[r, "chol_refactor"]) resw = resw " " r
     }
-    printf "- Against CHOLMOD refactorization (analyze + factor + solve) the amps.h step (p2) is %.1fx (%s) to %.0fx (%s) faster.\n", cmin, cr0, cmax, cr1
-    printf "- Against CHOLMOD update/downdate (`cholmod_updown` / `cholmod_rowdel` on a simplicial LDL^T, then a solve) amps.h is %.1fx (%s) to %.0fx (%s) faster", umin, ur0, umax, ur1
-    if (ulose != "") printf "; CHOLMOD updown is faster on:%s", ulose
+    printf "- CHOLMOD refactorization (analyze + factor + solve) takes %.2g (%s) to %.3g (%s) times the amps.h step (p2).\n", cmin, cr0, cmax, cr1
+    printf "- CHOLMOD update/downdate (`cholmod_updown` / `cholmod_rowdel` on a simplicial LDL^T, then a solve) takes %.2g (%s) to %.3g (%s) times the amps.h step", umin, ur0, umax, ur1
+    if (ulose != "") printf "; it is faster than amps.h on:%s", ulose
     printf ".\n"
-    printf "- The amps.h step costs %.2f (%s) to %.1f (%s) times one plain CHOLMOD supernodal solve of the same system.\n", smin, sr0, smax, sr1
-    printf "- The fastest iterative method at tolerance 1e-8 takes %.1fx (%s) to %.0fx (%s) the amps.h step", imin, ir0, imax, ir1
+    printf "- The amps.h step costs %.3g (%s) to %.3g (%s) times one plain CHOLMOD supernodal solve of the same system.\n", smin, sr0, smax, sr1
+    printf "- The fastest iterative method at tolerance 1e-8 takes %.2g (%s) to %.3g (%s) times the amps.h step", imin, ir0, imax, ir1
     if (itwin != "") printf "; it beats amps.h on:%s", itwin
     printf ".\n"
     printf "- Median errors of the iterative methods at tolerance 1e-8: %.0e to %.0e (per run and method); worst amps.h error per run: see below.\n", iemin, iemax
