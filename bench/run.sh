@@ -1,42 +1,54 @@
 #!/usr/bin/env bash
-# Benchmarks of amps.h against CHOLMOD: builds bench/*, fetches and meshes the bunny, runs the
-# factorization and update benchmarks, writes bench/out/*.csv and the tables of bench/RESULTS.md.
-#   bench/run.sh          full run (the meshes of the issues; about 20-30 minutes on 2 cores)
-#   bench/run.sh quick    representative subset (a few minutes)
+# Benchmarks of amps.h against CHOLMOD (refactor, update/downdate), CG and the GMRES method of
+# paper 001: builds bench/*, fetches and meshes the bunny, runs the factorization benchmark and
+# the harness over every experiment, writes bench/out/*.csv, the plots (bench/out/*.png) and
+# bench/RESULTS.md (bench/summarize.sh).
+#   bench/run.sh          full run (budget: under 30 minutes on 2 cores)
+#   bench/run.sh quick    representative subset (under 3 minutes)
 set -u
 cd "$(dirname "$0")/.."
 mode=${1:-full}
 bash tools/deps.sh bench || exit 1
 bash bench/get_bunny.sh || exit 1
-mkdir -p bench/out build/bench
+out=bench/out
+[ "$mode" = quick ] && out=build/bench/quick
+mkdir -p $out build/bench
 CC=${CC:-cc}
 FLAGS="-std=c99 -O2 -fopenmp -I. -I/usr/include/suitesparse"
-for b in update factor; do
-  [ -f bench/$b.c ] || continue
-  $CC $FLAGS -o build/bench/$b bench/$b.c -lcholmod -lm || exit 1
-done
-log=bench/out/log_$mode.txt
+$CC $FLAGS -o build/bench/factor bench/factor.c -lcholmod -lm || exit 1
+$CC $FLAGS -o build/bench/harness bench/harness.c -lcholmod -lumfpack -lm || exit 1
+log=$out/log_$mode.txt
 : > "$log"
-run() { echo "+ ${AMPS_GUARD:+AMPS_GUARD=$AMPS_GUARD }${AMPS_DUAL:+AMPS_DUAL=1 }$*" | tee -a "$log"; "$@" 2>&1 | tee -a "$log"; }
+rm -f $out/factor.csv $out/h_*.csv $out/*.png $out/summary.csv
+run() { echo "+ $*" | tee -a "$log"; "$@" 2>&1 | tee -a "$log"; }
+B20=bench/data/bunny20k.1.node
+B50=bench/data/bunny50k.1.node
+# harness runs: mesh:experiment:steps:every:cg_maxit:tmax (every: the sampled steps for the
+# reference, CHOLMOD refactor, CG and GMRES; amps.h and CHOLMOD update/downdate run every step;
+# tmax: wall-clock seconds after which a run takes no new step, a guard for the time budget)
 if [ "$mode" = quick ]; then
-  meshes_factor="beam:64 brick:12 bench/data/bunny20k.1.node"
-  updates="brick:12:cut:30 beam:256:cut:30 bench/data/bunny20k.1.node:cut:20 brick:12:deform:30"
+  meshes_factor="beam:64 brick:8"
+  runs="brick:8:cut:20:5:1000:30 beam:64:cut:20:10:1000:30 $B20:cut:10:10:300:60 brick:8:deform:20:10:1000:30"
 else
-  meshes_factor="beam:64 beam:256 beam:1024 brick:8 brick:14 brick:20 bench/data/bunny20k.1.node bench/data/bunny50k.1.node"
-  updates="beam:64:cut:50 beam:256:cut:50 beam:1024:cut:50 brick:8:cut:50 brick:14:cut:50 brick:20:cut:50 bench/data/bunny20k.1.node:cut:50 bench/data/bunny50k.1.node:cut:50 beam:256:deform:50 brick:14:deform:50 bench/data/bunny20k.1.node:deform:50"
+  meshes_factor="beam:64 beam:256 beam:1024 brick:8 brick:14 brick:20 $B20 $B50"
+  runs=""
+  for m in beam:4 beam:16 beam:64 brick:4 brick:8 brick:12; do runs="$runs $m:cut:50:5:2000:60 $m:deform:50:5:2000:60"; done
+  for m in beam:256 brick:16; do runs="$runs $m:cut:50:10:2000:90 $m:deform:50:10:2000:90"; done
+  for m in beam:1024 brick:20 $B20; do runs="$runs $m:cut:50:25:1000:150 $m:deform:50:25:1000:150"; done
+  runs="$runs $B50:cut:50:25:500:240 $B50:deform:50:50:500:180 beam:128:cut:500:50:1000:240"
 fi
-if [ -x build/bench/factor ]; then
-  for m in $meshes_factor; do run build/bench/factor "$m" bench/out/factor.csv; done
-fi
-for u in $updates; do
-  mesh=${u%:*:*}; rest=${u#"$mesh":}; kind=${rest%%:*}; steps=${rest#*:}
+for m in $meshes_factor; do run build/bench/factor "$m" $out/factor.csv; done
+for r in $runs; do
+  IFS=: read -r -a f <<< "$r"
+  n=${#f[@]}
+  mesh=$(IFS=:; echo "${f[*]:0:n-5}"); kind=${f[n-5]}; steps=${f[n-4]}; every=${f[n-3]}; cgmax=${f[n-2]}; tmax=${f[n-1]}
   name=$(basename "$mesh" | sed 's/\.1\.node$//; s/:/_/')
-  run build/bench/update "$mesh" "$kind" "$steps" "bench/out/update_${kind}_${name}.csv" 5
+  [ "$steps" -gt 50 ] && name="${name}_long"
+  BENCH_CG_MAXIT=$cgmax BENCH_TMAX=$tmax run build/bench/harness "$mesh" "$kind" "$steps" "$every" "$out/h_${kind}_${name}.csv"
 done
 if [ "$mode" = full ]; then
-  # the accuracy guard on the worst-conditioned beam, and the dual formulation on the bunny
-  AMPS_GUARD=1e-12 run build/bench/update beam:1024 cut 50 bench/out/update_cut_beam_1024_guard.csv 5
-  AMPS_DUAL=1 run build/bench/update bench/data/bunny20k.1.node cut 50 bench/out/update_cut_bunny20k_dual.csv 5
+  # the accuracy guard (opt-in) on the worst-conditioned beam, amps.h only
+  BENCH_GUARD=1e-12 BENCH_AMPS=p2 BENCH_ITER=0 BENCH_TMAX=60 run build/bench/harness beam:1024 cut 50 25 $out/h_cut_beam_1024_guard.csv
 fi
 # haptic step and watch sets (bench/haptic.c, bench/watch.c; results: bench/RESULTS_haptic.md)
 for b in haptic watch; do $CC $FLAGS -o build/bench/$b bench/$b.c -lm || exit 1; done
@@ -69,5 +81,8 @@ fi
   echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
   echo "blas: $(readlink -f /usr/lib/x86_64-linux-gnu/libblas.so.3 2>/dev/null)"
   echo "compiler: $($CC --version | head -1), flags: $FLAGS"
-} > bench/out/machine_$mode.txt
-echo "done: bench/out/ (log $log)"
+  echo "mode: $mode"
+} > $out/machine.txt
+if [ "$mode" = quick ]; then res=$out/RESULTS.md; pre=""; else res=bench/RESULTS.md; pre=out/; fi
+bash bench/summarize.sh "$out" "$pre" > $res.tmp && mv $res.tmp $res || exit 1
+echo "done: $out/ (log $log), $res"

@@ -1,37 +1,314 @@
 #!/usr/bin/env bash
-# Markdown table of bench/out/update_*.csv: per run the median AMPS step, the medians of
-# CHOLMOD analyze+factor+solve and of CHOLMOD's plain solve (same steps), their ratios, the worst
-# residuals, and the median share of Steps 1-6 in the AMPS step.
-cd "$(dirname "$0")/out" || exit 1
-med() { sort -g | awk '{a[NR]=$1} END {if (NR) print a[int((NR+1)/2)]; else print "nan"}'; }
-echo "| run | steps | final dim | final \|S u C\| | AMPS step (median) | CHOLMOD refactor+solve | ratio | CHOLMOD solve | AMPS / solve | worst residual (AMPS / CHOLMOD) | Steps 1 / 2 / 3+4+5 / 6 (median share) |"
-echo "|---|---|---|---|---|---|---|---|---|---|---|"
-for f in update_*.csv; do
-  [ -f "$f" ] || continue
-  name=${f#update_}; name=${name%.csv}
-  n=$(($(wc -l < "$f") - 1)); [ "$n" -gt 0 ] || continue
-  last=$(tail -1 "$f")
-  dim=$(echo "$last" | cut -d, -f2); ns=$(echo "$last" | cut -d, -f3)
-  ta=$(tail -n +2 "$f" | cut -d, -f4 | med)
-  tc=$(tail -n +2 "$f" | awk -F, '$12 > 0 {print $12}' | med)
-  ts=$(tail -n +2 "$f" | awk -F, '$13 > 0 {print $13}' | med)
-  ra=$(tail -n +2 "$f" | awk -F, 'BEGIN{m=0} $11 > m {m=$11} END{printf "%.1e", m}')
-  rc=$(tail -n +2 "$f" | awk -F, 'BEGIN{m=0} $14 > m {m=$14} END{printf "%.1e", m}')
-  s1=$(tail -n +2 "$f" | awk -F, '{print $5/$4}' | med); s2=$(tail -n +2 "$f" | awk -F, '{print $6/$4}' | med)
-  s345=$(tail -n +2 "$f" | awk -F, '{print ($7+$8+$9)/$4}' | med); s6=$(tail -n +2 "$f" | awk -F, '{print $10/$4}' | med)
-  awk -v name="$name" -v n="$n" -v dim="$dim" -v ns="$ns" -v ta="$ta" -v tc="$tc" -v ts="$ts" -v ra="$ra" -v rc="$rc" \
-      -v s1="$s1" -v s2="$s2" -v s345="$s345" -v s6="$s6" 'BEGIN {
-    printf "| %s | %d | %d | %d | %.2f ms | %.1f ms | %.1fx | %.2f ms | %.2f | %s / %s | %.0f%% / %.0f%% / %.0f%% / %.0f%% |\n",
-      name, n, dim, ns, 1e3*ta, 1e3*tc, tc/ta, 1e3*ts, ta/ts, ra, rc, 100*s1, 100*s2, 100*s345, 100*s6 }'
-done
+# bench/RESULTS.md from the CSV files of a run: bench/summarize.sh [dir [png-prefix]] > RESULTS.md
+#   dir: where factor.csv, h_*.csv, h_*_meta.csv and machine.txt are (default bench/out); the
+#   plots are written there as PNG (gnuplot), referenced as <png-prefix><name>.png (default out/).
+# Writes dir/summary.csv: per run, method and tolerance the median / max of time, residual, error.
+set -u
+here=$(cd "$(dirname "$0")" && pwd)
+dir=${1:-$here/out}
+pre=${2:-out/}
+dir=$(cd "$dir" && pwd) || exit 1
+cd "$dir" || exit 1
+ls h_*_meta.csv >/dev/null 2>&1 || { echo "summarize: no h_*_meta.csv in $dir" >&2; exit 1; }
 
-# factor.csv: one row per mesh
+# ---- summary.csv ----
+{
+echo "run,exp,mesh,method,tol,count,med_time,max_time,med_res,max_res,med_err,max_err,nconv,med_iters,dim,nsys,t1,t2,t3,t4,t5,t6,nodes,n0,nnzL,nnzL_updown,every"
+for f in h_*.csv; do
+  case $f in *_meta.csv) continue ;; esac
+  run=${f#h_}; run=${run%.csv}
+  meta=$(tail -1 "${f%.csv}_meta.csv")
+  awk -F, -v run="$run" -v meta="$meta" '
+    function med(a, n,   i, j, t) { for (i = 2; i <= n; i++) { t = a[i]; for (j = i - 1; j >= 1 && a[j] > t; j--) a[j + 1] = a[j]; a[j + 1] = t } return n ? a[int((n + 1) / 2)] : -1 }
+    NR == 1 { next }
+    { k = $2 "," $3; if (!(k in cnt)) { keys[++nk] = k }
+      c = ++cnt[k]; T[k, c] = $4; I[k, c] = $5; if ($4 > mt[k]) mt[k] = $4
+      if ($6 >= 0) { nr[k]++; R[k, nr[k]] = $6; if ($6 > mr[k]) mr[k] = $6 }
+      if ($7 >= 0) { ne[k]++; E[k, ne[k]] = $7; if ($7 > me[k]) me[k] = $7 }
+      nc[k] += $8; dim[k] = $9; ns[k] = $10
+      for (s = 1; s <= 6; s++) S[k, s, c] = $(10 + s) }
+    END {
+      split(meta, m, ","); ex = m[2]; mesh = m[1]; sub(/.*\//, "", mesh); sub(/\.1\.node$/, "", mesh)
+      for (q = 1; q <= nk; q++) { k = keys[q]; n = cnt[k]
+        for (i = 1; i <= n; i++) { a[i] = T[k, i]; b[i] = I[k, i] } mtm = med(a, n); mit = med(b, n)
+        for (i = 1; i <= nr[k]; i++) a[i] = R[k, i]; mres = med(a, nr[k] + 0)
+        for (i = 1; i <= ne[k]; i++) a[i] = E[k, i]; merr = med(a, ne[k] + 0)
+        st = ""; for (s = 1; s <= 6; s++) { for (i = 1; i <= n; i++) a[i] = S[k, s, i]; st = st "," med(a, n) }
+        printf "%s,%s,%s,%s,%d,%.6e,%.6e,%.3e,%.3e,%.3e,%.3e,%d,%d,%d,%d%s,%s,%s,%s,%s,%s\n", run, ex, mesh, k, n, mtm, mt[k],
+          mres, (nr[k] ? mr[k] : -1), merr, (ne[k] ? me[k] : -1), nc[k], mit, dim[k], ns[k], st, m[3], m[4], m[5], m[6], m[12] } }' "$f"
+done
+} > summary.csv
+
+# look-ups in summary.csv: field of (run, method, tol)
+get() { awk -F, -v r="$1" -v m="$2" -v t="$3" -v c="$4" '$1 == r && $4 == m && $5 + 0 == t + 0 { print $c; exit }' summary.csv; }
+runs_of() { awk -F, -v e="$1" 'NR > 1 && $2 == e && !seen[$1]++ { print $1 }' summary.csv | sort -t_ -k2,2 -k3,3n; }
+ms() { awk -v x="${1:--1}" 'BEGIN { if (x < 0 || x == "") printf "-"; else if (x < 1e-3) printf "%.3f", 1e3 * x; else if (x < 1) printf "%.2f", 1e3 * x; else printf "%.0f", 1e3 * x }'; }
+sci() { awk -v x="${1:--1}" 'BEGIN { if (x < 0 || x == "") printf "-"; else printf "%.1e", x }'; }
+ratio() { awk -v a="${1:-0}" -v b="${2:-0}" 'BEGIN { if (a > 0 && b > 0) printf (a / b < 10 ? "%.2gx" : "%.0fx"), a / b; else printf "-" }'; }
+
+cat <<EOF
+# amps.h benchmark results
+
+Produced by \`make bench\` (\`bench/run.sh full\`); every number and plot below is generated by
+\`bench/summarize.sh\` from the run recorded in \`bench/out/\` (CSV per run, \`summary.csv\`,
+\`log_full.txt\`). Timings are wall clock, one run; methods are compared side by side on the
+same step sequence in the same process. On a shared host (other jobs on the 2 cores) the timings
+are noisy, and the 2-thread amps.h configurations suffer most (see the p1 / p2 columns).
+
+$(sed 's/^/- /' machine.txt)
+
+CHOLMOD runs as a user would have it: SuiteSparse from Debian, with OpenBLAS
+(\`libopenblas0-pthread\`, 2 threads) behind its supernodal factorization. Models: P1 linear
+elasticity, E = 1000, nu = 0.3; beams are 5 x 5 x h node grids fixed at one end, bricks
+1 x 1 x 2 with (R+1)^2 (2R+1) nodes fixed on one face, the Stanford bunny (npm package \`bunny\`)
+tetrahedralized by TetGen (\`-pq1.5a0.015\`: 20,349 nodes; \`-pq1.5a0.0027\`: 49,843 nodes) and
+fixed at its base.
+
+EOF
+
 if [ -f factor.csv ]; then
-  echo
-  echo "| mesh | n | nnz(L) ours AMD / CHOLMOD AMD | nnz(L) ours ND / METIS | ordering ND (s) | analyze (s) ours / CHOLMOD | factor (s) ours / simplicial / supernodal | ratio simpl / super | solve (ms) ours / simpl / super | ours / best | 1-index forward solve (us), closure/n | residual ours / simpl / super |"
-  echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
+cat <<'EOF'
+## 1. Orderings, factorization and solves (`bench/factor`)
+
+nnz(L) counts the diagonal. "ours AMD" is `AMPS_ORDER_AMD` on the node graph, "ours ND" our
+nested dissection guided by the node coordinates, METIS is CHOLMOD's own METIS ordering. All
+factorizations and solves below use the same permutation (ours ND) for amps.h and CHOLMOD.
+
+| mesh | n | nnz(L) ours AMD / CHOLMOD AMD | nnz(L) ours ND / METIS | ordering ND (s) | analyze (s) ours / CHOLMOD | factor (s) ours / simplicial / supernodal | ratio simpl / super | solve (ms) ours / simpl / super | ours / best | 1-index forward solve (us), closure/n | residual ours / simpl / super |
+|---|---|---|---|---|---|---|---|---|---|---|---|
+EOF
   tail -n +2 factor.csv | awk -F, '{
     m = $1; sub(/.*\//, "", m); sub(/\.1\.node$/, "", m)
     printf "| %s | %d | %.2fM / %.2fM (%.3f) | %.2fM / %.2fM (%.3f) | %.3f | %.3f / %.3f | %.3f / %.3f / %.3f | %.2f / %.2f | %.2f / %.2f / %.2f | %.2f | %.0f, %.3f | %.1e / %.1e / %.1e |\n",
       m, $3, $5/1e6, $6/1e6, $7, $8/1e6, $9/1e6, $10, $13, $17, $18, $21, $22, $23, $24, $25, 1e3*$26, 1e3*$27, 1e3*$28, $29, 1e6*$30, $32, $34, $35, $36 }'
+  echo
 fi
+
+cat <<'EOF'
+## 2. The methods (`bench/harness`)
+
+All methods follow the same step sequence (`bench/bench_common.h`). **cut**: an advancing planar
+cut through the middle of the model, one node per step, opposing forces pulling the cut faces
+apart. **deform**: one more node pinned with a nonzero displacement per step. Residuals are
+||K^ x - f^|| / ||f^|| of the reduced system (fixed and pinned DOFs eliminated), errors
+||x - x_ref|| / ||x_ref|| against CHOLMOD on the explicit matrix improved by three refinement
+steps (residual in double), both 2-norms over the free DOFs.
+
+- `amps_p2`, `amps_p1`, `amps_d2`, `amps_d1`: amps.h (`amps_scene_cut` / `amps_scene_pin` +
+  `amps_scene_solve`), primal (p) or dual (d) formulation, 2 or 1 threads (`ctx.nthreads`).
+- `chol_refactor`: CHOLMOD analyze + supernodal factorize (OpenBLAS) + solve of the explicitly
+  assembled reduced system (a new analysis each step: the dimension changes). `chol_solve`: a
+  plain solve with that factor, the floor every exact method pays. `chol_refactor_simpl`: the
+  simplicial LDL^T instead, at the first and last sampled steps of systems up to 60,000 equations.
+- `chol_updown`: CHOLMOD's Modify module. CHOLMOD cannot grow a factorization, so the initial
+  system is factored once padded with identity rows for the 3 (steps + 1) equations cuts may
+  add, A = [K0 0; 0 I], and converted to a simplicial LDL^T (setup, not timed). A cut of node v
+  with copy v' and moved tets T changes K by sum_T (P_new W_t W_t^T P_new^T - P_old W_t W_t^T P_old^T),
+  where Ke(t) = W_t W_t^T with W_t = sqrt(V_t) B_t^T chol(C) (12 x 6: rank 6 per tet) and P_old, P_new
+  place the tet's DOFs on v or on v'. It is applied as one `cholmod_updown` update with
+  C+ = [P_new W_t] (6|T| columns) followed by one downdate with C- = [P_old W_t] plus the three
+  identity columns of v' (removing its padding), so every intermediate matrix stays positive
+  definite. A pin of DOF e is `cholmod_rowdel(e)` (row and column of A and L become the
+  identity) with b_F -= K_Fe g_e, b_e = g_e. The step time is building C, the modification and
+  one `cholmod_solve` (sequential; CHOLMOD's simplicial kernels).
+- `cg_none`, `cg_jacobi`: our conjugate gradients on K_FF x_F = b_F (OpenMP products), warm
+  started from the previous step's (exact) solution, stopped at ||r|| <= tol ||b_F||
+  (tol = 1e-4, 1e-6, 1e-8, 1e-10; one run to the tightest, the time and iterate at which each
+  looser tolerance is met are recorded), capped at 2000 iterations (1000 on the larger meshes
+  and the 500-step run, 500 on bunny50k; see `bench/run.sh`); "nc" counts samples that hit the cap.
+- `gmres_none`, `gmres_D`, `gmres_tri`: paper 001 (Eq. 13-20): the augmented system
+  [R J; H 0][a1; a2] = [f^; 0] with R = [K0 0; 0 I] factored once by amps.h, J the current
+  columns of the changed DOFs (unit columns for constrained ones), H the matching rows of I;
+  step 1 y = H R^{-1} f^ (sparse forward solve, partial backward solve onto the changed DOFs),
+  step 2 restarted GMRES(150) on (H R^{-1} J) a2 = H R^{-1} f^ with the same sparse solves per
+  product, step 3 a1 = R^{-1}(f^ - J a2) (sparse forward, full backward solve). Right
+  preconditioner M = H S J, S ~ R^{-1} (paper §3.5): none, S = D^{-1} of the LDL^T factor, or
+  the tridiagonal sparse approximate inverse of R (column j minimizes ||R s_j - e_j||_2 on
+  rows j-1..j+1); M is sparse and factored by UMFPACK each step. GMRES stops at relative
+  residual tol of the small system (same tolerances, one run, cap 600 iterations), warm
+  started at the previous step's values.
+
+Sampling: amps.h and `chol_updown` (stateful) run every step; the reference, `chol_refactor`,
+CG and GMRES run at the sampled steps only: step 1, every k-th step and the last (k per run in
+the tables: 5 on the small meshes, 10 on beam 5x5x256 and brick R=16, 25 on beam 5x5x1024,
+brick R=20 and the bunnies, 50 on the 500-step run and bunny50k deform), so that `make bench`
+stays within 30 minutes on 2 cores. Each run also has a wall-clock guard (`BENCH_TMAX` in
+`bench/run.sh`, 30-240 s): past it no new step starts, and the "steps" column shows how far the
+run got. Times are medians over the steps a method ran.
+
+EOF
+
+echo "## 3. Direct methods per run"
+echo
+echo "Median step time (ms); ratios are CHOLMOD / amps_p2. Worst residual and error over the sampled steps."
+echo
+echo "| run | steps (k) | n0 | nnz(L) | final dim / \|S u C\| | amps p2 / p1 / d2 / d1 | CHOLMOD updown | refactor | solve | refactor / amps | updown / amps | amps / solve | worst residual amps / updown / refactor | worst error amps / updown / refactor |"
+echo "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+for e in cut deform; do for r in $(runs_of $e); do
+  a=$(get "$r" amps_p2 0 7); u=$(get "$r" chol_updown 0 7); c=$(get "$r" chol_refactor 0 7); s=$(get "$r" chol_solve 0 7)
+  printf "| %s | %s (%s) | %s | %.2fM | %s / %s | %s / %s / %s / %s | %s | %s | %s | %s | %s | %s | %s / %s / %s | %s / %s / %s |\n" \
+    "$r" "$(get "$r" amps_p2 0 6)" "$(get "$r" amps_p2 0 27)" "$(get "$r" amps_p2 0 24)" "$(awk -v x="$(get "$r" amps_p2 0 25)" 'BEGIN{print x/1e6}')" \
+    "$(get "$r" amps_p2 0 15)" "$(get "$r" amps_p2 0 16)" \
+    "$(ms "$a")" "$(ms "$(get "$r" amps_p1 0 7)")" "$(ms "$(get "$r" amps_d2 0 7)")" "$(ms "$(get "$r" amps_d1 0 7)")" \
+    "$(ms "$u")" "$(ms "$c")" "$(ms "$s")" "$(ratio "$c" "$a")" "$(ratio "$u" "$a")" "$(awk -v a="$a" -v s="$s" 'BEGIN{ if (s > 0) printf "%.2f", a / s; else printf "-" }')" \
+    "$(sci "$(get "$r" amps_p2 0 10)")" "$(sci "$(get "$r" chol_updown 0 10)")" "$(sci "$(get "$r" chol_refactor 0 10)")" \
+    "$(sci "$(get "$r" amps_p2 0 12)")" "$(sci "$(get "$r" chol_updown 0 12)")" "$(sci "$(get "$r" chol_refactor 0 12)")"
+done; done
+echo
+
+echo "## 4. Iterative methods per run"
+echo
+echo "Median time (ms) / median error at each tolerance; nc = sampled steps that hit the iteration cap at that tolerance."
+echo
+echo "| run | method | 1e-4 | 1e-6 | 1e-8 | 1e-10 | median iterations at 1e-10 | nc at 1e-8 / 1e-10 |"
+echo "|---|---|---|---|---|---|---|---|"
+for e in cut deform; do for r in $(runs_of $e); do for m in cg_none cg_jacobi gmres_none gmres_D gmres_tri; do
+  [ -n "$(get "$r" $m 1e-10 6)" ] || continue
+  line="| $r | $m |"
+  for t in 1e-4 1e-6 1e-8 1e-10; do line="$line $(ms "$(get "$r" $m $t 7)") / $(sci "$(get "$r" $m $t 11)") |"; done
+  n8=$(( $(get "$r" $m 1e-8 6) - $(get "$r" $m 1e-8 13) )); n10=$(( $(get "$r" $m 1e-10 6) - $(get "$r" $m 1e-10 13) ))
+  echo "$line $(get "$r" $m 1e-10 14) | $n8 / $n10 |"
+done; done; done
+echo
+
+# ---- plots ----
+plots=0
+if command -v gnuplot >/dev/null 2>&1; then
+  tmp=$(mktemp -d)
+  for e in cut deform; do
+    for r in $(runs_of $e); do
+      # per step: amps_p2 amps_d2 amps_p1 updown (every step); refactor, cg_jacobi 1e-8, gmres_D 1e-8 (sampled)
+      for m in amps_p2:0 amps_d2:0 amps_p1:0 chol_updown:0 chol_refactor:0 cg_jacobi:1e-08 gmres_D:1e-08 gmres_none:1e-08; do
+        awk -F, -v m="${m%%:*}" -v t="${m#*:}" 'NR > 1 && $2 == m && $3 + 0 == t + 0 && $4 > 0 { print $1, 1 / $4 }' "h_$r.csv" > "$tmp/rate_${r}_${m%%:*}.dat"
+      done
+      # time against error: medians per method and tolerance
+      for m in cg_none cg_jacobi gmres_none gmres_D gmres_tri amps_p2 amps_d2 amps_p1 chol_updown chol_refactor; do
+        awk -F, -v r="$r" -v m=$m '$1 == r && $4 == m && $11 > 0 { print $11, $7 }' summary.csv > "$tmp/te_${r}_$m.dat"
+      done
+    done
+  done
+  # median time against nnz(L), cut runs of the beam and brick series
+  for s in beam brick; do
+    for m in amps_p2:0 chol_updown:0 chol_refactor:0 chol_solve:0 gmres_D:1e-08 cg_jacobi:1e-08; do
+      awk -F, -v s="$s" -v m="${m%%:*}" -v t="${m#*:}" '$2 == "cut" && $1 ~ "^cut_" s "_[0-9]+$" && $4 == m && $5 + 0 == t + 0 { print $25, $7 }' summary.csv | sort -g > "$tmp/nnz_${s}_${m%%:*}.dat"
+    done
+  done
+  # Steps 1-6 of amps_p2 (median seconds), cut runs
+  awk -F, '$2 == "cut" && $4 == "amps_p2" { s = $17 + $18 + $19 + $20 + $21 + $22; if (s > 0) print $1, 100 * $17 / s, 100 * $18 / s, 100 * ($19 + $20 + $21) / s, 100 * $22 / s }' summary.csv > "$tmp/steps.dat"
+  # "plot" with the non-empty ones of: file|options ...
+  pl() { local out="" a; for a in "$@"; do [ -s "${a%%|*}" ] && out="$out, '${a%%|*}' ${a#*|}"; done; [ -n "$out" ] && echo "plot ${out#, }" || echo "plot 1 notitle lc rgb 'white'"; }
+  runs_cut=$(runs_of cut | tr '\n' ' '); runs_def=$(runs_of deform | tr '\n' ' ')
+  {
+    echo "set terminal pngcairo size 1800,1500 font ',10' noenhanced"
+    echo "set logscale y; set grid; set key top right font ',8'"
+    for e in cut deform; do
+      list=$([ $e = cut ] && echo "$runs_cut" || echo "$runs_def")
+      echo "set output '$dir/rate_$e.png'"
+      echo "set multiplot layout 4,4 title 'update rate (Hz) per step, $e (lines: every step; points: sampled steps, iterative at tol 1e-8)'"
+      for r in $list; do
+        echo "set title '$r'; set xlabel 'step'"
+        t=$tmp/rate_${r}_
+        pl "${t}amps_p2.dat|w l lw 2 t 'amps p2'" "${t}amps_d2.dat|w l t 'amps d2'" "${t}amps_p1.dat|w l t 'amps p1'" "${t}chol_updown.dat|w l t 'CHOLMOD updown'" \
+           "${t}chol_refactor.dat|w lp t 'CHOLMOD refactor'" "${t}cg_jacobi.dat|w lp t 'CG Jacobi'" "${t}gmres_D.dat|w lp t 'GMRES D'" "${t}gmres_none.dat|w lp t 'GMRES none'"
+      done
+      echo "unset multiplot"
+      echo "set output '$dir/tradeoff_$e.png'"
+      echo "set multiplot layout 4,4 title 'median step time (s) against median error, $e (curves: tolerances 1e-4..1e-10)'"
+      echo "set logscale xy; set xlabel 'relative error'"
+      for r in $list; do
+        echo "set title '$r'"
+        a=()
+        for m in cg_none cg_jacobi gmres_none gmres_D gmres_tri; do a+=("$tmp/te_${r}_$m.dat|w lp t '$m'"); done
+        for m in amps_p2 amps_d2 amps_p1 chol_updown chol_refactor; do a+=("$tmp/te_${r}_$m.dat|w p pt 7 ps 1.5 t '$m'"); done
+        pl "${a[@]}"
+      done
+      echo "unset multiplot; unset logscale"
+    done
+    echo "set terminal pngcairo size 1400,600 font ',10' noenhanced"
+    echo "set output '$dir/scaling.png'"
+    echo "set multiplot layout 1,2 title 'median step time against nnz(L), cut runs'"
+    echo "set logscale xy; set xlabel 'nnz(L) of the base factor'; set ylabel 'seconds'; set key top left"
+    for s in beam brick; do
+      echo "set title '$s'"
+      t=$tmp/nnz_${s}_
+      pl "${t}amps_p2.dat|w lp lw 2 t 'amps p2'" "${t}chol_updown.dat|w lp t 'CHOLMOD updown'" "${t}chol_refactor.dat|w lp t 'CHOLMOD refactor'" \
+         "${t}chol_solve.dat|w lp t 'CHOLMOD solve'" "${t}gmres_D.dat|w lp t 'GMRES D 1e-8'" "${t}cg_jacobi.dat|w lp t 'CG Jacobi 1e-8'"
+    done
+    echo "unset multiplot; unset logscale"
+    echo "set output '$dir/steps.png'"
+    echo "set title 'amps.h (p2): share of Steps 1-6 in the step (medians per step, normalized), cut runs'; set ylabel '%'; set xlabel ''; set yrange [0:100]"
+    echo "set style data histograms; set style histogram rowstacked; set style fill solid 0.8 border -1; set boxwidth 0.7"
+    echo "set xtics rotate by -30; set key outside"
+    echo "plot '$tmp/steps.dat' u 2:xtic(1) t 'Step 1 (L^{-1} columns)', '' u 3 t 'Step 2 (inverse principal submatrix)', '' u 4 t 'Steps 3-5 (dense system)', '' u 5 t 'Step 6 (full solution)'"
+  } > "$tmp/plots.gp"
+  gnuplot "$tmp/plots.gp" 2> "$tmp/gnuplot.err" && plots=1 || sed 's/^/gnuplot: /' "$tmp/gnuplot.err" >&2
+  rm -rf "$tmp"
+fi
+if [ $plots = 1 ]; then
+cat <<EOF
+## 5. Plots
+
+- Update rate against step (paper 000 Fig. 6-7): cut ![rate cut](${pre}rate_cut.png) deform ![rate deform](${pre}rate_deform.png)
+- Median time against median error, one point per direct method and one curve (tolerances) per
+  iterative method: cut ![tradeoff cut](${pre}tradeoff_cut.png) deform ![tradeoff deform](${pre}tradeoff_deform.png)
+- Median step time against nnz(L), beam and brick series (paper 000 Fig. 5): ![scaling](${pre}scaling.png)
+- Steps 1-6 of the amps.h step (paper 000 Fig. 8): ![steps](${pre}steps.png)
+
+EOF
+else
+  echo "(plots skipped: gnuplot not found; install it with \`apt-get install gnuplot-nox\`)"
+  echo
+fi
+
+echo "## 6. Reading"
+echo
+awk -F, '
+  NR == 1 { next }
+  $5 + 0 == 0 { T[$1, $4] = $7; R[$1, $4] = $10; E[$1, $4] = $12; runs[$1] = 1 }
+  $4 ~ /^(cg|gmres)/ && $5 + 0 == 1e-8 { I[$1, $4] = $7; if ($11 >= 0) { if (!nie++ || $11 < iemin) iemin = $11; if ($11 > iemax) iemax = $11 } }
+  END {
+    for (r in runs) {
+      a = T[r, "amps_p2"]; if (a <= 0) continue; n++
+      u = T[r, "chol_updown"] / a; c = T[r, "chol_refactor"] / a; s = a / T[r, "chol_solve"]
+      if (n == 1 || u < umin) { umin = u; ur0 = r } if (n == 1 || u > umax) { umax = u; ur1 = r }
+      if (n == 1 || c < cmin) { cmin = c; cr0 = r } if (n == 1 || c > cmax) { cmax = c; cr1 = r }
+      if (n == 1 || s < smin) { smin = s; sr0 = r } if (n == 1 || s > smax) { smax = s; sr1 = r }
+      if (u < 1) ulose = ulose " " r
+      best = 1e300; bm = ""
+      for (m = 1; m <= 5; m++) { split("cg_none cg_jacobi gmres_none gmres_D gmres_tri", mm, " "); t = I[r, mm[m]]; if (t > 0 && t < best) { best = t; bm = mm[m] } }
+      if (best < a) itwin = itwin " " r " (" bm ")"
+      if (best < 1e300) { q = best / a; if (!ni++ || q < imin) { imin = q; ir0 = r } if (q > imax) { imax = q; ir1 = r } }
+      if (E[r, "amps_p2"] > emax) { emax = E[r, "amps_p2"]; er = r }
+      if (R[r, "amps_p2"] > 10 * R[r, "chol_refactor"]) resw = resw " " r
+    }
+    printf "- CHOLMOD refactorization (analyze + factor + solve) takes %.2g (%s) to %.3g (%s) times the amps.h step (p2).\n", cmin, cr0, cmax, cr1
+    printf "- CHOLMOD update/downdate (`cholmod_updown` / `cholmod_rowdel` on a simplicial LDL^T, then a solve) takes %.2g (%s) to %.3g (%s) times the amps.h step", umin, ur0, umax, ur1
+    if (ulose != "") printf "; it is faster than amps.h on:%s", ulose
+    printf ".\n"
+    printf "- The amps.h step costs %.3g (%s) to %.3g (%s) times one plain CHOLMOD supernodal solve of the same system.\n", smin, sr0, smax, sr1
+    printf "- The fastest iterative method at tolerance 1e-8 takes %.2g (%s) to %.3g (%s) times the amps.h step", imin, ir0, imax, ir1
+    if (itwin != "") printf "; it beats amps.h on:%s", itwin
+    printf ".\n"
+    printf "- Median errors of the iterative methods at tolerance 1e-8: %.0e to %.0e (per run and method); worst amps.h error per run: see below.\n", iemin, iemax
+    printf "- Worst amps.h error against the reference: %.1e (%s); paper 000 Table 3 reports 7e-11 (beam) and 3e-14 (brick).", emax, er
+    if (resw != "") printf " Runs whose worst amps.h residual exceeds 10x CHOLMOD refactor'"'"'s:%s.", resw
+    printf "\n"
+  }' summary.csv
+echo
+echo "Per-mesh worst errors next to paper 000 Table 3 (beam 7e-11, brick 3e-14):"
+echo
+echo "| run | amps p2 | amps d2 | CHOLMOD updown | CHOLMOD refactor (unrefined) |"
+echo "|---|---|---|---|---|"
+for r in $(runs_of cut) $(runs_of deform); do
+  echo "| $r | $(sci "$(get "$r" amps_p2 0 12)") | $(sci "$(get "$r" amps_d2 0 12)") | $(sci "$(get "$r" chol_updown 0 12)") | $(sci "$(get "$r" chol_refactor 0 12)") |"
+done
+echo
+cat <<'EOF'
+## 7. How to reproduce
+
+`make bench` (full run, under 30 minutes on 2 cores; it installs the packages it needs when run
+as root, otherwise it names them), `make bench-quick` for a subset (under 3 minutes; results in
+`build/bench/quick/`). `bench/run.sh` is the driver, `bench/factor.c` and `bench/harness.c` the
+programs (`bench/bench_common.h` the scenario), `bench/summarize.sh` writes this file and the
+plots from the CSV files.
+EOF
