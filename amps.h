@@ -4922,19 +4922,21 @@ static amps_status amps__lu_extend(amps_update *U, amps_int nf, amps_int u_old, 
             for (rr = 0; rr < u; rr++) { col[rr] = buf[U->rowperm[rr]]; if (fabs(buf[rr]) > nrm) nrm = fabs(buf[rr]); }
             U->cnorm[j] = nrm;
         }
-        /* apply the factored columns 0..qp-1: P(0:qp) = L11^{-1} P(0:qp) (unit lower, per
-           column), then P(qp:u) -= L(qp:u, 0:qp) P(0:qp) */
-#ifdef _OPENMP
-#pragma omp parallel for schedule(static) num_threads(U->nthr) if (w > 1 && (double)qp * qp * w > 4e5)
-#endif
-        for (c = 0; c < w; c++) {
-            double *col = P + (size_t)c * ld;
-            for (kb = 0; kb < qp; kb++) {
-                const double *lk = LU + (size_t)kb * ld;
-                double x = col[kb];
-                if (x == 0.0) continue;
-                for (r = kb + 1; r < qp; r++) col[r] -= lk[r] * x;
+        /* apply the factored columns 0..qp-1: P(0:qp) = L11^{-1} P(0:qp) (unit lower) by blocks
+           of 128 rows: the diagonal block per column, the rows below it by one product; then
+           P(qp:u) -= L(qp:u, 0:qp) P(0:qp) */
+        for (kb = 0; kb < qp; kb += 128) {
+            amps_int k1 = kb + 128 < qp ? kb + 128 : qp, kk;
+            for (c = 0; c < w; c++) {
+                double *col = P + (size_t)c * ld;
+                for (kk = kb; kk < k1; kk++) {
+                    const double *lk = LU + (size_t)kk * ld;
+                    double x = col[kk];
+                    if (x == 0.0) continue;
+                    for (r = kk + 1; r < k1; r++) col[r] -= lk[r] * x;
+                }
             }
+            amps__gemm_sub(qp - k1, w, k1 - kb, LU + (size_t)kb * ld + (size_t)k1, ld, P + (size_t)kb, ld, P + (size_t)k1, ld, U->nthr);
         }
         amps__gemm_sub(u - qp, w, qp, LU + (size_t)qp, ld, P, ld, P + (size_t)qp, ld, U->nthr);
         /* factor the panel with partial pivoting; swaps act on whole rows 0..qp+w-1 */

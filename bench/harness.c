@@ -9,7 +9,8 @@
      BENCH_CG_MAXIT (default 2000), BENCH_GM_MAXIT (default 600), BENCH_GM_RESTART (default 150),
      BENCH_SIMPL_MAXN (CHOLMOD simplicial refactor at the first and last sampled steps when the
      system has at most this many equations; default 60000), BENCH_ITER=0 (no CG / GMRES),
-     BENCH_GUARD (opts.update.guard_tol of the amps.h scenes), BENCH_TMAX (seconds: no new
+     BENCH_GUARD (opts.update.guard_tol of the amps.h scenes), BENCH_REFACTOR (auto: background
+     re-factorization on; default off), BENCH_TMAX (seconds: no new
      step after this much wall time; the run then ends early, its last step a sampled one only if
      it happened to be).
    Writes one row per (step, method, tolerance) to out.csv:
@@ -664,6 +665,9 @@ int main(int argc, char **argv) {
         amps_scene_opts_default(&so);
         if (conf[k][5] == 'd') so.update.formulation = AMPS_FORM_DUAL;
         if (getenv("BENCH_GUARD")) so.update.guard_tol = atof(getenv("BENCH_GUARD"));
+        /* background re-factorization off: its thread would run while the other methods are
+           timed (bench/refactor measures it alone); BENCH_REFACTOR=auto turns it on */
+        so.update.refactor = getenv("BENCH_REFACTOR") && !strcmp(getenv("BENCH_REFACTOR"), "auto") ? AMPS_REFACTOR_AUTO : AMPS_REFACTOR_OFF;
         S[k] = bscen_scene(&cctx[k], &sc, spec, &so);
         t0 = amps_now();
         if (amps_scene_solve(&cctx[k], S[k]) != AMPS_OK) bench_die("first solve", cctx[k].msg);

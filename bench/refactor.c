@@ -1,8 +1,8 @@
 /* bench/refactor: a long advancing cut with and without background re-factorization.
 
-   usage: refactor <mesh> <steps> <on|off> <out.csv>
+   usage: refactor <mesh> <steps> <on|off> <out.csv> [tmax]
      mesh: beam:<h> | brick:<R> | path to a TetGen .node / .msh / .mesh file
-   Setup as in bench/update (base held, opposing forces at the start of the cut). Each step cuts
+   Setup as in bench/harness (base held, opposing forces at the start of the cut). Each step cuts
    the next node of the path and solves (amps_scene_cut + amps_scene_solve, timed together).
    When the path is used up it is walked again with the plane normal along the next axis, so
    nodes are cut repeatedly. Cuts that would detach a piece are undone by the scene and skipped.
@@ -10,7 +10,8 @@
    refactor = OFF (the augmentation grows for ever).
    Per step (CSV): step time, |S u C|, re-factorizations swapped in so far, whether one is
    running, the time of a swap that happened in this step (0 otherwise), the residual every 50
-   steps. The summary compares the median step time of steps 5-15 with that of the last 11. */
+   steps. The summary compares the median step time of steps 5-15 with the median and the mean
+   of the last min(100, steps/5) steps. */
 #define AMPS_IMPLEMENTATION
 #include "../amps.h"
 #include "bench_util.h"
@@ -22,12 +23,14 @@ int main(int argc, char **argv) {
     amps_scene_opts so;
     bu_cut cp;
     unsigned char *fixed;
-    double lo[3], hi[3], *force, *t, first[11], last[11], worst_res = 0;
+    double lo[3], hi[3], *force, *t, first[11], last[100], worst_res = 0;
+    double tmax, t_run = 0;
     int steps, on, up, st, pass = 0, nsk = 0, nn;
     char name[256];
     FILE *f;
-    if (argc < 5) { fprintf(stderr, "usage: refactor <mesh> <steps> <on|off> <out.csv>\n"); return 2; }
+    if (argc < 5) { fprintf(stderr, "usage: refactor <mesh> <steps> <on|off> <out.csv> [tmax]\n"); return 2; }
     steps = atoi(argv[2]); on = strcmp(argv[3], "off") != 0;
+    tmax = argc > 5 ? atof(argv[5]) : 0;
     amps_ctx_init(&ctx);
     bu_mesh_name(argv[1], name, sizeof(name));
     if (!(m = bu_load_mesh(&ctx, argv[1]))) { fprintf(stderr, "%s: %s\n", argv[1], ctx.msg); return 1; }
@@ -38,6 +41,7 @@ int main(int argc, char **argv) {
     bu_scene_opts(&so);
     so.update.refactor = on ? AMPS_REFACTOR_AUTO : AMPS_REFACTOR_OFF;
     if (getenv("AMPS_REFACTOR_RATIO")) so.update.refactor_ratio = atof(getenv("AMPS_REFACTOR_RATIO"));
+    if (getenv("AMPS_REFACTOR_ORDER")) so.update.refactor_order.method = !strcmp(getenv("AMPS_REFACTOR_ORDER"), "nd") ? AMPS_ORDER_ND : AMPS_ORDER_AMD;
     S = amps_scene_create(&ctx, m, &so);
     amps_scene_set_material(&ctx, S, 1000.0, 0.3);
     bu_fix(&ctx, S, nn, fixed);
@@ -46,7 +50,7 @@ int main(int argc, char **argv) {
     t = (double *)malloc(sizeof(double) * (size_t)steps);
     bu_cut_forces(&ctx, S, m, fixed, &cp, force);
     if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "first solve: %s\n", ctx.msg); return 1; }
-    f = bu_csv(argv[4], "mesh,policy,step,t_step,nsys,nrefactor,running,t_swap,t_refactor,relres");
+    f = bu_csv(argv[4], "mesh,policy,step,t_step,nsys,nrefactor,running,t_swap,t_refactor,relres,lu_cols");
     for (st = 0; st < steps; st++) {
         amps_update_stats us;
         amps_status s;
@@ -69,24 +73,33 @@ int main(int argc, char **argv) {
         }
         s = amps_scene_solve(&ctx, S);
         t[st] = amps_now() - t0;
+        t_run += t[st];
         if (s != AMPS_OK) { fprintf(stderr, "step %d: solve: %s\n", st, ctx.msg); return 1; }
         if (st % 50 == 49 && amps_scene_residual(&ctx, S, &res) == AMPS_OK && res > worst_res) worst_res = res;
         amps_update_get_stats(amps_scene_engine(S), &us);
-        if (f) fprintf(f, "%s,%s,%d,%.6e,%d,%d,%d,%.6e,%.6e,%.3e\n", name, on ? "on" : "off", st + 1, t[st], (int)us.nsys,
+        if (f) fprintf(f, "%s,%s,%d,%.6e,%d,%d,%d,%.6e,%.6e,%.3e,%d\n", name, on ? "on" : "off", st + 1, t[st], (int)us.nsys,
                        (int)us.nrefactor, us.refactor_running, (int)us.nrefactor > nref0 ? us.t_swap : 0.0,
-                       (int)us.nrefactor > nref0 ? us.t_refactor : 0.0, res);
+                       (int)us.nrefactor > nref0 ? us.t_refactor : 0.0, res, (int)us.lu_cols);
+        if (tmax > 0 && t_run > tmax && st + 1 < steps) {   /* time guard: the summary covers the steps run */
+            printf("  stopped after %d of %d steps: %.0f s of step time (tmax %.0f s)\n", st + 1, steps, t_run, tmax);
+            steps = st + 1;
+            break;
+        }
     }
     if (f) fclose(f);
-    {
+    {   /* rate at the end: median and mean of the last min(100, steps/5) steps against the
+           median of steps 5-15 */
         amps_update_stats us;
-        int k, nf = 0;
+        int k, nf = 0, nl = steps / 5 < 100 ? steps / 5 : 100;
+        double mean = 0, m0, m1;
         for (k = 4; k < 15 && k < steps; k++) first[nf++] = t[k];
-        for (k = 0; k < 11 && k < steps; k++) last[k] = t[steps - 1 - k];
+        for (k = 0; k < nl; k++) { last[k] = t[steps - 1 - k]; mean += last[k] / nl; }
+        m0 = bu_median(first, nf); m1 = bu_median(last, nl);
         amps_update_get_stats(amps_scene_engine(S), &us);
-        printf("%-10s re-factorization %-3s  steps %d (skipped cuts %d)  step 5-15 median %.2f ms, last 11 median %.2f ms, ratio %.2f"
-               "  |S u C| at the end %d  re-factorizations %d (failed %d)  worst residual %.1e\n",
-               name, on ? "on" : "off", steps, nsk, 1e3 * bu_median(first, nf), 1e3 * bu_median(last, steps < 11 ? steps : 11),
-               bu_median(last, steps < 11 ? steps : 11) / bu_median(first, nf), (int)us.nsys, (int)us.nrefactor, (int)us.refactor_failed, worst_res);
+        printf("%-10s re-factorization %-3s  steps %d (skipped cuts %d)  step 5-15 median %.2f ms; last %d steps: median %.2f ms (x%.2f), "
+               "mean %.2f ms (x%.2f)  |S u C| at the end %d  re-factorizations %d (failed %d)  worst residual %.1e\n",
+               name, on ? "on" : "off", steps, nsk, 1e3 * m0, nl, 1e3 * m1, m1 / m0, 1e3 * mean, mean / m0,
+               (int)us.nsys, (int)us.nrefactor, (int)us.refactor_failed, worst_res);
     }
     amps_scene_free(&ctx, S);
     free(fixed); free(force); free(t); free(cp.path);

@@ -34,8 +34,8 @@ else
   runs=""
   for m in beam:4 beam:16 beam:64 brick:4 brick:8 brick:12; do runs="$runs $m:cut:50:5:2000:60 $m:deform:50:5:2000:60"; done
   for m in beam:256 brick:16; do runs="$runs $m:cut:50:10:2000:90 $m:deform:50:10:2000:90"; done
-  for m in beam:1024 brick:20 $B20; do runs="$runs $m:cut:50:25:1000:150 $m:deform:50:25:1000:150"; done
-  runs="$runs $B50:cut:50:25:500:240 $B50:deform:50:50:500:180 beam:128:cut:500:50:1000:240"
+  for m in beam:1024 brick:20 $B20; do runs="$runs $m:cut:50:25:1000:120 $m:deform:50:25:1000:120"; done
+  runs="$runs $B50:cut:50:25:500:180 $B50:deform:50:50:500:120 beam:128:cut:500:50:1000:180"
 fi
 for m in $meshes_factor; do run build/bench/factor "$m" $out/factor.csv; done
 for r in $runs; do
@@ -52,27 +52,28 @@ if [ "$mode" = full ]; then
 fi
 # haptic step and watch sets (bench/haptic.c, bench/watch.c; results: bench/RESULTS_haptic.md)
 for b in haptic watch; do $CC $FLAGS -o build/bench/$b bench/$b.c -lm || exit 1; done
-rm -f bench/out/haptic.csv bench/out/watch.csv
+rm -f $out/haptic.csv $out/watch.csv
 if [ "$mode" = quick ]; then hmesh="brick:12 bench/data/bunny20k.1.node"; hsteps=500; wreps=5
 else hmesh="brick:14 bench/data/bunny20k.1.node bench/data/bunny50k.1.node"; hsteps=2000; wreps=7; fi
 for m in $hmesh; do
-  run build/bench/haptic "$m" $hsteps 10 bench/out/haptic.csv
-  run build/bench/watch "$m" $wreps 10 bench/out/watch.csv
+  run build/bench/haptic "$m" $hsteps 10 $out/haptic.csv
+  run build/bench/watch "$m" $wreps 10 $out/watch.csv
 done
 # background re-factorization: a long cut with and without (bench/refactor.c)
 $CC $FLAGS -o build/bench/refactor bench/refactor.c -lm || exit 1
-rm -f bench/out/refactor.csv
+rm -f $out/refactor.csv
 if [ "$mode" = quick ]; then rmesh="beam:64"; rsteps=200
 else rmesh="beam:256 bench/data/bunny20k.1.node"; rsteps=1000; fi
-for m in $rmesh; do for p in on off; do run build/bench/refactor "$m" $rsteps $p bench/out/refactor.csv; done; done
+# the off runs stop after 90 s of step time (their step time grows without bound)
+for m in $rmesh; do for p in on off; do run build/bench/refactor "$m" $rsteps $p $out/refactor.csv $([ $p = off ] && echo 90); done; done
 if command -v gnuplot >/dev/null; then
-  for m in $(cut -d, -f1 bench/out/refactor.csv | sort -u | grep -v '^mesh$'); do
-    gnuplot -e "set term pngcairo size 900,600; set out 'bench/out/refactor_$m.png'; set datafile separator ',';
+  for m in $(cut -d, -f1 $out/refactor.csv | sort -u | grep -v '^mesh$'); do
+    gnuplot -e "set term pngcairo size 900,600; set out '$out/refactor_$m.png'; set datafile separator ',';
       set multiplot layout 2,1 title '$m: advancing cut, background re-factorization on / off';
       set ylabel 'step time (ms)'; set logscale y; set key top left;
-      plot '< grep ^$m, bench/out/refactor.csv | grep ,on,' u 3:(1e3*\$4) w l t 'on', '< grep ^$m, bench/out/refactor.csv | grep ,off,' u 3:(1e3*\$4) w l t 'off';
+      plot '< grep ^$m, $out/refactor.csv | grep ,on,' u 3:(1e3*\$4) w l t 'on', '< grep ^$m, $out/refactor.csv | grep ,off,' u 3:(1e3*\$4) w l t 'off';
       unset logscale y; set ylabel '|S u C|'; set xlabel 'step';
-      plot '< grep ^$m, bench/out/refactor.csv | grep ,on,' u 3:5 w l t 'on', '< grep ^$m, bench/out/refactor.csv | grep ,off,' u 3:5 w l t 'off';
+      plot '< grep ^$m, $out/refactor.csv | grep ,on,' u 3:5 w l t 'on', '< grep ^$m, $out/refactor.csv | grep ,off,' u 3:5 w l t 'off';
       unset multiplot" 2>/dev/null || echo "gnuplot failed for $m"
   done
 fi
