@@ -588,8 +588,11 @@ AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, co
 AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v);
 /* Cut at node v with the plane (p, nrm) (semantics of amps_mesh_cut). The copy v' starts free
    (no pin, no force) with v's displacement, and is fixed if v is. AMPS_WARN_NOOP if the plane
-   leaves one side empty. A cut that leaves a piece held by nothing returns
-   AMPS_ERR_SINGULAR_UPDATE and the scene is as it was. */
+   leaves one side empty. A cut that leaves a piece held by nothing, or joined to the rest only at
+   nodes on one line (a hinge, a ball joint) and not held off it by fixed or pinned nodes, returns
+   AMPS_ERR_SINGULAR_UPDATE and the scene is as it was: a face-connected piece is tested by
+   exploring the pieces around v, at a cost of about the tets of the pieces the cut separates.
+   (Chains of pieces that are loose only together are left to the engine's pivot test.) */
 AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3], const double nrm[3],
                                     amps_int *new_node);
 /* Solves for the displacements of every node. */
@@ -7060,6 +7063,10 @@ struct amps_scene {
     amps_int maxdeg;
     amps_int *moved, *ldof, *ri, *ci;
     double *lk, *vx;
+    /* mechanism test of a cut: per tet (label, queue link, visit list), per node (stamp), per
+       piece (union-find parent, queue head and tail, active); scale = the model's extent */
+    amps_int *tlab, *tnxt, *tvis, *nstamp, nst, *gpar, *ghead, *gtail, *gact;
+    double scale;
 };
 
 AMPS_API void amps_scene_opts_default(amps_scene_opts *o) {
@@ -7081,6 +7088,8 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->force); amps__free(ctx, S->disp); amps__free(ctx, S->dof);
     amps__free(ctx, S->moved); amps__free(ctx, S->ldof); amps__free(ctx, S->ri); amps__free(ctx, S->ci);
     amps__free(ctx, S->lk); amps__free(ctx, S->vx); amps__free(ctx, S->wnode);
+    amps__free(ctx, S->tlab); amps__free(ctx, S->tnxt); amps__free(ctx, S->tvis); amps__free(ctx, S->nstamp);
+    amps__free(ctx, S->gpar); amps__free(ctx, S->ghead); amps__free(ctx, S->gtail); amps__free(ctx, S->gact);
     amps__free(ctx, S);
 }
 
@@ -7091,11 +7100,12 @@ static amps_status amps__scene_grow(amps_ctx *ctx, amps_scene *S, amps_int cap) 
     size_t c = (size_t)cap;
     if (amps__realloc(ctx, (void **)&S->fixed, c, 1) || amps__realloc(ctx, (void **)&S->pinned, c, 1) ||
         amps__realloc(ctx, (void **)&S->pinval, 3 * c, sizeof(double)) || amps__realloc(ctx, (void **)&S->force, 3 * c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&S->disp, 3 * c, sizeof(double)) || amps__realloc(ctx, (void **)&S->dof, 3 * c, sizeof(amps_int)))
+        amps__realloc(ctx, (void **)&S->disp, 3 * c, sizeof(double)) || amps__realloc(ctx, (void **)&S->dof, 3 * c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&S->nstamp, c, sizeof(amps_int)))
         return AMPS_ERR_OOM;
     for (v = old; v < cap; v++) {
         int d;
-        S->fixed[v] = 0; S->pinned[v] = 0;
+        S->fixed[v] = 0; S->pinned[v] = 0; S->nstamp[v] = 0;
         for (d = 0; d < 3; d++) { S->pinval[3 * v + d] = 0; S->force[3 * v + d] = 0; S->disp[3 * v + d] = 0; S->dof[3 * v + d] = -1; }
     }
     S->cap = cap;
@@ -7193,6 +7203,27 @@ AMPS_API amps_status amps_scene_prepare(amps_ctx *ctx, amps_scene *S) {
         S->vx = AMPS__CAST(double *, amps__malloc(ctx, ne, sizeof(double)));
         if (!S->moved || !S->ldof || !S->lk || !S->ri || !S->ci || !S->vx) goto fail;
     }
+    {
+        amps_int t, nt = S->m->ntet, ng = maxdeg + 1;
+        double lo[3], hi[3];
+        S->tlab = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
+        S->tnxt = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
+        S->tvis = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
+        S->gpar = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+        S->ghead = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+        S->gtail = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+        S->gact = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+        if (!S->tlab || !S->tnxt || !S->tvis || !S->gpar || !S->ghead || !S->gtail || !S->gact) goto fail;
+        for (t = 0; t < nt; t++) S->tlab[t] = -1;
+        for (k = 0; k < 3; k++) { lo[k] = S->m->xyz[k]; hi[k] = lo[k]; }
+        for (v = 0; v < S->m->nnode; v++)
+            for (k = 0; k < 3; k++) {
+                double x = S->m->xyz[3 * v + k];
+                if (x < lo[k]) lo[k] = x;
+                if (x > hi[k]) hi[k] = x;
+            }
+        S->scale = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) + (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    }
     S->ndof0 = n;
     /* forces set before the factorization */
     for (v = 0; v < S->m->nnode; v++)
@@ -7214,6 +7245,9 @@ fail:
     amps__free(ctx, S->moved); amps__free(ctx, S->ldof); amps__free(ctx, S->lk);
     amps__free(ctx, S->ri); amps__free(ctx, S->ci); amps__free(ctx, S->vx);
     S->moved = NULL; S->ldof = NULL; S->lk = NULL; S->ri = NULL; S->ci = NULL; S->vx = NULL;
+    amps__free(ctx, S->tlab); amps__free(ctx, S->tnxt); amps__free(ctx, S->tvis);
+    amps__free(ctx, S->gpar); amps__free(ctx, S->ghead); amps__free(ctx, S->gtail); amps__free(ctx, S->gact);
+    S->tlab = S->tnxt = S->tvis = S->gpar = S->ghead = S->gtail = S->gact = NULL;
     for (v = 0; v < 3 * S->m->nnode; v++) S->dof[v] = -1;
     return ctx && ctx->status ? ctx->status : AMPS_ERR_OOM;
 }
@@ -7297,6 +7331,143 @@ AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, am
     return AMPS_OK;
 }
 
+/* ---- mechanism test of a cut ---- */
+
+/* The tet other than t that holds the face of t opposite its q-th node, or -1. */
+static amps_int amps__tet_face_nb(const amps_mesh *m, amps_int t, int q) {
+    amps_int a = m->tet[4 * t + (q + 1) % 4], b = m->tet[4 * t + (q + 2) % 4], c = m->tet[4 * t + (q + 3) % 4], k;
+    for (k = 0; k < m->inc_len[a]; k++) {
+        amps_int o = m->inc[m->inc_ptr[a] + k], r;
+        int hb = 0, hc = 0;
+        if (o == t) continue;
+        for (r = 0; r < 4; r++) { hb |= m->tet[4 * o + r] == b; hc |= m->tet[4 * o + r] == c; }
+        if (hb && hc) return o;
+    }
+    return -1;
+}
+
+/* Points added one by one: are they all on one line? Points closer than tol count as one. */
+typedef struct amps__line { int state; double p0[3], d[3], tol; } amps__line;   /* state: 0 none, 1 point, 2 line, 3 not on a line */
+static void amps__line_add(amps__line *L, const double *p) {
+    double w[3], c[3], len;
+    int k;
+    if (L->state == 3) return;
+    if (L->state == 0) { for (k = 0; k < 3; k++) L->p0[k] = p[k]; L->state = 1; return; }
+    for (k = 0; k < 3; k++) w[k] = p[k] - L->p0[k];
+    if (L->state == 1) {
+        len = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+        if (len > L->tol) { for (k = 0; k < 3; k++) L->d[k] = w[k] / len; L->state = 2; }
+        return;
+    }
+    /* distance from the line: |w x d| */
+    c[0] = w[1] * L->d[2] - w[2] * L->d[1]; c[1] = w[2] * L->d[0] - w[0] * L->d[2]; c[2] = w[0] * L->d[1] - w[1] * L->d[0];
+    if (sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) > L->tol) L->state = 3;
+}
+
+static amps_int amps__gfind(amps_int *par, amps_int g) {
+    while (par[g] != g) { par[g] = par[par[g]]; g = par[g]; }
+    return g;
+}
+
+/* Is the face-connected piece X (root g; its tets among tvis[0:nvis]) joined to the rest at
+   nodes on one line, and then is X or the rest not held off that line by constrained (fixed or
+   pinned) nodes? A face-connected piece is rigid; two rigid pieces sharing three nodes not on
+   one line move together, otherwise one turns about that line (or falls off) at zero energy.
+   *nj and *jn receive the number of joint nodes and one of them (-1 when none). */
+static int amps__piece_loose(amps_scene *S, amps_int g, amps_int nvis, amps_int *nj, amps_int *jn) {
+    const amps_mesh *m = S->m;
+    amps__line J, JX, JR;
+    amps_int k, n;
+    int q;
+    J.state = 0; J.tol = 1e-9 * S->scale;
+    JX = J; JR = J;
+    *nj = 0; *jn = -1;
+    if (++S->nst == 0x7fffffff) { for (n = 0; n < S->cap; n++) S->nstamp[n] = 0; S->nst = 1; }
+    for (k = 0; k < nvis; k++) {
+        amps_int t = S->tvis[k];
+        if (amps__gfind(S->gpar, S->tlab[t]) != g) continue;
+        for (q = 0; q < 4; q++) {
+            amps_int v = m->tet[4 * t + q], r;
+            int joint = 0;
+            if (S->nstamp[v] == S->nst) continue;
+            S->nstamp[v] = S->nst;
+            for (r = 0; r < m->inc_len[v] && !joint; r++) {
+                amps_int o = m->inc[m->inc_ptr[v] + r];
+                joint = S->tlab[o] < 0 || amps__gfind(S->gpar, S->tlab[o]) != g;
+            }
+            if (joint) { amps__line_add(&J, m->xyz + 3 * v); (*nj)++; *jn = v; }
+            if (joint || S->fixed[v] || S->pinned[v]) amps__line_add(&JX, m->xyz + 3 * v);
+        }
+    }
+    if (J.state == 3) return 0;                       /* a rigid joint */
+    /* the rest: the joint and the constrained nodes outside X */
+    JR = J;
+    for (n = 0; n < m->nnode && JR.state != 3; n++)
+        if ((S->fixed[n] || S->pinned[n]) && S->nstamp[n] != S->nst) amps__line_add(&JR, m->xyz + 3 * n);
+    return JX.state != 3 || JR.state != 3;
+}
+
+/* After cutting v into v and vc: explores the face-connected pieces that hold the tets of v
+   and vc together, one tet per piece per round, merging pieces that meet, until one piece is
+   left unfinished (the rest of the model). Cost: about (number of pieces) x (tets of the pieces
+   that finish), so a cut that separates nothing stops as soon as the pieces around v meet.
+   Returns 1 if a finished piece is loose (amps__piece_loose); *ntet, *nj, *jn describe it. */
+static int amps__cut_mechanism(amps_scene *S, amps_int v, amps_int vc, amps_int *ntet, amps_int *nj, amps_int *jn) {
+    const amps_mesh *m = S->m;
+    amps_int ng = 0, nact, nvis = 0, k, g, loose = 0;
+    const amps_int nodes[2] = {v, vc};
+    int w;
+    for (w = 0; w < 2; w++)
+        for (k = 0; k < m->inc_len[nodes[w]] && ng <= S->maxdeg; k++) {
+            amps_int t = m->inc[m->inc_ptr[nodes[w]] + k];
+            if (S->tlab[t] >= 0) continue;
+            S->gpar[ng] = ng; S->ghead[ng] = t; S->gtail[ng] = t; S->gact[ng] = 1;
+            S->tlab[t] = ng; S->tnxt[t] = -1; S->tvis[nvis++] = t;
+            ng++;
+        }
+    nact = ng;
+    while (nact > 1 && !loose) {
+        for (g = 0; g < ng && nact > 1 && !loose; g++) {
+            amps_int t;
+            int q;
+            if (!S->gact[g]) continue;
+            t = S->ghead[g];
+            if (t < 0) {                                   /* piece g is finished */
+                amps_int c = 0;
+                S->gact[g] = 0; nact--;
+                if (amps__piece_loose(S, g, nvis, nj, jn)) {
+                    for (k = 0; k < nvis; k++) c += amps__gfind(S->gpar, S->tlab[S->tvis[k]]) == g;
+                    *ntet = c; loose = 1;
+                }
+                continue;
+            }
+            S->ghead[g] = S->tnxt[t];
+            if (S->ghead[g] < 0) S->gtail[g] = -1;
+            for (q = 0; q < 4; q++) {
+                amps_int o = amps__tet_face_nb(m, t, q), h;
+                if (o < 0) continue;
+                if (S->tlab[o] < 0) {                      /* a new tet of piece g */
+                    S->tlab[o] = g; S->tnxt[o] = -1; S->tvis[nvis++] = o;
+                    if (S->gtail[g] >= 0) S->tnxt[S->gtail[g]] = o; else S->ghead[g] = o;
+                    S->gtail[g] = o;
+                    continue;
+                }
+                h = amps__gfind(S->gpar, S->tlab[o]);
+                if (h == g) continue;
+                /* pieces g and h meet: h joins g with its queue */
+                S->gpar[h] = g;
+                if (S->ghead[h] >= 0) {
+                    if (S->gtail[g] >= 0) S->tnxt[S->gtail[g]] = S->ghead[h]; else S->ghead[g] = S->ghead[h];
+                    S->gtail[g] = S->gtail[h];
+                }
+                if (S->gact[h]) { S->gact[h] = 0; nact--; }
+            }
+        }
+    }
+    for (k = 0; k < nvis; k++) S->tlab[S->tvis[k]] = -1;
+    return loose;
+}
+
 AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3], const double nrm[3],
                                     amps_int *new_node) {
     amps_int vc, nmoved = 0, k, nl = 0, nz = 0, first = -1, a, b;
@@ -7337,6 +7508,16 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
     S->fixed[vc] = S->fixed[v];
     S->pinned[vc] = 0;
     for (k = 0; k < 3; k++) { S->pinval[3 * vc + k] = 0; S->force[3 * vc + k] = 0; S->disp[3 * vc + k] = S->disp[3 * v + k]; S->dof[3 * vc + k] = -1; }
+    {
+        amps_int nt = 0, nj = 0, jn = -1;
+        if (amps__cut_mechanism(S, v, vc, &nt, &nj, &jn)) {
+            if (nj == 0) amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE, "amps_scene_cut: the cut at node %ld detaches a piece of %ld tets held by nothing; the cut was undone", (long)v, (long)nt);
+            else amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE, "amps_scene_cut: the cut at node %ld leaves a piece of %ld tets joined to the rest at %ld node%s on one line (node %ld) and not held otherwise: "
+                           "it could turn about that line; the cut was undone", (long)v, (long)nt, (long)nj, nj == 1 ? "" : "s", (long)jn);
+            s = AMPS_ERR_SINGULAR_UPDATE;
+            goto undo;
+        }
+    }
     if (!S->fixed[v] && S->dof[3 * v] >= 0) {
         if ((s = amps_update_add_dofs(ctx, S->U, 3, &first)) != AMPS_OK) goto undo_engine;
         for (k = 0; k < 3; k++) S->dof[3 * vc + k] = first + k;
