@@ -595,7 +595,8 @@ AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v
    (Chains of pieces that are loose only together are left to the engine's pivot test.) */
 AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3], const double nrm[3],
                                     amps_int *new_node);
-/* Solves for the displacements of every node. */
+/* Solves for the displacements of every node. AMPS_WARN_INACCURATE (the accuracy guard's
+   tolerance was not reached) still gives the displacements. */
 AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S);
 /* Watch set: the nodes amps_scene_solve_watched computes (replaces the previous set; nv = 0
    clears it). A cut of a watched node watches its copy too. Allocates. */
@@ -7600,9 +7601,9 @@ AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve: NULL scene");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
-    if ((s = amps_update_solve(ctx, S->U, NULL)) != AMPS_OK) return s;
+    if ((s = amps_update_solve(ctx, S->U, NULL)) < 0) return s;
     amps__scene_gather(S, 0, NULL);
-    return AMPS_OK;
+    return s;                                   /* AMPS_WARN_INACCURATE: solved all the same */
 }
 
 AMPS_API amps_status amps_scene_watch(amps_ctx *ctx, amps_scene *S, amps_int nv, const amps_int *nodes) {
@@ -7654,9 +7655,9 @@ AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S) {
         if (s != AMPS_OK) return s;
         S->wstale = 0;
     }
-    if ((s = amps_update_solve_watched(ctx, S->U, NULL)) != AMPS_OK) return s;
+    if ((s = amps_update_solve_watched(ctx, S->U, NULL)) < 0) return s;
     amps__scene_gather(S, S->nwn, S->wnode);
-    return AMPS_OK;
+    return s;
 }
 
 AMPS_API amps_status amps_scene_solve_forces(amps_ctx *ctx, amps_scene *S) {

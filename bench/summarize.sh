@@ -303,8 +303,143 @@ for r in $(runs_of cut) $(runs_of deform); do
   echo "| $r | $(sci "$(get "$r" amps_p2 0 12)") | $(sci "$(get "$r" amps_d2 0 12)") | $(sci "$(get "$r" chol_updown 0 12)") | $(sci "$(get "$r" chol_refactor 0 12)") |"
 done
 echo
+if [ -f accuracy.csv ]; then
 cat <<'EOF'
-## 7. How to reproduce
+## 6b. Accuracy under stress: Eq. 3.20, refinement, the guard (`bench/accuracy.sh`)
+
+The cases of the stress suite (`tests/test_stress.c`, short mode: random cuts, pins, releases
+and forces on each model, every solve compared with CHOLMOD plus two steps of iterative
+refinement on the explicitly assembled system) run under four engine variants: **default**
+(one local refinement step, x_S from the full solve), **eq320** (x_S taken from the small
+system, paper 000 Eq. 3.20), **norefine** (no refinement step), **guard** (accuracy guard at
+1e-12: full residual, refinement with the same factors, synchronous re-factorization). Worst
+relative forward error over the checks, and the worst normwise backward error in units of eps;
+CHOLMOD's columns are its own unrefined solve of the same systems. "fails" counts checks over
+the suite's bounds.
+
+| case | equations | cond est. | CHOLMOD error | default | eq320 | norefine | guard | CHOLMOD be/eps | default be/eps | eq320 be/eps | norefine be/eps | guard be/eps | smallest pivot ratio (default) | fails (d/e/n/g) |
+|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|
+EOF
+awk -F, '
+  NR == 1 { next }
+  $4 + 0 == 0 { next }
+  { k = $2; if (!(k in seen)) { seen[k] = 1; keys[++n] = k; neq[k] = $3; cond[k] = $6; ech[k] = $12; bch[k] = $10 }
+    E[k, $1] = $11; B[k, $1] = $9; F[k, $1] = $14; P[k, $1] = $13 }
+  END { for (q = 1; q <= n; q++) { k = keys[q]
+      printf "| %s | %d | %.1e | %s | %.1e | %.1e | %.1e | %.1e | %.1f | %.1f | %.1f | %.1f | %.1f | %.1e | %s/%s/%s/%s |\n", k, neq[k], cond[k],
+        (ech[k] > 0 ? sprintf("%.1e", ech[k]) : "failed"), E[k, "default"], E[k, "eq320"], E[k, "norefine"], E[k, "guard"], bch[k],
+        B[k, "default"], B[k, "eq320"], B[k, "norefine"], B[k, "guard"], P[k, "default"], F[k, "default"], F[k, "eq320"], F[k, "norefine"], F[k, "guard"] } }' accuracy.csv
+echo
+cat <<'EOF'
+Reading (compare the backward errors: forward errors follow the condition number for every
+variant):
+- **Eq. 3.20 is off by default** (`eq320 = 0`): taking x_S from the small system instead of the
+  full solve does not change the forward error but raises the backward error by 2-3 orders of
+  magnitude on the ill-conditioned cases (the long beams, Poisson ratio 0.4999): the small
+  system and the full solve round differently, and substituting one into the other leaves
+  residual on the rows next to S.
+- **One local refinement step is on by default** (`refine = 1`): without it the backward error
+  grows the same way (and the forward error of the nearly incompressible brick by 20x).
+- **The guard** (opt-in `guard_tol`) brings the backward error to CHOLMOD's level (0.1 eps) on
+  every case, at the price of one product with K^ per solve plus refinement solves, and
+  synchronous re-factorizations while its tolerance is out of reach (the call then returns
+  `AMPS_WARN_INACCURATE` with the solution).
+- **Pivoting**: the dense system is factored with partial (row) pivoting, left-looking, with the
+  changed columns last so a commit re-eliminates only them; a column whose pivot falls below
+  `singular_tol` (1e-15) times its norm refuses the commit and rolls it back. The smallest pivot
+  ratio of a committed system is the column above: legitimate ill-conditioned systems go far
+  below the ratio of a singular one (beam 5x5x4096 in `make stress`: 1.6e-16; a piece hanging on a hinge
+  gave 1.4e-15), so no threshold on it can tell a mechanism from a long beam. Mechanisms are
+  therefore caught by the scene's topological test (a face-connected piece joined at collinear
+  nodes), and the pivot test only backs it up.
+- `adv_near_cancel` drives K^ to within 1e-14 of singular on purpose: CHOLMOD fails there, the
+  engine solves with a small backward error, and the forward error reflects cond ~ 1e18.
+
+EOF
+fi
+if [ -f haptic.csv ]; then
+cat <<'EOF'
+## 7. Haptic step and watch sets (`bench/haptic`, `bench/watch`)
+
+Setup of both: base held, the opposing forces of the harness's cut, the uncut model factored
+once, then 10 steps of the advancing cut. Haptic step: 20 pins (the highest free unloaded
+nodes) moved together every step along a smooth closed path (amplitude 1% of the model), step =
+20 x `amps_scene_pin` + `amps_scene_solve_forces` + 20 x `amps_scene_reaction`; every 100 steps
+a full `amps_scene_solve` (the visual update) gives reference reactions.
+
+| mesh | equations | nnz(L) | \|S u C\| | steps | median | mean | p99 | max | rate (mean) | full solve (median) | reactions vs full solve |
+|---|---|---|---|---|---|---|---|---|---|---|---|
+EOF
+awk -F, 'NR > 1 && $1 != "mesh" { printf "| %s | %d | %.1f M | %d | %d | %.3f ms | %.3f ms | %.3f ms | %.1f ms | %.0f Hz | %.1f ms | %.1e |\n", $1, $3, $4 / 1e6, $7, $8, $10, $9, $11, $12, $13, $14, $15 }' haptic.csv
+echo
+fi
+if [ -f watch.csv ]; then
+cat <<'EOF'
+Watch sets: closure = closure_L of the watched equations in the base factor; "nnz(L) share" =
+the entries of L in those columns (what the watched backward solve reads). Times: medians of
+solves each after a change of the force on the probe node (nothing cached).
+
+| mesh | set | watched nodes | closure / n | nnz(L) share | full solve | watched solve | speed-up | watched vs full (max rel. diff) |
+|---|---|---|---|---|---|---|---|---|
+EOF
+awk -F, 'NR > 1 && $1 != "mesh" { printf "| %s | %s | %d | %.3f | %.3f | %.2f ms | %.2f ms | %.2fx | %.1e |\n", $1, $7, $8, $10, $11, $12, $13, $14, $16 }' watch.csv
+echo
+cat <<'EOF'
+Reading: the haptic step does not depend on the model's size (O(|S u C|^2) on the small dense
+system plus the pin bookkeeping), so it is thousands of times cheaper than the full solve. A
+watched surface reaches almost every column of L (a surface touches nearly every separator of
+the nested dissection), so watching it saves little; what it buys is the two-phase job, which
+runs that backward solve outside the lock the haptic thread takes (`examples/haptic_loop.c`).
+A single probe reads 5-18% of L; its speed-up is capped by work every watched solve still pays:
+the local refinement step over the closure of S u C and its neighbours, and Step 4.
+
+EOF
+fi
+if [ -f refactor.csv ]; then
+cat <<'EOF'
+## 8. Background re-factorization (`bench/refactor`)
+
+An advancing cut of one node per step (cut + solve timed together, back to back, no frame
+pacing), with the default policy (on: AUTO, rent or buy) and with re-factorization off (the
+augmentation grows for ever; these runs stop after 90 s of step time). Rate at the end: the
+last min(100, steps/5) steps against steps 5-15. Swap: the time the swapping step spent on it;
+background job: wall time of the re-factorization, start to ready.
+
+| mesh | policy | steps run | steps 5-15 median | end median | end / start | end mean | \|S u C\| at the end (median) | re-factorizations | swap median / max | background job median | worst residual |
+|---|---|---|---|---|---|---|---|---|---|---|---|
+EOF
+awk -F, '
+  function med(a, n,   i, j, t) { for (i = 2; i <= n; i++) { t = a[i]; for (j = i - 1; j >= 1 && a[j] > t; j--) a[j + 1] = a[j]; a[j + 1] = t } return n ? a[int((n + 1) / 2)] : 0 }
+  NR > 1 && $1 != "mesh" { k = $1 "," $2; if (!(k in n)) keys[++nk] = k; i = ++n[k]; T[k, i] = $4; U[k, i] = $5; nr[k] = $6
+    if ($8 > 0) { ns[k]++; SW[k, ns[k]] = $8; BG[k, ns[k]] = $9; if ($8 > swmax[k]) swmax[k] = $8 }
+    if ($10 > res[k]) res[k] = $10 }
+  END { for (q = 1; q <= nk; q++) { k = keys[q]; m = n[k]; split(k, kk, ",")
+      nf = 0; for (i = 5; i <= 15 && i <= m; i++) a[++nf] = T[k, i]; m0 = med(a, nf)
+      nl = int(m / 5); if (nl > 100) nl = 100; if (nl < 1) nl = 1; s = 0
+      for (i = 1; i <= nl; i++) { a[i] = T[k, m - nl + i]; s += a[i] } m1 = med(a, nl)
+      for (i = 1; i <= nl; i++) a[i] = U[k, m - nl + i]; u1 = med(a, nl)
+      for (i = 1; i <= ns[k]; i++) a[i] = SW[k, i]; sw = med(a, ns[k] + 0)
+      for (i = 1; i <= ns[k]; i++) a[i] = BG[k, i]; bg = med(a, ns[k] + 0)
+      printf "| %s | %s | %d | %.2f ms | %.2f ms | %.1fx | %.2f ms | %d | %d | %s | %s | %.1e |\n", kk[1], kk[2], m, 1e3 * m0, 1e3 * m1, m1 / m0, 1e3 * s / nl, u1, nr[k],
+        ns[k] ? sprintf("%.1f / %.1f ms", 1e3 * sw, 1e3 * swmax[k]) : "-", ns[k] ? sprintf("%.0f ms", 1e3 * bg) : "-", res[k] } }' refactor.csv
+echo
+for p in refactor_*.png; do [ -f "$p" ] && echo "- ${p%.png}: step time and |S u C| against step ![$p](${pre}$p)"; done
+echo
+cat <<'EOF'
+Reading: without re-factorization the step time grows without bound (quadratically in
+|S u C|: the dense LU extension re-eliminates the changed columns against all earlier ones).
+With it, |S u C| stays bounded, but at the number of changes made while one background job
+runs (m' of paper 001): a job takes 0.1 s on the beam and about 4 s on bunny20k (ordering,
+analysis and factorization on one core while the other runs the steps), during which 40-60
+back-to-back cut steps add 10-12 augmented columns each. The end rate therefore settles at the
+rate of a step with |S u C| of several hundred, not at the rate of step 10: the issue's target
+(within 2x of step 10) is not met on these two meshes. Steps paced at a frame rate accumulate
+fewer changes per job and stay closer to the start.
+
+EOF
+fi
+cat <<'EOF'
+## 9. How to reproduce
 
 `make bench` (full run, under 30 minutes on 2 cores; it installs the packages it needs when run
 as root, otherwise it names them), `make bench-quick` for a subset (under 3 minutes; results in
