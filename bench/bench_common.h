@@ -18,6 +18,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
+#include "bench_util.h"
 
 #define BENCH_E 1000.0
 #define BENCH_NU 0.3
@@ -61,7 +62,7 @@ typedef struct bstep {
 } bstep;
 
 static void bscen_init(bscen *sc, const amps_mesh *m, const char *spec, int cut, int steps) {
-    int v, d, nn0 = (int)m->nnode, i, j;
+    int v, d, nn0 = (int)m->nnode;
     memset(sc, 0, sizeof(*sc));
     sc->cut = cut; sc->nn0 = nn0; sc->cap = nn0 + steps + 16;
     for (d = 0; d < 3; d++) { sc->lo[d] = 1e300; sc->hi[d] = -1e300; }
@@ -78,18 +79,7 @@ static void bscen_init(bscen *sc, const amps_mesh *m, const char *spec, int cut,
     sc->tol = 0.5 * sc->h;
     sc->path = (int *)bench_alloc(sizeof(int) * (size_t)nn0);
     for (v = 0; v < nn0; v++) if (fabs(m->xyz[3 * v] - sc->xc) <= sc->tol && !sc->fixed0[v]) sc->path[sc->npath++] = v;
-    {   /* order: descending long-axis coordinate, then ascending third axis (insertion sort) */
-        int ax = sc->axis, ax2 = ax == 2 ? 1 : 2;
-        for (i = 1; i < sc->npath; i++) {
-            int pv = sc->path[i];
-            for (j = i - 1; j >= 0; j--) {
-                const double *a = m->xyz + 3 * sc->path[j], *b = m->xyz + 3 * pv;
-                if (a[ax] > b[ax] + 1e-9 || (fabs(a[ax] - b[ax]) <= 1e-9 && a[ax2] <= b[ax2])) break;
-                sc->path[j + 1] = sc->path[j];
-            }
-            sc->path[j + 1] = pv;
-        }
-    }
+    bu_sort_path(m, sc->path, sc->npath, sc->axis, sc->axis == 2 ? 1 : 2);   /* descending long axis */
     sc->force = (double *)bench_alloc(sizeof(double) * 3 * (size_t)sc->cap);
     sc->pinned = (unsigned char *)bench_alloc((size_t)sc->cap);
     sc->pinval = (double *)bench_alloc(sizeof(double) * 3 * (size_t)sc->cap);

@@ -1,6 +1,6 @@
 /* bench/bench_util.h: helpers shared by the benchmark programs (include after amps.h).
-   Mesh loading (beam:<h> | brick:<R> | file), the held base, the advancing planar cut of
-   bench/update.c, surface nodes, order statistics and CSV output. */
+   Mesh loading (beam:<h> | brick:<R> | file), the held base, the advancing planar cut (the
+   path of bench/harness), surface nodes, order statistics and CSV output. */
 #ifndef BENCH_UTIL_H
 #define BENCH_UTIL_H
 #include <stdio.h>
@@ -80,7 +80,7 @@ static inline amps_status bu_fix(amps_ctx *ctx, amps_scene *S, amps_int nnode, c
     return s;
 }
 
-/* The advancing planar cut of bench/update.c: the nodes within half a mesh spacing h of the
+/* The advancing planar cut of bench/harness: the nodes within half a mesh spacing h of the
    plane x = xc (the centre), not fixed, ordered by descending up-axis coordinate, then the
    third axis; each cut step cuts the next path node by the plane x = its own x. */
 typedef struct bu_cut {
@@ -88,8 +88,23 @@ typedef struct bu_cut {
     double xc, tol, h;
 } bu_cut;
 
+/* Sorts the nodes path[0:n] by descending coordinate ax, then ascending ax2 (insertion sort):
+   the order in which the advancing cut visits them. */
+static inline void bu_sort_path(const amps_mesh *m, int *path, int n, int ax, int ax2) {
+    int i, j;
+    for (i = 1; i < n; i++) {
+        int pv = path[i];
+        for (j = i - 1; j >= 0; j--) {
+            const double *a = m->xyz + 3 * path[j], *b = m->xyz + 3 * pv;
+            if (a[ax] > b[ax] + 1e-9 || (fabs(a[ax] - b[ax]) <= 1e-9 && a[ax2] <= b[ax2])) break;
+            path[j + 1] = path[j];
+        }
+        path[j + 1] = pv;
+    }
+}
+
 static inline int bu_cut_init(bu_cut *c, const amps_mesh *m, const unsigned char *fixed, int axis, const double lo[3], const double hi[3]) {
-    int nn = (int)m->nnode, v, i, j, ax2 = axis == 2 ? 1 : 2;
+    int nn = (int)m->nnode, v, ax2 = axis == 2 ? 1 : 2;
     c->xc = 0.5 * (lo[0] + hi[0]);
     c->h = pow((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]) / nn, 1.0 / 3.0);
     c->tol = 0.5 * c->h;
@@ -97,15 +112,7 @@ static inline int bu_cut_init(bu_cut *c, const amps_mesh *m, const unsigned char
     c->path = (int *)malloc(sizeof(int) * ((size_t)nn + 1));
     if (!c->path) return -1;
     for (v = 0; v < nn; v++) if (fabs(m->xyz[3 * v] - c->xc) <= c->tol && !fixed[v]) c->path[c->npath++] = v;
-    for (i = 1; i < c->npath; i++) {
-        int pv = c->path[i];
-        for (j = i - 1; j >= 0; j--) {
-            const double *a = m->xyz + 3 * c->path[j], *b = m->xyz + 3 * pv;
-            if (a[axis] > b[axis] + 1e-9 || (fabs(a[axis] - b[axis]) <= 1e-9 && a[ax2] <= b[ax2])) break;
-            c->path[j + 1] = c->path[j];
-        }
-        c->path[j + 1] = pv;
-    }
+    bu_sort_path(m, c->path, c->npath, axis, ax2);
     return 0;
 }
 

@@ -5,7 +5,7 @@
      mesh: beam:<h>   amps_mesh_beam(h), nodes with z < 0.5 fixed
            brick:<R>  amps_mesh_brick(R), nodes with z < 1e-9 fixed
            a TetGen .node / .msh / .mesh file (amps_mesh_read), the nodes in the lowest 4% of the
-           y range fixed (as bench/update.c does)
+           y range fixed (as bench/harness does)
    Material E = 1000, nu = 0.3. K = upper triangle from amps_mesh_number_dofs + amps_mesh_assemble.
    Prints one table row and appends one row to out.csv (the header first if the file is new or empty).
 

@@ -2,7 +2,7 @@
 
    usage: haptic <mesh> <steps> <cuts> <out.csv> [npins]
      mesh: beam:<h> | brick:<R> | path to a TetGen .node / .msh / .mesh file
-   Setup as in bench/update: the base held (the low 4% of the up axis: z for beam and brick, y for
+   Setup as in bench/harness: the base held (the low 4% of the up axis: z for beam and brick, y for
    the bunny), the opposing forces at the start of the advancing cut, then <cuts> cut steps. The
    tool: the npins (default 20) free, unloaded nodes highest along the up axis, all moved by the
    same smooth path, amplitude A = 1% of the largest extent of the model, period 400 steps:

@@ -2,7 +2,7 @@
 
    usage: watch <mesh> <reps> <cuts> <out.csv>
      mesh: beam:<h> | brick:<R> | path to a TetGen .node / .msh / .mesh file
-   Setup as in bench/update: the base held, the opposing forces at the start of the advancing
+   Setup as in bench/harness: the base held, the opposing forces at the start of the advancing
    cut, then <cuts> cut steps. Watch sets (surface = nodes of the faces of exactly one tet,
    cut faces included):
      surface    every surface node;
