@@ -33,9 +33,9 @@ else
   meshes_factor="beam:64 beam:256 beam:1024 brick:8 brick:14 brick:20 $B20 $B50"
   runs=""
   for m in beam:4 beam:16 beam:64 brick:4 brick:8 brick:12; do runs="$runs $m:cut:50:5:2000:60 $m:deform:50:5:2000:60"; done
-  for m in beam:256 brick:16; do runs="$runs $m:cut:50:10:2000:90 $m:deform:50:10:2000:90"; done
+  for m in beam:256 brick:16; do runs="$runs $m:cut:50:10:2000:75 $m:deform:50:10:2000:75"; done
   for m in beam:1024 brick:20 $B20; do runs="$runs $m:cut:50:25:1000:120 $m:deform:50:25:1000:120"; done
-  runs="$runs $B50:cut:50:25:500:150 $B50:deform:50:50:500:120 beam:128:cut:500:50:1000:150"
+  runs="$runs $B50:cut:50:25:500:120 $B50:deform:50:50:500:90 beam:128:cut:500:50:1000:120"
 fi
 for m in $meshes_factor; do run build/bench/factor "$m" $out/factor.csv; done
 for r in $runs; do
@@ -66,8 +66,8 @@ $CC $FLAGS -o build/bench/refactor bench/refactor.c -lm || exit 1
 rm -f $out/refactor.csv
 if [ "$mode" = quick ]; then rmesh="beam:64"; rsteps=200
 else rmesh="beam:256 bench/data/bunny20k.1.node"; rsteps=1000; fi
-# the off runs stop after 90 s of step time (their step time grows without bound)
-for m in $rmesh; do for p in on off; do run build/bench/refactor "$m" $rsteps $p $out/refactor.csv $([ $p = off ] && echo 90); done; done
+# the off runs stop after 60 s of step time (their step time grows without bound)
+for m in $rmesh; do for p in on off; do run build/bench/refactor "$m" $rsteps $p $out/refactor.csv $([ $p = off ] && echo 60); done; done
 if command -v gnuplot >/dev/null; then
   for m in $(cut -d, -f1 $out/refactor.csv | sort -u | grep -v '^mesh$'); do
     gnuplot -e "set term pngcairo size 900,600; set out '$out/refactor_$m.png'; set datafile separator ',';

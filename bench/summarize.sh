@@ -133,7 +133,7 @@ CG and GMRES run at the sampled steps only: step 1, every k-th step and the last
 the tables: 5 on the small meshes, 10 on beam 5x5x256 and brick R=16, 25 on beam 5x5x1024,
 brick R=20 and the bunnies, 50 on the 500-step run and bunny50k deform), so that `make bench`
 stays within 30 minutes on 2 cores. Each run also has a wall-clock guard (`BENCH_TMAX` in
-`bench/run.sh`, 30-240 s): past it no new step starts, and the "steps" column shows how far the
+`bench/run.sh`, 30-120 s): past it no new step starts, and the "steps" column shows how far the
 run got. Times are medians over the steps a method ran.
 
 EOF
@@ -401,7 +401,7 @@ cat <<'EOF'
 
 An advancing cut of one node per step (cut + solve timed together, back to back, no frame
 pacing), with the default policy (on: AUTO, rent or buy) and with re-factorization off (the
-augmentation grows for ever; these runs stop after 90 s of step time). Rate at the end: the
+augmentation grows for ever; these runs stop after 60 s of step time). Rate at the end: the
 last min(100, steps/5) steps against steps 5-15. Swap: the time the swapping step spent on it;
 background job: wall time of the re-factorization, start to ready.
 
