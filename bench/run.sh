@@ -35,7 +35,7 @@ else
   for m in beam:4 beam:16 beam:64 brick:4 brick:8 brick:12; do runs="$runs $m:cut:50:5:2000:60 $m:deform:50:5:2000:60"; done
   for m in beam:256 brick:16; do runs="$runs $m:cut:50:10:2000:75 $m:deform:50:10:2000:75"; done
   for m in beam:1024 brick:20 $B20; do runs="$runs $m:cut:50:25:1000:120 $m:deform:50:25:1000:120"; done
-  runs="$runs $B50:cut:50:25:500:120 $B50:deform:50:50:500:90 beam:128:cut:500:50:1000:120"
+  runs="$runs $B50:cut:50:25:500:150 $B50:deform:50:50:500:120 beam:128:cut:500:50:1000:120"
 fi
 for m in $meshes_factor; do run build/bench/factor "$m" $out/factor.csv; done
 for r in $runs; do
