@@ -387,7 +387,7 @@ if command -v gnuplot >/dev/null; then
   for f in stress/long_*.csv; do
     n=$(basename "$f" .csv)
     gnuplot -e "set term pngcairo size 900,500; set out 'stress/$n.png'; set datafile separator ','; set logscale y; set format y '%.0e';
-      set xlabel 'step'; set ylabel 'relative residual'; set key top left; set title '$n';
+      set xlabel 'step'; set ylabel 'relative residual'; set key top left; set title '$n' noenhanced;
       plot '$f' u 1:4 every ::1 w l t 'amps.h (engine, every step)', '$f' u 1:(\$6 > 0 ? \$6 : 1/0) every ::1 w p pt 7 ps 0.6 t 'CHOLMOD (checked steps)'" 2>/dev/null \
       && echo "- $n: residual against step ![$n](${pre}stress/$n.png)"
   done
