@@ -148,6 +148,48 @@ static inline amps_status bu_cut_next(amps_ctx *ctx, amps_scene *S, bu_cut *c, i
     return s;
 }
 
+/* The model every program here starts from: the mesh of spec, its base held (bu_base along the
+   up axis), E = 1000, nu = 0.3, the advancing cut's path and its opposing forces set. so: the
+   scene options (NULL: bu_scene_opts). 0 on success; otherwise 1 with the reason on stderr. */
+typedef struct bu_model {
+    amps_mesh *m;
+    amps_scene *S;
+    unsigned char *fixed;
+    double *force, lo[3], hi[3];
+    int up, nn;
+    bu_cut cp;
+} bu_model;
+static inline int bu_model_init(amps_ctx *ctx, const char *spec, const amps_scene_opts *so, bu_model *b) {
+    amps_scene_opts o;
+    memset(b, 0, sizeof(*b));
+    if (!(b->m = bu_load_mesh(ctx, spec))) { fprintf(stderr, "%s: %s\n", spec, ctx->msg); return 1; }
+    b->nn = (int)b->m->nnode;
+    bu_bbox(b->m, b->lo, b->hi);
+    b->up = bu_up_axis(spec);
+    b->fixed = bu_base(b->m, b->up, b->lo, b->hi);
+    if (so) o = *so; else bu_scene_opts(&o);
+    b->S = amps_scene_create(ctx, b->m, &o);
+    b->force = (double *)calloc(3 * (size_t)b->nn, sizeof(double));
+    if (!b->S || !b->fixed || !b->force) { fprintf(stderr, "%s: %s\n", spec, ctx->msg); return 1; }
+    amps_scene_set_material(ctx, b->S, 1000.0, 0.3);
+    bu_fix(ctx, b->S, b->nn, b->fixed);
+    if (bu_cut_init(&b->cp, b->m, b->fixed, b->up, b->lo, b->hi)) { fprintf(stderr, "%s: out of memory\n", spec); return 1; }
+    bu_cut_forces(ctx, b->S, b->m, b->fixed, &b->cp, b->force);
+    return 0;
+}
+/* ncuts steps of the advancing cut (a failed cut is reported and skipped); returns the cuts done. */
+static inline int bu_cuts(amps_ctx *ctx, bu_model *b, int ncuts) {
+    int k, done = 0;
+    for (k = 0; k < ncuts; k++) {
+        int node;
+        amps_status s = bu_cut_next(ctx, b->S, &b->cp, &node);
+        if (s == AMPS_WARN_NOOP) break;
+        if (s != AMPS_OK) fprintf(stderr, "cut at %d: %s\n", node, ctx->msg);
+        else done++;
+    }
+    return done;
+}
+
 /* Surface nodes: the nodes of the boundary faces (faces of exactly one tet). Writes them to out
    (room for nnode), ascending; returns their number (-1 out of memory). */
 static inline int bu_cmp_face(const void *a, const void *b) {

@@ -30,6 +30,7 @@ int main(int argc, char **argv) {
     double lo[3], hi[3], amp = 0, t_prep, *t_step, *t_full, *r1, *r2, *force, relmax = 0, relsum = 0, fmax = 0;
     unsigned char *fixed;
     bu_cut cp;
+    bu_model B;
     amps_update_stats us;
     FILE *csv;
     if (argc < 5) { fprintf(stderr, "usage: haptic <beam:h|brick:R|file> <steps> <cuts> <out.csv> [npins]\n"); return 2; }
@@ -38,36 +39,16 @@ int main(int argc, char **argv) {
     if (steps < 1 || npins < 1) return 2;
     bu_mesh_name(spec, name, sizeof(name));
     amps_ctx_init(&ctx);
-    m = bu_load_mesh(&ctx, spec);
-    if (!m) { fprintf(stderr, "%s: %s\n", spec, ctx.msg); return 1; }
-    nn = (int)m->nnode;
-    bu_bbox(m, lo, hi);
-    up = bu_up_axis(spec);
+    if (bu_model_init(&ctx, spec, NULL, &B)) return 1;
+    m = B.m; S = B.S; fixed = B.fixed; force = B.force; nn = B.nn; up = B.up; cp = B.cp;
+    memcpy(lo, B.lo, sizeof(lo)); memcpy(hi, B.hi, sizeof(hi));
     ax3 = up == 2 ? 1 : 2;
     for (k = 0; k < 3; k++) if (hi[k] - lo[k] > amp) amp = hi[k] - lo[k];
     amp *= 0.01;
-    fixed = bu_base(m, up, lo, hi);
-    {
-        amps_scene_opts so;
-        bu_scene_opts(&so);
-        S = amps_scene_create(&ctx, m, &so);
-    }
-    if (!S || !fixed) { fprintf(stderr, "%s: %s\n", spec, ctx.msg); return 1; }
-    amps_scene_set_material(&ctx, S, 1000.0, 0.3);
-    bu_fix(&ctx, S, nn, fixed);
-    if (bu_cut_init(&cp, m, fixed, up, lo, hi)) return 1;
-    force = (double *)calloc(3 * (size_t)nn, sizeof(double));
-    bu_cut_forces(&ctx, S, m, fixed, &cp, force);
     t_prep = amps_now();
     if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "first solve: %s\n", ctx.msg); return 1; }
     t_prep = amps_now() - t_prep;
-    for (k = 0; k < ncuts; k++) {
-        int node;
-        amps_status s = bu_cut_next(&ctx, S, &cp, &node);
-        if (s == AMPS_WARN_NOOP) break;
-        if (s != AMPS_OK) fprintf(stderr, "cut at %d: %s\n", node, ctx.msg);
-        else ndid++;
-    }
+    ndid = bu_cuts(&ctx, &B, ncuts);
     /* the tool: the npins highest free, unloaded original nodes (selection by repeated maximum) */
     pins = (int *)malloc(sizeof(int) * (size_t)npins);
     {

@@ -18,37 +18,28 @@
 
 int main(int argc, char **argv) {
     amps_ctx ctx;
-    amps_mesh *m;
     amps_scene *S;
     amps_scene_opts so;
     bu_cut cp;
     unsigned char *fixed;
-    double lo[3], hi[3], *force, *t, first[11], last[100], worst_res = 0;
+    double *force, *t, first[11], last[100], worst_res = 0;
     double tmax, t_run = 0;
-    int steps, on, up, st, pass = 0, nsk = 0, nn;
+    int steps, on, st, pass = 0, nsk = 0;
     char name[256];
     FILE *f;
+    bu_model B;
     if (argc < 5) { fprintf(stderr, "usage: refactor <mesh> <steps> <on|off> <out.csv> [tmax]\n"); return 2; }
     steps = atoi(argv[2]); on = strcmp(argv[3], "off") != 0;
     tmax = argc > 5 ? atof(argv[5]) : 0;
     amps_ctx_init(&ctx);
     bu_mesh_name(argv[1], name, sizeof(name));
-    if (!(m = bu_load_mesh(&ctx, argv[1]))) { fprintf(stderr, "%s: %s\n", argv[1], ctx.msg); return 1; }
-    nn = (int)m->nnode;
-    bu_bbox(m, lo, hi);
-    up = bu_up_axis(argv[1]);
-    fixed = bu_base(m, up, lo, hi);
     bu_scene_opts(&so);
     so.update.refactor = on ? AMPS_REFACTOR_AUTO : AMPS_REFACTOR_OFF;
     if (getenv("AMPS_REFACTOR_RATIO")) so.update.refactor_ratio = atof(getenv("AMPS_REFACTOR_RATIO"));
     if (getenv("AMPS_REFACTOR_ORDER")) so.update.refactor_order.method = !strcmp(getenv("AMPS_REFACTOR_ORDER"), "nd") ? AMPS_ORDER_ND : AMPS_ORDER_AMD;
-    S = amps_scene_create(&ctx, m, &so);
-    amps_scene_set_material(&ctx, S, 1000.0, 0.3);
-    bu_fix(&ctx, S, nn, fixed);
-    if (bu_cut_init(&cp, m, fixed, up, lo, hi)) return 1;
-    force = (double *)calloc(3 * (size_t)nn, sizeof(double));
+    if (bu_model_init(&ctx, argv[1], &so, &B)) return 1;
+    S = B.S; fixed = B.fixed; force = B.force; cp = B.cp;
     t = (double *)malloc(sizeof(double) * (size_t)steps);
-    bu_cut_forces(&ctx, S, m, fixed, &cp, force);
     if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "first solve: %s\n", ctx.msg); return 1; }
     f = bu_csv(argv[4], "mesh,policy,step,t_step,nsys,nrefactor,running,t_swap,t_refactor,relres,lu_cols");
     for (st = 0; st < steps; st++) {

@@ -28,10 +28,11 @@ int main(int argc, char **argv) {
     const char *spec, *out;
     char name[256];
     int reps, ncuts, ndid = 0, up, nn0, nn, v, k, r, nsurf, probe = -1, set, sign = 1;
-    double lo[3], hi[3], *force, *tf, *tw, *xw;
+    double *force, *tf, *tw, *xw;
     amps_int *dof0, *surf, *idx, *clo;
     unsigned char *fixed;
     bu_cut cp;
+    bu_model B;
     amps_update_stats us;
     FILE *csv;
     if (argc < 5) { fprintf(stderr, "usage: watch <beam:h|brick:R|file> <reps> <cuts> <out.csv>\n"); return 2; }
@@ -39,36 +40,16 @@ int main(int argc, char **argv) {
     if (reps < 1) return 2;
     bu_mesh_name(spec, name, sizeof(name));
     amps_ctx_init(&ctx);
-    m = bu_load_mesh(&ctx, spec);
-    if (!m) { fprintf(stderr, "%s: %s\n", spec, ctx.msg); return 1; }
-    nn0 = (int)m->nnode;
-    bu_bbox(m, lo, hi);
-    up = bu_up_axis(spec);
-    fixed = bu_base(m, up, lo, hi);
+    if (bu_model_init(&ctx, spec, NULL, &B)) return 1;
+    m = B.m; S = B.S; fixed = B.fixed; force = B.force; nn0 = B.nn; up = B.up; cp = B.cp;
     /* the equations of the original nodes: the scene numbers them as amps_mesh_number_dofs does
        (checked below against the solution); cut copies get appended equations, outside L */
     dof0 = (amps_int *)malloc(sizeof(amps_int) * 3 * (size_t)nn0);
+    if (!dof0) return 1;
     amps_mesh_number_dofs(m, fixed, dof0);
-    {
-        amps_scene_opts so;
-        bu_scene_opts(&so);
-        S = amps_scene_create(&ctx, m, &so);
-    }
-    if (!S || !fixed || !dof0) { fprintf(stderr, "%s: %s\n", spec, ctx.msg); return 1; }
-    amps_scene_set_material(&ctx, S, 1000.0, 0.3);
-    bu_fix(&ctx, S, nn0, fixed);
-    if (bu_cut_init(&cp, m, fixed, up, lo, hi)) return 1;
-    force = (double *)calloc(3 * (size_t)nn0, sizeof(double));
-    bu_cut_forces(&ctx, S, m, fixed, &cp, force);
     /* factor the uncut model, then cut */
     if (amps_scene_prepare(&ctx, S) != AMPS_OK) { fprintf(stderr, "prepare: %s\n", ctx.msg); return 1; }
-    for (k = 0; k < ncuts; k++) {
-        int node;
-        amps_status s = bu_cut_next(&ctx, S, &cp, &node);
-        if (s == AMPS_WARN_NOOP) break;
-        if (s != AMPS_OK) fprintf(stderr, "cut at %d: %s\n", node, ctx.msg);
-        else ndid++;
-    }
+    ndid = bu_cuts(&ctx, &B, ncuts);
     if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "solve: %s\n", ctx.msg); return 1; }
     F = amps_scene_factor(S);
     {
