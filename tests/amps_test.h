@@ -45,4 +45,16 @@ static inline double t_reldiff(int n, const double *x, const double *y) {
     for (i = 0; i < n; i++) { s += (x[i] - y[i]) * (x[i] - y[i]); t += y[i] * y[i]; }
     return t > 0 ? sqrt(s / t) : sqrt(s);
 }
+#ifndef AMPS_NO_FEM
+/* K (upper triangle) of mesh m with the nodes below z = 0.5 fixed; *fixed (1 per node), *dof
+   (3 per node, -1 for fixed) and *n (equations) receive the numbering. */
+static inline amps_csc *t_fixed_stiffness(amps_ctx *ctx, const amps_mesh *m, unsigned char **fixed, amps_int **dof, amps_int *n) {
+    amps_int v;
+    *fixed = (unsigned char *)calloc((size_t)m->nnode, 1);
+    *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * (size_t)m->nnode);
+    for (v = 0; v < m->nnode; v++) (*fixed)[v] = m->xyz[3 * v + 2] < 0.5;
+    *n = amps_mesh_number_dofs(m, *fixed, *dof);
+    return amps_mesh_assemble(ctx, m, *dof, *n);
+}
+#endif
 #endif

@@ -387,14 +387,9 @@ int main(void) {
     amps_mesh *m;
     amps_int *dof, n;
     unsigned char *fixed;
-    amps_int v;
     amps_ctx_init(&c);   /* uncounted */
     m = amps_mesh_beam(&c, 4);
-    fixed = (unsigned char *)calloc(m->nnode, 1);
-    for (v = 0; v < m->nnode; v++) fixed[v] = m->xyz[3 * v + 2] < 0.5;
-    dof = (amps_int *)malloc(sizeof(amps_int) * 3 * m->nnode);
-    n = amps_mesh_number_dofs(m, fixed, dof);
-    base_K = amps_mesh_assemble(&c, m, dof, n);
+    base_K = t_fixed_stiffness(&c, m, &fixed, &dof, &n);
     base_F = amps_analyze(&c, base_K, AMPS_UPPER, NULL);
     CHECK(base_F && amps_factorize(&c, base_F, base_K, AMPS_UPPER) == AMPS_OK, "base factor");
     test_engine();

@@ -706,11 +706,7 @@ static void adv_near_cancel(void) {
     amps_ctx_init(&ctx);
     m = amps_mesh_beam(&ctx, 12);
     amps_mesh_set_material(&ctx, m, 1000.0, 0.3);
-    fixed = (unsigned char *)calloc(m->nnode, 1);
-    for (k = 0; k < m->nnode; k++) fixed[k] = m->xyz[3 * k + 2] < 0.5;
-    dof = (amps_int *)malloc(sizeof(amps_int) * 3 * m->nnode);
-    n = amps_mesh_number_dofs(m, fixed, dof);
-    K = amps_mesh_assemble(&ctx, m, dof, n);
+    K = t_fixed_stiffness(&ctx, m, &fixed, &dof, &n);
     F = amps_analyze(&ctx, K, AMPS_UPPER, NULL);
     CHECK(F && amps_factorize(&ctx, F, K, AMPS_UPPER) == AMPS_OK, "near cancel: factor: %s", ctx.msg);
     z = (double *)calloc(n, sizeof(double)); f = (double *)malloc(sizeof(double) * n); w = (double *)malloc(sizeof(double) * 3 * n);
