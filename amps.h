@@ -4140,6 +4140,9 @@ done:
 #define AMPS__UMOD 1u  /* index in S */
 #define AMPS__UCON 2u  /* index in C */
 #define AMPS__NB 32    /* dense panel width */
+#ifndef AMPS__TB
+#define AMPS__TB 64    /* diagonal block of the panel's triangular solve */
+#endif
 #define AMPS__VB 16    /* right-hand sides per chunk of Step 1 */
 
 typedef struct amps__pdelta { amps_int r, c; double v; } amps__pdelta;
@@ -4176,7 +4179,7 @@ struct amps_update {
     double *G, *LU, *cnorm;                /* capu x capu column major; column norms of A */
     amps_int *rowperm, *colorder, *colpos, *cstamp; amps_int stamp;
     amps_int *rst, *rcnt; amps_int rstamp;  /* rows touched by a commit, their added entries */
-    double *pbuf;                          /* nthr * capu column buffers */
+    double *pbuf;                          /* max(nbuf, 4) * capu column buffers */
     double *rv;                            /* 2 * capN residual vectors */
     amps__djour *dj; amps_int ndj;         /* Delta row headers before this commit */
     amps__kjour *kj; amps_int nkj;         /* kinds and values before this commit (cappc) */
@@ -4253,7 +4256,7 @@ static amps_status amps__grow_u(amps_ctx *ctx, amps_update *U, amps_int cap) {
         amps__realloc(ctx, (void **)&U->cstamp, c, sizeof(amps_int)) ||
         amps__realloc(ctx, (void **)&U->rst, c, sizeof(amps_int)) ||
         amps__realloc(ctx, (void **)&U->rcnt, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->pbuf, c * (size_t)U->nbuf, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->pbuf, c * (size_t)(U->nbuf > 4 ? U->nbuf : 4), sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->dj, c, sizeof(amps__djour)) ||
         amps__realloc(ctx, (void **)&U->react, c, sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->z, c, sizeof(double)) ||
@@ -4859,8 +4862,88 @@ static double amps__aentry(const amps_update *U, amps_int i, amps_int j) {
 
 /* ---- Step 5: left-looking dense LU with partial pivoting, P A(:, colorder) = L U ---- */
 
-/* C(0:m, 0:w) -= A(0:m, 0:kk) B(0:kk, 0:w), column major; one parallel region over row
-   blocks of 128 (a block of C stays in cache while A streams through once). */
+/* C(r0:r1, 0:w) -= A(r0:r1, k0:k1) B(k0:k1, 0:w), column major, by tiles of 4 columns and
+   2 vectors of rows held in registers (GNU vector extensions where available, else scalars):
+   A and B are read once per tile, C once per call. */
+#if defined(__GNUC__) || defined(__clang__)
+#if defined(__AVX__)
+#define AMPS__VL 4
+typedef double amps__vd __attribute__((vector_size(32)));
+#else
+#define AMPS__VL 2
+typedef double amps__vd __attribute__((vector_size(16)));
+#endif
+#define AMPS__VLD(v, p) memcpy(&(v), (p), sizeof(amps__vd))
+#define AMPS__VSUB(p, s) do { amps__vd t_; memcpy(&t_, (p), sizeof(t_)); t_ -= (s); memcpy((p), &t_, sizeof(t_)); } while (0)
+#else
+#define AMPS__VL 1
+#endif
+static void amps__gemm_tile(amps_int r0, amps_int r1, amps_int w, amps_int k0, amps_int k1, const double *A, size_t lda,
+                            const double *B, size_t ldb, double *C, size_t ldc) {
+    amps_int c, r, k;
+    for (c = 0; c + 4 <= w; c += 4) {
+        const double *b0 = B + (size_t)c * ldb, *b1 = b0 + ldb, *b2 = b1 + ldb, *b3 = b2 + ldb;
+        double *c0 = C + (size_t)c * ldc, *c1 = c0 + ldc, *c2 = c1 + ldc, *c3 = c2 + ldc;
+        r = r0;
+#if AMPS__VL > 1
+        for (; r + 2 * AMPS__VL <= r1; r += 2 * AMPS__VL) {
+            amps__vd z = {0}, s00 = z, s10 = z, s01 = z, s11 = z, s02 = z, s12 = z, s03 = z, s13 = z, a0, a1, v;
+            const double *a = A + (size_t)k0 * lda + (size_t)r;
+            for (k = k0; k < k1; k++, a += lda) {
+                AMPS__VLD(a0, a); AMPS__VLD(a1, a + AMPS__VL);
+                v = z + b0[k]; s00 += a0 * v; s10 += a1 * v;
+                v = z + b1[k]; s01 += a0 * v; s11 += a1 * v;
+                v = z + b2[k]; s02 += a0 * v; s12 += a1 * v;
+                v = z + b3[k]; s03 += a0 * v; s13 += a1 * v;
+            }
+            AMPS__VSUB(c0 + r, s00); AMPS__VSUB(c0 + r + AMPS__VL, s10);
+            AMPS__VSUB(c1 + r, s01); AMPS__VSUB(c1 + r + AMPS__VL, s11);
+            AMPS__VSUB(c2 + r, s02); AMPS__VSUB(c2 + r + AMPS__VL, s12);
+            AMPS__VSUB(c3 + r, s03); AMPS__VSUB(c3 + r + AMPS__VL, s13);
+        }
+#endif
+        for (; r < r1; r++) {
+            double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+            for (k = k0; k < k1; k++) {
+                double av = A[(size_t)k * lda + (size_t)r];
+                s0 += av * b0[k]; s1 += av * b1[k]; s2 += av * b2[k]; s3 += av * b3[k];
+            }
+            c0[r] -= s0; c1[r] -= s1; c2[r] -= s2; c3[r] -= s3;
+        }
+    }
+    for (; c < w; c++) {
+        const double *b = B + (size_t)c * ldb;
+        double *cc = C + (size_t)c * ldc;
+        for (k = k0; k < k1; k++) {
+            const double *a = A + (size_t)k * lda;
+            double bv = b[k];
+            if (bv != 0.0) for (r = r0; r < r1; r++) cc[r] -= a[r] * bv;
+        }
+    }
+}
+
+/* a(0:n)^T b(0:n) */
+static double amps__dot(const double *a, const double *b, amps_int n) {
+    double s = 0;
+    amps_int k = 0;
+#if AMPS__VL > 1
+    {
+        amps__vd s0 = {0}, s1 = s0, x, y;
+        int l;
+        for (; k + 2 * AMPS__VL <= n; k += 2 * AMPS__VL) {
+            AMPS__VLD(x, a + k); AMPS__VLD(y, b + k); s0 += x * y;
+            AMPS__VLD(x, a + k + AMPS__VL); AMPS__VLD(y, b + k + AMPS__VL); s1 += x * y;
+        }
+        s0 += s1;
+        for (l = 0; l < AMPS__VL; l++) s += s0[l];
+    }
+#endif
+    for (; k < n; k++) s += a[k] * b[k];
+    return s;
+}
+
+/* C(0:m, 0:w) -= A(0:m, 0:kk) B(0:kk, 0:w), column major; one parallel region over row blocks
+   of 128, each swept in k blocks of 256 (the block of A stays in cache for all of C's columns). */
 static void amps__gemm_sub(amps_int m, amps_int w, amps_int kk, const double *A, size_t lda,
                            const double *B, size_t ldb, double *C, size_t ldc, int nthr) {
     amps_int rb, nrb = (m + 127) / 128;
@@ -4870,16 +4953,9 @@ static void amps__gemm_sub(amps_int m, amps_int w, amps_int kk, const double *A,
 #pragma omp parallel for schedule(static) num_threads(nthr) if ((double)m * w * kk > 1e6)
 #endif
     for (rb = 0; rb < nrb; rb++) {
-        amps_int r0 = rb * 128, r1 = r0 + 128 < m ? r0 + 128 : m, k, c, r;
-        for (k = 0; k < kk; k++) {
-            const double *a = A + (size_t)k * lda;
-            for (c = 0; c < w; c++) {
-                double bv = B[(size_t)c * ldb + (size_t)k];
-                double *cc = C + (size_t)c * ldc;
-                if (bv == 0.0) continue;
-                for (r = r0; r < r1; r++) cc[r] -= a[r] * bv;
-            }
-        }
+        amps_int r0 = rb * 128, r1 = r0 + 128 < m ? r0 + 128 : m, k0;
+        for (k0 = 0; k0 < kk; k0 += 256)
+            amps__gemm_tile(r0, r1, w, k0, k0 + 256 < kk ? k0 + 256 : kk, A, lda, B, ldb, C, ldc);
     }
 }
 
@@ -4887,23 +4963,29 @@ static void amps__gemm_sub(amps_int m, amps_int w, amps_int kk, const double *A,
    rows u_old..u-1 are new (rowperm set). Returns AMPS_OK, AMPS_ERR_SINGULAR_UPDATE (position in
    *bad), or AMPS_ERR_CAPACITY when the new rows' multipliers grow past 1e6 (refactor from 0). */
 static amps_status amps__lu_extend(amps_update *U, amps_int nf, amps_int u_old, amps_int *bad) {
-    amps_int u = U->u, q, qp, r, k;
+    amps_int u = U->u, q, qp, r;
     size_t ld = (size_t)U->capu;
     double *LU = U->LU;
-    /* new rows: L(r, 0:nf) solves l U11 = A(r, colorder[0:nf]) */
+    /* new rows: L(r, 0:nf) solves l U11 = A(r, colorder[0:nf]), by groups of 4 rows kept
+       row-major in pbuf, so that each entry is one dot product with a column of U11 */
     if (nf > 0 && u > u_old) {
         double growth = 0;
-        for (q = 0; q < nf; q++) {
-            double *lq = LU + (size_t)q * ld, piv = LU[(size_t)q * ld + (size_t)q];
-            amps_int j = U->colorder[q];
-            for (r = u_old; r < u; r++) lq[r] = amps__aentry(U, U->rowperm[r], j);
-            for (k = 0; k < q; k++) {
-                const double *lk = LU + (size_t)k * ld;
-                double ukq = lq[k];
-                if (ukq == 0.0) continue;
-                for (r = u_old; r < u; r++) lq[r] -= lk[r] * ukq;
+        amps_int r0, i;
+        for (r0 = u_old; r0 < u; r0 += 4) {
+            amps_int nr = u - r0 < 4 ? u - r0 : 4;
+            double *lr = U->pbuf;
+            for (q = 0; q < nf; q++) {
+                const double *uq = LU + (size_t)q * ld;
+                amps_int j = U->colorder[q];
+                for (i = 0; i < nr; i++)
+                    lr[(size_t)i * ld + (size_t)q] = (amps__aentry(U, U->rowperm[r0 + i], j) - amps__dot(lr + (size_t)i * ld, uq, q)) / uq[q];
             }
-            for (r = u_old; r < u; r++) { lq[r] /= piv; if (fabs(lq[r]) > growth) growth = fabs(lq[r]); }
+            for (i = 0; i < nr; i++)
+                for (q = 0; q < nf; q++) {
+                    double v = lr[(size_t)i * ld + (size_t)q];
+                    LU[(size_t)q * ld + (size_t)(r0 + i)] = v;
+                    if (fabs(v) > growth) growth = fabs(v);
+                }
         }
         if (!(growth <= 1e6)) return AMPS_ERR_CAPACITY;
     }
@@ -4927,18 +5009,22 @@ static amps_status amps__lu_extend(amps_update *U, amps_int nf, amps_int u_old, 
             U->cnorm[j] = nrm;
         }
         /* apply the factored columns 0..qp-1: P(0:qp) = L11^{-1} P(0:qp) (unit lower) by blocks
-           of 128 rows: the diagonal block per column, the rows below it by one product; then
-           P(qp:u) -= L(qp:u, 0:qp) P(0:qp) */
-        for (kb = 0; kb < qp; kb += 128) {
-            amps_int k1 = kb + 128 < qp ? kb + 128 : qp, kk;
-            for (c = 0; c < w; c++) {
-                double *col = P + (size_t)c * ld;
-                for (kk = kb; kk < k1; kk++) {
-                    const double *lk = LU + (size_t)kk * ld;
-                    double x = col[kk];
-                    if (x == 0.0) continue;
-                    for (r = kk + 1; r < k1; r++) col[r] -= lk[r] * x;
+           of AMPS__TB rows: the diagonal block per column, the rows below it by one product;
+           then P(qp:u) -= L(qp:u, 0:qp) P(0:qp) */
+        for (kb = 0; kb < qp; kb += AMPS__TB) {
+            amps_int k1 = kb + AMPS__TB < qp ? kb + AMPS__TB : qp, kk;
+            amps_int ib;
+            for (ib = kb; ib < k1; ib += 8) {            /* the diagonal block by blocks of 8 */
+                amps_int i1 = ib + 8 < k1 ? ib + 8 : k1;
+                for (c = 0; c < w; c++) {
+                    double *col = P + (size_t)c * ld;
+                    for (kk = ib; kk < i1; kk++) {
+                        const double *lk = LU + (size_t)kk * ld;
+                        double x = col[kk];
+                        if (x != 0.0) for (r = kk + 1; r < i1; r++) col[r] -= lk[r] * x;
+                    }
                 }
+                amps__gemm_tile(i1, k1, w, ib, i1, LU, ld, P, ld, P, ld);
             }
             amps__gemm_sub(qp - k1, w, k1 - kb, LU + (size_t)kb * ld + (size_t)k1, ld, P + (size_t)kb, ld, P + (size_t)k1, ld, U->nthr);
         }
