@@ -316,12 +316,16 @@ typedef struct amps_update_opts {
                                happened; AMPS_WARN_INACCURATE if the tolerance was not reached.
                                0 (default) = off */
     amps_refactor_policy refactor; /* re-factorization of the current matrix (see below); default AUTO */
-    amps_order_opts refactor_order;/* its ordering; default AMD with node blocks detected (block 0):
-                                      nested dissection without coordinates is much slower */
+    amps_order_opts refactor_order;/* its ordering; default nested dissection with node blocks
+                                      detected (block 0); with block > 0 (the scene sets 3) the
+                                      couplings a change cancelled exactly leave the pattern too.
+                                      AMD often has less fill but a tall elimination tree: long
+                                      closures make Steps 1-2 slower */
     int refactor_threads;   /* OpenMP threads of the background factorization; default 1 */
     double refactor_ratio;  /* AUTO: start when the extra time the augmentation has cost since the
-                               last base reaches this times the (measured or estimated) cost of a
-                               factorization; default 1 (rent or buy) */
+                               last base reaches this times the (measured or estimated) time of a
+                               re-factorization; default 0.25: it runs on another core, so the steps
+                               lose less than its time (1 would be rent or buy; bench/RESULTS.md) */
 } amps_update_opts;
 
 /* Per-commit and per-solve measurements (seconds) and sizes. */
@@ -564,7 +568,8 @@ typedef struct amps_scene amps_scene;
 
 typedef struct amps_scene_opts {
     amps_order_opts order;      /* ordering of K (default: ND guided by the node coordinates) */
-    amps_update_opts update;    /* engine options (default: amps_update_opts_default, grow = 1) */
+    amps_update_opts update;    /* engine options (default: amps_update_opts_default, grow = 1);
+                                   update.refactor_order.block 0 becomes 3 (node triples) */
 } amps_scene_opts;
 
 AMPS_API void amps_scene_opts_default(amps_scene_opts *o);
@@ -4224,10 +4229,10 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
     o->refine = 1;
     o->eq320 = 0;
     o->refactor = AMPS_REFACTOR_AUTO;
-    o->refactor_order.method = AMPS_ORDER_AMD;
+    o->refactor_order.method = AMPS_ORDER_ND;
     o->refactor_order.block = 0;
     o->refactor_threads = 1;
-    o->refactor_ratio = 1.0;
+    o->refactor_ratio = 0.25;
 }
 
 /* ---- allocation of the capacity-dependent arrays ---- */
@@ -4427,7 +4432,7 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     U->F = F; U->form = o.formulation; U->tol = o.singular_tol; U->grow = o.grow;
     U->refine = o.refine; U->eq320 = o.eq320; U->guard_tol = o.guard_tol;
     if (!(o.refactor_ratio > 0)) o.refactor_ratio = 1.0;
-    if (o.refactor_order.method == AMPS_ORDER_GIVEN) o.refactor_order.method = AMPS_ORDER_AMD;  /* a given perm has the old order */
+    if (o.refactor_order.method == AMPS_ORDER_GIVEN) o.refactor_order.method = AMPS_ORDER_ND;  /* a given perm has the old order */
     o.refactor_order.perm = NULL; o.refactor_order.coords = NULL;
     U->opts = o;
     U->n = n; U->N = n; U->capN = capN; U->capu = 0; U->u = 0;
@@ -5179,7 +5184,10 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
     amps_status s;
     double t0, t1;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit: NULL engine");
-    if (!U->npd && !U->npc && !U->kpend) { if (U->bg) amps__bg_poll(ctx, U); return AMPS_OK; }
+    /* a finished re-factorization is swapped in first: the recorded changes move along and are
+       then committed on the new base, against its small augmentation */
+    if (U->bg) amps__bg_poll(ctx, U);
+    if (!U->npd && !U->npc && !U->kpend) return AMPS_OK;
     t0 = amps_now();
     u_old = U->u; vused_old = U->vused; dused_old = U->dused;
     U->ndj = 0; U->nkj = 0;
@@ -5349,7 +5357,6 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
     U->committed = 1;
     U->st.ncommit++;
     (void)touched;
-    if (U->bg) amps__bg_poll(ctx, U);
     return AMPS_OK;
 fail:
     amps__rollback(U, u_old, vused_old, dused_old);
@@ -5991,6 +5998,19 @@ static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U) {
     return b;
 }
 
+/* Removes the off-diagonal entries of A that are exactly zero, in place. */
+static void amps__csc_drop_zeros(amps_csc *A) {
+    amps_int j, p, q = 0, p0 = 0;
+    for (j = 0; j < A->ncol; j++) {
+        amps_int p1 = A->p[j + 1];
+        A->p[j] = q;
+        for (p = p0; p < p1; p++)
+            if (A->x[p] != 0.0 || A->i[p] == j) { A->i[q] = A->i[p]; A->x[q] = A->x[p]; q++; }
+        p0 = p1;
+    }
+    A->p[A->ncol] = q;
+}
+
 /* Records the changes of one commit in the log; on failure the re-factorization is cancelled. */
 static void amps__bg_log(amps_update *U, amps_int kpend, const amps__pdelta *pd, amps_int npd) {
     amps__bg *b = U->bg;
@@ -6063,6 +6083,9 @@ static void amps__bg_work(amps__bg *b) {
     b->K2 = amps_csc_from_triplets(&c2, b->N0, nz + b->nt, ti, tj, tx, AMPS_UPPER);
     amps__free(&c2, ti); amps__free(&c2, tj); amps__free(&c2, tx); ti = tj = NULL; tx = NULL;
     if (!b->K2) { s = c2.status; goto done; }
+    /* couplings a change cancelled exactly (a cut moves K[i, j] to a copy of j) leave the pattern,
+       so that they cause no fill; with node blocks detected (block 0) the pattern stays whole */
+    if (b->opts.refactor_order.block != 0) amps__csc_drop_zeros(b->K2);
     /* 2. ordering, analysis, factorization */
     if (amps__bg_get(b, &b->cancel)) { s = AMPS_ERR_STATE; goto done; }
     if (AMPS_TEST_BG_FAULT(1)) { s = amps__err(&c2, AMPS_ERR_OOM, "injected failure in the analysis"); goto done; }
@@ -6230,7 +6253,7 @@ fail:
     return amps__err(ctx, s, "amps_update: swapping the re-factorization in failed (%s); the engine keeps its factors", c2.msg);
 }
 
-/* At the end of a commit: swaps a ready re-factorization in (not while a watched-solve job
+/* At the start of a commit: swaps a ready re-factorization in (not while a watched-solve job
    runs), drops a failed one; the AUTO policy starts one. Never fails the caller. */
 static void amps__bg_poll(amps_ctx *ctx, amps_update *U) {
     if (U->bg) {
@@ -7276,7 +7299,11 @@ AMPS_API amps_status amps_scene_prepare(amps_ctx *ctx, amps_scene *S) {
         }
         goto fail;
     }
-    S->U = amps_update_create(ctx, S->K, AMPS_UPPER, S->F, &S->o.update);
+    {   /* re-factorizations order the node graph (the unknowns come in node triples) */
+        amps_update_opts uo = S->o.update;
+        if (uo.refactor_order.block == 0) uo.refactor_order.block = 3;
+        S->U = amps_update_create(ctx, S->K, AMPS_UPPER, S->F, &uo);
+    }
     if (!S->U) goto fail;
     for (v = 0; v < S->m->nnode; v++) { amps_int d = amps_mesh_degree(S->m, v); if (d > maxdeg) maxdeg = d; }
     S->maxdeg = maxdeg;

@@ -602,13 +602,15 @@ static void test_refactor(void) {
         report(what, &m);
         model_free(&m); free(ti); free(tj); free(tx);
     }
-    {
+    for (ph = 0; ph < 2; ph++) {
+        /* ph 1: node blocks given, so the new bases also drop the couplings cuts cancelled */
         model m; amps_update_opts o; fe_mesh mesh = fe_brick(3);
         amps_update_opts_default(&o); o.grow = 1; o.refactor = AMPS_REFACTOR_MANUAL;
+        if (ph) { o.refactor_order.block = 3; o.refactor_order.method = AMPS_ORDER_AMD; }
         fe_model(&m, &mesh, 2, &o);
-        m.bgmode = 1; m.bgrng = 7; m.extra = 1;
+        m.bgmode = 1; m.bgrng = 7 + (unsigned long long)ph; m.extra = 1;
         cut_sequence(&m, &mesh, 60, 99, 1e-9);
-        report("refactor: brick R=3 cuts", &m);
+        report(ph ? "refactor: brick R=3 cuts, node blocks" : "refactor: brick R=3 cuts", &m);
         model_free(&m); fe_free(&mesh);
     }
     for (ph = 1; ph <= 3; ph++) {
