@@ -11,10 +11,35 @@
    Per step (CSV): step time, |S u C|, re-factorizations swapped in so far, whether one is
    running, the time of a swap that happened in this step (0 otherwise), the residual every 50
    steps. The summary compares the median step time of steps 5-15 with the median and the mean
-   of the last min(100, steps/5) steps. */
+   of the last min(100, steps/5) steps. With on, the run then re-factors synchronously and cuts
+   15 more steps (CSV policy "fresh"): their median over steps 5-15 is the rate a fresh base
+   gives at the end of the run, the best any re-factorization policy can reach there. */
 #define AMPS_IMPLEMENTATION
 #include "../amps.h"
 #include "bench_util.h"
+
+/* One cut step: the next path node the scene accepts (cuts that would detach a piece are undone
+   by the scene and skipped, counted in *nsk), then a solve. Returns the step time, -1 on error. */
+static double cut_step(amps_ctx *ctx, amps_scene *S, bu_cut *cp, int *pass, int *nsk, int st) {
+    amps_status s;
+    double t0 = amps_now();
+    for (;;) {
+        double p[3], nrm[3] = {0, 0, 0};
+        amps_int vc;
+        int node;
+        if (cp->ip >= cp->npath) { cp->ip = 0; (*pass)++; }
+        node = cp->path[cp->ip++];
+        nrm[*pass % 3] = 1;
+        memcpy(p, amps_scene_mesh(S)->xyz + 3 * node, sizeof(p));
+        s = amps_scene_cut(ctx, S, node, p, nrm, &vc);
+        if (s == AMPS_OK) break;
+        if (s != AMPS_WARN_NOOP && s != AMPS_ERR_SINGULAR_UPDATE) { fprintf(stderr, "step %d: cut: %s\n", st, ctx->msg); return -1; }
+        (*nsk)++;
+    }
+    s = amps_scene_solve(ctx, S);
+    if (s != AMPS_OK) { fprintf(stderr, "step %d: solve: %s\n", st, ctx->msg); return -1; }
+    return amps_now() - t0;
+}
 
 int main(int argc, char **argv) {
     amps_ctx ctx;
@@ -22,12 +47,13 @@ int main(int argc, char **argv) {
     amps_scene_opts so;
     bu_cut cp;
     unsigned char *fixed;
-    double *force, *t, first[11], last[100], worst_res = 0;
+    double *force, *t, first[11], last[100], worst_res = 0, fresh = 0;
     double tmax, t_run = 0;
     int steps, on, st, pass = 0, nsk = 0;
     char name[256];
     FILE *f;
     bu_model B;
+    amps_update_stats uend;
     if (argc < 5) { fprintf(stderr, "usage: refactor <mesh> <steps> <on|off> <out.csv> [tmax]\n"); return 2; }
     steps = atoi(argv[2]); on = strcmp(argv[3], "off") != 0;
     tmax = argc > 5 ? atof(argv[5]) : 0;
@@ -44,28 +70,12 @@ int main(int argc, char **argv) {
     f = bu_csv(argv[4], "mesh,policy,step,t_step,nsys,nrefactor,running,t_swap,t_refactor,relres,lu_cols");
     for (st = 0; st < steps; st++) {
         amps_update_stats us;
-        amps_status s;
-        int node, nref0;
-        double t0, res = -1;
+        int nref0;
+        double res = -1;
         amps_update_get_stats(amps_scene_engine(S), &us);
         nref0 = (int)us.nrefactor;
-        t0 = amps_now();
-        for (;;) {
-            double p[3], nrm[3] = {0, 0, 0};
-            amps_int vc;
-            if (cp.ip >= cp.npath) { cp.ip = 0; pass++; }
-            node = cp.path[cp.ip++];
-            nrm[pass % 3] = 1;
-            memcpy(p, amps_scene_mesh(S)->xyz + 3 * node, sizeof(p));
-            s = amps_scene_cut(&ctx, S, node, p, nrm, &vc);
-            if (s == AMPS_OK) break;
-            if (s != AMPS_WARN_NOOP && s != AMPS_ERR_SINGULAR_UPDATE) { fprintf(stderr, "step %d: cut: %s\n", st, ctx.msg); return 1; }
-            nsk++;
-        }
-        s = amps_scene_solve(&ctx, S);
-        t[st] = amps_now() - t0;
+        if ((t[st] = cut_step(&ctx, S, &cp, &pass, &nsk, st)) < 0) return 1;
         t_run += t[st];
-        if (s != AMPS_OK) { fprintf(stderr, "step %d: solve: %s\n", st, ctx.msg); return 1; }
         if (st % 50 == 49 && amps_scene_residual(&ctx, S, &res) == AMPS_OK && res > worst_res) worst_res = res;
         amps_update_get_stats(amps_scene_engine(S), &us);
         if (f) fprintf(f, "%s,%s,%d,%.6e,%d,%d,%d,%.6e,%.6e,%.3e,%d\n", name, on ? "on" : "off", st + 1, t[st], (int)us.nsys,
@@ -77,20 +87,37 @@ int main(int argc, char **argv) {
             break;
         }
     }
+    amps_update_get_stats(amps_scene_engine(S), &uend);
+    if (on) {   /* a fresh base at the end: synchronous re-factorization, then 15 steps */
+        double tf[15];
+        int k;
+        if (amps_update_refactor(&ctx, amps_scene_engine(S)) != AMPS_OK || amps_scene_solve(&ctx, S) != AMPS_OK) {
+            fprintf(stderr, "re-factorization at the end: %s\n", ctx.msg);
+            return 1;
+        }
+        for (k = 0; k < 15; k++) {
+            amps_update_stats us;
+            if ((tf[k] = cut_step(&ctx, S, &cp, &pass, &nsk, steps + k)) < 0) return 1;
+            amps_update_get_stats(amps_scene_engine(S), &us);
+            if (f) fprintf(f, "%s,fresh,%d,%.6e,%d,%d,%d,0,0,-1,%d\n", name, steps + k + 1, tf[k], (int)us.nsys, (int)us.nrefactor,
+                           us.refactor_running, (int)us.lu_cols);
+        }
+        fresh = bu_median(tf + 4, 11);
+    }
     if (f) fclose(f);
     {   /* rate at the end: median and mean of the last min(100, steps/5) steps against the
            median of steps 5-15 */
-        amps_update_stats us;
         int k, nf = 0, nl = steps / 5 < 100 ? steps / 5 : 100;
         double mean = 0, m0, m1;
         for (k = 4; k < 15 && k < steps; k++) first[nf++] = t[k];
         for (k = 0; k < nl; k++) { last[k] = t[steps - 1 - k]; mean += last[k] / nl; }
         m0 = bu_median(first, nf); m1 = bu_median(last, nl);
-        amps_update_get_stats(amps_scene_engine(S), &us);
         printf("%-10s re-factorization %-3s  steps %d (skipped cuts %d)  step 5-15 median %.2f ms; last %d steps: median %.2f ms (x%.2f), "
                "mean %.2f ms (x%.2f)  |S u C| at the end %d  re-factorizations %d (failed %d)  worst residual %.1e\n",
                name, on ? "on" : "off", steps, nsk, 1e3 * m0, nl, 1e3 * m1, m1 / m0, 1e3 * mean, mean / m0,
-               (int)us.nsys, (int)us.nrefactor, (int)us.refactor_failed, worst_res);
+               (int)uend.nsys, (int)uend.nrefactor, (int)uend.refactor_failed, worst_res);
+        if (on) printf("%-10s fresh base after step %d: median %.2f ms (x%.2f of steps 5-15); the last %d steps are x%.2f of it\n",
+                       name, steps, 1e3 * fresh, fresh / m0, nl, m1 / fresh);
     }
     amps_scene_free(&ctx, S);
     free(fixed); free(force); free(t); free(cp.path);
