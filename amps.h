@@ -4797,39 +4797,72 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
     }
 }
 
-/* Position of v in ascending a[0..len-1], or -1. */
-static amps_int amps__bsearch(const amps_int *a, amps_int len, amps_int v) {
-    amps_int lo = 0, hi = len - 1;
-    while (lo <= hi) {
-        amps_int mid = lo + (hi - lo) / 2;
-        if (a[mid] == v) return mid;
-        if (a[mid] < v) lo = mid + 1; else hi = mid - 1;
+/* acc(0:W) = sum over the common suffix of the root path (wi, wv, len) and the union mapped by
+   lmap of wv[t] X(lmap[wi[t]], 0:W): the union is closed under parents, so the suffix ends at the
+   first node (from the root down) outside it. */
+#define AMPS__GSCAN(W)                                                                         \
+    static void amps__gscan##W(const amps_int *wi, const double *wv, amps_int len,             \
+                               const amps_int *lmap, const double *X, double *acc) {          \
+        amps_int t, j;                                                                         \
+        for (j = 0; j < W; j++) acc[j] = 0;                                                    \
+        for (t = len - 1; t >= 0 && lmap[wi[t]] >= 0; t--) {                                   \
+            const double *xr = X + (size_t)lmap[wi[t]] * W;                                    \
+            double v = wv[t];                                                                  \
+            for (j = 0; j < W; j++) acc[j] += v * xr[j];                                       \
+        }                                                                                      \
     }
-    return -1;
-}
+AMPS__GSCAN(4)
+AMPS__GSCAN(8)
+AMPS__GSCAN(16)
+#undef AMPS__GSCAN
 
-/* W_a^T W_b: the two root paths share exactly a common suffix (from their lowest common
-   ancestor on); membership in path b is monotone along path a, so bisection finds its start. */
-static double amps__wdot(const amps_int *ia, const double *va, amps_int la, const amps_int *ib, const double *vb, amps_int lb) {
-    amps_int lo = 0, hi = la - 1, m, t;
-    double s = 0;
-    if (la == 0 || lb == 0 || ia[la - 1] != ib[lb - 1]) return 0.0;   /* different trees */
-    while (lo < hi) {                     /* first position of path a that lies on path b */
-        amps_int mid = lo + (hi - lo) / 2;
-        if (amps__bsearch(ib, lb, ia[mid]) >= 0) hi = mid; else lo = mid + 1;
+/* Step 2: G(a, b) = W_a^T W_b for the new positions a >= u_old and every b <= a (both triangles).
+   The new columns go by chunks of at most AMPS__VB: a chunk is scattered row-major over the union
+   of its root paths, and each W_b is then read once for the whole chunk (its suffix in the
+   union), the products W_b^T X in one pass; threads share the b. */
+static void amps__gcols(amps_update *U, amps_int u_old) {
+    amps_int u = U->u, n = U->n, a0;
+    size_t ld = (size_t)U->capu;
+    double *X = U->xb;                                   /* thread 0's Step 1 workspace */
+    amps_int *lmap = U->lmap, *clo = U->clo;
+    for (a0 = u_old; a0 < u; a0 += AMPS__VB) {
+        amps_int m = u - a0 < AMPS__VB ? u - a0 : AMPS__VB, mw = m <= 4 ? 4 : (m <= 8 ? 8 : AMPS__VB), nc = 0, j, t, b;
+        for (j = 0; j < m; j++) {
+            const amps_int *wi = U->vidx + U->voff[a0 + j];
+            if (U->uidx[a0 + j] >= n) continue;
+            for (t = 0; t < U->vlen[a0 + j]; t++) if (lmap[wi[t]] < 0) { lmap[wi[t]] = nc; clo[nc++] = wi[t]; }
+        }
+        memset(X, 0, sizeof(double) * (size_t)nc * (size_t)mw);
+        for (j = 0; j < m; j++) {
+            const amps_int *wi = U->vidx + U->voff[a0 + j];
+            const double *wv = U->vval + U->voff[a0 + j];
+            if (U->uidx[a0 + j] >= n) continue;
+            for (t = 0; t < U->vlen[a0 + j]; t++) X[(size_t)lmap[wi[t]] * (size_t)mw + (size_t)j] = wv[t];
+        }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 16) num_threads(U->nthr) if ((double)u * nc > 1e5)
+#endif
+        for (b = 0; b < u; b++) {
+            double acc[AMPS__VB];
+            amps_int jj;
+            if (U->uidx[b] < n) {
+                const amps_int *wi = U->vidx + U->voff[b];
+                const double *wv = U->vval + U->voff[b];
+                if (mw == 4) amps__gscan4(wi, wv, U->vlen[b], lmap, X, acc);
+                else if (mw == 8) amps__gscan8(wi, wv, U->vlen[b], lmap, X, acc);
+                else amps__gscan16(wi, wv, U->vlen[b], lmap, X, acc);
+            }
+            for (jj = 0; jj < m; jj++) {
+                amps_int a = a0 + jj;
+                double gv;
+                if (b >= u_old && b > a) continue;       /* the chunk of b writes it */
+                gv = (U->uidx[a] >= n || U->uidx[b] >= n) ? (a == b ? 1.0 / U->sigma : 0.0) : acc[jj];
+                U->G[(size_t)b * ld + (size_t)a] = gv;
+                U->G[(size_t)a * ld + (size_t)b] = gv;
+            }
+        }
+        for (t = 0; t < nc; t++) lmap[clo[t]] = -1;
     }
-    m = la - lo;
-    va += lo; vb += lb - m;
-    for (t = 0; t < m; t++) s += va[t] * vb[t];
-    return s;
-}
-
-/* G entry of U positions a, b (K-bar^{-1} is 1/sigma on appended DOFs). */
-static double amps__gentry(const amps_update *U, amps_int a, amps_int b) {
-    amps_int i = U->uidx[a], j = U->uidx[b];
-    if (i >= U->n || j >= U->n) return (a == b) ? 1.0 / U->sigma : 0.0;
-    return amps__wdot(U->vidx + U->voff[a], U->vval + U->voff[a], U->vlen[a],
-                      U->vidx + U->voff[b], U->vval + U->voff[b], U->vlen[b]);
 }
 
 /* ---- Step 3: columns of A = I~ + G Delta~ ---- */
@@ -5246,21 +5279,7 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
     }
     t1 = amps_now(); U->st.t_step[1] = t1 - t0; t0 = t1;
     /* Step 2: trapezoidal augmentation of G (Eq. 3.25-3.27), both triangles stored */
-    if (U->u > u_old) {
-        amps_int b, u = U->u;
-        size_t ld = (size_t)U->capu;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 8) num_threads(U->nthr) if ((double)u * (u - u_old) > 4096)
-#endif
-        for (b = 0; b < u; b++) {
-            amps_int aa;
-            for (aa = (b > u_old ? b : u_old); aa < u; aa++) {
-                double gv = amps__gentry(U, aa, b);
-                U->G[(size_t)b * ld + (size_t)aa] = gv;
-                U->G[(size_t)aa * ld + (size_t)b] = gv;
-            }
-        }
-    }
+    amps__gcols(U, u_old);
     t1 = amps_now(); U->st.t_step[2] = t1 - t0; t0 = t1;
     /* Delta: relocate every touched row to the end of the pool with room for its additions
        (old locations stay intact, so a rollback only restores headers) */
