@@ -4798,14 +4798,15 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
 }
 
 /* acc(0:W) = sum over the common suffix of the root path (wi, wv, len) and the union mapped by
-   lmap of wv[t] X(lmap[wi[t]], 0:W): the union is closed under parents, so the suffix ends at the
-   first node (from the root down) outside it. */
+   lmap of wv[t] X(lmap[wi[t]], 0:W): the union is closed under parents, so the suffix starts
+   below the last node (from the root down) inside it. Summed upwards, as the path is stored. */
 #define AMPS__GSCAN(W)                                                                         \
     static void amps__gscan##W(const amps_int *wi, const double *wv, amps_int len,             \
                                const amps_int *lmap, const double *X, double *acc) {          \
         amps_int t, j;                                                                         \
         for (j = 0; j < W; j++) acc[j] = 0;                                                    \
-        for (t = len - 1; t >= 0 && lmap[wi[t]] >= 0; t--) {                                   \
+        for (t = len; t > 0 && lmap[wi[t - 1]] >= 0; t--) {}                                   \
+        for (; t < len; t++) {                                                                 \
             const double *xr = X + (size_t)lmap[wi[t]] * W;                                    \
             double v = wv[t];                                                                  \
             for (j = 0; j < W; j++) acc[j] += v * xr[j];                                       \
