@@ -4431,7 +4431,7 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     if (!U) return NULL;
     U->F = F; U->form = o.formulation; U->tol = o.singular_tol; U->grow = o.grow;
     U->refine = o.refine; U->eq320 = o.eq320; U->guard_tol = o.guard_tol;
-    if (!(o.refactor_ratio > 0)) o.refactor_ratio = 1.0;
+    if (!(o.refactor_ratio > 0)) o.refactor_ratio = 0.25;
     if (o.refactor_order.method == AMPS_ORDER_GIVEN) o.refactor_order.method = AMPS_ORDER_ND;  /* a given perm has the old order */
     o.refactor_order.perm = NULL; o.refactor_order.coords = NULL;
     U->opts = o;
