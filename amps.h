@@ -4145,9 +4145,7 @@ done:
 #define AMPS__UMOD 1u  /* index in S */
 #define AMPS__UCON 2u  /* index in C */
 #define AMPS__NB 32    /* dense panel width */
-#ifndef AMPS__TB
 #define AMPS__TB 64    /* diagonal block of the panel's triangular solve */
-#endif
 #define AMPS__VB 16    /* right-hand sides per chunk of Step 1 */
 
 typedef struct amps__pdelta { amps_int r, c; double v; } amps__pdelta;
