@@ -338,6 +338,9 @@ typedef struct amps_update_stats {
     amps_int nsys;          /* |S u C|: order of the dense system */
     amps_int lu_cols;       /* dense columns refactored by the last commit */
     amps_int lu_full;       /* full dense refactorizations so far */
+    amps_int lu_drops;      /* commits that moved their changed dense columns to the end without
+                               refactoring the unchanged columns after them (amps__lu_drop) */
+    amps_int lu_drop_fails; /* ... of which fell back to refactoring them (multiplier or pivot test) */
     double vpool_entries;   /* memoized entries of L^{-1} H */
     amps_int ncommit, nsolve;
     amps_int guard_steps;   /* refinement steps the accuracy guard took in the last solve */
@@ -4139,13 +4142,19 @@ done:
    Every change of K^ or of C changes columns of A = I~ + G Delta~ (column j depends on
    Delta[:, j], on the kind of j and of its Delta-neighbours) or appends rows and columns (G only
    grows). The dense LU with partial pivoting is left-looking in a column order that keeps
-   recently changed columns last: a commit refactors only the columns from the first changed
-   position on, O(|U|^2 r) for r changed columns. */
+   recently changed columns last. A commit removes its changed columns from the factor (the
+   unchanged ones after them keep theirs: the upper Hessenberg U left by the removal is
+   re-triangularized by adjacent-row transforms, amps__lu_drop) and appends them with the new
+   ones: O(|U|^2 (r + k)) for r changed and k new columns. When a transform would need a
+   multiplier above AMPS__DMULT the commit refactors from that column on, as without removal. */
 
 #define AMPS__UMOD 1u  /* index in S */
 #define AMPS__UCON 2u  /* index in C */
 #define AMPS__NB 32    /* dense panel width */
 #define AMPS__TB 64    /* diagonal block of the panel's triangular solve */
+#define AMPS__DMAX 48      /* most changed dense columns amps__lu_drop moves in one commit */
+#define AMPS__DMULT 8.0    /* largest multiplier amps__lu_drop accepts */
+#define AMPS__DLMAX 64.0   /* largest entry of L it may create */
 #define AMPS__VB 16    /* right-hand sides per chunk of Step 1 */
 
 typedef struct amps__pdelta { amps_int r, c; double v; } amps__pdelta;
@@ -4183,6 +4192,7 @@ struct amps_update {
     amps_int *rowperm, *colorder, *colpos, *cstamp; amps_int stamp;
     amps_int *rst, *rcnt; amps_int rstamp;  /* rows touched by a commit, their added entries */
     double *pbuf;                          /* max(nbuf, 4) * capu column buffers */
+    double *hbuf;                          /* 3 AMPS__DMAX capu: row transforms of amps__lu_drop */
     double *rv;                            /* 2 * capN residual vectors */
     amps__djour *dj; amps_int ndj;         /* Delta row headers before this commit */
     amps__kjour *kj; amps_int nkj;         /* kinds and values before this commit (cappc) */
@@ -4260,6 +4270,7 @@ static amps_status amps__grow_u(amps_ctx *ctx, amps_update *U, amps_int cap) {
         amps__realloc(ctx, (void **)&U->rst, c, sizeof(amps_int)) ||
         amps__realloc(ctx, (void **)&U->rcnt, c, sizeof(amps_int)) ||
         amps__realloc(ctx, (void **)&U->pbuf, c * (size_t)(U->nbuf > 4 ? U->nbuf : 4), sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->hbuf, c * (size_t)(3 * AMPS__DMAX), sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->dj, c, sizeof(amps__djour)) ||
         amps__realloc(ctx, (void **)&U->react, c, sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->z, c, sizeof(double)) ||
@@ -4361,7 +4372,7 @@ AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     amps__free(ctx, U->dcol); amps__free(ctx, U->dval);
     amps__free(ctx, U->G); amps__free(ctx, U->LU); amps__free(ctx, U->cnorm);
     amps__free(ctx, U->rowperm); amps__free(ctx, U->colorder); amps__free(ctx, U->colpos); amps__free(ctx, U->cstamp);
-    amps__free(ctx, U->rst); amps__free(ctx, U->rcnt); amps__free(ctx, U->pbuf); amps__free(ctx, U->rv);
+    amps__free(ctx, U->rst); amps__free(ctx, U->rcnt); amps__free(ctx, U->pbuf); amps__free(ctx, U->hbuf); amps__free(ctx, U->rv);
     amps__free(ctx, U->gbuf); amps__free(ctx, U->ctr);
     amps__free(ctx, U->dj); amps__free(ctx, U->kj);
     amps__free(ctx, U->x); amps__free(ctx, U->react); amps__free(ctx, U->z); amps__free(ctx, U->rhs);
@@ -5098,6 +5109,105 @@ static amps_status amps__lu_extend(amps_update *U, amps_int nf, amps_int u_old, 
     return AMPS_OK;
 }
 
+/* ---- Step 5 with column removal: the unchanged columns after a changed one keep their factor ---- */
+
+/* x(r-1:r) <- T x(r-1:r) for a row transform h = {m, l, swap} of amps__lu_drop: without swap
+   x_r -= m x_{r-1}; with swap the rows exchange, x_{r-1} += l x_r, then x_r -= m x_{r-1}. */
+static void amps__pair(double *x, amps_int r, const double *h) {
+    if (h[2] != 0.0) { double t = x[r - 1]; x[r - 1] = x[r] + h[1] * t; x[r] = t; }
+    x[r] -= h[0] * x[r - 1];
+}
+
+/* L <- L T^{-1} for the transform h of rows r-1, r (rows of L below q0 live in rows 0..u_old-1).
+   Without swap: E = I - m e_r e_{r-1}^T, column r-1 += m (e_r + L(r+1:, r)). With swap the rows
+   (P and L, columns < q0 deferred through perm) and the columns r-1, r of L exchange, which puts
+   l = L(r, r-1) above the diagonal; R = I + l e_{r-1} e_r^T removes it (column r -= l column r-1,
+   U row r-1 += l row r: the h[1] of amps__pair); then E as before. L stays unit lower. */
+static double amps__lpair(amps_update *U, amps_int q0, amps_int u_old, amps_int r, const double *h, amps_int *perm) {
+    size_t ld = (size_t)U->capu;
+    double *L0 = U->LU + (size_t)(r - 1) * ld, *L1 = U->LU + (size_t)r * ld, m = h[0], l = h[1], g = 0.0;
+    amps_int i, c;
+    if (h[2] != 0.0) {
+        amps_int t = U->rowperm[r - 1];
+        U->rowperm[r - 1] = U->rowperm[r]; U->rowperm[r] = t;
+        t = perm[r - 1 - q0]; perm[r - 1 - q0] = perm[r - q0]; perm[r - q0] = t;
+        for (c = q0; c < r - 1; c++) {
+            double *lc = U->LU + (size_t)c * ld, tv = lc[r - 1];
+            lc[r - 1] = lc[r]; lc[r] = tv;
+        }
+        for (i = r + 1; i < u_old; i++) {
+            double a0 = L0[i], a1 = L1[i];
+            L0[i] = a1; L1[i] = a0 - l * a1;
+            if (fabs(L1[i]) > g) g = fabs(L1[i]);
+        }
+        L0[r] = 0.0;                           /* (Pi L Pi)(r, r-1) = L(r-1, r) = 0 */
+    }
+    L0[r] += m;
+    g = fabs(L0[r]) > g ? fabs(L0[r]) : g;
+    if (m != 0.0 || h[2] != 0.0)
+        for (i = r + 1; i < u_old; i++) {
+            L0[i] += m * L1[i];
+            if (fabs(L0[i]) > g) g = fabs(L0[i]);
+        }
+    return g;
+}
+
+/* Column removal. On entry positions 0..u_old-1 of LU hold P A_old Q_old = L U, and the new
+   order colorder keeps positions 0..q0-1 and puts at q0..q0+nk-1 the unchanged columns of old
+   positions q0..u_old-1 in their old order (old position colpos[j] = p + d_p, d_p <= AMPS__DMAX).
+   Without the changed columns U' = U(:, kept) is upper Hessenberg below q0, with d_p
+   subdiagonals in column p. They are eliminated bottom-up by transforms of adjacent rows
+   (Gaussian elimination with pairwise pivoting: the row exchange is taken when it gives the
+   smaller multiplier), U'' = T U', L'' = L T^{-1}, P'' = Pi P, and then P'' A(:, kept) =
+   L''(:, 0:q0+nk) U''(0:q0+nk, :): positions 0..q0+nk-1 are factored for rows 0..u_old-1, in
+   O(d (nk + u)) flops per column instead of O(u^2). Stops at the first column whose multiplier
+   exceeds AMPS__DMULT, that would make an entry of L larger than AMPS__DLMAX or whose pivot
+   fails the test of amps__lu_extend. Returns the number of positions factored (q0..q0+nk);
+   the rest must be refactored. */
+static amps_int amps__lu_drop(amps_update *U, amps_int q0, amps_int nk, amps_int u_old) {
+    size_t ld = (size_t)U->capu;
+    double *LU = U->LU, *x = U->pbuf;
+    amps_int *perm = U->iwork, p, k, r, i, c, nr = u_old - q0;
+    int fail = 0;
+    for (i = 0; i < nr; i++) perm[i] = i;
+    for (p = q0; p < q0 + nk && !fail; p++) {
+        amps_int j = U->colorder[p], op = U->colpos[j], d = op - p;
+        double *dst = LU + (size_t)p * ld, *h = U->hbuf + (size_t)(p - q0) * 3 * AMPS__DMAX;
+        const double *src = LU + (size_t)op * ld;
+        if (d > AMPS__DMAX) { fail = 1; break; }
+        /* column p of U': rows q0..op of old column op, then the transforms of columns q0..p-1 */
+        for (r = q0; r <= op; r++) x[r] = src[r];
+        for (k = q0; k < p; k++) {
+            amps_int dk = U->colpos[U->colorder[k]] - k;
+            const double *hk = U->hbuf + (size_t)(k - q0) * 3 * AMPS__DMAX;
+            for (r = k + dk; r > k; r--, hk += 3) amps__pair(x, r, hk);
+        }
+        /* its own subdiagonals, bottom-up: the pair (r-1, r) zeroes x_r */
+        for (r = op; r > p; r--, h += 3) {
+            double a = x[r - 1], b = x[r], l = LU[(size_t)(r - 1) * ld + (size_t)r];
+            double ma = a != 0.0 ? b / a : (b == 0.0 ? 0.0 : HUGE_VAL), pb = b + l * a, mb = pb != 0.0 ? a / pb : HUGE_VAL;
+            if (fabs(ma) <= 1.0 || fabs(ma) <= fabs(mb)) { h[0] = ma; h[1] = 0.0; h[2] = 0.0; }
+            else { h[0] = mb; h[1] = l; h[2] = 1.0; }
+            if (!(fabs(h[0]) <= AMPS__DMULT)) { fail = 1; break; }
+            amps__pair(x, r, h);
+            x[r] = 0.0;
+            if (!(amps__lpair(U, q0, u_old, r, h, perm) <= AMPS__DLMAX)) { fail = 1; break; }
+        }
+        if (fail) break;
+        if (!(fabs(x[p]) > U->tol * ((U->ukind[j] & AMPS__UCON) || U->cnorm[j] > 1.0 ? U->cnorm[j] : 1.0))) { fail = 1; break; }
+        /* U''(0:p, p): rows above q0 move with the column (old column p was read before) */
+        if (op != p) memcpy(dst, src, sizeof(double) * (size_t)q0);
+        for (r = q0; r <= p; r++) dst[r] = x[r];
+    }
+    /* the deferred row exchanges of L(q0:u_old, 0:q0) */
+    for (c = 0; c < q0; c++) {
+        double *lc = LU + (size_t)c * ld + (size_t)q0;
+        for (i = 0; i < nr; i++) x[i] = lc[perm[i]];
+        memcpy(lc, x, sizeof(double) * (size_t)nr);
+    }
+    return p;
+}
+
 /* z = A^{-1} b (U positions); t is scratch of length u. */
 static void amps__lu_solve(const amps_update *U, const double *b, double *z, double *t) {
     amps_int u = U->u, q, r;
@@ -5357,8 +5467,18 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
         for (a = u_old; a < U->u; a++) { U->colorder[a] = a; U->rowperm[a] = a; }
     }
     t1 = amps_now(); U->st.t_step[3] = t1 - t0; t0 = t1;
-    U->st.lu_cols = U->u - q0;
-    s = amps__lu_extend(U, q0, u_old, &bad);
+    {   /* the unchanged columns after q0 keep their factor when the changed ones are few */
+        amps_int nk = 0, q, nf = q0;
+        for (q = q0; q < u_old; q++) if (U->cstamp[U->colorder[q]] != U->stamp) nk++;
+        if (nk >= 8 && u_old - q0 - nk <= AMPS__DMAX) {
+            U->st.lu_drops++;
+            nf = amps__lu_drop(U, q0, nk, u_old);
+            if (nf < q0 + nk) U->st.lu_drop_fails++;
+
+        }
+        U->st.lu_cols = U->u - nf;
+        s = amps__lu_extend(U, nf, u_old, &bad);
+    }
     if (s == AMPS_ERR_CAPACITY) s = amps__lu_full(U, &bad);     /* multipliers grew: refactor */
     t1 = amps_now(); U->st.t_step[5] = t1 - t0;
     if (s != AMPS_OK) {

@@ -345,7 +345,9 @@ variant):
   synchronous re-factorizations while its tolerance is out of reach (the call then returns
   `AMPS_WARN_INACCURATE` with the solution).
 - **Pivoting**: the dense system is factored with partial (row) pivoting, left-looking, with the
-  changed columns last so a commit re-eliminates only them; a column whose pivot falls below
+  changed columns last; a commit removes them from the factor (the columns after them keep their
+  factor, re-triangularized by adjacent-row transforms with pairwise pivoting) and appends them
+  again, so it re-eliminates only them and the new ones; a column whose pivot falls below
   `singular_tol` (1e-15) times its norm refuses the commit and rolls it back. The smallest pivot
   ratio of a committed system is the column above: legitimate ill-conditioned systems go far
   below the ratio of a singular one (beam 5x5x4096 in `make stress`: 1.6e-16; a piece hanging on a hinge
@@ -470,7 +472,8 @@ for p in refactor_*.png; do [ -f "$p" ] && echo "- ${p%.png}: step time and |S u
 echo
 cat <<'EOF'
 Reading: without re-factorization the step time grows without bound (quadratically in
-|S u C|: the dense LU extension re-eliminates the changed columns against all earlier ones).
+|S u C|: the dense LU extension eliminates the changed and new columns against all earlier
+ones, and Steps 1-2 and the refinement's partial solve grow with the closure of S u C).
 With it, |S u C| stays bounded, at the number of changes made while one background job runs
 (m' of paper 001) plus those made before the policy starts the next one: back-to-back cut steps
 add 10-12 augmented columns each while the job (ordering, analysis and factorization on one

@@ -653,6 +653,35 @@ static void test_refactor(void) {
     }
 }
 
+/* Column removal (amps__lu_drop): without re-factorizations the changed dense columns of long
+   cut and random sequences move to the end of the dense factor by row transforms, some commits
+   fall back to refactoring; every step agrees with CHOLMOD. */
+static void test_lu_drop(void) {
+    int ph;
+    for (ph = 0; ph < 2; ph++) {
+        model m; amps_update_opts o; amps_update_stats st;
+        const char *what = ph ? "column removal: random spd" : "column removal: brick R=3 cuts";
+        amps_update_opts_default(&o); o.grow = 1; o.refactor = AMPS_REFACTOR_OFF;
+        if (ph == 0) {
+            fe_mesh mesh = fe_brick(3);
+            fe_model(&m, &mesh, 2, &o);
+            cut_sequence(&m, &mesh, 80, 6, 1e-9);
+            fe_free(&mesh);
+        } else {
+            int nz, *ti, *tj; double *tx;
+            random_spd(120, 77, &nz, &ti, &tj, &tx);
+            CHECK(model_init(&m, 120, nz, ti, tj, tx, &o) == 0, "init: %s", m.ctx.msg);
+            random_sequence(&m, 150, 4242, 1e-10, what);
+            free(ti); free(tj); free(tx);
+        }
+        amps_update_get_stats(m.U, &st);
+        printf("  %s: %d commits, %d with column removal, %d of them fell back\n", what, (int)st.ncommit, (int)st.lu_drops, (int)st.lu_drop_fails);
+        CHECK(st.lu_drops > 10 && st.lu_drop_fails < st.lu_drops, "%s: column removal used %d times, %d fell back", what, (int)st.lu_drops, (int)st.lu_drop_fails);
+        report(what, &m);
+        model_free(&m);
+    }
+}
+
 /* 1 and 2 threads give the same results. */
 static void test_threads(void) {
 #ifdef _OPENMP
@@ -680,6 +709,7 @@ int main(void) {
     test_fe_sequences();
     test_guard();
     test_refactor();
+    test_lu_drop();
     test_threads();
     return amps_t_end("test_update");
 }
