@@ -4910,6 +4910,13 @@ static double amps__aentry(const amps_update *U, amps_int i, amps_int j) {
 
 /* ---- Step 5: left-looking dense LU with partial pivoting, P A(:, colorder) = L U ---- */
 
+/* Pivot test of dense column j: |pivot| > tol * reference, the reference being the column's norm,
+   for unconstrained columns at least the identity part (so that a column cancelled to rounding
+   level, a row with no stiffness, is caught). */
+static int amps__pivot_ok(const amps_update *U, amps_int j, double apiv) {
+    return apiv > U->tol * ((U->ukind[j] & AMPS__UCON) || U->cnorm[j] > 1.0 ? U->cnorm[j] : 1.0) && apiv != 0.0;
+}
+
 /* C(r0:r1, 0:w) -= A(r0:r1, k0:k1) B(k0:k1, 0:w), column major, by tiles of 4 columns and
    2 vectors of rows held in registers (GNU vector extensions where available, else scalars):
    A and B are read once per tile, C once per call. */
@@ -5082,9 +5089,7 @@ static amps_status amps__lu_extend(amps_update *U, amps_int nf, amps_int u_old, 
             amps_int qq = qp + c, pr = qq, j = U->colorder[qq], cc;
             double *col = LU + (size_t)qq * ld, pmax = fabs(col[qq]), piv;
             for (r = qq + 1; r < u; r++) if (fabs(col[r]) > pmax) { pmax = fabs(col[r]); pr = r; }
-            /* reference: the column's norm; for unconstrained columns at least the identity part,
-               so that a column cancelled to rounding level (a row with no stiffness) is caught */
-            if (!(pmax > U->tol * ((U->ukind[j] & AMPS__UCON) || U->cnorm[j] > 1.0 ? U->cnorm[j] : 1.0)) || pmax == 0.0) {
+            if (!amps__pivot_ok(U, j, pmax)) {
                 *bad = j;
                 return AMPS_ERR_SINGULAR_UPDATE;
             }
@@ -5170,11 +5175,11 @@ static amps_int amps__lu_drop(amps_update *U, amps_int q0, amps_int nk, amps_int
     amps_int *perm = U->iwork, p, k, r, i, c, nr = u_old - q0;
     int fail = 0;
     for (i = 0; i < nr; i++) perm[i] = i;
-    for (p = q0; p < q0 + nk && !fail; p++) {
+    for (p = q0; p < q0 + nk; p++) {
         amps_int j = U->colorder[p], op = U->colpos[j], d = op - p;
         double *dst = LU + (size_t)p * ld, *h = U->hbuf + (size_t)(p - q0) * 3 * AMPS__DMAX;
         const double *src = LU + (size_t)op * ld;
-        if (d > AMPS__DMAX) { fail = 1; break; }
+        if (d > AMPS__DMAX) break;
         /* column p of U': rows q0..op of old column op, then the transforms of columns q0..p-1 */
         for (r = q0; r <= op; r++) x[r] = src[r];
         for (k = q0; k < p; k++) {
@@ -5194,7 +5199,7 @@ static amps_int amps__lu_drop(amps_update *U, amps_int q0, amps_int nk, amps_int
             if (!(amps__lpair(U, q0, u_old, r, h, perm) <= AMPS__DLMAX)) { fail = 1; break; }
         }
         if (fail) break;
-        if (!(fabs(x[p]) > U->tol * ((U->ukind[j] & AMPS__UCON) || U->cnorm[j] > 1.0 ? U->cnorm[j] : 1.0))) { fail = 1; break; }
+        if (!amps__pivot_ok(U, j, fabs(x[p]))) break;
         /* U''(0:p, p): rows above q0 move with the column (old column p was read before) */
         if (op != p) memcpy(dst, src, sizeof(double) * (size_t)q0);
         for (r = q0; r <= p; r++) dst[r] = x[r];
