@@ -340,7 +340,8 @@ typedef struct amps_update_stats {
     amps_int lu_full;       /* full dense refactorizations so far */
     amps_int lu_drops;      /* commits that moved their changed dense columns to the end without
                                refactoring the unchanged columns after them (amps__lu_drop) */
-    amps_int lu_drop_fails; /* ... of which fell back to refactoring them (multiplier or pivot test) */
+    amps_int lu_drop_fails; /* ... of which fell back to refactoring them (a multiplier, an entry of L
+                               or a pivot out of bounds) */
     double vpool_entries;   /* memoized entries of L^{-1} H */
     amps_int ncommit, nsolve;
     amps_int guard_steps;   /* refinement steps the accuracy guard took in the last solve */
@@ -4145,8 +4146,8 @@ done:
    recently changed columns last. A commit removes its changed columns from the factor (the
    unchanged ones after them keep theirs: the upper Hessenberg U left by the removal is
    re-triangularized by adjacent-row transforms, amps__lu_drop) and appends them with the new
-   ones: O(|U|^2 (r + k)) for r changed and k new columns. When a transform would need a
-   multiplier above AMPS__DMULT the commit refactors from that column on, as without removal. */
+   ones: O(|U|^2 (r + k)) for r changed and k new columns. Where a transform exceeds its bounds
+   (AMPS__DMULT, AMPS__DLMAX, the pivot test) the commit refactors from that column on. */
 
 #define AMPS__UMOD 1u  /* index in S */
 #define AMPS__UCON 2u  /* index in C */
@@ -5176,10 +5177,9 @@ static amps_int amps__lu_drop(amps_update *U, amps_int q0, amps_int nk, amps_int
     int fail = 0;
     for (i = 0; i < nr; i++) perm[i] = i;
     for (p = q0; p < q0 + nk; p++) {
-        amps_int j = U->colorder[p], op = U->colpos[j], d = op - p;
+        amps_int j = U->colorder[p], op = U->colpos[j];
         double *dst = LU + (size_t)p * ld, *h = U->hbuf + (size_t)(p - q0) * 3 * AMPS__DMAX;
         const double *src = LU + (size_t)op * ld;
-        if (d > AMPS__DMAX) break;
         /* column p of U': rows q0..op of old column op, then the transforms of columns q0..p-1 */
         for (r = q0; r <= op; r++) x[r] = src[r];
         for (k = q0; k < p; k++) {
@@ -5479,7 +5479,6 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
             U->st.lu_drops++;
             nf = amps__lu_drop(U, q0, nk, u_old);
             if (nf < q0 + nk) U->st.lu_drop_fails++;
-
         }
         U->st.lu_cols = U->u - nf;
         s = amps__lu_extend(U, nf, u_old, &bad);

@@ -82,9 +82,11 @@ static inline amps_status bu_fix(amps_ctx *ctx, amps_scene *S, amps_int nnode, c
 
 /* The advancing planar cut of bench/harness: the nodes within half a mesh spacing h of the
    plane x = xc (the centre), not fixed, ordered by descending up-axis coordinate, then the
-   third axis; each cut step cuts the next path node by the plane x = its own x. */
+   third axis; each cut step cuts the next path node by the plane x = its own x. With wrap set,
+   a used-up path starts again with the plane normal along the next axis (pass counts the
+   restarts), so nodes are cut repeatedly. */
 typedef struct bu_cut {
-    int *path, npath, ip;
+    int *path, npath, ip, wrap, pass;
     double xc, tol, h;
 } bu_cut;
 
@@ -108,7 +110,7 @@ static inline int bu_cut_init(bu_cut *c, const amps_mesh *m, const unsigned char
     c->xc = 0.5 * (lo[0] + hi[0]);
     c->h = pow((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]) / nn, 1.0 / 3.0);
     c->tol = 0.5 * c->h;
-    c->npath = 0; c->ip = 0;
+    c->npath = 0; c->ip = 0; c->wrap = 0; c->pass = 0;
     c->path = (int *)malloc(sizeof(int) * ((size_t)nn + 1));
     if (!c->path) return -1;
     for (v = 0; v < nn; v++) if (fabs(m->xyz[3 * v] - c->xc) <= c->tol && !fixed[v]) c->path[c->npath++] = v;
@@ -135,12 +137,14 @@ static inline void bu_cut_forces(amps_ctx *ctx, amps_scene *S, const amps_mesh *
 }
 
 /* One cut step: the plane through the next path node that the cut actually splits. *node gets
-   the node cut; AMPS_WARN_NOOP when the path is exhausted. */
+   the node cut; AMPS_WARN_NOOP when the path is exhausted (with wrap: when it has none). */
 static inline amps_status bu_cut_next(amps_ctx *ctx, amps_scene *S, bu_cut *c, int *node) {
     amps_status s = AMPS_WARN_NOOP;
-    while (s == AMPS_WARN_NOOP && c->ip < c->npath) {
-        double p[3], nrm[3] = {1, 0, 0};
+    while (s == AMPS_WARN_NOOP && (c->ip < c->npath || (c->wrap && c->npath > 0))) {
+        double p[3], nrm[3] = {0, 0, 0};
         amps_int vc;
+        if (c->ip >= c->npath) { c->ip = 0; c->pass++; }
+        nrm[c->pass % 3] = 1;
         *node = c->path[c->ip++];
         memcpy(p, amps_scene_mesh(S)->xyz + 3 * *node, sizeof(p));
         s = amps_scene_cut(ctx, S, *node, p, nrm, &vc);

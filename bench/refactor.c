@@ -18,24 +18,15 @@
 #include "../amps.h"
 #include "bench_util.h"
 
-/* One cut step: the next path node the scene accepts (cuts that would detach a piece are undone
-   by the scene and skipped, counted in *nsk), then a solve. Returns the step time, -1 on error. */
-static double cut_step(amps_ctx *ctx, amps_scene *S, bu_cut *cp, int *pass, int *nsk, int st) {
+/* One cut step: the next path node whose cut the scene accepts (bu_cut_next; cuts that would
+   detach a piece are undone by the scene and skipped, counted in *nsk), then a solve. Returns
+   the step time, -1 on error. */
+static double cut_step(amps_ctx *ctx, amps_scene *S, bu_cut *cp, int *nsk, int st) {
     amps_status s;
+    int node;
     double t0 = amps_now();
-    for (;;) {
-        double p[3], nrm[3] = {0, 0, 0};
-        amps_int vc;
-        int node;
-        if (cp->ip >= cp->npath) { cp->ip = 0; (*pass)++; }
-        node = cp->path[cp->ip++];
-        nrm[*pass % 3] = 1;
-        memcpy(p, amps_scene_mesh(S)->xyz + 3 * node, sizeof(p));
-        s = amps_scene_cut(ctx, S, node, p, nrm, &vc);
-        if (s == AMPS_OK) break;
-        if (s != AMPS_WARN_NOOP && s != AMPS_ERR_SINGULAR_UPDATE) { fprintf(stderr, "step %d: cut: %s\n", st, ctx->msg); return -1; }
-        (*nsk)++;
-    }
+    while ((s = bu_cut_next(ctx, S, cp, &node)) == AMPS_ERR_SINGULAR_UPDATE) (*nsk)++;
+    if (s != AMPS_OK) { fprintf(stderr, "step %d: cut at %d: %s\n", st, node, ctx->msg); return -1; }
     s = amps_scene_solve(ctx, S);
     if (s != AMPS_OK) { fprintf(stderr, "step %d: solve: %s\n", st, ctx->msg); return -1; }
     return amps_now() - t0;
@@ -49,7 +40,7 @@ int main(int argc, char **argv) {
     unsigned char *fixed;
     double *force, *t, first[11], last[100], worst_res = 0, fresh = 0;
     double tmax, t_run = 0;
-    int steps, on, st, pass = 0, nsk = 0;
+    int steps, on, st, nsk = 0;
     char name[256];
     FILE *f;
     bu_model B;
@@ -64,7 +55,7 @@ int main(int argc, char **argv) {
     if (getenv("AMPS_REFACTOR_RATIO")) so.update.refactor_ratio = atof(getenv("AMPS_REFACTOR_RATIO"));
     if (getenv("AMPS_REFACTOR_ORDER")) so.update.refactor_order.method = !strcmp(getenv("AMPS_REFACTOR_ORDER"), "nd") ? AMPS_ORDER_ND : AMPS_ORDER_AMD;
     if (bu_model_init(&ctx, argv[1], &so, &B)) return 1;
-    S = B.S; fixed = B.fixed; force = B.force; cp = B.cp;
+    S = B.S; fixed = B.fixed; force = B.force; cp = B.cp; cp.wrap = 1;
     t = (double *)malloc(sizeof(double) * (size_t)steps);
     if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "first solve: %s\n", ctx.msg); return 1; }
     f = bu_csv(argv[4], "mesh,policy,step,t_step,nsys,nrefactor,running,t_swap,t_refactor,relres,lu_cols");
@@ -74,7 +65,7 @@ int main(int argc, char **argv) {
         double res = -1;
         amps_update_get_stats(amps_scene_engine(S), &us);
         nref0 = (int)us.nrefactor;
-        if ((t[st] = cut_step(&ctx, S, &cp, &pass, &nsk, st)) < 0) return 1;
+        if ((t[st] = cut_step(&ctx, S, &cp, &nsk, st)) < 0) return 1;
         t_run += t[st];
         if (st % 50 == 49 && amps_scene_residual(&ctx, S, &res) == AMPS_OK && res > worst_res) worst_res = res;
         amps_update_get_stats(amps_scene_engine(S), &us);
@@ -97,7 +88,7 @@ int main(int argc, char **argv) {
         }
         for (k = 0; k < 15; k++) {
             amps_update_stats us;
-            if ((tf[k] = cut_step(&ctx, S, &cp, &pass, &nsk, steps + k)) < 0) return 1;
+            if ((tf[k] = cut_step(&ctx, S, &cp, &nsk, steps + k)) < 0) return 1;
             amps_update_get_stats(amps_scene_engine(S), &us);
             if (f) fprintf(f, "%s,fresh,%d,%.6e,%d,%d,%d,0,0,-1,%d\n", name, steps + k + 1, tf[k], (int)us.nsys, (int)us.nrefactor,
                            us.refactor_running, (int)us.lu_cols);
