@@ -4725,27 +4725,77 @@ static amps_int amps__path_len(const amps_factor *F, amps_int p) {
     return len;
 }
 
+/* Row width of a chunk of m <= AMPS__VB right-hand sides (zero padded): 4, 8, 12 or 16. */
+static amps_int amps__width(amps_int m) { return m <= 4 ? 4 : (m <= 8 ? 8 : (m <= 12 ? 12 : AMPS__VB)); }
+
 /* X := L^{-1} X restricted to the ascending node list clo[0..nc-1] (closed under the elimination
-   tree's parents), X row-major with W columns, row t for node clo[t], lmap: node -> row. */
+   tree's parents), X row-major with W columns, row t for node clo[t], lmap: node -> row. The union
+   enters a column group c0..ke at some c and then holds c..ke (a chain) in consecutive rows. The
+   group goes by blocks of b = 4 (2, 1) columns o..o+b-1: the small triangle inside the block, then
+   X(r, :) -= sum_i L(r, o+i) X(o+i, :) for the rows r after the block, first those of the group
+   (consecutive) then its shared rows S, so each row of X is loaded and stored once per block.
+   The block's rows are copied to a local array (no aliasing: the row loop vectorizes). */
 #define AMPS__WSOLVE(W)                                                                        \
+    static void amps__wblock##W(const double *const *sl, amps_int b, amps_int ng, const amps_int *S, \
+                                amps_int ns, const amps_int *lmap, double *Xo, double *X) {    \
+        double a[4][W];                                                                        \
+        amps_int i, q, j;                                                                      \
+        for (i = 1; i < b; i++) {                        /* triangle: row o+i from o..o+i-1 */  \
+            amps_int k;                                                                        \
+            for (k = 0; k < i; k++) {                                                          \
+                double l = sl[k][i - b];                  /* L(o+i, o+k) */            \
+                for (j = 0; j < W; j++) Xo[(size_t)i * W + j] -= l * Xo[(size_t)k * W + j];     \
+            }                                                                                  \
+        }                                                                                      \
+        for (i = 0; i < b; i++) memcpy(a[i], Xo + (size_t)i * W, sizeof(a[i]));                 \
+        for (i = b; i < 4; i++) memset(a[i], 0, sizeof(a[i]));                                 \
+        if (b == 4) {                                                                          \
+            const double *s0 = sl[0], *s1 = sl[1], *s2 = sl[2], *s3 = sl[3];                   \
+            for (q = 0; q < ng + ns; q++) {                                                    \
+                double l0 = s0[q], l1 = s1[q], l2 = s2[q], l3 = s3[q];                         \
+                double *xr = q < ng ? Xo + (size_t)(4 + q) * W : X + (size_t)lmap[S[q - ng]] * W; \
+                for (j = 0; j < W; j++) xr[j] -= (l0 * a[0][j] + l1 * a[1][j]) + (l2 * a[2][j] + l3 * a[3][j]); \
+            }                                                                                  \
+        } else if (b == 2) {                                                                   \
+            const double *s0 = sl[0], *s1 = sl[1];                                             \
+            for (q = 0; q < ng + ns; q++) {                                                    \
+                double l0 = s0[q], l1 = s1[q];                                                 \
+                double *xr = q < ng ? Xo + (size_t)(2 + q) * W : X + (size_t)lmap[S[q - ng]] * W; \
+                for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j] + l1 * a[1][j];                  \
+            }                                                                                  \
+        } else {                                                                               \
+            const double *s0 = sl[0];                                                          \
+            for (q = 0; q < ng + ns; q++) {                                                    \
+                double l0 = s0[q];                                                             \
+                double *xr = q < ng ? Xo + (size_t)(1 + q) * W : X + (size_t)lmap[S[q - ng]] * W; \
+                for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j];                                 \
+            }                                                                                  \
+        }                                                                                      \
+    }                                                                                          \
     static void amps__wsolve##W(const amps_factor *F, const amps_int *clo, amps_int nc,         \
                                 const amps_int *lmap, double *X) {                             \
-        amps_int t, e, j;                                                                      \
-        for (t = 0; t < nc; t++) {                                                             \
-            double xk[W];                                                                      \
-            amps_int k = clo[t];                                                               \
-            int nz = 0;                                                                        \
-            memcpy(xk, X + (size_t)t * W, sizeof(xk));                                         \
-            for (j = 0; j < W; j++) nz |= xk[j] != 0.0;                                        \
-            if (!nz) continue;                                                                 \
-            for (e = F->Lp[k]; e < F->Lp[k + 1]; e++) {                                        \
-                double l = F->Lx[e], *xr = X + (size_t)lmap[F->Li[e]] * W;                     \
-                for (j = 0; j < W; j++) xr[j] -= l * xk[j];                                    \
+        const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);                       \
+        const amps_int *Lp = F->Lp;                                                            \
+        amps_int t, c, ke, o, b, i;                                                            \
+        for (t = 0; t < nc; t += ke - c + 1) {                                                 \
+            const amps_int *S;                                                                 \
+            amps_int ns;                                                                       \
+            c = clo[t];                                                                        \
+            ke = P ? P->gs[P->cgrp[c] + 1] - 1 : c;                                            \
+            AMPS_ASSERT(t + ke - c < nc && clo[t + ke - c] == ke);                              \
+            S = F->Li + Lp[ke]; ns = Lp[ke + 1] - Lp[ke];                                      \
+            for (o = c; o <= ke; o += b) {                                                     \
+                const double *sl[4];                                                           \
+                b = ke + 1 - o >= 4 ? 4 : (ke + 1 - o >= 2 ? 2 : 1);                           \
+                /* column o+i: rows o+i+1..ke, then S; sl[i] starts at row o+b */               \
+                for (i = 0; i < b; i++) sl[i] = F->Lx + Lp[o + i] + (b - 1 - i);               \
+                amps__wblock##W(sl, b, ke + 1 - o - b, S, ns, lmap, X + (size_t)(t + o - c) * W, X); \
             }                                                                                  \
         }                                                                                      \
     }
 AMPS__WSOLVE(4)
 AMPS__WSOLVE(8)
+AMPS__WSOLVE(12)
 AMPS__WSOLVE(16)
 #undef AMPS__WSOLVE
 
@@ -4785,12 +4835,13 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
             for (k = F->iperm[U->uidx[list[j0 + j]]]; k != -1 && lmap[k] < 0; k = F->parent[k]) { lmap[k] = 0; clo[nc++] = k; }
         qsort(clo, (size_t)nc, sizeof(amps_int), amps__int_cmp);
         for (t = 0; t < nc; t++) lmap[clo[t]] = t;
-        mw = m <= 4 ? 4 : (m <= 8 ? 8 : AMPS__VB);
+        mw = amps__width(m);
         memset(X, 0, sizeof(double) * (size_t)nc * (size_t)mw);
         for (j = 0; j < m; j++) X[(size_t)lmap[F->iperm[U->uidx[list[j0 + j]]]] * (size_t)mw + (size_t)j] = 1.0;
         /* X := L^{-1} X on the union, with a fixed row width mw >= m (zero padding) */
         if (m <= 4) amps__wsolve4(F, clo, nc, lmap, X);
         else if (m <= 8) amps__wsolve8(F, clo, nc, lmap, X);
+        else if (m <= 12) amps__wsolve12(F, clo, nc, lmap, X);
         else amps__wsolve16(F, clo, nc, lmap, X);
         /* gather each column along its own path, scaled by D^{-1/2} */
         for (j = 0; j < m; j++) {
@@ -4813,17 +4864,27 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
 #define AMPS__GSCAN(W)                                                                         \
     static void amps__gscan##W(const amps_int *wi, const double *wv, amps_int len,             \
                                const amps_int *lmap, const double *X, double *acc) {          \
-        amps_int t, j;                                                                         \
-        for (j = 0; j < W; j++) acc[j] = 0;                                                    \
+        /* named accumulators stay in registers (a local array of 8 or 16 does not) */          \
+        double a0 = 0, a1 = 0, a2 = 0, a3 = 0, b0 = 0, b1 = 0, b2 = 0, b3 = 0;                  \
+        double c0 = 0, c1 = 0, c2 = 0, c3 = 0, d0 = 0, d1 = 0, d2 = 0, d3 = 0;                  \
+        amps_int t;                                                                            \
         for (t = len; t > 0 && lmap[wi[t - 1]] >= 0; t--) {}                                   \
         for (; t < len; t++) {                                                                 \
             const double *xr = X + (size_t)lmap[wi[t]] * W;                                    \
             double v = wv[t];                                                                  \
-            for (j = 0; j < W; j++) acc[j] += v * xr[j];                                       \
+            a0 += v * xr[0]; a1 += v * xr[1]; a2 += v * xr[2]; a3 += v * xr[3];                \
+            if (W > 4) { b0 += v * xr[4]; b1 += v * xr[5]; b2 += v * xr[6]; b3 += v * xr[7]; } \
+            if (W > 8) { c0 += v * xr[8]; c1 += v * xr[9]; c2 += v * xr[10]; c3 += v * xr[11]; } \
+            if (W > 12) { d0 += v * xr[12]; d1 += v * xr[13]; d2 += v * xr[14]; d3 += v * xr[15]; } \
         }                                                                                      \
+        acc[0] = a0; acc[1] = a1; acc[2] = a2; acc[3] = a3;                                    \
+        if (W > 4) { acc[4] = b0; acc[5] = b1; acc[6] = b2; acc[7] = b3; }                     \
+        if (W > 8) { acc[8] = c0; acc[9] = c1; acc[10] = c2; acc[11] = c3; }                   \
+        if (W > 12) { acc[12] = d0; acc[13] = d1; acc[14] = d2; acc[15] = d3; }                \
     }
 AMPS__GSCAN(4)
 AMPS__GSCAN(8)
+AMPS__GSCAN(12)
 AMPS__GSCAN(16)
 #undef AMPS__GSCAN
 
@@ -4837,7 +4898,7 @@ static void amps__gcols(amps_update *U, amps_int u_old) {
     double *X = U->xb;                                   /* thread 0's Step 1 workspace */
     amps_int *lmap = U->lmap, *clo = U->clo;
     for (a0 = u_old; a0 < u; a0 += AMPS__VB) {
-        amps_int m = u - a0 < AMPS__VB ? u - a0 : AMPS__VB, mw = m <= 4 ? 4 : (m <= 8 ? 8 : AMPS__VB), nc = 0, j, t, b;
+        amps_int m = u - a0 < AMPS__VB ? u - a0 : AMPS__VB, mw = amps__width(m), nc = 0, j, t, b;
         for (j = 0; j < m; j++) {
             const amps_int *wi = U->vidx + U->voff[a0 + j];
             if (U->uidx[a0 + j] >= n) continue;
@@ -4861,6 +4922,7 @@ static void amps__gcols(amps_update *U, amps_int u_old) {
                 const double *wv = U->vval + U->voff[b];
                 if (mw == 4) amps__gscan4(wi, wv, U->vlen[b], lmap, X, acc);
                 else if (mw == 8) amps__gscan8(wi, wv, U->vlen[b], lmap, X, acc);
+                else if (mw == 12) amps__gscan12(wi, wv, U->vlen[b], lmap, X, acc);
                 else amps__gscan16(wi, wv, U->vlen[b], lmap, X, acc);
             }
             for (jj = 0; jj < m; jj++) {

@@ -1,6 +1,6 @@
 /* bench/refactor: a long advancing cut with and without background re-factorization.
 
-   usage: refactor <mesh> <steps> <on|off> <out.csv> [tmax]
+   usage: refactor <mesh> <steps> <on|off> <out.csv> [tmax] [run]
      mesh: beam:<h> | brick:<R> | path to a TetGen .node / .msh / .mesh file
    Setup as in bench/harness (base held, opposing forces at the start of the cut). Each step cuts
    the next node of the path and solves (amps_scene_cut + amps_scene_solve, timed together).
@@ -13,7 +13,8 @@
    steps. The summary compares the median step time of steps 5-15 with the median and the mean
    of the last min(100, steps/5) steps. With on, the run then re-factors synchronously and cuts
    15 more steps (CSV policy "fresh"): their median over steps 5-15 is the rate a fresh base
-   gives at the end of the run, the best any re-factorization policy can reach there. */
+   gives at the end of the run, the best any re-factorization policy can reach there. run: a
+   label appended to the CSV policy (on2, fresh2, ...) of repeated runs into one file. */
 #define AMPS_IMPLEMENTATION
 #include "../amps.h"
 #include "bench_util.h"
@@ -41,13 +42,16 @@ int main(int argc, char **argv) {
     double *force, *t, first[11], last[100], worst_res = 0, fresh = 0;
     double tmax, t_run = 0;
     int steps, on, st, nsk = 0;
-    char name[256];
+    char name[256], pol[32], frl[32];
+    const char *run = argc > 6 ? argv[6] : "";
     FILE *f;
     bu_model B;
     amps_update_stats uend;
-    if (argc < 5) { fprintf(stderr, "usage: refactor <mesh> <steps> <on|off> <out.csv> [tmax]\n"); return 2; }
+    if (argc < 5) { fprintf(stderr, "usage: refactor <mesh> <steps> <on|off> <out.csv> [tmax] [run]\n"); return 2; }
     steps = atoi(argv[2]); on = strcmp(argv[3], "off") != 0;
     tmax = argc > 5 ? atof(argv[5]) : 0;
+    snprintf(pol, sizeof(pol), "%s%s", on ? "on" : "off", run);
+    snprintf(frl, sizeof(frl), "fresh%s", run);
     amps_ctx_init(&ctx);
     bu_mesh_name(argv[1], name, sizeof(name));
     bu_scene_opts(&so);
@@ -69,7 +73,7 @@ int main(int argc, char **argv) {
         t_run += t[st];
         if (st % 50 == 49 && amps_scene_residual(&ctx, S, &res) == AMPS_OK && res > worst_res) worst_res = res;
         amps_update_get_stats(amps_scene_engine(S), &us);
-        if (f) fprintf(f, "%s,%s,%d,%.6e,%d,%d,%d,%.6e,%.6e,%.3e,%d\n", name, on ? "on" : "off", st + 1, t[st], (int)us.nsys,
+        if (f) fprintf(f, "%s,%s,%d,%.6e,%d,%d,%d,%.6e,%.6e,%.3e,%d\n", name, pol, st + 1, t[st], (int)us.nsys,
                        (int)us.nrefactor, us.refactor_running, (int)us.nrefactor > nref0 ? us.t_swap : 0.0,
                        (int)us.nrefactor > nref0 ? us.t_refactor : 0.0, res, (int)us.lu_cols);
         if (tmax > 0 && t_run > tmax && st + 1 < steps) {   /* time guard: the summary covers the steps run */
@@ -90,7 +94,7 @@ int main(int argc, char **argv) {
             amps_update_stats us;
             if ((tf[k] = cut_step(&ctx, S, &cp, &nsk, steps + k)) < 0) return 1;
             amps_update_get_stats(amps_scene_engine(S), &us);
-            if (f) fprintf(f, "%s,fresh,%d,%.6e,%d,%d,%d,0,0,-1,%d\n", name, steps + k + 1, tf[k], (int)us.nsys, (int)us.nrefactor,
+            if (f) fprintf(f, "%s,%s,%d,%.6e,%d,%d,%d,0,0,-1,%d\n", name, frl, steps + k + 1, tf[k], (int)us.nsys, (int)us.nrefactor,
                            us.refactor_running, (int)us.lu_cols);
         }
         fresh = bu_median(tf + 4, 11);
@@ -105,7 +109,7 @@ int main(int argc, char **argv) {
         m0 = bu_median(first, nf); m1 = bu_median(last, nl);
         printf("%-10s re-factorization %-3s  steps %d (skipped cuts %d)  step 5-15 median %.2f ms; last %d steps: median %.2f ms (x%.2f), "
                "mean %.2f ms (x%.2f)  |S u C| at the end %d  re-factorizations %d (failed %d)  worst residual %.1e\n",
-               name, on ? "on" : "off", steps, nsk, 1e3 * m0, nl, 1e3 * m1, m1 / m0, 1e3 * mean, mean / m0,
+               name, pol, steps, nsk, 1e3 * m0, nl, 1e3 * m1, m1 / m0, 1e3 * mean, mean / m0,
                (int)uend.nsys, (int)uend.nrefactor, (int)uend.refactor_failed, worst_res);
         if (on) printf("%-10s fresh base after step %d: median %.2f ms (x%.2f of steps 5-15); the last %d steps are x%.2f of it\n",
                        name, steps, 1e3 * fresh, fresh / m0, nl, m1 / fresh);

@@ -445,14 +445,15 @@ min(100, steps/5) steps against steps 5-15. Fresh base: after the last step the 
 re-factors synchronously and cuts 15 more steps; their median (steps 5-15) is the best rate any
 policy can reach at that point of the cut (the cut matrix itself has changed: more unknowns,
 other fill). Swap: the time the swapping step spent on it; background job: wall time of the
-re-factorization, start to ready.
+re-factorization, start to ready. The on runs are repeated (rows on, on2, on3): the end rate
+depends on where the re-factorization cycle stands in the last 100 steps and on machine noise.
 
 | mesh | policy | steps run | steps 5-15 median | end median | end / start | fresh base at the end | end / fresh | end mean | \|S u C\| at the end (median) | re-factorizations | swap median / max | background job median | worst residual |
 |---|---|---|---|---|---|---|---|---|---|---|---|---|---|
 EOF
 awk -F, '
   function med(a, n,   i, j, t) { for (i = 2; i <= n; i++) { t = a[i]; for (j = i - 1; j >= 1 && a[j] > t; j--) a[j + 1] = a[j]; a[j + 1] = t } return n ? a[int((n + 1) / 2)] : 0 }
-  NR > 1 && $1 != "mesh" && $2 == "fresh" { nfr[$1]++; FR[$1, nfr[$1]] = $4; next }
+  NR > 1 && $1 != "mesh" && $2 ~ /^fresh/ { kf = $1 "," substr($2, 6); nfr[kf]++; FR[kf, nfr[kf]] = $4; next }
   NR > 1 && $1 != "mesh" { k = $1 "," $2; if (!(k in n)) keys[++nk] = k; i = ++n[k]; T[k, i] = $4; U[k, i] = $5; nr[k] = $6
     if ($8 > 0) { ns[k]++; SW[k, ns[k]] = $8; BG[k, ns[k]] = $9; if ($8 > swmax[k]) swmax[k] = $8 }
     if ($10 > res[k]) res[k] = $10 }
@@ -463,10 +464,15 @@ awk -F, '
       for (i = 1; i <= nl; i++) a[i] = U[k, m - nl + i]; u1 = med(a, nl)
       for (i = 1; i <= ns[k]; i++) a[i] = SW[k, i]; sw = med(a, ns[k] + 0)
       for (i = 1; i <= ns[k]; i++) a[i] = BG[k, i]; bg = med(a, ns[k] + 0)
-      fr = 0; if (kk[2] == "on" && nfr[kk[1]] >= 15) { for (i = 5; i <= 15; i++) a[i - 4] = FR[kk[1], i]; fr = med(a, 11) }
+      kf = kk[1] "," substr(kk[2], 3); fr = 0
+      if (kk[2] ~ /^on/ && nfr[kf] >= 15) { for (i = 5; i <= 15; i++) a[i - 4] = FR[kf, i]; fr = med(a, 11) }
+      if (kk[2] ~ /^on/) { nrun[kk[1]]++; if (!(kk[1] in rlo) || m1 / m0 < rlo[kk[1]]) rlo[kk[1]] = m1 / m0; if (m1 / m0 > rhi[kk[1]]) rhi[kk[1]] = m1 / m0 }
       printf "| %s | %s | %d | %.2f ms | %.2f ms | %.1fx | %s | %s | %.2f ms | %d | %d | %s | %s | %.1e |\n", kk[1], kk[2], m, 1e3 * m0, 1e3 * m1, m1 / m0,
         (fr > 0 ? sprintf("%.2f ms (%.1fx of start)", 1e3 * fr, fr / m0) : "-"), (fr > 0 ? sprintf("%.1fx", m1 / fr) : "-"), 1e3 * s / nl, u1, nr[k],
-        (ns[k] ? sprintf("%.1f / %.1f ms", 1e3 * sw, 1e3 * swmax[k]) : "-"), (ns[k] ? sprintf("%.0f ms", 1e3 * bg) : "-"), res[k] } }' refactor.csv
+        (ns[k] ? sprintf("%.1f / %.1f ms", 1e3 * sw, 1e3 * swmax[k]) : "-"), (ns[k] ? sprintf("%.0f ms", 1e3 * bg) : "-"), res[k] }
+    print ""
+    for (q = 1; q <= nk; q++) { k = keys[q]; split(k, kk, ","); if (kk[1] in nrun && !(kk[1] in said)) { said[kk[1]] = 1
+      printf "- %s: end / start over %d runs with re-factorization on (on, on2, ...): %.1fx to %.1fx\n", kk[1], nrun[kk[1]], rlo[kk[1]], rhi[kk[1]] } } }' refactor.csv
 echo
 for p in refactor_*.png; do [ -f "$p" ] && echo "- ${p%.png}: step time and |S u C| against step ![$p](${pre}$p)"; done
 echo
