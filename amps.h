@@ -3835,14 +3835,15 @@ static void amps__fwd(const amps_factor *F, amps_int c0, amps_int ke, double *x)
     }
 }
 
-/* x := L^{-T} x on columns c0..ke of one group (rows above c0 untouched). */
-static void amps__bwd(const amps_factor *F, amps_int c0, amps_int ke, double *x) {
+/* x(c0:cl) -= L(S, c0:cl)^T x(S) for columns c0..cl of the group ending at ke, S its shared rows
+   (below ke). The columns are independent: blocks of them may run on different threads. */
+static void amps__bwd_rows(const amps_factor *F, amps_int c0, amps_int cl, amps_int ke, double *x) {
     const amps_int *Lp = F->Lp;
     const double *Lx = F->Lx;
     const amps_int *S = F->Li + Lp[ke];
-    amps_int ns = Lp[ke + 1] - Lp[ke], c, o, p;
-    for (c = c0; c <= ke;) {
-        amps_int kc = ke + 1 - c;
+    amps_int ns = Lp[ke + 1] - Lp[ke], c, p;
+    for (c = c0; c <= cl;) {
+        amps_int kc = cl + 1 - c;
         if (kc >= 8) {
             const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1);
             const double *s2 = Lx + Lp[c + 2] + (ke - c - 2), *s3 = Lx + Lp[c + 3] + (ke - c - 3);
@@ -3868,7 +3869,7 @@ static void amps__bwd(const amps_factor *F, amps_int c0, amps_int ke, double *x)
             x[c] -= t0; x[c + 1] -= t1; x[c + 2] -= t2; x[c + 3] -= t3;
             c += 4;
         } else if (kc == 3) {
-            const double *s0 = Lx + Lp[c] + 2, *s1 = Lx + Lp[c + 1] + 1, *s2 = Lx + Lp[c + 2];
+            const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1), *s2 = Lx + Lp[c + 2] + (ke - c - 2);
             double t0 = 0, t1 = 0, t2 = 0;
             for (p = 0; p < ns; p++) {
                 double xs = x[S[p]];
@@ -3877,7 +3878,7 @@ static void amps__bwd(const amps_factor *F, amps_int c0, amps_int ke, double *x)
             x[c] -= t0; x[c + 1] -= t1; x[c + 2] -= t2;
             c += 3;
         } else if (kc == 2) {
-            const double *s0 = Lx + Lp[c] + 1, *s1 = Lx + Lp[c + 1];
+            const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1);
             double t0 = 0, t1 = 0;
             for (p = 0; p < ns; p++) {
                 double xs = x[S[p]];
@@ -3886,19 +3887,32 @@ static void amps__bwd(const amps_factor *F, amps_int c0, amps_int ke, double *x)
             x[c] -= t0; x[c + 1] -= t1;
             c += 2;
         } else {
-            const double *s0 = Lx + Lp[c];
+            const double *s0 = Lx + Lp[c] + (ke - c);
             double t0 = 0;
             for (p = 0; p < ns; p++) t0 += s0[p] * x[S[p]];
             x[c] -= t0;
             c += 1;
         }
     }
+}
+
+/* x(c0:ke) := L(c0:ke, c0:ke)^{-T} x(c0:ke), the triangle of a group. */
+static void amps__bwd_tri(const amps_factor *F, amps_int c0, amps_int ke, double *x) {
+    const amps_int *Lp = F->Lp;
+    const double *Lx = F->Lx;
+    amps_int c, o;
     for (c = ke - 1; c >= c0; c--) {
         const double *Lc = Lx + Lp[c];
         double t = 0;
         for (o = 0; o < ke - c; o++) t += Lc[o] * x[c + 1 + o];
         x[c] -= t;
     }
+}
+
+/* x := L^{-T} x on columns c0..ke of one group (rows above c0 untouched). */
+static void amps__bwd(const amps_factor *F, amps_int c0, amps_int ke, double *x) {
+    amps__bwd_rows(F, c0, ke, ke, x);
+    amps__bwd_tri(F, c0, ke, x);
 }
 
 AMPS_API void amps_lsolve(const amps_factor *F, double *x) {
@@ -3918,6 +3932,84 @@ AMPS_API void amps_ltsolve(const amps_factor *F, double *x) {
     amps_int g, c;
     if (P) for (g = P->ng - 1; g >= 0; g--) amps__bwd(F, P->gs[g], P->gs[g + 1] - 1, x);
     else for (c = F->n - 1; c >= 0; c--) amps__bwd(F, c, c, x);
+}
+
+/* amps__bwd of columns c0..ke of a group on nthr threads when it is large: x(c) -= L(S, c)^T x(S)
+   is independent per column, so blocks of 8 columns go to the threads; then the triangle. */
+static void amps__bwd_par(const amps_factor *F, amps_int c0, amps_int ke, double *x, int nthr) {
+    amps_int nb = (ke + 1 - c0) / 8, b;
+    if (nb < 2 || (double)(F->Lp[ke + 1] - F->Lp[c0]) < 1e5) { amps__bwd(F, c0, ke, x); return; }
+    (void)nthr;                                      /* used by the pragma only */
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) num_threads(nthr)
+#endif
+    for (b = 0; b < nb; b++) amps__bwd_rows(F, c0 + 8 * b, c0 + 8 * b + 7, ke, x);
+    amps__bwd_rows(F, c0 + 8 * nb, ke, ke, x);
+    amps__bwd_tri(F, c0, ke, x);
+}
+
+/* Whether the tree-parallel backward solves are worth their threads. */
+static int amps__par_bwd(const amps_factor *F, int nthr) {
+    const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
+    return P && nthr > 1 && P->nsub >= 2 && (double)F->Lp[F->n] >= 2e5;
+}
+
+/* amps_ltsolve on nthr threads, same result bit for bit: the top part of the subtree decomposition
+   (closed under parents) first, by descending groups (amps__bwd_par); then the subtrees, one per
+   thread at a time, each by descending groups (it reads only its own and top rows, and writes
+   its own). */
+static void amps__ltsolve_par(const amps_factor *F, double *x, int nthr) {
+    const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
+    amps_int i;
+    if (!amps__par_bwd(F, nthr)) { amps_ltsolve(F, x); return; }
+    for (i = P->ntop - 1; i >= 0; i--) amps__bwd_par(F, P->gs[P->topg[i]], P->gs[P->topg[i] + 1] - 1, x, nthr);
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) num_threads(nthr)
+#endif
+    for (i = 0; i < P->nsub; i++) {
+        amps_int k;
+        for (k = P->subp[i + 1] - 1; k >= P->subp[i]; k--) {
+            amps_int g = P->subg[k];
+            amps__bwd(F, P->gs[g], P->gs[g + 1] - 1, x);
+        }
+    }
+}
+
+/* First index j <= k of the run of closure[0..k] that ends at closure[k] inside its group. */
+static amps_int amps__run_start(const amps_factor *F, const amps_int *closure, amps_int k) {
+    const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
+    amps_int s = P ? P->gs[P->cgrp[closure[k]]] : closure[k], j;
+    for (j = k; j > 0 && closure[j - 1] >= s; j--) {}
+    return j;
+}
+
+/* amps_ltsolve_closure on nthr threads, same result bit for bit, as amps__ltsolve_par: the runs of
+   the closure in top groups first (descending), the others listed in iw (room for cnt) and
+   solved per subtree, one subtree per thread at a time. */
+static void amps__ltsolve_closure_par(const amps_factor *F, amps_int cnt, const amps_int *closure, double *y, int nthr,
+                                      amps_int *iw) {
+    amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
+    amps_int k, j, nr = 0, i;
+    if (!amps__par_bwd(F, nthr)) { amps_ltsolve_closure(F, cnt, closure, y); return; }
+    for (k = cnt - 1; k >= 0; k = j - 1) {
+        amps_int ke = closure[k];
+        j = amps__run_start(F, closure, k);
+#ifdef AMPS_COUNT_TOUCH
+        P->touch += (double)(F->Lp[ke + 1] - F->Lp[closure[j]]);
+#endif
+        if (P->gsub[P->cgrp[ke]] < 0) amps__bwd_par(F, closure[j], ke, y, nthr);
+        else iw[nr++] = k;
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) num_threads(nthr)
+#endif
+    for (i = 0; i < P->nsub; i++) {
+        amps_int r;
+        for (r = 0; r < nr; r++) {
+            amps_int kk = iw[r], ke = closure[kk];
+            if (P->gsub[P->cgrp[ke]] == i) amps__bwd(F, closure[amps__run_start(F, closure, kk)], ke, y);
+        }
+    }
 }
 
 AMPS_API amps_status amps_solve(amps_ctx *ctx, const amps_factor *F, const double *b, double *x, double *work) {
@@ -3957,13 +4049,14 @@ AMPS_API amps_int amps_ltsolve_partial(const amps_factor *F, amps_int nreq, cons
 }
 
 AMPS_API void amps_ltsolve_closure(const amps_factor *F, amps_int cnt, const amps_int *closure, double *y) {
+#ifdef AMPS_COUNT_TOUCH
     amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
-    amps_int k, j, ke, s;
+#endif
+    amps_int k, j, ke;
     /* closures of columns in one group are contiguous runs: solve each run as one block */
     for (k = cnt - 1; k >= 0; k = j - 1) {
         ke = closure[k];
-        s = P ? P->gs[P->cgrp[ke]] : ke;
-        for (j = k; j > 0 && closure[j - 1] >= s; j--) {}
+        j = amps__run_start(F, closure, k);
         amps__bwd(F, closure[j], ke, y);
 #ifdef AMPS_COUNT_TOUCH
         if (P) P->touch += (double)(F->Lp[ke + 1] - F->Lp[closure[j]]);
@@ -4962,11 +5055,12 @@ static double amps__aentry(const amps_update *U, amps_int i, amps_int j) {
     size_t ld = (size_t)U->capu;
     double s;
     amps_int k;
-    if (U->ukind[j] & AMPS__UCON) return U->G[(size_t)j * ld + (size_t)i];
+    const double *gi = U->G + (size_t)i * ld;       /* G(i, :) = G(:, i): contiguous */
+    if (U->ukind[j] & AMPS__UCON) return gi[j];
     s = (i == j) ? 1.0 : 0.0;
     for (k = 0; k < U->dln[j]; k++) {
         amps_int b = U->dcol[U->dst[j] + k];
-        if (!(U->ukind[b] & AMPS__UCON)) s += U->G[(size_t)b * ld + (size_t)i] * U->dval[U->dst[j] + k];
+        if (!(U->ukind[b] & AMPS__UCON)) s += gi[b] * U->dval[U->dst[j] + k];
     }
     return s;
 }
@@ -5040,24 +5134,27 @@ static void amps__gemm_tile(amps_int r0, amps_int r1, amps_int w, amps_int k0, a
     }
 }
 
-/* a(0:n)^T b(0:n) */
-static double amps__dot(const double *a, const double *b, amps_int n) {
-    double s = 0;
+/* s[i] = a_i(0:n)^T b(0:n) for the nr <= 4 vectors a_i = a + i lda: b is read once for all. */
+static void amps__dot4(const double *a, size_t lda, amps_int nr, const double *b, amps_int n, double *s) {
+    const double *a0 = a, *a1 = nr > 1 ? a + lda : a, *a2 = nr > 2 ? a + 2 * lda : a, *a3 = nr > 3 ? a + 3 * lda : a;
+    double t0 = 0, t1 = 0, t2 = 0, t3 = 0;
     amps_int k = 0;
 #if AMPS__VL > 1
     {
-        amps__vd s0 = {0}, s1 = s0, x, y;
+        amps__vd s0 = {0}, s1 = s0, s2 = s0, s3 = s0, x, y;
         int l;
-        for (; k + 2 * AMPS__VL <= n; k += 2 * AMPS__VL) {
-            AMPS__VLD(x, a + k); AMPS__VLD(y, b + k); s0 += x * y;
-            AMPS__VLD(x, a + k + AMPS__VL); AMPS__VLD(y, b + k + AMPS__VL); s1 += x * y;
+        for (; k + AMPS__VL <= n; k += AMPS__VL) {
+            AMPS__VLD(y, b + k);
+            AMPS__VLD(x, a0 + k); s0 += x * y;
+            AMPS__VLD(x, a1 + k); s1 += x * y;
+            AMPS__VLD(x, a2 + k); s2 += x * y;
+            AMPS__VLD(x, a3 + k); s3 += x * y;
         }
-        s0 += s1;
-        for (l = 0; l < AMPS__VL; l++) s += s0[l];
+        for (l = 0; l < AMPS__VL; l++) { t0 += s0[l]; t1 += s1[l]; t2 += s2[l]; t3 += s3[l]; }
     }
 #endif
-    for (; k < n; k++) s += a[k] * b[k];
-    return s;
+    for (; k < n; k++) { t0 += a0[k] * b[k]; t1 += a1[k] * b[k]; t2 += a2[k] * b[k]; t3 += a3[k] * b[k]; }
+    s[0] = t0; s[1] = t1; s[2] = t2; s[3] = t3;
 }
 
 /* C(0:m, 0:w) -= A(0:m, 0:kk) B(0:kk, 0:w), column major; one parallel region over row blocks
@@ -5095,8 +5192,10 @@ static amps_status amps__lu_extend(amps_update *U, amps_int nf, amps_int u_old, 
             for (q = 0; q < nf; q++) {
                 const double *uq = LU + (size_t)q * ld;
                 amps_int j = U->colorder[q];
+                double d[4];
+                amps__dot4(lr, ld, nr, uq, q, d);
                 for (i = 0; i < nr; i++)
-                    lr[(size_t)i * ld + (size_t)q] = (amps__aentry(U, U->rowperm[r0 + i], j) - amps__dot(lr + (size_t)i * ld, uq, q)) / uq[q];
+                    lr[(size_t)i * ld + (size_t)q] = (amps__aentry(U, U->rowperm[r0 + i], j) - d[i]) / uq[q];
             }
             for (i = 0; i < nr; i++)
                 for (q = 0; q < nf; q++) {
@@ -5700,7 +5799,8 @@ static void amps__refine(amps_update *U, const double *sv, const double *wv, con
         }
     }
     memcpy(s2, sv, sizeof(double) * (size_t)n);
-    ncl = amps_ltsolve_partial(F, nreq, req, s2, clo, &U->mk);
+    ncl = amps_closure(F, nreq, req, clo, &U->mk);
+    amps__ltsolve_closure_par(F, ncl, clo, s2, U->nthr, req);      /* req is free again */
     for (k = 0; k < ncl; k++) x[F->perm[clo[k]]] = s2[clo[k]];
     for (k = n; k < U->N; k++) { a = U->upos[k]; x[k] = (fv[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma; }
     for (a = 0; a < u; a++) if (U->ukind[a] & AMPS__UCON) x[U->uidx[a]] = hom ? 0.0 : U->g[a];
@@ -5793,7 +5893,7 @@ static void amps__solve_core(amps_update *U, const double *ct, const double *fv,
         U->st.t_step[6] += amps_now() - t0;
         return;
     } else {
-        amps_ltsolve(F, sv);
+        amps__ltsolve_par(F, sv, U->nthr);
         for (k = 0; k < n; k++) { x[F->perm[k]] = sv[k]; sv[k] = 0.0; }
         for (k = n; k < U->N; k++) {
             a = U->upos[k];

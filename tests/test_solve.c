@@ -57,6 +57,16 @@ static void check_solves(const char *name, const amps_csc *A, const int *perm) {
     amps_lsolve(F, y); amps_dsolve(F, y); amps_ltsolve(F, y);
     for (k = 0, ok = 1; k < n; k++) ok &= y[k] == x[F->perm[k]];
     CHECK(ok, "%s: lsolve/dsolve/ltsolve differ from amps_solve", name);
+    {   /* the tree-parallel backward solve gives the same bits on 2 and 3 threads */
+        int nt;
+        for (nt = 2; nt <= 3; nt++) {
+            for (k = 0; k < n; k++) z[k] = b[F->perm[k]] + 0.25;
+            memcpy(y, z, sizeof(double) * n);
+            amps_ltsolve(F, y);
+            amps__ltsolve_par(F, z, nt);
+            CHECK(memcmp(y, z, sizeof(double) * n) == 0, "%s: parallel backward solve on %d threads differs", name, nt);
+        }
+    }
     /* sparse forward and partial backward solves on closures */
     CHECK(amps_marker_init(&ctx, &m, n) == AMPS_OK, "%s: marker", name);
     for (t = 0; t < 12; t++) {
@@ -210,6 +220,15 @@ int main(void) {
     A = m_fe(&ctx, fe_beam(64), 1);
     perm = m_cholmod_perm(A, CHOLMOD_METIS);
     check_solves("beam h=64", A, perm);
+    {   /* ... where the parallel path runs: subtrees and a factor above its size threshold */
+        amps_order_opts o;
+        amps_factor *F;
+        memset(&o, 0, sizeof(o));
+        o.method = AMPS_ORDER_GIVEN; o.perm = perm;
+        F = amps_analyze(&ctx, A, AMPS_UPPER, &o);
+        CHECK(F && ((amps__fpriv *)F->priv)->nsub >= 2 && (double)F->Lp[F->n] >= 2e5, "beam h=64: the parallel backward solve is not exercised");
+        amps_factor_free(&ctx, F);
+    }
     free(perm); amps_csc_free(&ctx, A);
     A = m_fe(&ctx, fe_brick(6), 1);
     check_solves("brick R=6 default", A, NULL);
