@@ -112,6 +112,14 @@ static void check_solves(const char *name, const amps_csc *A, const int *perm) {
             else inside &= y[k] == w[k];
         }
         CHECK(inside, "%s: partial backward changed entries outside the closure", name);
+        {   /* the tree-parallel closure solve: same bits, same touch count */
+            double tc = amps_touch_count(F);
+            memcpy(z, w, sizeof(double) * n);
+            amps_touch_reset(F);
+            amps__ltsolve_closure_par(F, cnt, cl, z, 2 + t % 2, cl2);
+            CHECK(memcmp(y, z, sizeof(double) * n) == 0, "%s: parallel closure solve differs", name);
+            CHECK(amps_touch_count(F) == tc, "%s: parallel closure solve touched %g, sequential %g", name, amps_touch_count(F), tc);
+        }
     }
     /* multiple right-hand sides, 1 and 2 threads, in place */
     {
