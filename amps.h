@@ -212,7 +212,8 @@ AMPS_API void amps_marker_next(amps_marker *m);
    size. Cost O(closure size + its sort). Uses m (starts a new marking). */
 AMPS_API amps_int amps_closure(const amps_factor *F, amps_int nidx, const amps_int *idx, amps_int *out, amps_marker *m);
 
-/* Full solve K x = b in the original numbering; x may equal b; work has n doubles. */
+/* Full solve K x = b in the original numbering; x may equal b; work has n doubles. The backward
+   solve of a large factor runs on ctx->nthreads threads (OpenMP; same result on any number). */
 AMPS_API amps_status amps_solve(amps_ctx *ctx, const amps_factor *F, const double *b, double *x, double *work);
 /* Permuted-space kernels on a dense n-vector x: x := L^{-1} x, x := D^{-1} x, x := L^{-T} x. */
 AMPS_API void amps_lsolve(const amps_factor *F, double *x);
@@ -4020,7 +4021,7 @@ AMPS_API amps_status amps_solve(amps_ctx *ctx, const amps_factor *F, const doubl
     for (k = 0; k < n; k++) work[k] = b[F->perm[k]];
     amps_lsolve(F, work);
     amps_dsolve(F, work);
-    amps_ltsolve(F, work);
+    amps__ltsolve_par(F, work, amps__nthreads(ctx, 1024));
     for (k = 0; k < n; k++) x[F->perm[k]] = work[k];
     return AMPS_OK;
 }
