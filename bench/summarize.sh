@@ -53,7 +53,12 @@ Produced by \`make bench\` (\`bench/run.sh full\`); every number and plot below 
 \`bench/summarize.sh\` from the run recorded in \`bench/out/\` (CSV per run, \`summary.csv\`,
 \`log_full.txt\`). Timings are wall clock, one run; methods are compared side by side on the
 same step sequence in the same process. On a shared host (other jobs on the 2 cores) the timings
-are noisy, and the 2-thread amps.h configurations suffer most (see the p1 / p2 columns).
+are noisy, and the 2-thread amps.h configurations suffer most (see the p1 / p2 columns). On this
+virtual machine the second OpenMP thread falls asleep while the other methods run between two
+amps.h steps, and waking it can cost tens of milliseconds: cut_bunny50k with p2 alone in the
+harness (16 steps) has Step 1 at 4-42 ms (bimodal) and the step at 36-88 ms; with
+\`OMP_WAIT_POLICY=active\` Step 1 stays at about 5 ms. Back-to-back steps (\`bench/refactor\`) keep
+the thread awake.
 
 $(sed 's/^/- /' machine.txt)
 
@@ -486,7 +491,13 @@ add 10-12 augmented columns each while the job (ordering, analysis and factoriza
 core, the steps on the other) runs for the time in the table. Two things separate the end rate
 from the rate of step 10: the cut matrix itself (the fresh-base column: after 1,000 cuts a step
 costs more even with an empty augmentation) and the augmentation that one job's m' leaves (end /
-fresh). The issue's target, within 2x of step 10, is met where end / start is at most 2.0.
+fresh). On the bunny the first is the place of the cut: the path starts at the tip of an ear,
+where a cut adds 6-15 unknowns to S whose elimination-tree paths are short (Step 1: 0.22 ms per
+column); in the body a cut adds 12-54 unknowns at 0.6-1.0 ms per column (one thread, measured
+before the Step 1 kernel of 2026-11-22, which about halves the time per column), so a fresh base
+in the body already costs 1.5-1.8x step 10. While a job runs the steps have one core, so the
+parallel kernels (Steps 1-2, the backward solves) speed up the start more than the end. The
+issue's target, within 2x of step 10, is met where end / start is at most 2.0.
 
 EOF
 fi
