@@ -4842,7 +4842,6 @@ static amps_int amps__width(amps_int m) { return m <= 4 ? 4 : (m <= 8 ? 8 : (m <
             }                                                                                  \
         }                                                                                      \
         for (i = 0; i < b; i++) memcpy(a[i], Xo + (size_t)i * W, sizeof(a[i]));                 \
-        for (i = b; i < 4; i++) memset(a[i], 0, sizeof(a[i]));                                 \
         if (b == 4) {                                                                          \
             const double *s0 = sl[0], *s1 = sl[1], *s2 = sl[2], *s3 = sl[3];                   \
             for (q = 0; q < ng + ns; q++) {                                                    \
