@@ -20,7 +20,7 @@
      AMPS_NO_FEM          linear algebra only (sparse, ordering, factor, solve, update engine):
                           leaves out the mesh and element layer, the scene and the mesh I/O
      AMPS_NO_STDIO        no <stdio.h>: leaves out the file readers and writers (amps_mesh_read*,
-                          amps_write_*); the *_mem readers stay. Error messages never use stdio
+                          amps_mesh_write_*); the *_mem readers stay. Error messages never use stdio
                           (a private formatter, the same in every build).
      AMPS_NO_THREADS      leave out amps' own background threads (pthreads); OpenMP is separate
      OpenMP kernels are used when compiled with -fopenmp (_OPENMP defined), else none.
@@ -89,7 +89,11 @@ typedef struct amps_ctx {
 
 AMPS_API void amps_ctx_init(amps_ctx *ctx);
 AMPS_API const char *amps_status_str(amps_status s);
-/* Wall-clock seconds (omp_get_wtime) in OpenMP builds, processor time (clock) otherwise. */
+/* Seconds of a monotonic wall clock (arbitrary origin): clock_gettime(CLOCK_MONOTONIC),
+   QueryPerformanceCounter on Windows, mach_absolute_time on Apple; define AMPS_NOW() to supply
+   your own. Where none of these is available (a strict ISO build that included <time.h> before
+   the implementation), omp_get_wtime with OpenMP, else processor time (clock), which the
+   re-factorization's cost model then misreads in threaded builds. */
 AMPS_API double amps_now(void);
 
 /* =============================== sparse matrix =============================== */
@@ -505,9 +509,10 @@ AMPS_API amps_status amps_mesh_check(amps_ctx *ctx, const amps_mesh *m);
 
 typedef enum amps_cmp { AMPS_LT = 0, AMPS_GT = 1 } amps_cmp;
 /* Nodes v (copies included) with xyz[3v+axis] < value (AMPS_LT) or > value (AMPS_GT), ascending,
-   written to out (room for nnode; may be NULL to count). Returns their number, -1 if axis is
-   not 0, 1, 2 (x, y, z). */
-AMPS_API amps_int amps_mesh_select(const amps_mesh *m, int axis, amps_cmp cmp, double value, amps_int *out);
+   written to out (room for nnode; may be NULL to count). Returns their number, or -1 with
+   AMPS_ERR_ARG (NULL mesh, axis not 0, 1, 2, cmp not AMPS_LT/AMPS_GT) or AMPS_ERR_VALUE (NaN). */
+AMPS_API amps_int amps_mesh_select(amps_ctx *ctx, const amps_mesh *m, int axis, amps_cmp cmp, double value,
+                                   amps_int *out);
 /* Equation numbers in node order: dof[3v+d] = next number, or -1 if fixed[v] (fixed may be NULL)
    or v lies in no tet. dof has 3 * nnode entries. Returns the number of equations. */
 AMPS_API amps_int amps_mesh_number_dofs(const amps_mesh *m, const unsigned char *fixed, amps_int *dof);
@@ -533,6 +538,11 @@ AMPS_API amps_csc *amps_mesh_assemble(amps_ctx *ctx, const amps_mesh *m, const a
    AMPS_ERR_ARG (NULL pointer, zero normal), AMPS_ERR_OOM / AMPS_ERR_CAPACITY (growth). */
 AMPS_API amps_status amps_mesh_cut(amps_ctx *ctx, amps_mesh *m, amps_int v, const double p[3], const double nrm[3],
                                    amps_int *new_node, amps_int *moved, amps_int *nmoved);
+/* Undoes the last cut of m: vc = m->nnode - 1 is the copy of v, moved[0..nmoved-1] the tets the cut
+   moved (ascending, as amps_mesh_cut returned them). AMPS_ERR_ARG (m unchanged) if vc is not the
+   last copy of v or nmoved does not match. */
+AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, amps_int vc, const amps_int *moved,
+                                     amps_int nmoved);
 /* Per-tet stress for displacements disp (3 per node): sigma (6 per tet), von_mises (1 per tet),
    principal (3 per tet, descending); each output may be NULL. */
 AMPS_API amps_status amps_mesh_stress(amps_ctx *ctx, const amps_mesh *m, const double *disp, double *sigma,
@@ -578,7 +588,9 @@ typedef struct amps_scene_opts {
 } amps_scene_opts;
 
 AMPS_API void amps_scene_opts_default(amps_scene_opts *o);
-/* Scene over mesh m, which it takes over (it is cut by the scene and freed with it). */
+/* Scene over mesh m, which it takes over in every case: the scene cuts it and frees it with
+   itself, and a failed create frees it. So amps_scene_create(ctx, amps_mesh_read(ctx, path),
+   opts) leaks nothing; when the reader fails (NULL), ctx keeps the reader's message. */
 AMPS_API amps_scene *amps_scene_create(amps_ctx *ctx, amps_mesh *m, const amps_scene_opts *opts);
 AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S);
 AMPS_API const amps_mesh *amps_scene_mesh(const amps_scene *S);
@@ -618,7 +630,7 @@ AMPS_API amps_status amps_scene_watch(amps_ctx *ctx, amps_scene *S, amps_int nv,
 AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S);
 /* The haptic step: updates the pin reactions (amps_scene_reaction) from the dense system alone,
    without computing displacements (amps_update_solve_reactions). */
-AMPS_API amps_status amps_scene_solve_forces(amps_ctx *ctx, amps_scene *S);
+AMPS_API amps_status amps_scene_solve_reactions(amps_ctx *ctx, amps_scene *S);
 /* Displacements of the last solve, 3 per node (nodes created since: their origin's values). */
 AMPS_API const double *amps_scene_displacements(const amps_scene *S);
 /* Deformed positions (reference + displacement of the last solve) of nodes[0..n-1], or of all
@@ -635,8 +647,6 @@ AMPS_API amps_int amps_scene_ndof(const amps_scene *S);
 /* The engine (for statistics) and its current base factor; NULL before the factorization. */
 AMPS_API amps_update *amps_scene_engine(const amps_scene *S);
 AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S);
-/* Undoes the last cut of m: vc = m->nnode - 1 is the copy of v, moved its tets (ascending). */
-AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, amps_int vc, const amps_int *moved, amps_int nmoved);
 #endif /* AMPS_NO_FEM */
 
 /* =================================== I/O =================================== */
@@ -667,14 +677,14 @@ AMPS_API amps_mesh *amps_mesh_read_medit(amps_ctx *ctx, const char *path);
    separate points, so a cut opens under "Warp By Vector"). Point data: "displacement" (disp,
    3 per node, if given) and "origin". Cell data: "von_mises" (1 per tet, if given),
    "principal_stress" (3 per tet, if given) and "cut" (1 if the tet uses a cut copy node). */
-AMPS_API amps_status amps_write_vtu(amps_ctx *ctx, const char *path, const amps_mesh *m, const double *disp,
+AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const amps_mesh *m, const double *disp,
                                     const double *von_mises, const double *principal);
 /* Writers of all nnode nodes and the tets (copies become ordinary nodes; materials are not
    written). TetGen: base.node and base.ele with numbering from first_index (0 or 1).
    Gmsh: version 2 (2.2) or 4 (4.1), ASCII. MEDIT: .mesh, version 2. */
-AMPS_API amps_status amps_write_tetgen(amps_ctx *ctx, const char *base, const amps_mesh *m, int first_index);
-AMPS_API amps_status amps_write_gmsh(amps_ctx *ctx, const char *path, const amps_mesh *m, int version);
-AMPS_API amps_status amps_write_medit(amps_ctx *ctx, const char *path, const amps_mesh *m);
+AMPS_API amps_status amps_mesh_write_tetgen(amps_ctx *ctx, const char *base, const amps_mesh *m, int first_index);
+AMPS_API amps_status amps_mesh_write_gmsh(amps_ctx *ctx, const char *path, const amps_mesh *m, int version);
+AMPS_API amps_status amps_mesh_write_medit(amps_ctx *ctx, const char *path, const amps_mesh *m);
 #endif /* AMPS_NO_STDIO */
 #endif /* AMPS_NO_FEM */
 
@@ -691,11 +701,26 @@ AMPS_API amps_status amps_write_medit(amps_ctx *ctx, const char *path, const amp
 #ifndef AMPS_IMPLEMENTATION_DONE
 #define AMPS_IMPLEMENTATION_DONE
 
+/* clock_gettime is POSIX: a strict ISO C build (-std=c99) declares it only with _POSIX_C_SOURCE,
+   which takes effect when the implementation is the first include of its file. Otherwise, and on
+   systems without it, amps_now falls back as its declaration says. */
+#if !defined(_WIN32) && defined(__STRICT_ANSI__) && !defined(_POSIX_C_SOURCE) && !defined(_XOPEN_SOURCE) && \
+    !defined(_GNU_SOURCE) && !defined(_DEFAULT_SOURCE) && !defined(_BSD_SOURCE)
+#define _POSIX_C_SOURCE 200112L
+#endif
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
 #include <stdarg.h>
 #include <time.h>
+#if defined(_WIN32) && !defined(AMPS_NOW)
+#ifndef WIN32_LEAN_AND_MEAN
+#define WIN32_LEAN_AND_MEAN
+#endif
+#include <windows.h>
+#elif defined(__APPLE__) && !defined(AMPS_NOW)
+#include <mach/mach_time.h>
+#endif
 #if !defined(AMPS_NO_FEM) && !defined(AMPS_NO_STDIO)
 #include <stdio.h> /* file readers and writers only */
 #endif
@@ -765,7 +790,22 @@ AMPS_API const char *amps_status_str(amps_status s) {
 }
 
 AMPS_API double amps_now(void) {
-#ifdef _OPENMP
+#if defined(AMPS_NOW)
+    return AMPS_NOW();
+#elif defined(_WIN32)
+    LARGE_INTEGER c, f;
+    QueryPerformanceCounter(&c);
+    QueryPerformanceFrequency(&f);
+    return (double)c.QuadPart / (double)f.QuadPart;
+#elif defined(__APPLE__)
+    mach_timebase_info_data_t tb;
+    mach_timebase_info(&tb);
+    return (double)mach_absolute_time() * ((double)tb.numer / (double)tb.denom) * 1e-9;
+#elif defined(CLOCK_MONOTONIC)
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#elif defined(_OPENMP)
     return omp_get_wtime();
 #else
     return (double)clock() / (double)CLOCKS_PER_SEC;
@@ -7202,9 +7242,16 @@ AMPS_API amps_status amps_mesh_check(amps_ctx *ctx, const amps_mesh *m) {
     return AMPS_OK;
 }
 
-AMPS_API amps_int amps_mesh_select(const amps_mesh *m, int axis, amps_cmp cmp, double value, amps_int *out) {
+AMPS_API amps_int amps_mesh_select(amps_ctx *ctx, const amps_mesh *m, int axis, amps_cmp cmp, double value,
+                                   amps_int *out) {
     amps_int v, n = 0;
-    if (!m || axis < 0 || axis > 2) return -1;
+    if (!m) { amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_select: NULL mesh"); return -1; }
+    if (axis < 0 || axis > 2 || (cmp != AMPS_LT && cmp != AMPS_GT)) {
+        amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_select: axis %d, comparison %d (axis 0-2, AMPS_LT or AMPS_GT)", axis,
+                  (int)cmp);
+        return -1;
+    }
+    if (value != value) { amps__err(ctx, AMPS_ERR_VALUE, "amps_mesh_select: value is NaN"); return -1; }
     for (v = 0; v < m->nnode; v++) {
         double x = m->xyz[3 * v + axis];
         if (cmp == AMPS_LT ? x < value : x > value) {
@@ -7457,6 +7504,27 @@ AMPS_API amps_status amps_mesh_cut(amps_ctx *ctx, amps_mesh *m, amps_int v, cons
     return AMPS_OK;
 }
 
+AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, amps_int vc, const amps_int *moved, amps_int nmoved) {
+    amps_int base, keep, i, j, w, k;
+    int q;
+    if (!m || vc != m->nnode - 1 || v < 0 || v >= vc || m->inc_len[vc] != nmoved || m->inc_ptr[vc] != m->inc_ptr[v] + m->inc_len[v])
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_uncut: node %ld is not the last copy of node %ld", (long)vc, (long)v);
+    for (k = 0; k < nmoved; k++)
+        for (q = 0; q < 4; q++)
+            if (m->tet[4 * moved[k] + q] == vc) m->tet[4 * moved[k] + q] = v;
+    /* merge v's kept tets and the moved ones back into one ascending slot, from the back */
+    base = m->inc_ptr[v]; keep = m->inc_len[v];
+    i = keep - 1; j = nmoved - 1; w = keep + nmoved - 1;
+    while (j >= 0) {
+        if (i >= 0 && m->inc[base + i] > moved[j]) m->inc[base + w--] = m->inc[base + i--];
+        else m->inc[base + w--] = moved[j--];
+    }
+    m->inc_len[v] = keep + nmoved;
+    m->inc_len[vc] = 0; m->inc_ptr[vc] = 0;
+    m->nnode--;
+    return AMPS_OK;
+}
+
 /* @@SECTION scene: owned by engine */
 
 struct amps_scene {
@@ -7528,16 +7596,15 @@ static amps_status amps__scene_grow(amps_ctx *ctx, amps_scene *S, amps_int cap) 
 
 AMPS_API amps_scene *amps_scene_create(amps_ctx *ctx, amps_mesh *m, const amps_scene_opts *opts) {
     amps_scene *S;
-    if (!m) { amps__err(ctx, AMPS_ERR_ARG, "amps_scene_create: NULL mesh"); return NULL; }
+    if (!m) { amps__err(ctx, AMPS_ERR_ARG, "amps_scene_create: NULL mesh (did the mesh reader fail?)"); return NULL; }
     S = AMPS__CAST(amps_scene *, amps__calloc(ctx, 1, sizeof(amps_scene)));
-    if (!S) return NULL;
-    if (opts) S->o = *opts; else amps_scene_opts_default(&S->o);
-    if (amps__scene_grow(ctx, S, m->node_cap > m->nnode ? m->node_cap : m->nnode + 1)) {
+    if (!S || amps__scene_grow(ctx, S, m->node_cap > m->nnode ? m->node_cap : m->nnode + 1)) {
         amps__err(ctx, AMPS_ERR_OOM, "amps_scene_create: out of memory");
-        S->m = NULL;
-        amps_scene_free(ctx, S);
+        amps_scene_free(ctx, S); /* S->m is NULL: the mesh is freed below */
+        amps_mesh_free(ctx, m);
         return NULL;
     }
+    if (opts) S->o = *opts; else amps_scene_opts_default(&S->o);
     S->m = m;
     return S;
 }
@@ -7683,11 +7750,11 @@ AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, 
     if (!f) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_force: NULL force");
     for (k = 0; k < 3; k++) if (!amps__isfinite(f[k])) return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_force: non-finite force on node %ld", (long)v);
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_force")) != AMPS_OK) return s;
-    for (k = 0; k < 3; k++) {
-        S->force[3 * v + k] = f[k];
+    for (k = 0; k < 3; k++)
         if (S->prepared && S->dof[3 * v + k] >= 0) { idx[m] = S->dof[3 * v + k]; val[m] = f[k]; m++; }
-    }
-    return S->prepared ? amps_update_set_force(ctx, S->U, m, idx, val) : AMPS_OK;
+    if (S->prepared && (s = amps_update_set_force(ctx, S->U, m, idx, val)) != AMPS_OK) return s;
+    for (k = 0; k < 3; k++) S->force[3 * v + k] = f[k];
+    return AMPS_OK;
 }
 
 AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, const double u[3]) {
@@ -7725,27 +7792,6 @@ AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v
         return amps__err(ctx, s, "amps_scene_release: releasing node %ld leaves a piece held by nothing (%s)", (long)v, msg);
     }
     S->pinned[v] = 0;
-    return AMPS_OK;
-}
-
-AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, amps_int vc, const amps_int *moved, amps_int nmoved) {
-    amps_int base, keep, i, j, w, k;
-    int q;
-    if (!m || vc != m->nnode - 1 || v < 0 || v >= vc || m->inc_len[vc] != nmoved || m->inc_ptr[vc] != m->inc_ptr[v] + m->inc_len[v])
-        return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_uncut: node %ld is not the last copy of node %ld", (long)vc, (long)v);
-    for (k = 0; k < nmoved; k++)
-        for (q = 0; q < 4; q++)
-            if (m->tet[4 * moved[k] + q] == vc) m->tet[4 * moved[k] + q] = v;
-    /* merge v's kept tets and the moved ones back into one ascending slot, from the back */
-    base = m->inc_ptr[v]; keep = m->inc_len[v];
-    i = keep - 1; j = nmoved - 1; w = keep + nmoved - 1;
-    while (j >= 0) {
-        if (i >= 0 && m->inc[base + i] > moved[j]) m->inc[base + w--] = m->inc[base + i--];
-        else m->inc[base + w--] = moved[j--];
-    }
-    m->inc_len[v] = keep + nmoved;
-    m->inc_len[vc] = 0; m->inc_ptr[vc] = 0;
-    m->nnode--;
     return AMPS_OK;
 }
 
@@ -8077,9 +8123,9 @@ AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S) {
     return s;
 }
 
-AMPS_API amps_status amps_scene_solve_forces(amps_ctx *ctx, amps_scene *S) {
+AMPS_API amps_status amps_scene_solve_reactions(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
-    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_forces: NULL scene");
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_reactions: NULL scene");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     return amps_update_solve_reactions(ctx, S->U);
 }
@@ -8980,9 +9026,9 @@ static amps_status amps__close_out(amps_ctx *ctx, const char *fn, const char *pa
     return AMPS_OK;
 }
 
-AMPS_API amps_status amps_write_vtu(amps_ctx *ctx, const char *path, const amps_mesh *m, const double *disp,
+AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const amps_mesh *m, const double *disp,
                                     const double *von_mises, const double *principal) {
-    const char *fn = "amps_write_vtu";
+    const char *fn = "amps_mesh_write_vtu";
     amps__out o;
     amps_int v, t;
     amps_status s;
@@ -9032,8 +9078,8 @@ AMPS_API amps_status amps_write_vtu(amps_ctx *ctx, const char *path, const amps_
     return amps__close_out(ctx, fn, path, &o);
 }
 
-AMPS_API amps_status amps_write_tetgen(amps_ctx *ctx, const char *base, const amps_mesh *m, int first_index) {
-    const char *fn = "amps_write_tetgen";
+AMPS_API amps_status amps_mesh_write_tetgen(amps_ctx *ctx, const char *base, const amps_mesh *m, int first_index) {
+    const char *fn = "amps_mesh_write_tetgen";
     amps__out o;
     amps_int v, t;
     amps_status s;
@@ -9070,8 +9116,8 @@ AMPS_API amps_status amps_write_tetgen(amps_ctx *ctx, const char *base, const am
     return s;
 }
 
-AMPS_API amps_status amps_write_gmsh(amps_ctx *ctx, const char *path, const amps_mesh *m, int version) {
-    const char *fn = "amps_write_gmsh";
+AMPS_API amps_status amps_mesh_write_gmsh(amps_ctx *ctx, const char *path, const amps_mesh *m, int version) {
+    const char *fn = "amps_mesh_write_gmsh";
     amps__out o;
     amps_int v, t;
     amps_status s;
@@ -9103,8 +9149,8 @@ AMPS_API amps_status amps_write_gmsh(amps_ctx *ctx, const char *path, const amps
     return amps__close_out(ctx, fn, path, &o);
 }
 
-AMPS_API amps_status amps_write_medit(amps_ctx *ctx, const char *path, const amps_mesh *m) {
-    const char *fn = "amps_write_medit";
+AMPS_API amps_status amps_mesh_write_medit(amps_ctx *ctx, const char *path, const amps_mesh *m) {
+    const char *fn = "amps_mesh_write_medit";
     amps__out o;
     amps_int v, t;
     amps_status s;

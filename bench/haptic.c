@@ -7,7 +7,7 @@
    tool: the npins (default 20) free, unloaded nodes highest along the up axis, all moved by the
    same smooth path, amplitude A = 1% of the largest extent of the model, period 400 steps:
      u(t) = A (-(1 - cos wt) / 2 along the up axis, sin(wt) / 2 along the third axis).
-   Haptic step (timed): amps_scene_pin for every tool node, amps_scene_solve_forces, and
+   Haptic step (timed): amps_scene_pin for every tool node, amps_scene_solve_reactions, and
    amps_scene_reaction for every tool node (the summed tool force).
    Every 100 steps (untimed for the haptic statistics) a full amps_scene_solve (the visual update,
    timed separately) gives the reference reactions: the relative difference
@@ -72,7 +72,7 @@ int main(int argc, char **argv) {
     {
         double u0[3] = {0, 0, 0};
         for (k = 0; k < npins; k++) amps_scene_pin(&ctx, S, pins[k], u0);
-        if (amps_scene_solve_forces(&ctx, S) != AMPS_OK) { fprintf(stderr, "forces: %s\n", ctx.msg); return 1; }
+        if (amps_scene_solve_reactions(&ctx, S) != AMPS_OK) { fprintf(stderr, "forces: %s\n", ctx.msg); return 1; }
     }
     amps_update_get_stats(amps_scene_engine(S), &us);
     for (st = 1; st <= steps; st++) {
@@ -81,7 +81,7 @@ int main(int argc, char **argv) {
         u[ax3] = 0.5 * amp * sin(wt);
         t0 = amps_now();
         for (k = 0; k < npins; k++) amps_scene_pin(&ctx, S, pins[k], u);
-        if (amps_scene_solve_forces(&ctx, S) != AMPS_OK) { fprintf(stderr, "step %d: %s\n", st, ctx.msg); return 1; }
+        if (amps_scene_solve_reactions(&ctx, S) != AMPS_OK) { fprintf(stderr, "step %d: %s\n", st, ctx.msg); return 1; }
         for (k = 0; k < npins; k++) {
             amps_scene_reaction(&ctx, S, pins[k], r1 + 3 * k);
             ftot[0] += r1[3 * k]; ftot[1] += r1[3 * k + 1]; ftot[2] += r1[3 * k + 2];

@@ -408,7 +408,7 @@ cat <<'EOF'
 Setup of both: base held, the opposing forces of the harness's cut, the uncut model factored
 once, then 10 steps of the advancing cut. Haptic step: 20 pins (the highest free unloaded
 nodes) moved together every step along a smooth closed path (amplitude 1% of the model), step =
-20 x `amps_scene_pin` + `amps_scene_solve_forces` + 20 x `amps_scene_reaction`; every 100 steps
+20 x `amps_scene_pin` + `amps_scene_solve_reactions` + 20 x `amps_scene_reaction`; every 100 steps
 a full `amps_scene_solve` (the visual update) gives reference reactions.
 
 | mesh | equations | nnz(L) | \|S u C\| | steps | median | mean | p99 | max | rate (mean) | full solve (median) | reactions vs full solve |

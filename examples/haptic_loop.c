@@ -4,7 +4,7 @@
    Model: a soft 1 x 1 x 2 brick (amps_mesh_brick), or the given mesh, held at its bottom face
    (z near its minimum). The "tool": the 4 nodes nearest the centre of the top face, pinned and
    moved along a smooth path (press down and slide sideways).
-     haptic thread, 1 kHz: move the tool pins, amps_scene_solve_forces (reactions from the small
+     haptic thread, 1 kHz: move the tool pins, amps_scene_solve_reactions (reactions from the small
        dense system alone, no triangular solve), read the tool force;
      visual thread, 60 Hz: the displacements of the surface nodes with the engine's two-phase
        watched solve, one line per 15th frame (frame, max surface displacement, tool force), and
@@ -97,7 +97,7 @@ static void *haptic_thread(void *arg) {
         tool_path(sh->amp, ts_s(&next) - t0, u);
         pthread_mutex_lock(&sh->lock);
         for (k = 0; k < NTOOL; k++) amps_scene_pin(&ctx, sh->S, sh->tool[k], u);
-        if (amps_scene_solve_forces(&ctx, sh->S) != AMPS_OK) { fprintf(stderr, "haptic: %s\n", ctx.msg); sh->stop = 1; }  /* lock held */
+        if (amps_scene_solve_reactions(&ctx, sh->S) != AMPS_OK) { fprintf(stderr, "haptic: %s\n", ctx.msg); sh->stop = 1; }  /* lock held */
         for (k = 0; k < NTOOL; k++) {
             amps_scene_reaction(&ctx, sh->S, sh->tool[k], r);
             f[0] += r[0]; f[1] += r[1]; f[2] += r[2];
@@ -165,7 +165,7 @@ static void *visual_thread(void *arg) {
             char path[1024];
             for (k = 0; k < sh->nw; k++) disp[3 * sh->wnode[k] + sh->wdim[k]] = xw[k];
             snprintf(path, sizeof(path), "%s/frame_%04ld.vtu", sh->outdir, sh->frames);
-            if (amps_write_vtu(&ctx, path, m, disp, NULL, NULL) != AMPS_OK) fprintf(stderr, "visual: %s\n", ctx.msg);
+            if (amps_mesh_write_vtu(&ctx, path, m, disp, NULL, NULL) != AMPS_OK) fprintf(stderr, "visual: %s\n", ctx.msg);
         }
         sh->frames++;
     }

@@ -285,7 +285,6 @@ static void test_scene(void) {
         points++;
         if (k > 2000) break;
         CHECK(c.status == AMPS_ERR_OOM, "scene_create fail at %ld: %s", k, c.msg);
-        amps_mesh_free(&c, m);
         CHECK(t_al.live == 0, "scene_create fail at %ld: %ld live", k, t_al.live);
         t_al.live = 0;
     }

@@ -389,16 +389,16 @@ static void test_select(void) {
     amps_ctx_init(&ctx);
     m = amps_mesh_beam(&ctx, 4);
     if (!m) { CHECK(0, "beam"); return; }
-    n = amps_mesh_select(m, 2, AMPS_LT, 0.5, out);
+    n = amps_mesh_select(&ctx, m, 2, AMPS_LT, 0.5, out);
     CHECK(n == 25, "fix z lt 0.5: %d", (int)n);
     for (k = 0; k < n; k++) if (out[k] != k) ok = 0;
     CHECK(ok, "z lt 0.5 selects nodes 0..24");
-    CHECK(amps_mesh_select(m, 2, AMPS_GT, 2.5, NULL) == 25, "z gt 2.5");
-    CHECK(amps_mesh_select(m, 0, AMPS_LT, 1.0, NULL) == 20, "x lt 1 (strict)");
-    CHECK(amps_mesh_select(m, 1, AMPS_GT, -1, NULL) == 100, "y gt -1");
-    CHECK(amps_mesh_select(m, 3, AMPS_LT, 0, NULL) == -1, "bad axis");
+    CHECK(amps_mesh_select(&ctx, m, 2, AMPS_GT, 2.5, NULL) == 25, "z gt 2.5");
+    CHECK(amps_mesh_select(&ctx, m, 0, AMPS_LT, 1.0, NULL) == 20, "x lt 1 (strict)");
+    CHECK(amps_mesh_select(&ctx, m, 1, AMPS_GT, -1, NULL) == 100, "y gt -1");
+    CHECK(amps_mesh_select(&ctx, m, 3, AMPS_LT, 0, NULL) == -1 && ctx.status == AMPS_ERR_ARG && strstr(ctx.msg, "axis 3"), "bad axis: %s", ctx.msg);
     memset(fixed, 0, sizeof(fixed));
-    n = amps_mesh_select(m, 2, AMPS_LT, 0.5, out);
+    n = amps_mesh_select(&ctx, m, 2, AMPS_LT, 0.5, out);
     for (k = 0; k < n; k++) fixed[out[k]] = 1;
     CHECK(amps_mesh_number_dofs(m, fixed, dof) == 225 && dof[0] == -1 && dof[74] == -1 && dof[75] == 0 && dof[299] == 224, "number_dofs");
     amps_mesh_free(&ctx, m);

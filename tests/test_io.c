@@ -271,7 +271,7 @@ static void test_roundtrip(void) {
     CHECK(m->nnode > m->nfile, "cuts made copies");
     for (base = 0; base < 2; base++) {
         t_path(p1, base ? "rt1" : "rt0");
-        CHECK(amps_write_tetgen(&ctx, p1, m, base) == AMPS_OK, "write tetgen %d: %s", base, ctx.msg);
+        CHECK(amps_mesh_write_tetgen(&ctx, p1, m, base) == AMPS_OK, "write tetgen %d: %s", base, ctx.msg);
         t_path(p1, base ? "rt1.node" : "rt0.node");
         t_path(p2, base ? "rt1.ele" : "rt0.ele");
         r = amps_mesh_read(&ctx, p1);
@@ -284,14 +284,14 @@ static void test_roundtrip(void) {
     }
     for (ver = 2; ver <= 4; ver += 2) {
         t_path(p1, ver == 2 ? "rt22.msh" : "rt41.MSH");
-        CHECK(amps_write_gmsh(&ctx, p1, m, ver) == AMPS_OK, "write gmsh %d: %s", ver, ctx.msg);
+        CHECK(amps_mesh_write_gmsh(&ctx, p1, m, ver) == AMPS_OK, "write gmsh %d: %s", ver, ctx.msg);
         r = amps_mesh_read(&ctx, p1);
         CHECK(t_same_mesh(r, m), "gmsh %d round trip: %s", ver, ctx.msg);
         amps_mesh_free(&ctx, r);
         remove(p1);
     }
     t_path(p1, "rt.mesh");
-    CHECK(amps_write_medit(&ctx, p1, m) == AMPS_OK, "write medit: %s", ctx.msg);
+    CHECK(amps_mesh_write_medit(&ctx, p1, m) == AMPS_OK, "write medit: %s", ctx.msg);
     r = amps_mesh_read(&ctx, p1);
     CHECK(t_same_mesh(r, m), "medit round trip: %s", ctx.msg);
     amps_mesh_free(&ctx, r);
@@ -311,9 +311,9 @@ static void test_roundtrip(void) {
     t_expect(&ctx, amps_mesh_read(&ctx, p1), AMPS_ERR_PARSE, p1, "file message names the path");
     remove(p1);
     t_path(p1, "no_such_dir/x.msh");
-    CHECK(amps_write_gmsh(&ctx, p1, m, 2) == AMPS_ERR_IO && strstr(ctx.msg, p1), "write to a missing directory: %s", ctx.msg);
-    CHECK(amps_write_gmsh(&ctx, p1, m, 3) == AMPS_ERR_ARG, "gmsh version 3");
-    CHECK(amps_write_tetgen(&ctx, p1, m, 2) == AMPS_ERR_ARG, "tetgen base 2");
+    CHECK(amps_mesh_write_gmsh(&ctx, p1, m, 2) == AMPS_ERR_IO && strstr(ctx.msg, p1), "write to a missing directory: %s", ctx.msg);
+    CHECK(amps_mesh_write_gmsh(&ctx, p1, m, 3) == AMPS_ERR_ARG, "gmsh version 3");
+    CHECK(amps_mesh_write_tetgen(&ctx, p1, m, 2) == AMPS_ERR_ARG, "tetgen base 2");
     amps_mesh_free(&ctx, m);
 }
 
@@ -392,7 +392,7 @@ static void test_vtu(void) {
     for (v = 0; v < m->nnode; v++) { disp[3 * v] = 0.01 * m->xyz[3 * v + 2]; disp[3 * v + 1] = 0; disp[3 * v + 2] = v >= m->nfile ? -0.1 : 0; }
     CHECK(amps_mesh_stress(&ctx, m, disp, NULL, vm, pr) == AMPS_OK, "stress");
     t_path(path, "out.vtu");
-    CHECK(amps_write_vtu(&ctx, path, m, disp, vm, pr) == AMPS_OK, "write vtu: %s", ctx.msg);
+    CHECK(amps_mesh_write_vtu(&ctx, path, m, disp, vm, pr) == AMPS_OK, "write vtu: %s", ctx.msg);
     txt = t_slurp(path, &len);
     CHECK(txt != NULL, "read back vtu");
     if (txt) {
@@ -435,7 +435,7 @@ static void test_vtu(void) {
         }
     }
     /* without optional arrays */
-    CHECK(amps_write_vtu(&ctx, path, m, NULL, NULL, NULL) == AMPS_OK, "vtu without data");
+    CHECK(amps_mesh_write_vtu(&ctx, path, m, NULL, NULL, NULL) == AMPS_OK, "vtu without data");
     txt = t_slurp(path, &len);
     CHECK(txt && t_xml_ok(txt, "VTKFile") && !strstr(txt, "displacement") && strstr(txt, "Name=\"cut\""), "minimal vtu");
     free(txt);
@@ -505,8 +505,8 @@ static void test_corruption(void) {
                     char path[700];
                     amps_mesh *r;
                     t_path(path, f == 2 ? "fz.mesh" : "fz.msh");
-                    if (f == 2) amps_write_medit(&ctx, path, m);
-                    else amps_write_gmsh(&ctx, path, m, f == 0 ? 4 : 2);
+                    if (f == 2) amps_mesh_write_medit(&ctx, path, m);
+                    else amps_mesh_write_gmsh(&ctx, path, m, f == 0 ? 4 : 2);
                     r = amps_mesh_read(&ctx, path);
                     if (!t_same_mesh(r, m)) bad++;
                     amps_mesh_free(&ctx, r);

@@ -19,7 +19,7 @@ static void compare(amps_ctx *ctx, amps_scene *S, const shadow *w, const char *w
     amps_status s;
     int k, d;
     /* the haptic path (reactions from the dense system) and the watched solve, before the full solve */
-    CHECK(amps_scene_solve_forces(ctx, S) == AMPS_OK, "%s step %d: forces-only solve: %s", what, step, ctx->msg);
+    CHECK(amps_scene_solve_reactions(ctx, S) == AMPS_OK, "%s step %d: forces-only solve: %s", what, step, ctx->msg);
     for (k = 0; k < m->nnode; k++) amps_scene_reaction(ctx, S, k, rf + 3 * k);
     CHECK(amps_scene_solve_watched(ctx, S) == AMPS_OK, "%s step %d: watched solve: %s", what, step, ctx->msg);
     for (k = 0; k < w->nwatch; k++) memcpy(uw + 3 * k, amps_scene_displacements(S) + 3 * w->watch[k], 3 * sizeof(double));

@@ -275,7 +275,7 @@ static int run_line(replay *R, int nt, char **t) {
         vm = (double *)malloc(sizeof(double) * (m->ntet + 1));
         pr = (double *)malloc(sizeof(double) * 3 * (m->ntet + 1));
         s = amps_scene_stress(&R->ctx, R->S, NULL, vm, pr);
-        if (s == AMPS_OK) s = amps_write_vtu(&R->ctx, t[1], m, amps_scene_displacements(R->S), vm, pr);
+        if (s == AMPS_OK) s = amps_mesh_write_vtu(&R->ctx, t[1], m, amps_scene_displacements(R->S), vm, pr);
         free(vm); free(pr);
         if (s != AMPS_OK) return lib_fail(R, "write");
         if (!R->quiet) printf("write: %s\n", t[1]);
