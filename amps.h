@@ -208,6 +208,9 @@ typedef struct amps_marker {
 } amps_marker;
 AMPS_API amps_status amps_marker_init(amps_ctx *ctx, amps_marker *m, amps_int n);
 AMPS_API void amps_marker_free(amps_ctx *ctx, amps_marker *m);
+/* Grows m to n indices (nothing if n <= m->n); the new ones are unmarked and the current marking
+   goes on. AMPS_ERR_OOM leaves m as it was. */
+AMPS_API amps_status amps_marker_grow(amps_ctx *ctx, amps_marker *m, amps_int n);
 /* Starts a new marking; all indices become unmarked in O(1) (amortized). */
 AMPS_API void amps_marker_next(amps_marker *m);
 
@@ -3774,6 +3777,16 @@ AMPS_API void amps_marker_free(amps_ctx *ctx, amps_marker *m) {
     amps__free(ctx, m->mark);
     m->mark = NULL;
     m->n = 0;
+}
+
+AMPS_API amps_status amps_marker_grow(amps_ctx *ctx, amps_marker *m, amps_int n) {
+    amps_int j;
+    if (n <= m->n) return AMPS_OK;
+    if (amps__realloc(ctx, (void **)&m->mark, (size_t)n, sizeof(amps_int))) return AMPS_ERR_OOM;
+    for (j = m->n; j < n; j++) m->mark[j] = 0;
+    if (m->stamp < 1) m->stamp = 1;
+    m->n = n;
+    return AMPS_OK;
 }
 
 AMPS_API void amps_marker_next(amps_marker *m) {
@@ -7527,28 +7540,56 @@ AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, am
 
 /* @@SECTION scene: owned by engine */
 
+/* Per-node state (node.cap nodes allocated; vectors hold 3 entries per node). */
+typedef struct amps__scene_nodes {
+    amps_int cap;                   /* node capacity of the arrays */
+    unsigned char *fixed, *pinned;  /* fixed: eliminated from the system; pinned: constrained */
+    double *pin_value;              /* target displacement of a pin */
+    double *force;                  /* external force */
+    double *disp;                   /* displacement of the last solve */
+    amps_int *dof;                  /* equation of each DOF, or -1 */
+} amps__scene_nodes;
+
+/* Workspace of a cut, sized by the largest node degree at the factorization. */
+typedef struct amps__scene_cutws {
+    amps_int max_degree;
+    amps_int *moved;                /* the tets the cut moved */
+    amps_int *local_dof;            /* equations of their nodes (12 max_degree + 3) */
+    double *local_K;                /* the stiffness change on local_dof x local_dof */
+    amps_int *row, *col;            /* its upper triangle as triplets for amps_update_add */
+    double *val;
+} amps__scene_cutws;
+
+/* Workspace of the mechanism test of a cut (amps__cut_mechanism). */
+typedef struct amps__scene_mech {
+    amps_int *tet_piece;            /* per tet: label of the piece exploring it, -1 between tests */
+    amps_int *tet_next;             /* per tet: next tet in its piece's queue */
+    amps_int *visited;              /* the tets labelled in this test */
+    amps_marker node_seen;          /* per node: visited in the current joint scan */
+    amps_int *piece_parent;         /* per piece (max_degree + 1): union-find parent */
+    amps_int *queue_head, *queue_tail;
+    amps_int *active;               /* 1 while the piece is still growing */
+    double scale;                   /* the model's extent (tolerance of the line test) */
+} amps__scene_mech;
+
+/* The watched nodes (amps_scene_watch). */
+typedef struct amps__scene_watch {
+    amps_int *nodes, n, cap;
+    int stale;                      /* the engine's watch set must be rebuilt */
+} amps__scene_watch;
+
 struct amps_scene {
     amps_mesh *m;
-    amps_scene_opts o;
-    int prepared;
-    amps_int cap;                 /* node capacity of the per-node arrays */
-    unsigned char *fixed, *pinned;
-    double *pinval, *force, *disp; /* 3 per node */
-    amps_int *dof;                /* 3 per node: equation or -1 */
-    amps_int ndof0;               /* equations of the initial system */
-    amps_csc *K;
-    amps_factor *F;
-    amps_update *U;
-    amps_int *wnode, nwn, capwn;  /* watched nodes */
-    int wstale;                   /* the engine's watch set must be rebuilt */
-    /* cut workspace (sized by the largest node degree) */
-    amps_int maxdeg;
-    amps_int *moved, *ldof, *ri, *ci;
-    double *lk, *vx;
-    /* mechanism test of a cut: per tet (label, queue link, visit list), per node (stamp), per
-       piece (union-find parent, queue head and tail, active); scale = the model's extent */
-    amps_int *tlab, *tnxt, *tvis, *nstamp, nst, *gpar, *ghead, *gtail, *gact;
-    double scale;
+    amps_scene_opts opts;
+    int prepared;                   /* K factored, engine created */
+    amps__scene_nodes node;
+    amps_int ndof0;                 /* equations of the initial system */
+    amps_csc *K;                    /* initial stiffness matrix (upper triangle, equations) */
+    amps_factor *F;                 /* its factor */
+    amps_update *U;                 /* the engine holding every change since */
+    amps__scene_watch watch;
+    amps__scene_cutws cut;
+    amps__scene_mech mech;
 };
 
 AMPS_API void amps_scene_opts_default(amps_scene_opts *o) {
@@ -7566,31 +7607,32 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps_factor_free(ctx, S->F);
     amps_csc_free(ctx, S->K);
     amps_mesh_free(ctx, S->m);
-    amps__free(ctx, S->fixed); amps__free(ctx, S->pinned); amps__free(ctx, S->pinval);
-    amps__free(ctx, S->force); amps__free(ctx, S->disp); amps__free(ctx, S->dof);
-    amps__free(ctx, S->moved); amps__free(ctx, S->ldof); amps__free(ctx, S->ri); amps__free(ctx, S->ci);
-    amps__free(ctx, S->lk); amps__free(ctx, S->vx); amps__free(ctx, S->wnode);
-    amps__free(ctx, S->tlab); amps__free(ctx, S->tnxt); amps__free(ctx, S->tvis); amps__free(ctx, S->nstamp);
-    amps__free(ctx, S->gpar); amps__free(ctx, S->ghead); amps__free(ctx, S->gtail); amps__free(ctx, S->gact);
+    amps__free(ctx, S->node.fixed); amps__free(ctx, S->node.pinned); amps__free(ctx, S->node.pin_value);
+    amps__free(ctx, S->node.force); amps__free(ctx, S->node.disp); amps__free(ctx, S->node.dof);
+    amps__free(ctx, S->cut.moved); amps__free(ctx, S->cut.local_dof); amps__free(ctx, S->cut.row); amps__free(ctx, S->cut.col);
+    amps__free(ctx, S->cut.local_K); amps__free(ctx, S->cut.val); amps__free(ctx, S->watch.nodes);
+    amps__free(ctx, S->mech.tet_piece); amps__free(ctx, S->mech.tet_next); amps__free(ctx, S->mech.visited);
+    amps_marker_free(ctx, &S->mech.node_seen);
+    amps__free(ctx, S->mech.piece_parent); amps__free(ctx, S->mech.queue_head); amps__free(ctx, S->mech.queue_tail); amps__free(ctx, S->mech.active);
     amps__free(ctx, S);
 }
 
 /* Grows the per-node arrays to cap nodes (new entries zero, dof -1). All-or-nothing in effect:
    arrays already grown stay valid. */
 static amps_status amps__scene_grow(amps_ctx *ctx, amps_scene *S, amps_int cap) {
-    amps_int v, old = S->cap;
+    amps_int v, old = S->node.cap;
     size_t c = (size_t)cap;
-    if (amps__realloc(ctx, (void **)&S->fixed, c, 1) || amps__realloc(ctx, (void **)&S->pinned, c, 1) ||
-        amps__realloc(ctx, (void **)&S->pinval, 3 * c, sizeof(double)) || amps__realloc(ctx, (void **)&S->force, 3 * c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&S->disp, 3 * c, sizeof(double)) || amps__realloc(ctx, (void **)&S->dof, 3 * c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&S->nstamp, c, sizeof(amps_int)))
+    if (amps__realloc(ctx, (void **)&S->node.fixed, c, 1) || amps__realloc(ctx, (void **)&S->node.pinned, c, 1) ||
+        amps__realloc(ctx, (void **)&S->node.pin_value, 3 * c, sizeof(double)) || amps__realloc(ctx, (void **)&S->node.force, 3 * c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&S->node.disp, 3 * c, sizeof(double)) || amps__realloc(ctx, (void **)&S->node.dof, 3 * c, sizeof(amps_int)) ||
+        amps_marker_grow(ctx, &S->mech.node_seen, cap))
         return AMPS_ERR_OOM;
     for (v = old; v < cap; v++) {
         int d;
-        S->fixed[v] = 0; S->pinned[v] = 0; S->nstamp[v] = 0;
-        for (d = 0; d < 3; d++) { S->pinval[3 * v + d] = 0; S->force[3 * v + d] = 0; S->disp[3 * v + d] = 0; S->dof[3 * v + d] = -1; }
+        S->node.fixed[v] = 0; S->node.pinned[v] = 0;
+        for (d = 0; d < 3; d++) { S->node.pin_value[3 * v + d] = 0; S->node.force[3 * v + d] = 0; S->node.disp[3 * v + d] = 0; S->node.dof[3 * v + d] = -1; }
     }
-    S->cap = cap;
+    S->node.cap = cap;
     return AMPS_OK;
 }
 
@@ -7604,7 +7646,7 @@ AMPS_API amps_scene *amps_scene_create(amps_ctx *ctx, amps_mesh *m, const amps_s
         amps_mesh_free(ctx, m);
         return NULL;
     }
-    if (opts) S->o = *opts; else amps_scene_opts_default(&S->o);
+    if (opts) S->opts = *opts; else amps_scene_opts_default(&S->opts);
     S->m = m;
     return S;
 }
@@ -7626,7 +7668,7 @@ AMPS_API amps_status amps_scene_fix(amps_ctx *ctx, amps_scene *S, amps_int nv, c
     if (S->prepared) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_fix: the system is already factored (fix nodes before the first change or solve)");
     for (k = 0; k < nv; k++)
         if (v[k] < 0 || v[k] >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_fix: node %ld out of range [0, %ld)", (long)v[k], (long)S->m->nnode);
-    for (k = 0; k < nv; k++) S->fixed[v[k]] = 1;
+    for (k = 0; k < nv; k++) S->node.fixed[v[k]] = 1;
     return AMPS_OK;
 }
 
@@ -7636,7 +7678,7 @@ AMPS_API amps_status amps_scene_fix_where(amps_ctx *ctx, amps_scene *S, int axis
     if (S->prepared) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_fix_where: the system is already factored");
     for (v = 0; v < S->m->nnode; v++) {
         double x = S->m->xyz[3 * v + axis];
-        if (cmp == AMPS_LT ? x < value : x > value) { S->fixed[v] = 1; c++; }
+        if (cmp == AMPS_LT ? x < value : x > value) { S->node.fixed[v] = 1; c++; }
     }
     if (count) *count = c;
     return AMPS_OK;
@@ -7648,16 +7690,16 @@ AMPS_API amps_status amps_scene_prepare(amps_ctx *ctx, amps_scene *S) {
     amps_order_opts ord;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_prepare: NULL scene");
     if (S->prepared) return AMPS_OK;
-    n = amps_mesh_number_dofs(S->m, S->fixed, S->dof);
+    n = amps_mesh_number_dofs(S->m, S->node.fixed, S->node.dof);
     if (n == 0) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_prepare: every node is fixed; nothing to solve");
-    S->K = amps_mesh_assemble(ctx, S->m, S->dof, n);
+    S->K = amps_mesh_assemble(ctx, S->m, S->node.dof, n);
     if (!S->K) goto fail;
     /* coordinates of the free nodes, one per block of 3 equations, for the ordering */
     coords = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
     if (!coords) goto fail;
     for (v = 0; v < S->m->nnode; v++)
-        if (S->dof[3 * v] >= 0) { for (k = 0; k < 3; k++) coords[3 * nfree + k] = S->m->xyz[3 * v + k]; nfree++; }
-    ord = S->o.order;
+        if (S->node.dof[3 * v] >= 0) { for (k = 0; k < 3; k++) coords[3 * nfree + k] = S->m->xyz[3 * v + k]; nfree++; }
+    ord = S->opts.order;
     if (!ord.coords && ord.block == 3 && 3 * nfree == n) ord.coords = coords;
     S->F = amps_analyze(ctx, S->K, AMPS_UPPER, &ord);
     amps__free(ctx, coords); coords = NULL;
@@ -7671,35 +7713,35 @@ AMPS_API amps_status amps_scene_prepare(amps_ctx *ctx, amps_scene *S) {
         goto fail;
     }
     {   /* re-factorizations order the node graph (the unknowns come in node triples) */
-        amps_update_opts uo = S->o.update;
+        amps_update_opts uo = S->opts.update;
         if (uo.refactor_order.block == 0) uo.refactor_order.block = 3;
         S->U = amps_update_create(ctx, S->K, AMPS_UPPER, S->F, &uo);
     }
     if (!S->U) goto fail;
     for (v = 0; v < S->m->nnode; v++) { amps_int d = amps_mesh_degree(S->m, v); if (d > maxdeg) maxdeg = d; }
-    S->maxdeg = maxdeg;
+    S->cut.max_degree = maxdeg;
     {
         size_t nl = (size_t)(12 * maxdeg + 3), ne = nl * nl;
-        S->moved = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)maxdeg + 1, sizeof(amps_int)));
-        S->ldof = AMPS__CAST(amps_int *, amps__malloc(ctx, nl, sizeof(amps_int)));
-        S->lk = AMPS__CAST(double *, amps__calloc(ctx, ne, sizeof(double)));
-        S->ri = AMPS__CAST(amps_int *, amps__malloc(ctx, ne, sizeof(amps_int)));
-        S->ci = AMPS__CAST(amps_int *, amps__malloc(ctx, ne, sizeof(amps_int)));
-        S->vx = AMPS__CAST(double *, amps__malloc(ctx, ne, sizeof(double)));
-        if (!S->moved || !S->ldof || !S->lk || !S->ri || !S->ci || !S->vx) goto fail;
+        S->cut.moved = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)maxdeg + 1, sizeof(amps_int)));
+        S->cut.local_dof = AMPS__CAST(amps_int *, amps__malloc(ctx, nl, sizeof(amps_int)));
+        S->cut.local_K = AMPS__CAST(double *, amps__calloc(ctx, ne, sizeof(double)));
+        S->cut.row = AMPS__CAST(amps_int *, amps__malloc(ctx, ne, sizeof(amps_int)));
+        S->cut.col = AMPS__CAST(amps_int *, amps__malloc(ctx, ne, sizeof(amps_int)));
+        S->cut.val = AMPS__CAST(double *, amps__malloc(ctx, ne, sizeof(double)));
+        if (!S->cut.moved || !S->cut.local_dof || !S->cut.local_K || !S->cut.row || !S->cut.col || !S->cut.val) goto fail;
     }
     {
         amps_int t, nt = S->m->ntet, ng = maxdeg + 1;
         double lo[3], hi[3];
-        S->tlab = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
-        S->tnxt = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
-        S->tvis = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
-        S->gpar = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
-        S->ghead = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
-        S->gtail = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
-        S->gact = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
-        if (!S->tlab || !S->tnxt || !S->tvis || !S->gpar || !S->ghead || !S->gtail || !S->gact) goto fail;
-        for (t = 0; t < nt; t++) S->tlab[t] = -1;
+        S->mech.tet_piece = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
+        S->mech.tet_next = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
+        S->mech.visited = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
+        S->mech.piece_parent = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+        S->mech.queue_head = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+        S->mech.queue_tail = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+        S->mech.active = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+        if (!S->mech.tet_piece || !S->mech.tet_next || !S->mech.visited || !S->mech.piece_parent || !S->mech.queue_head || !S->mech.queue_tail || !S->mech.active) goto fail;
+        for (t = 0; t < nt; t++) S->mech.tet_piece[t] = -1;
         for (k = 0; k < 3; k++) { lo[k] = S->m->xyz[k]; hi[k] = lo[k]; }
         for (v = 0; v < S->m->nnode; v++)
             for (k = 0; k < 3; k++) {
@@ -7707,18 +7749,18 @@ AMPS_API amps_status amps_scene_prepare(amps_ctx *ctx, amps_scene *S) {
                 if (x < lo[k]) lo[k] = x;
                 if (x > hi[k]) hi[k] = x;
             }
-        S->scale = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) + (hi[2] - lo[2]) * (hi[2] - lo[2]));
+        S->mech.scale = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) + (hi[2] - lo[2]) * (hi[2] - lo[2]));
     }
     S->ndof0 = n;
     /* forces set before the factorization */
     for (v = 0; v < S->m->nnode; v++)
         for (k = 0; k < 3; k++)
-            if (S->dof[3 * v + k] >= 0 && S->force[3 * v + k] != 0.0) {
-                amps_int i = S->dof[3 * v + k];
-                if (amps_update_set_force(ctx, S->U, 1, &i, S->force + 3 * v + k)) goto fail;
+            if (S->node.dof[3 * v + k] >= 0 && S->node.force[3 * v + k] != 0.0) {
+                amps_int i = S->node.dof[3 * v + k];
+                if (amps_update_set_force(ctx, S->U, 1, &i, S->node.force + 3 * v + k)) goto fail;
             }
     for (v = 0; v < S->m->nnode; v++)
-        if (S->pinned[v] && amps_update_constrain(ctx, S->U, 3, S->dof + 3 * v, S->pinval + 3 * v)) goto fail;
+        if (S->node.pinned[v] && amps_update_constrain(ctx, S->U, 3, S->node.dof + 3 * v, S->node.pin_value + 3 * v)) goto fail;
     if (amps_update_commit(ctx, S->U)) goto fail;
     S->prepared = 1;
     return AMPS_OK;
@@ -7727,13 +7769,13 @@ fail:
     amps_update_free(ctx, S->U); S->U = NULL;
     amps_factor_free(ctx, S->F); S->F = NULL;
     amps_csc_free(ctx, S->K); S->K = NULL;
-    amps__free(ctx, S->moved); amps__free(ctx, S->ldof); amps__free(ctx, S->lk);
-    amps__free(ctx, S->ri); amps__free(ctx, S->ci); amps__free(ctx, S->vx);
-    S->moved = NULL; S->ldof = NULL; S->lk = NULL; S->ri = NULL; S->ci = NULL; S->vx = NULL;
-    amps__free(ctx, S->tlab); amps__free(ctx, S->tnxt); amps__free(ctx, S->tvis);
-    amps__free(ctx, S->gpar); amps__free(ctx, S->ghead); amps__free(ctx, S->gtail); amps__free(ctx, S->gact);
-    S->tlab = S->tnxt = S->tvis = S->gpar = S->ghead = S->gtail = S->gact = NULL;
-    for (v = 0; v < 3 * S->m->nnode; v++) S->dof[v] = -1;
+    amps__free(ctx, S->cut.moved); amps__free(ctx, S->cut.local_dof); amps__free(ctx, S->cut.local_K);
+    amps__free(ctx, S->cut.row); amps__free(ctx, S->cut.col); amps__free(ctx, S->cut.val);
+    S->cut.moved = NULL; S->cut.local_dof = NULL; S->cut.local_K = NULL; S->cut.row = NULL; S->cut.col = NULL; S->cut.val = NULL;
+    amps__free(ctx, S->mech.tet_piece); amps__free(ctx, S->mech.tet_next); amps__free(ctx, S->mech.visited);
+    amps__free(ctx, S->mech.piece_parent); amps__free(ctx, S->mech.queue_head); amps__free(ctx, S->mech.queue_tail); amps__free(ctx, S->mech.active);
+    S->mech.tet_piece = S->mech.tet_next = S->mech.visited = S->mech.piece_parent = S->mech.queue_head = S->mech.queue_tail = S->mech.active = NULL;
+    for (v = 0; v < 3 * S->m->nnode; v++) S->node.dof[v] = -1;
     return ctx && ctx->status ? ctx->status : AMPS_ERR_OOM;
 }
 
@@ -7741,6 +7783,13 @@ static amps_status amps__scene_node(amps_ctx *ctx, amps_scene *S, amps_int v, co
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL scene", fn);
     if (v < 0 || v >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "%s: node %ld out of range [0, %ld)", fn, (long)v, (long)S->m->nnode);
     return AMPS_OK;
+}
+
+/* Commits the engine; a failed commit leaves no change recorded (amps_update_discard). */
+static amps_status amps__scene_commit(amps_ctx *ctx, amps_scene *S) {
+    amps_status s = amps_update_commit(ctx, S->U);
+    if (s != AMPS_OK) amps_update_discard(S->U);
+    return s;
 }
 
 AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, const double f[3]) {
@@ -7751,9 +7800,9 @@ AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, 
     for (k = 0; k < 3; k++) if (!amps__isfinite(f[k])) return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_force: non-finite force on node %ld", (long)v);
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_force")) != AMPS_OK) return s;
     for (k = 0; k < 3; k++)
-        if (S->prepared && S->dof[3 * v + k] >= 0) { idx[m] = S->dof[3 * v + k]; val[m] = f[k]; m++; }
+        if (S->prepared && S->node.dof[3 * v + k] >= 0) { idx[m] = S->node.dof[3 * v + k]; val[m] = f[k]; m++; }
     if (S->prepared && (s = amps_update_set_force(ctx, S->U, m, idx, val)) != AMPS_OK) return s;
-    for (k = 0; k < 3; k++) S->force[3 * v + k] = f[k];
+    for (k = 0; k < 3; k++) S->node.force[3 * v + k] = f[k];
     return AMPS_OK;
 }
 
@@ -7763,18 +7812,18 @@ AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, co
     if (!u) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_pin: NULL displacement");
     for (k = 0; k < 3; k++) if (!amps__isfinite(u[k])) return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_pin: non-finite displacement for node %ld", (long)v);
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_pin")) != AMPS_OK) return s;
-    if (S->fixed[v]) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_pin: node %ld is fixed", (long)v);
+    if (S->node.fixed[v]) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_pin: node %ld is fixed", (long)v);
     if (amps_mesh_degree(S->m, v) == 0) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_pin: node %ld belongs to no tetrahedron", (long)v);
     if (!S->prepared) {
-        S->pinned[v] = 1;
-        for (k = 0; k < 3; k++) S->pinval[3 * v + k] = u[k];
+        S->node.pinned[v] = 1;
+        for (k = 0; k < 3; k++) S->node.pin_value[3 * v + k] = u[k];
         return AMPS_OK;
     }
-    for (k = 0; k < 3; k++) idx[k] = S->dof[3 * v + k];
+    for (k = 0; k < 3; k++) idx[k] = S->node.dof[3 * v + k];
     if ((s = amps_update_constrain(ctx, S->U, 3, idx, u)) != AMPS_OK) return s;
-    if (!S->pinned[v] && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s;
-    S->pinned[v] = 1;
-    for (k = 0; k < 3; k++) S->pinval[3 * v + k] = u[k];
+    if (!S->node.pinned[v] && (s = amps__scene_commit(ctx, S)) != AMPS_OK) return s;
+    S->node.pinned[v] = 1;
+    for (k = 0; k < 3; k++) S->node.pin_value[3 * v + k] = u[k];
     return AMPS_OK;
 }
 
@@ -7782,16 +7831,16 @@ AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v
     amps_int k, idx[3];
     amps_status s;
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_release")) != AMPS_OK) return s;
-    if (!S->pinned[v]) return AMPS_OK;
-    if (!S->prepared) { S->pinned[v] = 0; return AMPS_OK; }
-    for (k = 0; k < 3; k++) idx[k] = S->dof[3 * v + k];
+    if (!S->node.pinned[v]) return AMPS_OK;
+    if (!S->prepared) { S->node.pinned[v] = 0; return AMPS_OK; }
+    for (k = 0; k < 3; k++) idx[k] = S->node.dof[3 * v + k];
     if ((s = amps_update_release(ctx, S->U, 3, idx)) != AMPS_OK) return s;
-    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
+    if ((s = amps__scene_commit(ctx, S)) != AMPS_OK) {
         char msg[256];
         memcpy(msg, ctx ? ctx->msg : "", ctx ? sizeof(msg) : 1);
         return amps__err(ctx, s, "amps_scene_release: releasing node %ld leaves a piece held by nothing (%s)", (long)v, msg);
     }
-    S->pinned[v] = 0;
+    S->node.pinned[v] = 0;
     return AMPS_OK;
 }
 
@@ -7840,34 +7889,35 @@ static amps_int amps__gfind(amps_int *par, amps_int g) {
    *nj and *jn receive the number of joint nodes and one of them (-1 when none). */
 static int amps__piece_loose(amps_scene *S, amps_int g, amps_int nvis, amps_int *nj, amps_int *jn) {
     const amps_mesh *m = S->m;
+    amps_marker *seen = &S->mech.node_seen;
     amps__line J, JX, JR;
     amps_int k, n;
     int q;
-    J.state = 0; J.tol = 1e-9 * S->scale;
+    J.state = 0; J.tol = 1e-9 * S->mech.scale;
     JX = J; JR = J;
     *nj = 0; *jn = -1;
-    if (++S->nst == 0x7fffffff) { for (n = 0; n < S->cap; n++) S->nstamp[n] = 0; S->nst = 1; }
+    amps_marker_next(&S->mech.node_seen);
     for (k = 0; k < nvis; k++) {
-        amps_int t = S->tvis[k];
-        if (amps__gfind(S->gpar, S->tlab[t]) != g) continue;
+        amps_int t = S->mech.visited[k];
+        if (amps__gfind(S->mech.piece_parent, S->mech.tet_piece[t]) != g) continue;
         for (q = 0; q < 4; q++) {
             amps_int v = m->tet[4 * t + q], r;
             int joint = 0;
-            if (S->nstamp[v] == S->nst) continue;
-            S->nstamp[v] = S->nst;
+            if (seen->mark[v] == seen->stamp) continue;
+            seen->mark[v] = seen->stamp;
             for (r = 0; r < m->inc_len[v] && !joint; r++) {
                 amps_int o = m->inc[m->inc_ptr[v] + r];
-                joint = S->tlab[o] < 0 || amps__gfind(S->gpar, S->tlab[o]) != g;
+                joint = S->mech.tet_piece[o] < 0 || amps__gfind(S->mech.piece_parent, S->mech.tet_piece[o]) != g;
             }
             if (joint) { amps__line_add(&J, m->xyz + 3 * v); (*nj)++; *jn = v; }
-            if (joint || S->fixed[v] || S->pinned[v]) amps__line_add(&JX, m->xyz + 3 * v);
+            if (joint || S->node.fixed[v] || S->node.pinned[v]) amps__line_add(&JX, m->xyz + 3 * v);
         }
     }
     if (J.state == 3) return 0;                       /* a rigid joint */
     /* the rest: the joint and the constrained nodes outside X */
     JR = J;
     for (n = 0; n < m->nnode && JR.state != 3; n++)
-        if ((S->fixed[n] || S->pinned[n]) && S->nstamp[n] != S->nst) amps__line_add(&JR, m->xyz + 3 * n);
+        if ((S->node.fixed[n] || S->node.pinned[n]) && seen->mark[n] != seen->stamp) amps__line_add(&JR, m->xyz + 3 * n);
     return JX.state != 3 || JR.state != 3;
 }
 
@@ -7882,11 +7932,11 @@ static int amps__cut_mechanism(amps_scene *S, amps_int v, amps_int vc, amps_int 
     const amps_int nodes[2] = {v, vc};
     int w;
     for (w = 0; w < 2; w++)
-        for (k = 0; k < m->inc_len[nodes[w]] && ng <= S->maxdeg; k++) {
+        for (k = 0; k < m->inc_len[nodes[w]] && ng <= S->cut.max_degree; k++) {
             amps_int t = m->inc[m->inc_ptr[nodes[w]] + k];
-            if (S->tlab[t] >= 0) continue;
-            S->gpar[ng] = ng; S->ghead[ng] = t; S->gtail[ng] = t; S->gact[ng] = 1;
-            S->tlab[t] = ng; S->tnxt[t] = -1; S->tvis[nvis++] = t;
+            if (S->mech.tet_piece[t] >= 0) continue;
+            S->mech.piece_parent[ng] = ng; S->mech.queue_head[ng] = t; S->mech.queue_tail[ng] = t; S->mech.active[ng] = 1;
+            S->mech.tet_piece[t] = ng; S->mech.tet_next[t] = -1; S->mech.visited[nvis++] = t;
             ng++;
         }
     nact = ng;
@@ -7894,129 +7944,136 @@ static int amps__cut_mechanism(amps_scene *S, amps_int v, amps_int vc, amps_int 
         for (g = 0; g < ng && nact > 1 && !loose; g++) {
             amps_int t;
             int q;
-            if (!S->gact[g]) continue;
-            t = S->ghead[g];
+            if (!S->mech.active[g]) continue;
+            t = S->mech.queue_head[g];
             if (t < 0) {                                   /* piece g is finished */
                 amps_int c = 0;
-                S->gact[g] = 0; nact--;
+                S->mech.active[g] = 0; nact--;
                 if (amps__piece_loose(S, g, nvis, nj, jn)) {
-                    for (k = 0; k < nvis; k++) c += amps__gfind(S->gpar, S->tlab[S->tvis[k]]) == g;
+                    for (k = 0; k < nvis; k++) c += amps__gfind(S->mech.piece_parent, S->mech.tet_piece[S->mech.visited[k]]) == g;
                     *ntet = c; loose = 1;
                 }
                 continue;
             }
-            S->ghead[g] = S->tnxt[t];
-            if (S->ghead[g] < 0) S->gtail[g] = -1;
+            S->mech.queue_head[g] = S->mech.tet_next[t];
+            if (S->mech.queue_head[g] < 0) S->mech.queue_tail[g] = -1;
             for (q = 0; q < 4; q++) {
                 amps_int o = amps__tet_face_nb(m, t, q), h;
                 if (o < 0) continue;
-                if (S->tlab[o] < 0) {                      /* a new tet of piece g */
-                    S->tlab[o] = g; S->tnxt[o] = -1; S->tvis[nvis++] = o;
-                    if (S->gtail[g] >= 0) S->tnxt[S->gtail[g]] = o; else S->ghead[g] = o;
-                    S->gtail[g] = o;
+                if (S->mech.tet_piece[o] < 0) {                      /* a new tet of piece g */
+                    S->mech.tet_piece[o] = g; S->mech.tet_next[o] = -1; S->mech.visited[nvis++] = o;
+                    if (S->mech.queue_tail[g] >= 0) S->mech.tet_next[S->mech.queue_tail[g]] = o; else S->mech.queue_head[g] = o;
+                    S->mech.queue_tail[g] = o;
                     continue;
                 }
-                h = amps__gfind(S->gpar, S->tlab[o]);
+                h = amps__gfind(S->mech.piece_parent, S->mech.tet_piece[o]);
                 if (h == g) continue;
                 /* pieces g and h meet: h joins g with its queue */
-                S->gpar[h] = g;
-                if (S->ghead[h] >= 0) {
-                    if (S->gtail[g] >= 0) S->tnxt[S->gtail[g]] = S->ghead[h]; else S->ghead[g] = S->ghead[h];
-                    S->gtail[g] = S->gtail[h];
+                S->mech.piece_parent[h] = g;
+                if (S->mech.queue_head[h] >= 0) {
+                    if (S->mech.queue_tail[g] >= 0) S->mech.tet_next[S->mech.queue_tail[g]] = S->mech.queue_head[h]; else S->mech.queue_head[g] = S->mech.queue_head[h];
+                    S->mech.queue_tail[g] = S->mech.queue_tail[h];
                 }
-                if (S->gact[h]) { S->gact[h] = 0; nact--; }
+                if (S->mech.active[h]) { S->mech.active[h] = 0; nact--; }
             }
         }
     }
-    for (k = 0; k < nvis; k++) S->tlab[S->tvis[k]] = -1;
+    for (k = 0; k < nvis; k++) S->mech.tet_piece[S->mech.visited[k]] = -1;
     return loose;
 }
 
-AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3], const double nrm[3],
-                                    amps_int *new_node) {
-    amps_int vc, nmoved = 0, k, nl = 0, nz = 0, first = -1, a, b;
-    amps_status s;
-    amps_mesh *m;
-    int watched;
-    if (new_node) *new_node = -1;
-    if ((s = amps__scene_node(ctx, S, v, "amps_scene_cut")) != AMPS_OK) return s;
-    m = S->m;
-    if (S->prepared && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s;   /* earlier changes first */
-    if (m->nnode + 1 > S->cap) {
-        if (!S->o.update.grow) return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_scene_cut: node capacity %ld reached", (long)S->cap);
-        if (amps__scene_grow(ctx, S, 2 * S->cap + 16)) return AMPS_ERR_OOM;
+/* Room for one more node and, when v is watched (*watched), for its copy in the watch set. */
+static amps_status amps__scene_cut_room(amps_ctx *ctx, amps_scene *S, amps_int v, int *watched) {
+    amps_int k;
+    if (S->m->nnode + 1 > S->node.cap) {
+        if (!S->opts.update.grow)
+            return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_scene_cut: node capacity %ld reached", (long)S->node.cap);
+        if (amps__scene_grow(ctx, S, 2 * S->node.cap + 16)) return AMPS_ERR_OOM;
     }
-    /* a watched node's copy is watched: room for it first */
-    for (k = 0; k < S->nwn && S->wnode[k] != v; k++) {}
-    watched = k < S->nwn;
-    if (watched && S->nwn == S->capwn) {
-        if (amps__realloc(ctx, (void **)&S->wnode, (size_t)S->capwn * 2 + 8, sizeof(amps_int)))
+    for (k = 0; k < S->watch.n && S->watch.nodes[k] != v; k++) {}
+    *watched = k < S->watch.n;
+    if (*watched && S->watch.n == S->watch.cap) {
+        if (amps__realloc(ctx, (void **)&S->watch.nodes, (size_t)S->watch.cap * 2 + 8, sizeof(amps_int)))
             return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_cut: out of memory");
-        S->capwn = S->capwn * 2 + 8;
+        S->watch.cap = S->watch.cap * 2 + 8;
     }
-    if (!S->prepared) {
-        /* before the factorization a cut is topology only: K is assembled from the cut mesh */
-        amps_int deg = amps_mesh_degree(m, v), *mv = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)deg + 1, sizeof(amps_int)));
-        if (!mv) return AMPS_ERR_OOM;
-        s = amps_mesh_cut(ctx, m, v, p, nrm, &vc, mv, &nmoved);
-        amps__free(ctx, mv);
-        if (s != AMPS_OK) return s;
-        S->fixed[vc] = S->fixed[v];
-        for (k = 0; k < 3; k++) S->disp[3 * vc + k] = S->disp[3 * v + k];
-        if (new_node) *new_node = vc;
-        if (watched) { S->wnode[S->nwn++] = vc; S->wstale = 1; }
-        return AMPS_OK;
-    }
-    s = amps_mesh_cut(ctx, m, v, p, nrm, &vc, S->moved, &nmoved);
-    if (s != AMPS_OK) return s;                                         /* includes the no-op */
-    S->fixed[vc] = S->fixed[v];
-    S->pinned[vc] = 0;
-    for (k = 0; k < 3; k++) { S->pinval[3 * vc + k] = 0; S->force[3 * vc + k] = 0; S->disp[3 * vc + k] = S->disp[3 * v + k]; S->dof[3 * vc + k] = -1; }
-    {
-        amps_int nt = 0, nj = 0, jn = -1;
-        if (amps__cut_mechanism(S, v, vc, &nt, &nj, &jn)) {
-            if (nj == 0) amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE, "amps_scene_cut: the cut at node %ld detaches a piece of %ld tets held by nothing; the cut was undone", (long)v, (long)nt);
-            else amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE, "amps_scene_cut: the cut at node %ld leaves a piece of %ld tets joined to the rest at %ld node%s on one line (node %ld) and not held otherwise: "
-                           "it could turn about that line; the cut was undone", (long)v, (long)nt, (long)nj, nj == 1 ? "" : "s", (long)jn);
-            s = AMPS_ERR_SINGULAR_UPDATE;
-            goto undo;
-        }
-    }
-    if (!S->fixed[v] && S->dof[3 * v] >= 0) {
-        if ((s = amps_update_add_dofs(ctx, S->U, 3, &first)) != AMPS_OK) goto undo_engine;
-        for (k = 0; k < 3; k++) S->dof[3 * vc + k] = first + k;
-    }
-    /* local equations of the moved tets (with v and v'), then
-       sum over moved tets of Ke scattered with v' minus Ke scattered with v */
-    for (k = 0; k < nmoved; k++) {
-        int q, d;
+    return AMPS_OK;
+}
+
+/* A cut before the factorization is topology only: K is assembled from the cut mesh. */
+static amps_status amps__scene_cut_topology(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3],
+                                            const double nrm[3], amps_int *vc) {
+    amps_int k, nmoved = 0, deg = amps_mesh_degree(S->m, v);
+    amps_int *mv = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)deg + 1, sizeof(amps_int)));
+    amps_status s;
+    if (!mv) return AMPS_ERR_OOM;
+    s = amps_mesh_cut(ctx, S->m, v, p, nrm, vc, mv, &nmoved);
+    amps__free(ctx, mv);
+    if (s != AMPS_OK) return s;
+    S->node.fixed[*vc] = S->node.fixed[v];
+    for (k = 0; k < 3; k++) S->node.disp[3 * *vc + k] = S->node.disp[3 * v + k];
+    return AMPS_OK;
+}
+
+/* The mechanism test of the cut of v into v and vc: AMPS_ERR_SINGULAR_UPDATE with the loose piece
+   described, or AMPS_OK. */
+static amps_status amps__scene_cut_held(amps_ctx *ctx, amps_scene *S, amps_int v, amps_int vc) {
+    amps_int nt = 0, nj = 0, jn = -1;
+    if (!amps__cut_mechanism(S, v, vc, &nt, &nj, &jn)) return AMPS_OK;
+    if (nj == 0)
+        return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
+                         "amps_scene_cut: the cut at node %ld detaches a piece of %ld tets held by nothing; "
+                         "the cut was undone", (long)v, (long)nt);
+    return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
+                     "amps_scene_cut: the cut at node %ld leaves a piece of %ld tets joined to the rest at %ld node%s on "
+                     "one line (node %ld) and not held otherwise: it could turn about that line; the cut was undone",
+                     (long)v, (long)nt, (long)nj, nj == 1 ? "" : "s", (long)jn);
+}
+
+/* cut.local_dof = the equations of the nodes of the moved tets, with v's for each DOF of vc;
+   returns their number nl. */
+static amps_int amps__cut_local_dofs(amps_scene *S, amps_int v, amps_int vc, amps_int nmoved) {
+    const amps_mesh *m = S->m;
+    amps_int *ld = S->cut.local_dof, nl = 0, k, t;
+    int q, d;
+    for (k = 0; k < nmoved; k++)
         for (q = 0; q < 4; q++) {
-            amps_int node = m->tet[4 * S->moved[k] + q];
+            amps_int node = m->tet[4 * S->cut.moved[k] + q];
             for (d = 0; d < 3; d++) {
-                amps_int e = S->dof[3 * node + d], t;
+                amps_int e = S->node.dof[3 * node + d], e2 = S->node.dof[3 * v + d];
                 if (e < 0) continue;
-                for (t = 0; t < nl && S->ldof[t] != e; t++) {}
-                if (t == nl) S->ldof[nl++] = e;
-                if (node == vc) {
-                    amps_int e2 = S->dof[3 * v + d];
-                    for (t = 0; t < nl && S->ldof[t] != e2; t++) {}
-                    if (t == nl && e2 >= 0) S->ldof[nl++] = e2;
-                }
+                for (t = 0; t < nl && ld[t] != e; t++) {}
+                if (t == nl) ld[nl++] = e;
+                if (node != vc) continue;
+                for (t = 0; t < nl && ld[t] != e2; t++) {}
+                if (t == nl && e2 >= 0) ld[nl++] = e2;
             }
         }
-    }
-    for (a = 0; a < nl * nl; a++) S->lk[a] = 0.0;
+    return nl;
+}
+
+/* cut.local_K (nl x nl over cut.local_dof) = sum over the moved tets of Ke scattered with vc
+   minus Ke scattered with v: the change of K^ the cut makes. */
+static void amps__cut_local_K(amps_scene *S, amps_int v, amps_int vc, amps_int nmoved, amps_int nl) {
+    const amps_mesh *m = S->m;
+    const amps_int *ld = S->cut.local_dof;
+    double *lk = S->cut.local_K;
+    amps_int k, a, b, t;
+    for (a = 0; a < nl * nl; a++) lk[a] = 0.0;
     for (k = 0; k < nmoved; k++) {
         double Ke[144];
         amps_int loc_new[12], loc_old[12];
         int q, d, pass;
-        amps_mesh_tet_stiffness(m, S->moved[k], Ke);
+        amps_mesh_tet_stiffness(m, S->cut.moved[k], Ke);
         for (q = 0; q < 4; q++) {
-            amps_int node = m->tet[4 * S->moved[k] + q];
+            amps_int node = m->tet[4 * S->cut.moved[k] + q];
             for (d = 0; d < 3; d++) {
-                amps_int en = S->dof[3 * node + d], eo = node == vc ? S->dof[3 * v + d] : en, t;
+                amps_int en = S->node.dof[3 * node + d], eo = node == vc ? S->node.dof[3 * v + d] : en;
                 loc_new[3 * q + d] = -1; loc_old[3 * q + d] = -1;
-                for (t = 0; t < nl; t++) { if (S->ldof[t] == en) loc_new[3 * q + d] = t; if (S->ldof[t] == eo) loc_old[3 * q + d] = t; }
+                for (t = 0; t < nl; t++) {
+                    if (ld[t] == en) loc_new[3 * q + d] = t;
+                    if (ld[t] == eo) loc_old[3 * q + d] = t;
+                }
                 if (en < 0) loc_new[3 * q + d] = -1;
                 if (eo < 0) loc_old[3 * q + d] = -1;
             }
@@ -8026,36 +8083,74 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
             double sg = pass ? 1.0 : -1.0;
             for (a = 0; a < 12; a++) {
                 if (loc[a] < 0) continue;
-                for (b = 0; b < 12; b++) if (loc[b] >= 0) S->lk[loc[a] * nl + loc[b]] += sg * Ke[12 * a + b];
+                for (b = 0; b < 12; b++) if (loc[b] >= 0) lk[loc[a] * nl + loc[b]] += sg * Ke[12 * a + b];
             }
         }
     }
-    for (a = 0; a < nl; a++)
-        for (b = a; b < nl; b++) {
-            double val = S->lk[a * nl + b];
-            if (val == 0.0) continue;
-            S->ri[nz] = S->ldof[a]; S->ci[nz] = S->ldof[b]; S->vx[nz] = val; nz++;
-        }
-    if ((s = amps_update_add(ctx, S->U, nz, S->ri, S->ci, S->vx)) != AMPS_OK) goto undo_engine;
-    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
-        if (s == AMPS_ERR_SINGULAR_UPDATE)
-            amps__err(ctx, s, "amps_scene_cut: the cut at node %ld leaves a piece held by nothing; the cut was undone", (long)v);
-        goto undo;                                                       /* the engine rolled back */
+}
+
+/* A cut of the factored model: the mesh cut, the mechanism test, new equations for the copy,
+   the change of K^ on the moved tets' equations, one commit. On failure the cut is undone. */
+static amps_status amps__scene_cut_update(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3],
+                                          const double nrm[3], amps_int *vcp) {
+    amps_int vc, nmoved = 0, k, nl, nz = 0, first = -1, a, b;
+    amps_status s = amps_mesh_cut(ctx, S->m, v, p, nrm, &vc, S->cut.moved, &nmoved);
+    if (s != AMPS_OK) return s;                                         /* includes the no-op */
+    S->node.fixed[vc] = S->node.fixed[v];
+    S->node.pinned[vc] = 0;
+    for (k = 0; k < 3; k++) {
+        S->node.pin_value[3 * vc + k] = 0; S->node.force[3 * vc + k] = 0;
+        S->node.disp[3 * vc + k] = S->node.disp[3 * v + k]; S->node.dof[3 * vc + k] = -1;
     }
-    if (new_node) *new_node = vc;
-    if (watched) { S->wnode[S->nwn++] = vc; S->wstale = 1; }
+    if ((s = amps__scene_cut_held(ctx, S, v, vc)) != AMPS_OK) goto undo;
+    if (!S->node.fixed[v] && S->node.dof[3 * v] >= 0) {
+        if ((s = amps_update_add_dofs(ctx, S->U, 3, &first)) != AMPS_OK) goto undo_engine;
+        for (k = 0; k < 3; k++) S->node.dof[3 * vc + k] = first + k;
+    }
+    nl = amps__cut_local_dofs(S, v, vc, nmoved);
+    amps__cut_local_K(S, v, vc, nmoved, nl);
+    for (a = 0; a < nl; a++)                                            /* its upper triangle */
+        for (b = a; b < nl; b++) {
+            double val = S->cut.local_K[a * nl + b];
+            if (val == 0.0) continue;
+            S->cut.row[nz] = S->cut.local_dof[a]; S->cut.col[nz] = S->cut.local_dof[b]; S->cut.val[nz] = val; nz++;
+        }
+    if ((s = amps_update_add(ctx, S->U, nz, S->cut.row, S->cut.col, S->cut.val)) != AMPS_OK) goto undo_engine;
+    if ((s = amps__scene_commit(ctx, S)) != AMPS_OK) {
+        if (s == AMPS_ERR_SINGULAR_UPDATE)
+            amps__err(ctx, s, "amps_scene_cut: the cut at node %ld leaves a piece held by nothing; the cut was undone",
+                      (long)v);
+        goto undo;
+    }
+    *vcp = vc;
     return AMPS_OK;
 undo_engine:
     amps_update_discard(S->U);
 undo:
-    for (k = 0; k < 3; k++) S->dof[3 * vc + k] = -1;
-    S->fixed[vc] = 0;
+    for (k = 0; k < 3; k++) S->node.dof[3 * vc + k] = -1;
+    S->node.fixed[vc] = 0;
     {
         amps_ctx c2;
         amps_ctx_init(&c2);
-        (void)amps_mesh_uncut(&c2, m, v, vc, S->moved, nmoved);
+        (void)amps_mesh_uncut(&c2, S->m, v, vc, S->cut.moved, nmoved);
     }
     return s;
+}
+
+AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3], const double nrm[3],
+                                    amps_int *new_node) {
+    amps_int vc = -1;
+    amps_status s;
+    int watched;
+    if (new_node) *new_node = -1;
+    if ((s = amps__scene_node(ctx, S, v, "amps_scene_cut")) != AMPS_OK) return s;
+    if (S->prepared && (s = amps__scene_commit(ctx, S)) != AMPS_OK) return s;   /* earlier changes first */
+    if ((s = amps__scene_cut_room(ctx, S, v, &watched)) != AMPS_OK) return s;
+    s = S->prepared ? amps__scene_cut_update(ctx, S, v, p, nrm, &vc) : amps__scene_cut_topology(ctx, S, v, p, nrm, &vc);
+    if (s != AMPS_OK) return s;
+    if (new_node) *new_node = vc;
+    if (watched) { S->watch.nodes[S->watch.n++] = vc; S->watch.stale = 1; }
+    return AMPS_OK;
 }
 
 static void amps__scene_gather(amps_scene *S, amps_int nv, const amps_int *nodes);
@@ -8074,15 +8169,15 @@ AMPS_API amps_status amps_scene_watch(amps_ctx *ctx, amps_scene *S, amps_int nv,
     if (!S || nv < 0 || (nv > 0 && !nodes)) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_watch: bad arguments");
     for (k = 0; k < nv; k++)
         if (nodes[k] < 0 || nodes[k] >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_watch: node %ld out of range [0, %ld)", (long)nodes[k], (long)S->m->nnode);
-    if (nv > S->capwn) {
+    if (nv > S->watch.cap) {
         amps_int *w = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nv, sizeof(amps_int)));
         if (!w) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_watch: out of memory");
-        amps__free(ctx, S->wnode);
-        S->wnode = w; S->capwn = nv;
+        amps__free(ctx, S->watch.nodes);
+        S->watch.nodes = w; S->watch.cap = nv;
     }
-    for (k = 0; k < nv; k++) S->wnode[k] = nodes[k];
-    S->nwn = nv;
-    S->wstale = 1;
+    for (k = 0; k < nv; k++) S->watch.nodes[k] = nodes[k];
+    S->watch.n = nv;
+    S->watch.stale = 1;
     return AMPS_OK;
 }
 
@@ -8094,8 +8189,8 @@ static void amps__scene_gather(amps_scene *S, amps_int nv, const amps_int *nodes
     for (k = 0; k < nv; k++) {
         amps_int v = nodes ? nodes[k] : k;
         for (d = 0; d < 3; d++) {
-            amps_int e = S->dof[3 * v + d];
-            S->disp[3 * v + d] = e >= 0 ? x[e] : 0.0;
+            amps_int e = S->node.dof[3 * v + d];
+            S->node.disp[3 * v + d] = e >= 0 ? x[e] : 0.0;
         }
     }
 }
@@ -8104,22 +8199,22 @@ AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_watched: NULL scene");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
-    if (S->wstale) {
+    if (S->watch.stale) {
         /* the engine watches the equations of the watched nodes */
-        amps_int k, d, m = 0, *idx = AMPS__CAST(amps_int *, amps__malloc(ctx, 3 * (size_t)(S->nwn > 0 ? S->nwn : 1), sizeof(amps_int)));
+        amps_int k, d, m = 0, *idx = AMPS__CAST(amps_int *, amps__malloc(ctx, 3 * (size_t)(S->watch.n > 0 ? S->watch.n : 1), sizeof(amps_int)));
         if (!idx) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_solve_watched: out of memory");
-        for (k = 0; k < S->nwn; k++)
+        for (k = 0; k < S->watch.n; k++)
             for (d = 0; d < 3; d++) {
-                amps_int e = S->dof[3 * S->wnode[k] + d];
+                amps_int e = S->node.dof[3 * S->watch.nodes[k] + d];
                 if (e >= 0) idx[m++] = e;
             }
         s = amps_update_watch(ctx, S->U, m, idx);
         amps__free(ctx, idx);
         if (s != AMPS_OK) return s;
-        S->wstale = 0;
+        S->watch.stale = 0;
     }
     if ((s = amps_update_solve_watched(ctx, S->U, NULL)) < 0) return s;
-    amps__scene_gather(S, S->nwn, S->wnode);
+    amps__scene_gather(S, S->watch.n, S->watch.nodes);
     return s;
 }
 
@@ -8130,7 +8225,7 @@ AMPS_API amps_status amps_scene_solve_reactions(amps_ctx *ctx, amps_scene *S) {
     return amps_update_solve_reactions(ctx, S->U);
 }
 
-AMPS_API const double *amps_scene_displacements(const amps_scene *S) { return S ? S->disp : NULL; }
+AMPS_API const double *amps_scene_displacements(const amps_scene *S) { return S ? S->node.disp : NULL; }
 
 AMPS_API amps_status amps_scene_positions(amps_ctx *ctx, const amps_scene *S, amps_int n, const amps_int *nodes, double *out) {
     amps_int k, d;
@@ -8139,7 +8234,7 @@ AMPS_API amps_status amps_scene_positions(amps_ctx *ctx, const amps_scene *S, am
     for (k = 0; k < n; k++) {
         amps_int v = nodes ? nodes[k] : k;
         if (v < 0 || v >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_positions: node %ld out of range", (long)v);
-        for (d = 0; d < 3; d++) out[3 * k + d] = S->m->xyz[3 * v + d] + S->disp[3 * v + d];
+        for (d = 0; d < 3; d++) out[3 * k + d] = S->m->xyz[3 * v + d] + S->node.disp[3 * v + d];
     }
     return AMPS_OK;
 }
@@ -8148,7 +8243,7 @@ AMPS_API amps_status amps_scene_reaction(amps_ctx *ctx, const amps_scene *S, amp
     int k;
     if (!S || !r) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_reaction: NULL argument");
     if (v < 0 || v >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_reaction: node %ld out of range", (long)v);
-    for (k = 0; k < 3; k++) r[k] = (S->U && S->pinned[v]) ? amps_update_reaction(S->U, S->dof[3 * v + k]) : 0.0;
+    for (k = 0; k < 3; k++) r[k] = (S->U && S->node.pinned[v]) ? amps_update_reaction(S->U, S->node.dof[3 * v + k]) : 0.0;
     return AMPS_OK;
 }
 
@@ -8159,7 +8254,7 @@ AMPS_API amps_status amps_scene_residual(amps_ctx *ctx, amps_scene *S, double *r
 
 AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, double *sigma, double *von_mises, double *principal) {
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_stress: NULL scene");
-    return amps_mesh_stress(ctx, S->m, S->disp, sigma, von_mises, principal);
+    return amps_mesh_stress(ctx, S->m, S->node.disp, sigma, von_mises, principal);
 }
 #endif /* AMPS_NO_FEM */
 
