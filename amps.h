@@ -7684,75 +7684,101 @@ AMPS_API amps_status amps_scene_fix_where(amps_ctx *ctx, amps_scene *S, int axis
     return AMPS_OK;
 }
 
-AMPS_API amps_status amps_scene_prepare(amps_ctx *ctx, amps_scene *S) {
-    amps_int n, v, k, maxdeg = 0, nfree = 0;
-    double *coords = NULL;
+/* K = the stiffness matrix of the free DOFs (node.dof numbered), its factor F (ordered with the
+   free nodes' coordinates unless opts.order gives some) and the engine U over them. */
+static amps_status amps__scene_factor(amps_ctx *ctx, amps_scene *S, amps_int n) {
+    amps_int v, k, nfree = 0;
+    double *coords;
     amps_order_opts ord;
-    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_prepare: NULL scene");
-    if (S->prepared) return AMPS_OK;
-    n = amps_mesh_number_dofs(S->m, S->node.fixed, S->node.dof);
-    if (n == 0) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_prepare: every node is fixed; nothing to solve");
+    amps_update_opts uo = S->opts.update;
     S->K = amps_mesh_assemble(ctx, S->m, S->node.dof, n);
-    if (!S->K) goto fail;
+    if (!S->K) return AMPS_ERR_OOM;
     /* coordinates of the free nodes, one per block of 3 equations, for the ordering */
     coords = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
-    if (!coords) goto fail;
+    if (!coords) return AMPS_ERR_OOM;
     for (v = 0; v < S->m->nnode; v++)
         if (S->node.dof[3 * v] >= 0) { for (k = 0; k < 3; k++) coords[3 * nfree + k] = S->m->xyz[3 * v + k]; nfree++; }
     ord = S->opts.order;
     if (!ord.coords && ord.block == 3 && 3 * nfree == n) ord.coords = coords;
     S->F = amps_analyze(ctx, S->K, AMPS_UPPER, &ord);
-    amps__free(ctx, coords); coords = NULL;
-    if (!S->F) goto fail;
+    amps__free(ctx, coords);
+    if (!S->F) return AMPS_ERR_OOM;
     if (amps_factorize(ctx, S->F, S->K, AMPS_UPPER) != AMPS_OK) {
-        if (ctx) {
-            char msg[256];
-            memcpy(msg, ctx->msg, sizeof(msg));
-            amps__err(ctx, AMPS_ERR_NOT_SPD, "amps_scene_prepare: the stiffness matrix is singular (is the model held? fix some nodes): %s", msg);
-        }
-        goto fail;
+        char msg[256];
+        memcpy(msg, ctx ? ctx->msg : "", ctx ? sizeof(msg) : 1);
+        return amps__err(ctx, AMPS_ERR_NOT_SPD,
+                         "amps_scene_prepare: the stiffness matrix is singular (is the model held? fix some nodes): %s", msg);
     }
-    {   /* re-factorizations order the node graph (the unknowns come in node triples) */
-        amps_update_opts uo = S->opts.update;
-        if (uo.refactor_order.block == 0) uo.refactor_order.block = 3;
-        S->U = amps_update_create(ctx, S->K, AMPS_UPPER, S->F, &uo);
-    }
-    if (!S->U) goto fail;
+    if (uo.refactor_order.block == 0) uo.refactor_order.block = 3; /* re-factorizations order node triples */
+    S->U = amps_update_create(ctx, S->K, AMPS_UPPER, S->F, &uo);
+    return S->U ? AMPS_OK : AMPS_ERR_OOM;
+}
+
+/* The cut and mechanism-test workspaces, sized by the largest node degree, and the model's extent. */
+static amps_status amps__scene_workspace(amps_ctx *ctx, amps_scene *S) {
+    amps_int v, k, t, maxdeg = 0, nt = S->m->ntet, ng;
+    size_t nl, ne;
+    double lo[3], hi[3];
     for (v = 0; v < S->m->nnode; v++) { amps_int d = amps_mesh_degree(S->m, v); if (d > maxdeg) maxdeg = d; }
     S->cut.max_degree = maxdeg;
-    {
-        size_t nl = (size_t)(12 * maxdeg + 3), ne = nl * nl;
-        S->cut.moved = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)maxdeg + 1, sizeof(amps_int)));
-        S->cut.local_dof = AMPS__CAST(amps_int *, amps__malloc(ctx, nl, sizeof(amps_int)));
-        S->cut.local_K = AMPS__CAST(double *, amps__calloc(ctx, ne, sizeof(double)));
-        S->cut.row = AMPS__CAST(amps_int *, amps__malloc(ctx, ne, sizeof(amps_int)));
-        S->cut.col = AMPS__CAST(amps_int *, amps__malloc(ctx, ne, sizeof(amps_int)));
-        S->cut.val = AMPS__CAST(double *, amps__malloc(ctx, ne, sizeof(double)));
-        if (!S->cut.moved || !S->cut.local_dof || !S->cut.local_K || !S->cut.row || !S->cut.col || !S->cut.val) goto fail;
-    }
-    {
-        amps_int t, nt = S->m->ntet, ng = maxdeg + 1;
-        double lo[3], hi[3];
-        S->mech.tet_piece = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
-        S->mech.tet_next = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
-        S->mech.visited = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
-        S->mech.piece_parent = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
-        S->mech.queue_head = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
-        S->mech.queue_tail = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
-        S->mech.active = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
-        if (!S->mech.tet_piece || !S->mech.tet_next || !S->mech.visited || !S->mech.piece_parent || !S->mech.queue_head || !S->mech.queue_tail || !S->mech.active) goto fail;
-        for (t = 0; t < nt; t++) S->mech.tet_piece[t] = -1;
-        for (k = 0; k < 3; k++) { lo[k] = S->m->xyz[k]; hi[k] = lo[k]; }
-        for (v = 0; v < S->m->nnode; v++)
-            for (k = 0; k < 3; k++) {
-                double x = S->m->xyz[3 * v + k];
-                if (x < lo[k]) lo[k] = x;
-                if (x > hi[k]) hi[k] = x;
-            }
-        S->mech.scale = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) + (hi[2] - lo[2]) * (hi[2] - lo[2]));
-    }
+    nl = (size_t)(12 * maxdeg + 3); ne = nl * nl; ng = maxdeg + 1;
+    S->cut.moved = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)maxdeg + 1, sizeof(amps_int)));
+    S->cut.local_dof = AMPS__CAST(amps_int *, amps__malloc(ctx, nl, sizeof(amps_int)));
+    S->cut.local_K = AMPS__CAST(double *, amps__calloc(ctx, ne, sizeof(double)));
+    S->cut.row = AMPS__CAST(amps_int *, amps__malloc(ctx, ne, sizeof(amps_int)));
+    S->cut.col = AMPS__CAST(amps_int *, amps__malloc(ctx, ne, sizeof(amps_int)));
+    S->cut.val = AMPS__CAST(double *, amps__malloc(ctx, ne, sizeof(double)));
+    S->mech.tet_piece = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
+    S->mech.tet_next = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
+    S->mech.visited = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
+    S->mech.piece_parent = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+    S->mech.queue_head = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+    S->mech.queue_tail = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+    S->mech.active = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+    if (!S->cut.moved || !S->cut.local_dof || !S->cut.local_K || !S->cut.row || !S->cut.col || !S->cut.val ||
+        !S->mech.tet_piece || !S->mech.tet_next || !S->mech.visited || !S->mech.piece_parent || !S->mech.queue_head ||
+        !S->mech.queue_tail || !S->mech.active)
+        return AMPS_ERR_OOM;
+    for (t = 0; t < nt; t++) S->mech.tet_piece[t] = -1;
+    for (k = 0; k < 3; k++) { lo[k] = S->m->xyz[k]; hi[k] = lo[k]; }
+    for (v = 0; v < S->m->nnode; v++)
+        for (k = 0; k < 3; k++) {
+            double x = S->m->xyz[3 * v + k];
+            if (x < lo[k]) lo[k] = x;
+            if (x > hi[k]) hi[k] = x;
+        }
+    S->mech.scale = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                         (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    return AMPS_OK;
+}
+
+/* Frees what amps_scene_prepare made; the scene is unprepared again. */
+static void amps__scene_unprepare(amps_ctx *ctx, amps_scene *S) {
+    amps_int v;
+    amps_update_free(ctx, S->U); S->U = NULL;
+    amps_factor_free(ctx, S->F); S->F = NULL;
+    amps_csc_free(ctx, S->K); S->K = NULL;
+    amps__free(ctx, S->cut.moved); amps__free(ctx, S->cut.local_dof); amps__free(ctx, S->cut.local_K);
+    amps__free(ctx, S->cut.row); amps__free(ctx, S->cut.col); amps__free(ctx, S->cut.val);
+    S->cut.moved = S->cut.local_dof = S->cut.row = S->cut.col = NULL;
+    S->cut.local_K = S->cut.val = NULL;
+    amps__free(ctx, S->mech.tet_piece); amps__free(ctx, S->mech.tet_next); amps__free(ctx, S->mech.visited);
+    amps__free(ctx, S->mech.piece_parent); amps__free(ctx, S->mech.queue_head); amps__free(ctx, S->mech.queue_tail);
+    amps__free(ctx, S->mech.active);
+    S->mech.tet_piece = S->mech.tet_next = S->mech.visited = NULL;
+    S->mech.piece_parent = S->mech.queue_head = S->mech.queue_tail = S->mech.active = NULL;
+    for (v = 0; v < 3 * S->m->nnode; v++) S->node.dof[v] = -1;
+}
+
+AMPS_API amps_status amps_scene_prepare(amps_ctx *ctx, amps_scene *S) {
+    amps_int n, v, k;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_prepare: NULL scene");
+    if (S->prepared) return AMPS_OK;
+    n = amps_mesh_number_dofs(S->m, S->node.fixed, S->node.dof);
+    if (n == 0) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_prepare: every node is fixed; nothing to solve");
+    if (amps__scene_factor(ctx, S, n) != AMPS_OK || amps__scene_workspace(ctx, S) != AMPS_OK) goto fail;
     S->ndof0 = n;
-    /* forces set before the factorization */
+    /* forces and pins set before the factorization */
     for (v = 0; v < S->m->nnode; v++)
         for (k = 0; k < 3; k++)
             if (S->node.dof[3 * v + k] >= 0 && S->node.force[3 * v + k] != 0.0) {
@@ -7760,22 +7786,13 @@ AMPS_API amps_status amps_scene_prepare(amps_ctx *ctx, amps_scene *S) {
                 if (amps_update_set_force(ctx, S->U, 1, &i, S->node.force + 3 * v + k)) goto fail;
             }
     for (v = 0; v < S->m->nnode; v++)
-        if (S->node.pinned[v] && amps_update_constrain(ctx, S->U, 3, S->node.dof + 3 * v, S->node.pin_value + 3 * v)) goto fail;
+        if (S->node.pinned[v] && amps_update_constrain(ctx, S->U, 3, S->node.dof + 3 * v, S->node.pin_value + 3 * v))
+            goto fail;
     if (amps_update_commit(ctx, S->U)) goto fail;
     S->prepared = 1;
     return AMPS_OK;
 fail:
-    amps__free(ctx, coords);
-    amps_update_free(ctx, S->U); S->U = NULL;
-    amps_factor_free(ctx, S->F); S->F = NULL;
-    amps_csc_free(ctx, S->K); S->K = NULL;
-    amps__free(ctx, S->cut.moved); amps__free(ctx, S->cut.local_dof); amps__free(ctx, S->cut.local_K);
-    amps__free(ctx, S->cut.row); amps__free(ctx, S->cut.col); amps__free(ctx, S->cut.val);
-    S->cut.moved = NULL; S->cut.local_dof = NULL; S->cut.local_K = NULL; S->cut.row = NULL; S->cut.col = NULL; S->cut.val = NULL;
-    amps__free(ctx, S->mech.tet_piece); amps__free(ctx, S->mech.tet_next); amps__free(ctx, S->mech.visited);
-    amps__free(ctx, S->mech.piece_parent); amps__free(ctx, S->mech.queue_head); amps__free(ctx, S->mech.queue_tail); amps__free(ctx, S->mech.active);
-    S->mech.tet_piece = S->mech.tet_next = S->mech.visited = S->mech.piece_parent = S->mech.queue_head = S->mech.queue_tail = S->mech.active = NULL;
-    for (v = 0; v < 3 * S->m->nnode; v++) S->node.dof[v] = -1;
+    amps__scene_unprepare(ctx, S);
     return ctx && ctx->status ? ctx->status : AMPS_ERR_OOM;
 }
 
