@@ -7314,129 +7314,143 @@ AMPS_API amps_status amps_mesh_stress(amps_ctx *ctx, const amps_mesh *m, const d
     return AMPS_OK;
 }
 
+/* owner[i] = the DOF 3v+d numbered i by dof (-1 if none); checks that dof numbers each equation
+   of [0, ndof) at most once. */
+static amps_status amps__dof_owner(amps_ctx *ctx, const char *fn, amps_int n, const amps_int *dof, amps_int ndof,
+                                   amps_int *owner) {
+    amps_int i, k;
+    for (i = 0; i < ndof; i++) owner[i] = -1;
+    for (k = 0; k < 3 * n; k++) {
+        i = dof[k];
+        if (i < -1 || i >= ndof)
+            return amps__err(ctx, AMPS_ERR_INDEX, "%s: dof[%lld] = %lld out of range [-1, %lld)", fn, (long long)k,
+                             (long long)i, (long long)ndof);
+        if (i < 0) continue;
+        if (owner[i] >= 0)
+            return amps__err(ctx, AMPS_ERR_ARG, "%s: equation %lld used by dof[%lld] and dof[%lld]", fn, (long long)i,
+                             (long long)owner[i], (long long)k);
+        owner[i] = k;
+    }
+    return AMPS_OK;
+}
+
+/* Node graph of m: adj[adjp[v] .. adjp[v+1]) = the nodes sharing a tet with v (v included).
+   Allocates *adjp (n + 1) and *adj; mark is workspace (n). */
+static amps_status amps__node_graph(amps_ctx *ctx, const char *fn, const amps_mesh *m, amps_int *mark,
+                                    amps_int **adjp_out, amps_int **adj_out) {
+    amps_int n = m->nnode, v, j, w, k, *adjp, *adj = NULL;
+    long long cnt = 0;
+    int e, pass;
+    *adjp_out = *adj_out = NULL;
+    adjp = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int)));
+    if (!adjp) return AMPS_ERR_OOM;
+    *adjp_out = adjp;
+    for (pass = 0; pass < 2; pass++) {   /* pass 0 counts, pass 1 fills */
+        for (v = 0; v < n; v++) mark[v] = -1;
+        for (v = 0, cnt = 0; v < n; v++) {
+            const amps_int *lst = m->inc + m->inc_ptr[v];
+            if (pass == 0) adjp[v] = (amps_int)cnt;
+            k = adjp[v];
+            for (j = 0; j < m->inc_len[v]; j++)
+                for (e = 0; e < 4; e++) {
+                    w = m->tet[4 * lst[j] + e];
+                    if (mark[w] == v) continue;
+                    mark[w] = v;
+                    if (pass) adj[k++] = w; else cnt++;
+                }
+            if (cnt > (long long)AMPS__IMAX) return amps__err(ctx, AMPS_ERR_OOM, "%s: node graph too large for the index type", fn);
+        }
+        if (pass == 0) {
+            adjp[n] = (amps_int)cnt;
+            adj = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cnt, sizeof(amps_int)));
+            if (!adj) return AMPS_ERR_OOM;
+            *adj_out = adj;
+        }
+    }
+    return AMPS_OK;
+}
+
+/* Upper-triangular pattern of K over the equations (values zero): visiting equations i in
+   ascending order and appending i to every column c >= i it couples with gives each column its
+   rows in ascending order. cc is workspace (ndof + 1, zero). */
+static amps_csc *amps__assemble_pattern(amps_ctx *ctx, const char *fn, const amps_int *dof, amps_int ndof,
+                                        const amps_int *owner, const amps_int *adjp, const amps_int *adj, amps_int *cc) {
+    amps_int i, j, c, k, v;
+    long long cnt;
+    amps_csc *A = NULL;
+    int e, pass;
+    for (pass = 0; pass < 2; pass++) {   /* pass 0 counts the entries of each column, pass 1 places them */
+        for (i = 0; i < ndof; i++) {
+            if (owner[i] < 0) continue;
+            v = owner[i] / 3;
+            for (j = adjp[v]; j < adjp[v + 1]; j++)
+                for (e = 0; e < 3; e++) {
+                    c = dof[3 * adj[j] + e];
+                    if (c < i) continue;
+                    if (pass) A->i[cc[c]++] = i; else cc[c + 1]++;
+                }
+        }
+        if (pass) break;
+        for (c = 0, cnt = 0; c < ndof; c++) {
+            cnt += cc[c + 1];
+            if (cnt > (long long)AMPS__IMAX) {
+                amps__err(ctx, AMPS_ERR_OOM, "%s: matrix too large for the index type", fn);
+                return NULL;
+            }
+            cc[c + 1] = (amps_int)cnt;
+        }
+        A = amps_csc_alloc(ctx, ndof, ndof, (amps_int)cnt, 1);
+        if (!A) return NULL;
+        memcpy(A->p, cc, sizeof(amps_int) * ((size_t)ndof + 1));
+        for (k = 0; k < (amps_int)cnt; k++) A->x[k] = 0.0;
+    }
+    return A;
+}
+
+/* A += the upper entries (row <= column) of the 12 x 12 element matrix Ke (row-major) on the
+   equations rd (-1: eliminated); the pattern of A holds them. */
+static void amps__csc_add_element(amps_csc *A, const amps_int rd[12], const double *Ke) {
+    int a, b;
+    for (b = 0; b < 12; b++) {
+        amps_int col = rd[b], lo, hi;
+        if (col < 0) continue;
+        for (a = 0; a < 12; a++) {
+            amps_int row = rd[a];
+            if (row < 0 || row > col) continue;
+            lo = A->p[col];
+            hi = A->p[col + 1] - 1;
+            while (lo < hi) {                       /* binary search of row in column col */
+                amps_int mid = lo + (hi - lo) / 2;
+                if (A->i[mid] < row) lo = mid + 1;
+                else hi = mid;
+            }
+            AMPS_ASSERT(A->i[lo] == row);
+            A->x[lo] += Ke[12 * a + b];
+        }
+    }
+}
+
 AMPS_API amps_csc *amps_mesh_assemble(amps_ctx *ctx, const amps_mesh *m, const amps_int *dof, amps_int ndof) {
     const char *fn = "amps_mesh_assemble";
-    amps_int *owner = NULL, *mark = NULL, *adjp = NULL, *adj = NULL, *cc = NULL;
-    amps_int n, v, w, t, k, i, j, c;
+    amps_int *owner = NULL, *mark = NULL, *adjp = NULL, *adj = NULL, *cc = NULL, t;
     amps_csc *A = NULL;
-    long long cnt;
-    int e;
     if (!m || !dof || ndof < 0) {
         amps__err(ctx, AMPS_ERR_ARG, "%s: NULL mesh / dof or negative ndof", fn);
         return NULL;
     }
-    n = m->nnode;
     owner = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ndof, sizeof(amps_int)));
     cc = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)ndof + 1, sizeof(amps_int)));
-    mark = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n, sizeof(amps_int)));
-    adjp = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int)));
-    if (!owner || !cc || !mark || !adjp) goto fail;
-    /* owner[i] = the DOF 3v+d numbered i */
-    for (i = 0; i < ndof; i++) owner[i] = -1;
-    for (k = 0; k < 3 * n; k++) {
-        i = dof[k];
-        if (i < -1 || i >= ndof) {
-            amps__err(ctx, AMPS_ERR_INDEX, "%s: dof[%lld] = %lld out of range [-1, %lld)", fn, (long long)k, (long long)i, (long long)ndof);
-            goto fail;
-        }
-        if (i < 0) continue;
-        if (owner[i] >= 0) {
-            amps__err(ctx, AMPS_ERR_ARG, "%s: equation %lld used by dof[%lld] and dof[%lld]", fn, (long long)i, (long long)owner[i],
-                      (long long)k);
-            goto fail;
-        }
-        owner[i] = k;
-    }
-    /* node graph: adj(v) = nodes sharing a tet with v (v included) */
-    for (v = 0; v < n; v++) mark[v] = -1;
-    for (v = 0, cnt = 0; v < n; v++) {
-        const amps_int *lst = m->inc + m->inc_ptr[v];
-        adjp[v] = (amps_int)cnt;
-        for (j = 0; j < m->inc_len[v]; j++)
-            for (e = 0; e < 4; e++) {
-                w = m->tet[4 * lst[j] + e];
-                if (mark[w] != v) {
-                    mark[w] = v;
-                    cnt++;
-                }
-            }
-        if (cnt > (long long)AMPS__IMAX) {
-            amps__err(ctx, AMPS_ERR_OOM, "%s: node graph too large for the index type", fn);
-            goto fail;
-        }
-    }
-    adjp[n] = (amps_int)cnt;
-    adj = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cnt, sizeof(amps_int)));
-    if (!adj) goto fail;
-    for (v = 0; v < n; v++) mark[v] = -1;
-    for (v = 0; v < n; v++) {
-        const amps_int *lst = m->inc + m->inc_ptr[v];
-        k = adjp[v];
-        for (j = 0; j < m->inc_len[v]; j++)
-            for (e = 0; e < 4; e++) {
-                w = m->tet[4 * lst[j] + e];
-                if (mark[w] != v) {
-                    mark[w] = v;
-                    adj[k++] = w;
-                }
-            }
-    }
-    /* pattern: visiting equations i in ascending order and appending i to every column c >= i it
-       couples with gives each column its rows in ascending order */
-    for (i = 0; i < ndof; i++) {
-        if (owner[i] < 0) continue;
-        v = owner[i] / 3;
-        for (j = adjp[v]; j < adjp[v + 1]; j++)
-            for (e = 0; e < 3; e++) {
-                c = dof[3 * adj[j] + e];
-                if (c >= i) cc[c + 1]++;
-            }
-    }
-    for (c = 0, cnt = 0; c < ndof; c++) {
-        cnt += cc[c + 1];
-        if (cnt > (long long)AMPS__IMAX) {
-            amps__err(ctx, AMPS_ERR_OOM, "%s: matrix too large for the index type", fn);
-            goto fail;
-        }
-        cc[c + 1] = (amps_int)cnt;
-    }
-    A = amps_csc_alloc(ctx, ndof, ndof, (amps_int)cnt, 1);
-    if (!A) goto fail;
-    memcpy(A->p, cc, sizeof(amps_int) * ((size_t)ndof + 1));
-    for (i = 0; i < ndof; i++) {
-        if (owner[i] < 0) continue;
-        v = owner[i] / 3;
-        for (j = adjp[v]; j < adjp[v + 1]; j++)
-            for (e = 0; e < 3; e++) {
-                c = dof[3 * adj[j] + e];
-                if (c >= i) A->i[cc[c]++] = i;
-            }
-    }
-    for (k = 0; k < (amps_int)cnt; k++) A->x[k] = 0.0;
-    /* values: scatter the upper entries (r <= c) of every element matrix */
-    for (t = 0; t < m->ntet; t++) {
+    mark = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m->nnode, sizeof(amps_int)));
+    if (owner && cc && mark && amps__dof_owner(ctx, fn, m->nnode, dof, ndof, owner) == AMPS_OK &&
+        amps__node_graph(ctx, fn, m, mark, &adjp, &adj) == AMPS_OK)
+        A = amps__assemble_pattern(ctx, fn, dof, ndof, owner, adjp, adj, cc);
+    for (t = 0; A && t < m->ntet; t++) {                  /* values: every element matrix */
         double Ke[144];
-        int a, b;
         amps_int rd[12];
+        int a;
         amps_mesh_tet_stiffness(m, t, Ke);
         for (a = 0; a < 12; a++) rd[a] = dof[3 * m->tet[4 * t + a / 3] + a % 3];
-        for (b = 0; b < 12; b++) {
-            amps_int col = rd[b], lo, hi;
-            if (col < 0) continue;
-            for (a = 0; a < 12; a++) {
-                amps_int row = rd[a];
-                if (row < 0 || row > col) continue;
-                lo = A->p[col];
-                hi = A->p[col + 1] - 1;
-                while (lo < hi) {
-                    amps_int mid = lo + (hi - lo) / 2;
-                    if (A->i[mid] < row) lo = mid + 1;
-                    else hi = mid;
-                }
-                AMPS_ASSERT(A->i[lo] == row);
-                A->x[lo] += Ke[12 * a + b];
-            }
-        }
+        amps__csc_add_element(A, rd, Ke);
     }
     amps__free(ctx, owner);
     amps__free(ctx, cc);
@@ -7444,13 +7458,6 @@ AMPS_API amps_csc *amps_mesh_assemble(amps_ctx *ctx, const amps_mesh *m, const a
     amps__free(ctx, adjp);
     amps__free(ctx, adj);
     return A;
-fail:
-    amps__free(ctx, owner);
-    amps__free(ctx, cc);
-    amps__free(ctx, mark);
-    amps__free(ctx, adjp);
-    amps__free(ctx, adj);
-    return NULL;
 }
 
 /* Sign test of amps_mesh_cut: (centroid(t) - p) . nrm in the reference configuration. */
