@@ -1094,53 +1094,37 @@ AMPS_API amps_status amps_csc_check(amps_ctx *ctx, const amps_csc *A, amps_stype
     return AMPS_OK;
 }
 
-AMPS_API amps_csc *amps_csc_from_triplets(amps_ctx *ctx, amps_int n, amps_int nz, const amps_int *ti,
-                                          const amps_int *tj, const double *tx, amps_stype stype) {
-    amps_int k, m = 0, j, r, p, q, nnz;
-    amps_int *Tp = NULL, *Tj = NULL, *Cp = NULL, *Ci = NULL, *w = NULL;
-    double *Tx = NULL, *Cx = NULL;
-    amps_csc *A = NULL;
-    if (n < 0 || nz < 0) {
-        amps__err(ctx, AMPS_ERR_ARG, "amps_csc_from_triplets: negative size (n %lld, nz %lld)", (long long)n, (long long)nz);
-        return NULL;
-    }
-    if (stype != AMPS_LOWER && stype != AMPS_FULL && stype != AMPS_UPPER) {
-        amps__err(ctx, AMPS_ERR_ARG, "amps_csc_from_triplets: invalid stype %d", (int)stype);
-        return NULL;
-    }
-    if (nz > 0 && (!ti || !tj || !tx)) {
-        amps__err(ctx, AMPS_ERR_ARG, "amps_csc_from_triplets: NULL triplet array");
-        return NULL;
-    }
+/* Checks the triplets of amps_csc_from_triplets; *m = the entries they give in the stype part
+   (off-diagonal ones twice for AMPS_FULL). */
+static amps_status amps__triplets_check(amps_ctx *ctx, amps_int n, amps_int nz, const amps_int *ti, const amps_int *tj,
+                                        const double *tx, amps_stype stype, amps_int *m) {
+    const char *fn = "amps_csc_from_triplets";
+    amps_int k;
+    *m = 0;
+    if (n < 0 || nz < 0)
+        return amps__err(ctx, AMPS_ERR_ARG, "%s: negative size (n %lld, nz %lld)", fn, (long long)n, (long long)nz);
+    if (stype != AMPS_LOWER && stype != AMPS_FULL && stype != AMPS_UPPER)
+        return amps__err(ctx, AMPS_ERR_ARG, "%s: invalid stype %d", fn, (int)stype);
+    if (nz > 0 && (!ti || !tj || !tx)) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL triplet array", fn);
     for (k = 0; k < nz; k++) {
-        if (ti[k] < 0 || ti[k] >= n || tj[k] < 0 || tj[k] >= n) {
-            amps__err(ctx, AMPS_ERR_INDEX, "amps_csc_from_triplets: triplet %lld: (row %lld, column %lld) out of range [0,%lld)",
-                      (long long)k, (long long)ti[k], (long long)tj[k], (long long)n);
-            return NULL;
-        }
-        if (!amps__isfinite(tx[k])) {
-            amps__err(ctx, AMPS_ERR_VALUE, "amps_csc_from_triplets: triplet %lld: (row %lld, column %lld) non-finite value",
-                      (long long)k, (long long)ti[k], (long long)tj[k]);
-            return NULL;
-        }
-        m += (stype == AMPS_FULL && ti[k] != tj[k]) ? 2 : 1;
-        if (m < 0 || m > AMPS__IMAX / 2) {
-            amps__err(ctx, AMPS_ERR_ARG, "amps_csc_from_triplets: too many entries for the index type");
-            return NULL;
-        }
+        if (ti[k] < 0 || ti[k] >= n || tj[k] < 0 || tj[k] >= n)
+            return amps__err(ctx, AMPS_ERR_INDEX, "%s: triplet %lld: (row %lld, column %lld) out of range [0,%lld)", fn,
+                             (long long)k, (long long)ti[k], (long long)tj[k], (long long)n);
+        if (!amps__isfinite(tx[k]))
+            return amps__err(ctx, AMPS_ERR_VALUE, "%s: triplet %lld: (row %lld, column %lld) non-finite value", fn,
+                             (long long)k, (long long)ti[k], (long long)tj[k]);
+        *m += (stype == AMPS_FULL && ti[k] != tj[k]) ? 2 : 1;
+        if (*m < 0 || *m > AMPS__IMAX / 2)
+            return amps__err(ctx, AMPS_ERR_ARG, "%s: too many entries for the index type", fn);
     }
-    /* bucket by row, then by column (stable): columns come out with ascending rows */
-    Tp = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)n + 1, sizeof(amps_int)));
-    Cp = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)n + 1, sizeof(amps_int)));
-    w = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int)));
-    Tj = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m, sizeof(amps_int)));
-    Tx = AMPS__CAST(double *, amps__malloc(ctx, (size_t)m, sizeof(double)));
-    Ci = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m, sizeof(amps_int)));
-    Cx = AMPS__CAST(double *, amps__malloc(ctx, (size_t)m, sizeof(double)));
-    if (!Tp || !Cp || !w || !Tj || !Tx || !Ci || !Cx) {
-        amps__err(ctx, AMPS_ERR_OOM, "amps_csc_from_triplets: out of memory (n %lld, nz %lld)", (long long)n, (long long)nz);
-        goto done;
-    }
+    return AMPS_OK;
+}
+
+/* The m stype-part entries of the triplets bucketed by row: row r holds (Tj, Tx)[Tp[r] .. Tp[r+1]),
+   in triplet order. Tp has n + 1 entries (zero on entry), w n + 1 of workspace. */
+static void amps__triplets_by_row(amps_int n, amps_int nz, const amps_int *ti, const amps_int *tj, const double *tx,
+                                  amps_stype stype, amps_int *Tp, amps_int *Tj, double *Tx, amps_int *w) {
+    amps_int k, r, p, q;
     for (k = 0; k < nz; k++) {
         amps_int a = ti[k], b = tj[k], lo = a < b ? a : b, hi = a < b ? b : a;
         if (stype == AMPS_UPPER) Tp[lo]++;
@@ -1158,13 +1142,13 @@ AMPS_API amps_csc *amps_csc_from_triplets(amps_ctx *ctx, amps_int n, amps_int nz
             if (a != b) { q = w[b]++; Tj[q] = a; Tx[q] = tx[k]; }
         }
     }
-    for (q = 0; q < m; q++) Cp[Tj[q]]++;
-    for (j = 0, p = 0; j < n; j++) { q = Cp[j]; Cp[j] = p; w[j] = p; p += q; }
-    Cp[n] = p;
-    for (r = 0; r < n; r++)
-        for (q = Tp[r]; q < Tp[r + 1]; q++) { p = w[Tj[q]]++; Ci[p] = r; Cx[p] = Tx[q]; }
-    /* sum duplicates in place */
-    for (j = 0, nnz = 0; j < n; j++) {
+}
+
+/* Sums the duplicates of each column of (Cp, Ci, Cx) in place (rows ascending, duplicates
+   adjacent); returns the number of entries left. */
+static amps_int amps__csc_sum_dups(amps_int n, amps_int *Cp, amps_int *Ci, double *Cx) {
+    amps_int j, q, nnz = 0;
+    for (j = 0; j < n; j++) {
         amps_int start = nnz;
         for (q = Cp[j]; q < Cp[j + 1]; q++) {
             if (nnz > start && Ci[nnz - 1] == Ci[q]) Cx[nnz - 1] += Cx[q];
@@ -1173,6 +1157,35 @@ AMPS_API amps_csc *amps_csc_from_triplets(amps_ctx *ctx, amps_int n, amps_int nz
         Cp[j] = start;
     }
     Cp[n] = nnz;
+    return nnz;
+}
+
+AMPS_API amps_csc *amps_csc_from_triplets(amps_ctx *ctx, amps_int n, amps_int nz, const amps_int *ti,
+                                          const amps_int *tj, const double *tx, amps_stype stype) {
+    amps_int m = 0, j, r, p, q, nnz;
+    amps_int *Tp = NULL, *Tj = NULL, *Cp = NULL, *Ci = NULL, *w = NULL;
+    double *Tx = NULL, *Cx = NULL;
+    amps_csc *A = NULL;
+    if (amps__triplets_check(ctx, n, nz, ti, tj, tx, stype, &m) != AMPS_OK) return NULL;
+    /* bucket by row, then by column (stable): columns come out with ascending rows */
+    Tp = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)n + 1, sizeof(amps_int)));
+    Cp = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)n + 1, sizeof(amps_int)));
+    w = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int)));
+    Tj = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m, sizeof(amps_int)));
+    Tx = AMPS__CAST(double *, amps__malloc(ctx, (size_t)m, sizeof(double)));
+    Ci = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m, sizeof(amps_int)));
+    Cx = AMPS__CAST(double *, amps__malloc(ctx, (size_t)m, sizeof(double)));
+    if (!Tp || !Cp || !w || !Tj || !Tx || !Ci || !Cx) {
+        amps__err(ctx, AMPS_ERR_OOM, "amps_csc_from_triplets: out of memory (n %lld, nz %lld)", (long long)n, (long long)nz);
+        goto done;
+    }
+    amps__triplets_by_row(n, nz, ti, tj, tx, stype, Tp, Tj, Tx, w);
+    for (q = 0; q < m; q++) Cp[Tj[q]]++;
+    for (j = 0, p = 0; j < n; j++) { q = Cp[j]; Cp[j] = p; w[j] = p; p += q; }
+    Cp[n] = p;
+    for (r = 0; r < n; r++)
+        for (q = Tp[r]; q < Tp[r + 1]; q++) { p = w[Tj[q]]++; Ci[p] = r; Cx[p] = Tx[q]; }
+    nnz = amps__csc_sum_dups(n, Cp, Ci, Cx);
     /* hand the arrays over, shrunk to nnz */
     {
         void *ti2 = Ci, *tx2 = Cx;
