@@ -4051,8 +4051,10 @@ static amps_int amps__run_start(const amps_factor *F, const amps_int *closure, a
 }
 
 /* amps_ltsolve_closure on nthr threads, same result bit for bit, as amps__ltsolve_par: the runs of
-   the closure in top groups first (descending), the others listed in iw (room for cnt) and
-   solved per subtree, one subtree per thread at a time. */
+   the closure in top groups first (descending), the others listed in iw (room for cnt) by their
+   first index and solved per subtree, one subtree per thread at a time. The closure is closed
+   under parents and a group is a chain, so a run ends at its group's last column. Each thread
+   scans the list: O(nsub x runs) index work beside the solve. */
 static void amps__ltsolve_closure_par(const amps_factor *F, amps_int cnt, const amps_int *closure, double *y, int nthr,
                                       amps_int *iw) {
     amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
@@ -4065,7 +4067,7 @@ static void amps__ltsolve_closure_par(const amps_factor *F, amps_int cnt, const 
         P->touch += (double)(F->Lp[ke + 1] - F->Lp[closure[j]]);
 #endif
         if (P->gsub[P->cgrp[ke]] < 0) amps__bwd_par(F, closure[j], ke, y, nthr);
-        else iw[nr++] = k;
+        else iw[nr++] = closure[j];
     }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) num_threads(nthr)
@@ -4073,8 +4075,8 @@ static void amps__ltsolve_closure_par(const amps_factor *F, amps_int cnt, const 
     for (i = 0; i < P->nsub; i++) {
         amps_int r;
         for (r = 0; r < nr; r++) {
-            amps_int kk = iw[r], ke = closure[kk];
-            if (P->gsub[P->cgrp[ke]] == i) amps__bwd(F, closure[amps__run_start(F, closure, kk)], ke, y);
+            amps_int c = iw[r], g = P->cgrp[c];
+            if (P->gsub[g] == i) amps__bwd(F, c, P->gs[g + 1] - 1, y);
         }
     }
 }
