@@ -8479,6 +8479,57 @@ static amps_status amps__lx_count(amps__lex *L, long long n, int mintok, const c
     return AMPS_OK;
 }
 
+/* Reads a count named what (e.g. "point count") of n records named unit (e.g. "point") of at
+   least mintok tokens each, checked by amps__lx_count. */
+static amps_status amps__lx_nrec(amps__lex *L, int cross, long long *n, const char *what, const char *unit, int mintok) {
+    amps_status s = amps__lx_int(L, cross, n, what);
+    return s ? s : amps__lx_count(L, *n, mintok, unit);
+}
+
+/* Optional integer on the current line: 0 if the line has no more tokens, 1 if it was read
+   into *v, -1 if the token is not an integer (it stays the last token). */
+static int amps__lx_optint(amps__lex *L, long long *v) {
+    if (!amps__lx_tok(L, 0)) return 0;
+    return amps__lx_ll(L, v) ? 1 : -1;
+}
+
+/* Records "<msg>'<last token>'" at the token's line; returns AMPS_ERR_PARSE. */
+static amps_status amps__lx_found(amps__lex *L, const char *msg) {
+    char sh[40];
+    return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "%s'%s'", msg, amps__lx_show(L, sh));
+}
+
+/* Start of record k of n, named units, on a later line: error "unexpected end of file: k of n
+   units read" if the file ends first. */
+static amps_status amps__lx_rec(amps__lex *L, long long k, long long n, const char *units) {
+    if (amps__lx_skip(L, 1)) return AMPS_OK;
+    return amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "unexpected end of file: %lld of %lld %s read", k, n, units);
+}
+
+/* End of a file of n units: error if any token follows. */
+static amps_status amps__lx_trail(amps__lex *L, long long n, const char *units) {
+    char sh[40];
+    if (!amps__lx_tok(L, 1)) return AMPS_OK;
+    return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "unexpected data '%s' after %lld %s", amps__lx_show(L, sh), n, units);
+}
+
+/* Reads an index named what, in [base, base + n - 1], into *out as v - base. */
+static amps_status amps__lx_index(amps__lex *L, int cross, const char *what, long long base, long long n, amps_int *out) {
+    long long v;
+    amps_status s = amps__lx_int(L, cross, &v, what);
+    if (s) return s;
+    if (v < base || v - base >= n)
+        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "%s %lld out of range [%lld, %lld]", what, v, base, base + n - 1);
+    *out = (amps_int)(v - base);
+    return AMPS_OK;
+}
+
+/* One tetrahedron as a reader parsed it: its 4 nodes (0-based) and the line it starts on. */
+typedef struct amps__tetrec {
+    amps_int v[4];
+    long long line;
+} amps__tetrec;
+
 /* Growable list of tets with the line each came from. */
 typedef struct amps__tetbuf {
     amps_int *tet;
@@ -8500,7 +8551,7 @@ static amps_status amps__tb_reserve(amps_ctx *ctx, amps__tetbuf *b, amps_int cap
     return AMPS_OK;
 }
 
-static amps_status amps__tb_push(amps_ctx *ctx, amps__tetbuf *b, const amps_int tv[4], long long line) {
+static amps_status amps__tb_push(amps_ctx *ctx, amps__tetbuf *b, const amps__tetrec *r) {
     if (b->n == b->cap) {
         amps_int cap = b->cap < 64 ? 64 : b->cap + b->cap / 2;
         amps_status s;
@@ -8509,8 +8560,8 @@ static amps_status amps__tb_push(amps_ctx *ctx, amps__tetbuf *b, const amps_int 
         if (s) return s;
         if (b->n == b->cap) return amps__err(ctx, AMPS_ERR_OOM, "too many tetrahedra for the index type");
     }
-    memcpy(b->tet + 4 * (size_t)b->n, tv, 4 * sizeof(amps_int));
-    b->line[b->n++] = line;
+    memcpy(b->tet + 4 * (size_t)b->n, r->v, 4 * sizeof(amps_int));
+    b->line[b->n++] = r->line;
     return AMPS_OK;
 }
 
@@ -8519,128 +8570,144 @@ static void amps__tb_free(amps_ctx *ctx, amps__tetbuf *b) {
     amps__free(ctx, b->line);
 }
 
+/* State of a mesh reader: the lexer, nn points (3 coordinates each, file order) and the tets. */
+typedef struct amps__rd {
+    amps__lex L;
+    double *xyz;
+    amps_int nn;
+    amps__tetbuf tb;
+} amps__rd;
+
+static void amps__rd_init(amps__rd *R, amps_ctx *ctx, const char *buf, size_t len, const char *name, int comment) {
+    memset(R, 0, sizeof(*R));
+    amps__lx_init(&R->L, ctx, buf, len, name, comment);
+}
+
+/* Allocates R->xyz for n points (a count checked by amps__lx_count). */
+static amps_status amps__rd_points(amps__rd *R, long long n) {
+    R->nn = (amps_int)n;
+    R->xyz = AMPS__CAST(double *, amps__malloc(R->L.ctx, 3 * (size_t)n, sizeof(double)));
+    return R->xyz ? AMPS_OK : AMPS_ERR_OOM;
+}
+
 /* Builds the mesh; a degenerate tet is reported as "file:line: ...". */
-static amps_mesh *amps__lx_mesh(amps__lex *L, amps_int nn, const double *xyz, const amps__tetbuf *tb) {
+static amps_mesh *amps__rd_mesh(amps__rd *R) {
+    amps__lex *L = &R->L;
     amps_int bad = -1;
     amps_mesh *m;
-    if (tb->n == 0) {
+    if (R->tb.n == 0) {
         amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no tetrahedra in the file");
         return NULL;
     }
-    m = amps__mesh_new(L->ctx, "mesh", nn, xyz, tb->n, tb->tet, &bad);
+    m = amps__mesh_new(L->ctx, "mesh", R->nn, R->xyz, R->tb.n, R->tb.tet, &bad);
     if (!m && bad >= 0 && L->ctx && L->ctx->status == AMPS_ERR_MESH) {
-        const amps_int *tv = tb->tet + 4 * (size_t)bad;
-        amps__lx_err(L, tb->line[bad], AMPS_ERR_MESH, "degenerate tetrahedron (file nodes %lld %lld %lld %lld, 0-based)",
+        const amps_int *tv = R->tb.tet + 4 * (size_t)bad;
+        amps__lx_err(L, R->tb.line[bad], AMPS_ERR_MESH, "degenerate tetrahedron (file nodes %lld %lld %lld %lld, 0-based)",
                      (long long)tv[0], (long long)tv[1], (long long)tv[2], (long long)tv[3]);
     }
     return m;
 }
 
+/* The mesh if s is AMPS_OK (else NULL, the error already recorded); frees the reader's arrays. */
+static amps_mesh *amps__rd_end(amps__rd *R, amps_status s) {
+    amps_mesh *m = s ? NULL : amps__rd_mesh(R);
+    amps__free(R->L.ctx, R->xyz);
+    amps__tb_free(R->L.ctx, &R->tb);
+    return m;
+}
+
 /* ---- TetGen .node / .ele ---- */
+
+/* .node header "<#points> [<dimension> [<#attributes> [<#boundary markers>]]]": at least one
+   point, dimension 3, marker flag 0 or 1. Moves to the next line. */
+static amps_status amps__tetgen_node_head(amps__lex *L, long long *np) {
+    long long dim = 3, nat = 0, nbm = 0;
+    int r;
+    amps_status s = amps__lx_nrec(L, 1, np, "point count", "point", 4);
+    if (s) return s;
+    if (*np == 0) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "the file declares no points");
+    if ((r = amps__lx_optint(L, &dim)) != 0 && (r < 0 || dim != 3)) return amps__lx_found(L, "dimension must be 3, found ");
+    if ((r = amps__lx_optint(L, &nat)) != 0 && (r < 0 || nat < 0)) return amps__lx_found(L, "invalid attribute count ");
+    if ((r = amps__lx_optint(L, &nbm)) != 0 && (r < 0 || nbm < 0 || nbm > 1))
+        return amps__lx_found(L, "boundary marker flag must be 0 or 1, found ");
+    amps__lx_eol(L);
+    return AMPS_OK;
+}
+
+/* The np point lines "<number> x y z [attributes] [marker]" of .node, numbered consecutively
+   from the first number (0 or 1: the index base, into *base); nothing may follow. Fills R->xyz. */
+static amps_status amps__tetgen_points(amps__rd *R, long long np, long long *base) {
+    amps__lex *L = &R->L;
+    long long k, idx = 0;
+    amps_status s = amps__rd_points(R, np);
+    for (k = 0; !s && k < np; k++) {
+        s = amps__lx_rec(L, k, np, "points");
+        if (!s) s = amps__lx_int(L, 1, &idx, "point number");
+        if (s) return s;
+        if (k == 0 && idx != 0 && idx != 1)
+            return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "first point number must be 0 or 1, found %lld", idx);
+        if (k == 0) *base = idx;
+        else if (idx != *base + k)
+            return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "point number %lld out of sequence (expected %lld)", idx, *base + k);
+        s = amps__lx_xyz(L, 0, R->xyz + 3 * k);
+        if (!s) amps__lx_eol(L); /* attributes and boundary marker */
+    }
+    return s ? s : amps__lx_trail(L, np, "points");
+}
+
+/* .ele header "<#tets> [<nodes per tet> [<#attributes>]]": 4 or 10 nodes per tet (*nper and
+   *nat keep their values if absent). Moves to the next line. */
+static amps_status amps__tetgen_ele_head(amps__lex *L, long long *ne, long long *nper, long long *nat) {
+    int r;
+    amps_status s = amps__lx_nrec(L, 1, ne, "tetrahedron count", "tetrahedron", 5);
+    if (s) return s;
+    if ((r = amps__lx_optint(L, nper)) != 0 && (r < 0 || (*nper != 4 && *nper != 10)))
+        return amps__lx_found(L, "nodes per tetrahedron must be 4 or 10, found ");
+    if ((r = amps__lx_optint(L, nat)) != 0 && (r < 0 || *nat < 0)) return amps__lx_found(L, "invalid attribute count ");
+    amps__lx_eol(L);
+    return AMPS_OK;
+}
+
+/* One .ele line "<number> <nper node indices in [base, base + np - 1]> [attributes]": the first
+   4 nodes (0-based) and the line into r. Moves to the next line. */
+static amps_status amps__tetgen_tet(amps__lex *L, long long nper, long long base, long long np, amps__tetrec *r) {
+    long long idx, q;
+    amps_int extra;
+    amps_status s = amps__lx_int(L, 1, &idx, "tetrahedron number");
+    r->line = L->tline;
+    for (q = 0; !s && q < nper; q++) s = amps__lx_index(L, 0, "node index", base, np, q < 4 ? r->v + q : &extra);
+    if (!s) amps__lx_eol(L); /* attributes */
+    return s;
+}
+
+/* The ne tet lines of .ele, node indices from base; nothing may follow. Fills R->tb. */
+static amps_status amps__tetgen_tets(amps__rd *R, long long ne, long long nper, long long base) {
+    amps__lex *L = &R->L;
+    amps__tetrec r;
+    long long k;
+    amps_status s = amps__tb_reserve(L->ctx, &R->tb, (amps_int)(ne > 0 ? ne : 1));
+    for (k = 0; !s && k < ne; k++) {
+        s = amps__lx_rec(L, k, ne, "tetrahedra");
+        if (!s) s = amps__tetgen_tet(L, nper, base, R->nn, &r);
+        if (!s) s = amps__tb_push(L->ctx, &R->tb, &r);
+    }
+    return s ? s : amps__lx_trail(L, ne, "tetrahedra");
+}
 
 AMPS_API amps_mesh *amps_mesh_read_tetgen_mem(amps_ctx *ctx, const char *node_buf, size_t node_len, const char *node_name,
                                               const char *ele_buf, size_t ele_len, const char *ele_name) {
-    amps__lex L;
-    amps__tetbuf tb;
-    double *xyz = NULL;
-    amps_mesh *m = NULL;
-    long long np = 0, dim = 3, nat = 0, nbm = 0, base = 0, idx, ne, nper = 4, k, q, v;
-    amps_int tv[4];
-    char sh[40];
-    memset(&tb, 0, sizeof(tb));
-    amps__lx_init(&L, ctx, node_buf, node_len, node_name ? node_name : "<node>", '#');
-    /* header: <#points> [<dimension> [<#attributes> [<#boundary markers>]]] */
-    if (amps__lx_int(&L, 1, &np, "point count")) goto done;
-    if (amps__lx_count(&L, np, 4, "point")) goto done;
-    if (np == 0) {
-        amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "the file declares no points");
-        goto done;
+    amps__rd R;
+    long long np = 0, base = 0, ne = 0, nper = 4, nat = 0;
+    amps_status s;
+    amps__rd_init(&R, ctx, node_buf, node_len, node_name ? node_name : "<node>", '#');
+    s = amps__tetgen_node_head(&R.L, &np);
+    if (!s) s = amps__tetgen_points(&R, np, &base);
+    if (!s) {
+        amps__lx_init(&R.L, ctx, ele_buf, ele_len, ele_name ? ele_name : "<ele>", '#');
+        s = amps__tetgen_ele_head(&R.L, &ne, &nper, &nat);
     }
-    if (amps__lx_tok(&L, 0)) {
-        if (!amps__lx_ll(&L, &dim) || dim != 3) {
-            amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "dimension must be 3, found '%s'", amps__lx_show(&L, sh));
-            goto done;
-        }
-        if (amps__lx_tok(&L, 0) && (!amps__lx_ll(&L, &nat) || nat < 0)) {
-            amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "invalid attribute count '%s'", amps__lx_show(&L, sh));
-            goto done;
-        }
-        if (amps__lx_tok(&L, 0) && (!amps__lx_ll(&L, &nbm) || nbm < 0 || nbm > 1)) {
-            amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "boundary marker flag must be 0 or 1, found '%s'", amps__lx_show(&L, sh));
-            goto done;
-        }
-    }
-    amps__lx_eol(&L);
-    xyz = AMPS__CAST(double *, amps__malloc(ctx, 3 * (size_t)np, sizeof(double)));
-    if (!xyz) goto done;
-    for (k = 0; k < np; k++) {
-        if (!amps__lx_skip(&L, 1)) {
-            amps__lx_err(&L, amps__lx_here(&L), AMPS_ERR_PARSE, "unexpected end of file: %lld of %lld points read", k, np);
-            goto done;
-        }
-        if (amps__lx_int(&L, 1, &idx, "point number")) goto done;
-        if (k == 0) {
-            if (idx != 0 && idx != 1) {
-                amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "first point number must be 0 or 1, found %lld", idx);
-                goto done;
-            }
-            base = idx;
-        } else if (idx != base + k) {
-            amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "point number %lld out of sequence (expected %lld)", idx, base + k);
-            goto done;
-        }
-        if (amps__lx_xyz(&L, 0, xyz + 3 * k)) goto done;
-        amps__lx_eol(&L); /* attributes and boundary marker */
-    }
-    if (amps__lx_tok(&L, 1)) {
-        amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "unexpected data '%s' after %lld points", amps__lx_show(&L, sh), np);
-        goto done;
-    }
-
-    amps__lx_init(&L, ctx, ele_buf, ele_len, ele_name ? ele_name : "<ele>", '#');
-    /* header: <#tets> [<nodes per tet> [<#attributes>]] */
-    if (amps__lx_int(&L, 1, &ne, "tetrahedron count")) goto done;
-    if (amps__lx_count(&L, ne, 5, "tetrahedron")) goto done;
-    if (amps__lx_tok(&L, 0)) {
-        if (!amps__lx_ll(&L, &nper) || (nper != 4 && nper != 10)) {
-            amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "nodes per tetrahedron must be 4 or 10, found '%s'", amps__lx_show(&L, sh));
-            goto done;
-        }
-        if (amps__lx_tok(&L, 0) && (!amps__lx_ll(&L, &nat) || nat < 0)) {
-            amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "invalid attribute count '%s'", amps__lx_show(&L, sh));
-            goto done;
-        }
-    }
-    amps__lx_eol(&L);
-    if (amps__tb_reserve(ctx, &tb, (amps_int)(ne > 0 ? ne : 1))) goto done;
-    for (k = 0; k < ne; k++) {
-        long long line;
-        if (!amps__lx_skip(&L, 1)) {
-            amps__lx_err(&L, amps__lx_here(&L), AMPS_ERR_PARSE, "unexpected end of file: %lld of %lld tetrahedra read", k, ne);
-            goto done;
-        }
-        if (amps__lx_int(&L, 1, &idx, "tetrahedron number")) goto done;
-        line = L.tline;
-        for (q = 0; q < nper; q++) {
-            if (amps__lx_int(&L, 0, &v, "node index")) goto done;
-            if (v < base || v - base >= np) {
-                amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "node index %lld out of range [%lld, %lld]", v, base, base + np - 1);
-                goto done;
-            }
-            if (q < 4) tv[q] = (amps_int)(v - base);
-        }
-        amps__lx_eol(&L); /* attributes */
-        if (amps__tb_push(ctx, &tb, tv, line)) goto done;
-    }
-    if (amps__lx_tok(&L, 1)) {
-        amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "unexpected data '%s' after %lld tetrahedra", amps__lx_show(&L, sh), ne);
-        goto done;
-    }
-    m = amps__lx_mesh(&L, (amps_int)np, xyz, &tb);
-done:
-    amps__free(ctx, xyz);
-    amps__tb_free(ctx, &tb);
-    return m;
+    if (!s) s = amps__tetgen_tets(&R, ne, nper, base);
+    return amps__rd_end(&R, s);
 }
 
 /* ---- Gmsh .msh (ASCII 2.x, 4.1) ---- */
@@ -8654,6 +8721,22 @@ static int amps__gtag_cmp(const void *a, const void *b) {
     const amps__gtag *x = (const amps__gtag *)a, *y = (const amps__gtag *)b;
     return x->tag < y->tag ? -1 : x->tag > y->tag ? 1 : (x->line < y->line ? -1 : x->line > y->line);
 }
+
+/* State of the Gmsh reader. */
+typedef struct amps__gmsh {
+    amps__rd R;
+    amps__gtag *tags; /* R.nn node tags with file position and line; sorted by tag after $Nodes */
+    int version;      /* 2 (2.x) or 4 (4.1) after $MeshFormat, else 0 */
+    int have_nodes, have_elems;
+    char sec[24];     /* name of the current section, without '$' */
+} amps__gmsh;
+
+/* Header of a 4.1 entity block. */
+typedef struct amps__gblk {
+    long long dim, tag; /* the entity */
+    long long kind;     /* parametric flag ($Nodes) or element type ($Elements) */
+    long long n;        /* nodes or elements in the block */
+} amps__gblk;
 
 /* Reads a node tag and maps it to its 0-based file position. */
 static amps_status amps__gmsh_node(amps__lex *L, const amps__gtag *tags, amps_int nn, amps_int *out) {
@@ -8693,228 +8776,249 @@ static amps_status amps__gmsh_end(amps__lex *L, const char *sec, const char *aft
     return AMPS_OK;
 }
 
-/* Head of a $Nodes / $Elements section: rejects a second one (*seen), then reads the entity
-   block count (version 4) and the total count. Nonzero on error (reported in L). */
-static int amps__gmsh_head(amps__lex *L, int version, int *seen, const char *sec, const char *what,
-                           long long *nblk, long long *total) {
-    if (*seen) {
-        amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "duplicate %s section", sec);
-        return 1;
+/* Skips the unknown section $<sec>: lines up to the line that starts with $End<sec>. */
+static amps_status amps__gmsh_skip(amps__lex *L, const char *sec) {
+    char want[32];
+    long long start = L->tline;
+    amps__gmsh_want(want, sec);
+    for (;;) {
+        if (!amps__lx_tok(L, 1)) return amps__lx_err(L, start, AMPS_ERR_PARSE, "section $%s is not closed by %s", sec, want);
+        amps__lx_eol(L);
+        if (amps__lx_is(L, want, 0)) return AMPS_OK;
     }
+}
+
+/* $MeshFormat body "version file-type data-size" and $EndMeshFormat: G->version from a
+   version 2.x or 4.1; file type 0 (ASCII) only. */
+static amps_status amps__gmsh_format(amps__gmsh *G) {
+    amps__lex *L = &G->R.L;
+    double ver;
+    long long a;
+    char sh[40];
+    amps_status s;
+    if (G->version) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "duplicate $MeshFormat");
+    s = amps__lx_num(L, 1, &ver, "format version");
+    if (s) return s;
+    if (ver >= 2.0 && ver < 3.0) G->version = 2;
+    else if (ver == 4.1) G->version = 4;
+    else return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "unsupported .msh version %s (readable: 2.x, 4.1)", amps__lx_show(L, sh));
+    s = amps__lx_int(L, 0, &a, "file type");
+    if (s) return s;
+    if (a == 1) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "binary .msh files are not supported; save the mesh as ASCII");
+    if (a != 0) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "invalid file type %lld (0 = ASCII)", a);
+    s = amps__lx_int(L, 0, &a, "data size");
+    if (s) return s;
+    amps__lx_eol(L);
+    return amps__gmsh_end(L, "MeshFormat", "");
+}
+
+/* Head line of the $Nodes (elems 0) or $Elements (elems 1) section, which must be the first of
+   its kind: the entity block count *nblk (4.1) and the total count of nodes or elements.
+   Moves to the next line. */
+static amps_status amps__gmsh_head(amps__gmsh *G, int elems, long long *nblk, long long *total) {
+    amps__lex *L = &G->R.L;
+    int *seen = elems ? &G->have_elems : &G->have_nodes;
+    int cross = 1;
+    amps_status s;
+    if (*seen) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "duplicate %s section", elems ? "$Elements" : "$Nodes");
     *seen = 1;
-    if (version == 4) {
-        if (amps__lx_int(L, 1, nblk, "entity block count")) return 1;
-        if (amps__lx_count(L, *nblk, 4, "entity block")) return 1;
-        return amps__lx_int(L, 0, total, what) != 0;
+    if (G->version == 4) {
+        s = amps__lx_nrec(L, 1, nblk, "entity block count", "entity block", 4);
+        if (s) return s;
+        cross = 0;
     }
-    return amps__lx_int(L, 1, total, what) != 0;
+    s = elems ? amps__lx_nrec(L, cross, total, "element count", "element", 2) : amps__lx_nrec(L, cross, total, "node count", "node", 4);
+    if (!s) amps__lx_eol(L);
+    return s;
+}
+
+/* 4.1 entity block header "entityDim entityTag <kind> <count>" in $Nodes (elems 0) or
+   $Elements (elems 1): the count must fit in the total less the got already read. Moves to
+   the next line. */
+static amps_status amps__gmsh_block(amps__lex *L, int elems, long long total, long long got, amps__gblk *h) {
+    const char *unit = elems ? "element" : "node";
+    amps_status s = amps__lx_int(L, 1, &h->dim, "entity dimension");
+    if (!s) s = amps__lx_int(L, 0, &h->tag, "entity tag");
+    if (!s) s = amps__lx_int(L, 0, &h->kind, elems ? "element type" : "parametric flag");
+    if (!s) s = amps__lx_int(L, 0, &h->n, elems ? "block element count" : "block node count");
+    if (s) return s;
+    if (h->n < 0 || h->n > total - got)
+        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "block %s count %lld exceeds the %lld %ss declared", unit, h->n, total, unit);
+    amps__lx_eol(L);
+    return AMPS_OK;
+}
+
+/* Error unless the 4.1 blocks of $Nodes (elems 0) or $Elements (elems 1) held the total. */
+static amps_status amps__gmsh_held(amps__lex *L, int elems, long long total, long long got) {
+    if (got == total) return AMPS_OK;
+    return amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "%s declares %lld %ss, its blocks hold %lld", elems ? "$Elements" : "$Nodes",
+                        total, elems ? "element" : "node", got);
+}
+
+/* Reads the tag of node k (on a later line) into G->tags[k]. */
+static amps_status amps__gmsh_tag(amps__gmsh *G, long long k) {
+    amps__lex *L = &G->R.L;
+    long long a;
+    amps_status s = amps__lx_int(L, 1, &a, "node tag");
+    if (s) return s;
+    G->tags[k].tag = a;
+    G->tags[k].line = L->tline;
+    G->tags[k].idx = (amps_int)k;
+    return AMPS_OK;
+}
+
+/* 2.x node lines "tag x y z". */
+static amps_status amps__gmsh_nodes2(amps__gmsh *G, long long total) {
+    long long k;
+    amps_status s = AMPS_OK;
+    for (k = 0; !s && k < total; k++) {
+        s = amps__gmsh_tag(G, k);
+        if (!s) s = amps__lx_xyz(&G->R.L, 0, G->R.xyz + 3 * k);
+        if (!s) amps__lx_eol(&G->R.L);
+    }
+    return s;
+}
+
+/* 4.1 node blocks: a header, the block's tags one a line, then its coordinates one a line
+   (parametric coordinates ignored); together total nodes. */
+static amps_status amps__gmsh_nodes4(amps__gmsh *G, long long nblk, long long total) {
+    amps__lex *L = &G->R.L;
+    amps__gblk h;
+    long long b, i, got = 0;
+    for (b = 0; b < nblk; b++) {
+        amps_status s = amps__gmsh_block(L, 0, total, got, &h);
+        for (i = 0; !s && i < h.n; i++) {
+            s = amps__gmsh_tag(G, got + i);
+            if (!s) amps__lx_eol(L);
+        }
+        for (i = 0; !s && i < h.n; i++) {
+            s = amps__lx_xyz(L, 1, G->R.xyz + 3 * (got + i));
+            if (!s) amps__lx_eol(L); /* parametric coordinates */
+        }
+        if (s) return s;
+        got += h.n;
+    }
+    return amps__gmsh_held(L, 0, total, got);
+}
+
+/* Sorts G->tags by tag for amps__gmsh_node; error at the later line of a repeated tag. */
+static amps_status amps__gmsh_tagmap(amps__gmsh *G) {
+    amps__gtag *t = G->tags;
+    amps_int k, n = G->R.nn;
+    qsort(t, (size_t)n, sizeof(amps__gtag), amps__gtag_cmp);
+    for (k = 1; k < n; k++)
+        if (t[k].tag == t[k - 1].tag)
+            return amps__lx_err(&G->R.L, t[k].line, AMPS_ERR_PARSE, "duplicate node tag %lld (first on line %lld)", t[k].tag, t[k - 1].line);
+    return AMPS_OK;
+}
+
+/* $Nodes up to $EndNodes: R.xyz in file order and the tag map. */
+static amps_status amps__gmsh_nodes(amps__gmsh *G) {
+    long long nblk = 1, total;
+    amps_status s = amps__gmsh_head(G, 0, &nblk, &total);
+    if (s) return s;
+    s = amps__rd_points(&G->R, total);
+    G->tags = AMPS__CAST(amps__gtag *, amps__malloc(G->R.L.ctx, (size_t)G->R.nn, sizeof(amps__gtag)));
+    if (s || !G->tags) return AMPS_ERR_OOM;
+    s = G->version == 2 ? amps__gmsh_nodes2(G, total) : amps__gmsh_nodes4(G, nblk, total);
+    if (!s) s = amps__gmsh_end(&G->R.L, "Nodes", " (node count mismatch?)");
+    return s ? s : amps__gmsh_tagmap(G);
+}
+
+/* The 4 node tags of a tetrahedron, on the current line, as file positions into r->v; then r
+   joins R.tb. */
+static amps_status amps__gmsh_tet(amps__gmsh *G, amps__tetrec *r) {
+    int i;
+    amps_status s = AMPS_OK;
+    for (i = 0; !s && i < 4; i++) s = amps__gmsh_node(&G->R.L, G->tags, G->R.nn, r->v + i);
+    return s ? s : amps__tb_push(G->R.L.ctx, &G->R.tb, r);
+}
+
+/* 2.x element lines "number type ntags <tags> <nodes>"; the tets (type 4) join R.tb. */
+static amps_status amps__gmsh_elems2(amps__gmsh *G, long long total) {
+    amps__lex *L = &G->R.L;
+    amps__tetrec r;
+    long long k, i, a, type = 0, c = 0;
+    amps_status s = AMPS_OK;
+    for (k = 0; !s && k < total; k++) {
+        s = amps__lx_int(L, 1, &a, "element number");
+        r.line = L->tline;
+        if (!s) s = amps__lx_int(L, 0, &type, "element type");
+        if (!s) s = amps__lx_int(L, 0, &c, "tag count");
+        if (!s && c < 0) s = amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "negative tag count %lld", c);
+        for (i = 0; !s && type == 4 && i < c; i++) s = amps__lx_int(L, 0, &a, "element tag");
+        if (!s && type == 4) s = amps__gmsh_tet(G, &r);
+        if (!s) amps__lx_eol(L);
+    }
+    return s;
+}
+
+/* 4.1 element blocks: a header, then one element a line "tag <nodes>"; the tets (type 4) join
+   R.tb; together total elements. */
+static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long total) {
+    amps__lex *L = &G->R.L;
+    amps__gblk h;
+    amps__tetrec r;
+    long long b, i, a, got = 0;
+    for (b = 0; b < nblk; b++) {
+        amps_status s = amps__gmsh_block(L, 1, total, got, &h);
+        for (i = 0; !s && i < h.n; i++) {
+            if (h.kind == 4) {
+                s = amps__lx_int(L, 1, &a, "element tag");
+                r.line = L->tline;
+                if (!s) s = amps__gmsh_tet(G, &r);
+            } else if (!amps__lx_skip(L, 1)) {
+                s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "unexpected end of file in an element block");
+            }
+            if (!s) amps__lx_eol(L);
+        }
+        if (s) return s;
+        got += h.n;
+    }
+    return amps__gmsh_held(L, 1, total, got);
+}
+
+/* $Elements (after $Nodes) up to $EndElements. */
+static amps_status amps__gmsh_elements(amps__gmsh *G) {
+    amps__lex *L = &G->R.L;
+    long long nblk = 1, total;
+    amps_status s;
+    if (!G->have_nodes) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "$Elements before $Nodes");
+    s = amps__gmsh_head(G, 1, &nblk, &total);
+    if (s) return s;
+    s = G->version == 2 ? amps__gmsh_elems2(G, total) : amps__gmsh_elems4(G, nblk, total);
+    return s ? s : amps__gmsh_end(L, "Elements", " (element count mismatch?)");
+}
+
+/* The section whose header "$<name>" is the last token (the first must be $MeshFormat): its
+   name into G->sec, then its body by name; unknown sections are skipped. */
+static amps_status amps__gmsh_section(amps__gmsh *G) {
+    amps__lex *L = &G->R.L;
+    if (L->tok[0] != '$' || L->tlen < 2 || L->tlen >= sizeof(G->sec) + 1)
+        return amps__lx_found(L, "expected a section header like $Nodes, found ");
+    memcpy(G->sec, L->tok + 1, L->tlen - 1);
+    G->sec[L->tlen - 1] = 0;
+    if (!G->version && !amps__lx_is(L, "$MeshFormat", 0)) return amps__lx_found(L, "the file must start with $MeshFormat, found ");
+    amps__lx_eol(L);
+    if (!strcmp(G->sec, "MeshFormat")) return amps__gmsh_format(G);
+    if (!strcmp(G->sec, "Nodes")) return amps__gmsh_nodes(G);
+    if (!strcmp(G->sec, "Elements")) return amps__gmsh_elements(G);
+    return amps__gmsh_skip(L, G->sec);
 }
 
 AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size_t len, const char *name) {
-    amps__lex L;
-    amps__tetbuf tb;
-    amps__gtag *tags = NULL;
-    double *xyz = NULL;
-    amps_mesh *m = NULL;
-    amps_int nn = 0;
-    int version = 0, have_nodes = 0, have_elems = 0;
-    long long a, b, c, d, k, i;
-    char sh[40];
-    memset(&tb, 0, sizeof(tb));
-    amps__lx_init(&L, ctx, buf, len, name ? name : "<msh>", 0);
-    for (;;) {
-        char sec[24];
-        if (!amps__lx_tok(&L, 1)) break;
-        if (L.tok[0] != '$' || L.tlen < 2 || L.tlen >= sizeof(sec) + 1) {
-            amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "expected a section header like $Nodes, found '%s'", amps__lx_show(&L, sh));
-            goto done;
-        }
-        memcpy(sec, L.tok + 1, L.tlen - 1);
-        sec[L.tlen - 1] = 0;
-        if (!version && !amps__lx_is(&L, "$MeshFormat", 0)) {
-            amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "the file must start with $MeshFormat, found '%s'", amps__lx_show(&L, sh));
-            goto done;
-        }
-        amps__lx_eol(&L);
-        if (!strcmp(sec, "MeshFormat")) {
-            double ver;
-            if (version) {
-                amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "duplicate $MeshFormat");
-                goto done;
-            }
-            if (amps__lx_num(&L, 1, &ver, "format version")) goto done;
-            if (ver >= 2.0 && ver < 3.0) version = 2;
-            else if (ver == 4.1) version = 4;
-            else {
-                amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "unsupported .msh version %s (readable: 2.x, 4.1)", amps__lx_show(&L, sh));
-                goto done;
-            }
-            if (amps__lx_int(&L, 0, &a, "file type")) goto done;
-            if (a != 0) {
-                if (a == 1) amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "binary .msh files are not supported; save the mesh as ASCII");
-                else amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "invalid file type %lld (0 = ASCII)", a);
-                goto done;
-            }
-            if (amps__lx_int(&L, 0, &a, "data size")) goto done;
-            amps__lx_eol(&L);
-            if (amps__gmsh_end(&L, sec, "")) goto done;
-        } else if (!strcmp(sec, "Nodes")) {
-            long long nblk = 1, total;
-            /* 4.1: numEntityBlocks numNodes minNodeTag maxNodeTag */
-            if (amps__gmsh_head(&L, version, &have_nodes, "$Nodes", "node count", &nblk, &total)) goto done;
-            if (amps__lx_count(&L, total, 4, "node")) goto done;
-            amps__lx_eol(&L);
-            nn = (amps_int)total;
-            xyz = AMPS__CAST(double *, amps__malloc(ctx, 3 * (size_t)nn, sizeof(double)));
-            tags = AMPS__CAST(amps__gtag *, amps__malloc(ctx, (size_t)nn, sizeof(amps__gtag)));
-            if (!xyz || !tags) goto done;
-            if (version == 2) {
-                for (k = 0; k < total; k++) {
-                    if (amps__lx_int(&L, 1, &a, "node tag")) goto done;
-                    tags[k].tag = a;
-                    tags[k].line = L.tline;
-                    tags[k].idx = (amps_int)k;
-                    if (amps__lx_xyz(&L, 0, xyz + 3 * k)) goto done;
-                    amps__lx_eol(&L);
-                }
-            } else {
-                long long got = 0, nin, par;
-                for (b = 0; b < nblk; b++) {
-                    /* entityDim entityTag parametric numNodesInBlock */
-                    if (amps__lx_int(&L, 1, &a, "entity dimension")) goto done;
-                    if (amps__lx_int(&L, 0, &a, "entity tag")) goto done;
-                    if (amps__lx_int(&L, 0, &par, "parametric flag")) goto done;
-                    if (amps__lx_int(&L, 0, &nin, "block node count")) goto done;
-                    if (nin < 0 || nin > total - got) {
-                        amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "block node count %lld exceeds the %lld nodes declared", nin, total);
-                        goto done;
-                    }
-                    amps__lx_eol(&L);
-                    for (i = 0; i < nin; i++) {
-                        if (amps__lx_int(&L, 1, &a, "node tag")) goto done;
-                        tags[got + i].tag = a;
-                        tags[got + i].line = L.tline;
-                        tags[got + i].idx = (amps_int)(got + i);
-                        amps__lx_eol(&L);
-                    }
-                    for (i = 0; i < nin; i++) {
-                        if (amps__lx_xyz(&L, 1, xyz + 3 * (got + i))) goto done;
-                        amps__lx_eol(&L); /* parametric coordinates */
-                    }
-                    got += nin;
-                }
-                if (got != total) {
-                    amps__lx_err(&L, amps__lx_here(&L), AMPS_ERR_PARSE, "$Nodes declares %lld nodes, its blocks hold %lld", total, got);
-                    goto done;
-                }
-            }
-            if (amps__gmsh_end(&L, sec, " (node count mismatch?)")) goto done;
-            qsort(tags, (size_t)nn, sizeof(amps__gtag), amps__gtag_cmp);
-            for (k = 1; k < total; k++)
-                if (tags[k].tag == tags[k - 1].tag) {
-                    amps__lx_err(&L, tags[k].line, AMPS_ERR_PARSE, "duplicate node tag %lld (first on line %lld)", tags[k].tag,
-                                 tags[k - 1].line);
-                    goto done;
-                }
-        } else if (!strcmp(sec, "Elements")) {
-            long long nblk = 1, total, got = 0, nin, type;
-            amps_int tv[4];
-            if (!have_nodes) {
-                amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "$Elements before $Nodes");
-                goto done;
-            }
-            if (amps__gmsh_head(&L, version, &have_elems, "$Elements", "element count", &nblk, &total)) goto done;
-            if (amps__lx_count(&L, total, 2, "element")) goto done;
-            amps__lx_eol(&L);
-            if (version == 2) {
-                for (k = 0; k < total; k++) {
-                    long long line;
-                    /* elm-number elm-type number-of-tags <tags> node-number-list */
-                    if (amps__lx_int(&L, 1, &a, "element number")) goto done;
-                    line = L.tline;
-                    if (amps__lx_int(&L, 0, &type, "element type")) goto done;
-                    if (amps__lx_int(&L, 0, &c, "tag count")) goto done;
-                    if (c < 0) {
-                        amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "negative tag count %lld", c);
-                        goto done;
-                    }
-                    if (type == 4) {
-                        for (i = 0; i < c; i++)
-                            if (amps__lx_int(&L, 0, &d, "element tag")) goto done;
-                        for (i = 0; i < 4; i++)
-                            if (amps__gmsh_node(&L, tags, nn, tv + i)) goto done;
-                        if (amps__tb_push(ctx, &tb, tv, line)) goto done;
-                    }
-                    amps__lx_eol(&L);
-                }
-            } else {
-                for (b = 0; b < nblk; b++) {
-                    /* entityDim entityTag elementType numElementsInBlock */
-                    if (amps__lx_int(&L, 1, &a, "entity dimension")) goto done;
-                    if (amps__lx_int(&L, 0, &a, "entity tag")) goto done;
-                    if (amps__lx_int(&L, 0, &type, "element type")) goto done;
-                    if (amps__lx_int(&L, 0, &nin, "block element count")) goto done;
-                    if (nin < 0 || nin > total - got) {
-                        amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "block element count %lld exceeds the %lld elements declared", nin,
-                                     total);
-                        goto done;
-                    }
-                    amps__lx_eol(&L);
-                    for (i = 0; i < nin; i++) {
-                        if (type == 4) {
-                            long long line;
-                            if (amps__lx_int(&L, 1, &a, "element tag")) goto done;
-                            line = L.tline;
-                            for (c = 0; c < 4; c++)
-                                if (amps__gmsh_node(&L, tags, nn, tv + c)) goto done;
-                            if (amps__tb_push(ctx, &tb, tv, line)) goto done;
-                        } else if (!amps__lx_skip(&L, 1)) {
-                            amps__lx_err(&L, amps__lx_here(&L), AMPS_ERR_PARSE, "unexpected end of file in an element block");
-                            goto done;
-                        }
-                        amps__lx_eol(&L);
-                    }
-                    got += nin;
-                }
-                if (got != total) {
-                    amps__lx_err(&L, amps__lx_here(&L), AMPS_ERR_PARSE, "$Elements declares %lld elements, its blocks hold %lld", total,
-                                 got);
-                    goto done;
-                }
-            }
-            if (amps__gmsh_end(&L, sec, " (element count mismatch?)")) goto done;
-        } else {
-            /* unknown section: skip lines up to $End<sec> */
-            char want[32];
-            long long start = L.tline;
-            amps__gmsh_want(want, sec);
-            for (;;) {
-                if (!amps__lx_tok(&L, 1)) {
-                    amps__lx_err(&L, start, AMPS_ERR_PARSE, "section $%s is not closed by %s", sec, want);
-                    goto done;
-                }
-                amps__lx_eol(&L);
-                if (amps__lx_is(&L, want, 0)) break;
-            }
-        }
-    }
-    if (!version) {
-        amps__lx_err(&L, amps__lx_here(&L), AMPS_ERR_PARSE, "empty file (no $MeshFormat)");
-        goto done;
-    }
-    if (!have_nodes) {
-        amps__lx_err(&L, amps__lx_here(&L), AMPS_ERR_PARSE, "no $Nodes section");
-        goto done;
-    }
-    if (tb.n == 0) {
-        amps__lx_err(&L, amps__lx_here(&L), AMPS_ERR_PARSE, "no tetrahedra (element type 4) in the file");
-        goto done;
-    }
-    m = amps__lx_mesh(&L, nn, xyz, &tb);
-done:
-    amps__free(ctx, xyz);
-    amps__free(ctx, tags);
-    amps__tb_free(ctx, &tb);
+    amps__gmsh G;
+    amps__lex *L = &G.R.L;
+    amps_status s = AMPS_OK;
+    amps_mesh *m;
+    memset(&G, 0, sizeof(G));
+    amps__rd_init(&G.R, ctx, buf, len, name ? name : "<msh>", 0);
+    while (!s && amps__lx_tok(L, 1)) s = amps__gmsh_section(&G);
+    if (!s && !G.version) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "empty file (no $MeshFormat)");
+    if (!s && !G.have_nodes) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no $Nodes section");
+    if (!s && G.R.tb.n == 0) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no tetrahedra (element type 4) in the file");
+    m = amps__rd_end(&G.R, s);
+    amps__free(ctx, G.tags);
     return m;
 }
 
@@ -8926,99 +9030,92 @@ static int amps__lx_numeric(const amps__lex *L) {
     return (c >= '0' && c <= '9') || c == '+' || c == '-' || c == '.';
 }
 
-AMPS_API amps_mesh *amps_mesh_read_medit_mem(amps_ctx *ctx, const char *buf, size_t len, const char *name) {
-    amps__lex L;
-    amps__tetbuf tb;
-    double *xyz = NULL;
-    amps_mesh *m = NULL;
-    amps_int nn = 0;
-    int have_tets = 0;
-    long long n, k, q, v, ref;
-    char sh[40];
-    memset(&tb, 0, sizeof(tb));
-    amps__lx_init(&L, ctx, buf, len, name ? name : "<mesh>", '#');
-    while (amps__lx_tok(&L, 1)) {
-        if (amps__lx_is(&L, "End", 1)) break;
-        if (amps__lx_is(&L, "MeshVersionFormatted", 1)) {
-            if (amps__lx_int(&L, 1, &n, "format version")) goto done;
-        } else if (amps__lx_is(&L, "Dimension", 1)) {
-            if (amps__lx_int(&L, 1, &n, "dimension")) goto done;
-            if (n != 3) {
-                amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "dimension must be 3, found %lld", n);
-                goto done;
-            }
-        } else if (amps__lx_is(&L, "Vertices", 1)) {
-            if (xyz) {
-                amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "duplicate Vertices section");
-                goto done;
-            }
-            if (amps__lx_int(&L, 1, &n, "vertex count")) goto done;
-            if (amps__lx_count(&L, n, 4, "vertex")) goto done;
-            nn = (amps_int)n;
-            xyz = AMPS__CAST(double *, amps__malloc(ctx, 3 * (size_t)nn, sizeof(double)));
-            if (!xyz) goto done;
-            for (k = 0; k < n; k++) {
-                if (amps__lx_xyz(&L, 1, xyz + 3 * k)) goto done;
-                if (amps__lx_int(&L, 1, &ref, "vertex reference")) goto done;
-            }
-        } else if (amps__lx_is(&L, "Tetrahedra", 1)) {
-            if (!xyz) {
-                amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "Tetrahedra before Vertices");
-                goto done;
-            }
-            if (have_tets) {
-                amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "duplicate Tetrahedra section");
-                goto done;
-            }
-            have_tets = 1;
-            if (amps__lx_int(&L, 1, &n, "tetrahedron count")) goto done;
-            if (amps__lx_count(&L, n, 5, "tetrahedron")) goto done;
-            if (amps__tb_reserve(ctx, &tb, (amps_int)(n > 0 ? n : 1))) goto done;
-            for (k = 0; k < n; k++) {
-                amps_int tv[4];
-                long long line = 0;
-                for (q = 0; q < 4; q++) {
-                    if (amps__lx_int(&L, 1, &v, "vertex index")) goto done;
-                    if (q == 0) line = L.tline;
-                    if (v < 1 || v > nn) {
-                        amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "vertex index %lld out of range [1, %lld]", v, (long long)nn);
-                        goto done;
-                    }
-                    tv[q] = (amps_int)(v - 1);
-                }
-                if (amps__lx_int(&L, 1, &ref, "tetrahedron reference")) goto done;
-                if (amps__tb_push(ctx, &tb, tv, line)) goto done;
-            }
-        } else if (!amps__lx_numeric(&L)) {
-            /* other keyword: skip its numeric data */
-            while (amps__lx_skip(&L, 1)) {
-                const char *save = L.p;
-                long long sline = L.line;
-                amps__lx_tok(&L, 1);
-                if (!amps__lx_numeric(&L)) {
-                    L.p = save;
-                    L.line = sline;
-                    break;
-                }
-            }
-        } else {
-            amps__lx_err(&L, L.tline, AMPS_ERR_PARSE, "expected a keyword, found '%s'", amps__lx_show(&L, sh));
-            goto done;
+/* Skips the numeric data after an unknown keyword, up to the next non-numeric token. */
+static void amps__medit_skip(amps__lex *L) {
+    while (amps__lx_skip(L, 1)) {
+        const char *save = L->p;
+        long long sline = L->line;
+        amps__lx_tok(L, 1);
+        if (!amps__lx_numeric(L)) {
+            L->p = save;
+            L->line = sline;
+            break;
         }
     }
-    if (!xyz) {
-        amps__lx_err(&L, amps__lx_here(&L), AMPS_ERR_PARSE, "no Vertices section");
-        goto done;
+}
+
+/* Vertices, after the keyword (once): the count, then "x y z ref" per vertex. Fills R->xyz. */
+static amps_status amps__medit_vertices(amps__rd *R) {
+    amps__lex *L = &R->L;
+    long long n, k, ref;
+    amps_status s;
+    if (R->xyz) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "duplicate Vertices section");
+    s = amps__lx_nrec(L, 1, &n, "vertex count", "vertex", 4);
+    if (!s) s = amps__rd_points(R, n);
+    for (k = 0; !s && k < n; k++) {
+        s = amps__lx_xyz(L, 1, R->xyz + 3 * k);
+        if (!s) s = amps__lx_int(L, 1, &ref, "vertex reference");
     }
-    if (!have_tets || tb.n == 0) {
-        amps__lx_err(&L, amps__lx_here(&L), AMPS_ERR_PARSE, "no Tetrahedra in the file");
-        goto done;
+    return s;
+}
+
+/* One tetrahedron "v1 v2 v3 v4 ref" (vertex indices from 1): nodes and the line of v1 into r. */
+static amps_status amps__medit_tet(amps__rd *R, amps__tetrec *r) {
+    long long ref;
+    int q;
+    amps_status s = AMPS_OK;
+    for (q = 0; !s && q < 4; q++) {
+        s = amps__lx_index(&R->L, 1, "vertex index", 1, R->nn, r->v + q);
+        if (q == 0) r->line = R->L.tline;
     }
-    m = amps__lx_mesh(&L, nn, xyz, &tb);
-done:
-    amps__free(ctx, xyz);
-    amps__tb_free(ctx, &tb);
-    return m;
+    return s ? s : amps__lx_int(&R->L, 1, &ref, "tetrahedron reference");
+}
+
+/* Tetrahedra, after the keyword (after Vertices, once: *seen): the count, then the tets into R->tb. */
+static amps_status amps__medit_tets(amps__rd *R, int *seen) {
+    amps__lex *L = &R->L;
+    amps__tetrec r;
+    long long n, k;
+    amps_status s;
+    if (!R->xyz) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "Tetrahedra before Vertices");
+    if (*seen) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "duplicate Tetrahedra section");
+    *seen = 1;
+    s = amps__lx_nrec(L, 1, &n, "tetrahedron count", "tetrahedron", 5);
+    if (!s) s = amps__tb_reserve(L->ctx, &R->tb, (amps_int)(n > 0 ? n : 1));
+    for (k = 0; !s && k < n; k++) {
+        s = amps__medit_tet(R, &r);
+        if (!s) s = amps__tb_push(L->ctx, &R->tb, &r);
+    }
+    return s;
+}
+
+AMPS_API amps_mesh *amps_mesh_read_medit_mem(amps_ctx *ctx, const char *buf, size_t len, const char *name) {
+    amps__rd R;
+    amps__lex *L = &R.L;
+    int have_tets = 0;
+    long long n = 0;
+    amps_status s = AMPS_OK;
+    amps__rd_init(&R, ctx, buf, len, name ? name : "<mesh>", '#');
+    /* keywords up to End or the end of the file */
+    while (!s && amps__lx_tok(L, 1) && !amps__lx_is(L, "End", 1)) {
+        if (amps__lx_is(L, "MeshVersionFormatted", 1)) {
+            s = amps__lx_int(L, 1, &n, "format version");
+        } else if (amps__lx_is(L, "Dimension", 1)) {
+            s = amps__lx_int(L, 1, &n, "dimension");
+            if (!s && n != 3) s = amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "dimension must be 3, found %lld", n);
+        } else if (amps__lx_is(L, "Vertices", 1)) {
+            s = amps__medit_vertices(&R);
+        } else if (amps__lx_is(L, "Tetrahedra", 1)) {
+            s = amps__medit_tets(&R, &have_tets);
+        } else if (!amps__lx_numeric(L)) {
+            amps__medit_skip(L); /* other keyword */
+        } else {
+            s = amps__lx_found(L, "expected a keyword, found ");
+        }
+    }
+    if (!s && !R.xyz) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no Vertices section");
+    if (!s && (!have_tets || R.tb.n == 0)) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no Tetrahedra in the file");
+    return amps__rd_end(&R, s);
 }
 
 /* ---- files ---- */

@@ -1,7 +1,7 @@
 /* Mesh readers and writers: round trips, TetGen numbering bases, Gmsh 2.2 / 4.1 with mixed
-   element types, malformed input (status and file:line), random corruption, allocation
-   failures, and a well-formed VTU file. Temporary files go next to the test binary.
-   With AMPS_NO_STDIO only the from-memory readers are tested. */
+   element types, malformed input (status and file:line; the whole message of each reader
+   error), random corruption, allocation failures, and a well-formed VTU file. Temporary files
+   go next to the test binary. With AMPS_NO_STDIO only the from-memory readers are tested. */
 #include <string.h>
 #include "t_alloc.h"
 #define AMPS_IMPLEMENTATION
@@ -253,6 +253,92 @@ static void test_malformed_medit(void) {
     t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n1 2 3 4 0.5\n"), AMPS_ERR_PARSE, "m.mesh:11:", "fractional reference");
     t_expect(&ctx, t_medit(&ctx, "Vertices\r\n4\r\n0 0 0 0\r\n1 0 0 0\r\n0 1 0 0\r\n0 0 0 0\r\nTetrahedra\r\n1\r\n1 2 3 4 0\r\n"), AMPS_ERR_MESH, "m.mesh:9:", "degenerate");
 #undef M_V
+}
+
+/* ---- the whole message of each reader error ---- */
+
+enum { T_TETGEN, T_GMSH, T_MEDIT };
+
+static void test_messages(void) {
+    static const struct {
+        int reader;
+        const char *in, *ele; /* ele: the .ele text of T_TETGEN */
+        amps_status st;
+        const char *msg;
+    } cases[] = {
+        {T_TETGEN, "", "", AMPS_ERR_PARSE, "t.node:1: missing point count"},
+        {T_TETGEN, "x\n", "", AMPS_ERR_PARSE, "t.node:1: invalid integer 'x' for point count"},
+        {T_TETGEN, "4 3\n0 0 0 0\n1 a 0 0\n", "", AMPS_ERR_PARSE, "t.node:3: invalid number 'a' for x coordinate"},
+        {T_TETGEN, "4 3\n0 0 0 0\n1 nan 0 0\n", "", AMPS_ERR_PARSE, "t.node:3: non-finite x coordinate 'nan'"},
+        {T_TETGEN, "-4\n", "", AMPS_ERR_PARSE, "t.node:1: negative point count -4"},
+        {T_TETGEN, "99999999999 3\n0 0 0 0\n", "", AMPS_ERR_PARSE, "t.node:1: point count 99999999999 exceeds what the file can hold"},
+        {T_TETGEN, "0 3 0 0\n", "", AMPS_ERR_PARSE, "t.node:1: the file declares no points"},
+        {T_TETGEN, "4 2 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE, "t.node:1: dimension must be 3, found '2'"},
+        {T_TETGEN, "4 3.0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE, "t.node:1: dimension must be 3, found '3.0'"},
+        {T_TETGEN, "4 3 -1 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE, "t.node:1: invalid attribute count '-1'"},
+        {T_TETGEN, "4 3 0 7\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE, "t.node:1: boundary marker flag must be 0 or 1, found '7'"},
+        {T_TETGEN, "4 3 0 x\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE, "t.node:1: boundary marker flag must be 0 or 1, found 'x'"},
+        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n", "", AMPS_ERR_PARSE, "t.node:3: unexpected end of file: 2 of 4 points read"},
+        {T_TETGEN, "4 3 0 0\n2 0 0 0\n", "", AMPS_ERR_PARSE, "t.node:2: first point number must be 0 or 1, found 2"},
+        {T_TETGEN, "4 3 0 0\n0 0 0 0\n2 1 0 0\n", "", AMPS_ERR_PARSE, "t.node:3: point number 2 out of sequence (expected 1)"},
+        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 1 1 1\n", "", AMPS_ERR_PARSE, "t.node:6: unexpected data '4' after 4 points"},
+        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1 # c\n", "1 6 0\n0 0 1 2 3\n", AMPS_ERR_PARSE, "t.ele:1: nodes per tetrahedron must be 4 or 10, found '6'"},
+        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "1 4 -2\n0 0 1 2 3\n", AMPS_ERR_PARSE, "t.ele:1: invalid attribute count '-2'"},
+        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "2 4 0\n0 0 1 2 3\n", AMPS_ERR_PARSE, "t.ele:2: unexpected end of file: 1 of 2 tetrahedra read"},
+        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "1 4 0\n0 0 1 2 4\n", AMPS_ERR_PARSE, "t.ele:2: node index 4 out of range [0, 3]"},
+        {T_TETGEN, "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n", "1 10 0\n1 1 2 3 4 1 2 3 4 1 5\n", AMPS_ERR_PARSE, "t.ele:2: node index 5 out of range [1, 4]"},
+        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "1 4 0\n0 0 1 2 3\n1 0 1 2 3\n", AMPS_ERR_PARSE, "t.ele:3: unexpected data '1' after 1 tetrahedra"},
+        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "0\n", AMPS_ERR_PARSE, "t.ele:1: no tetrahedra in the file"},
+        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "# d\n1 4 0\n0 0 1 2 2\n", AMPS_ERR_MESH, "t.ele:3: degenerate tetrahedron (file nodes 0 1 2 2, 0-based)"},
+        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "1\n0 0 1 2\n", AMPS_ERR_PARSE, "t.ele:2: missing node index"},
+        {T_GMSH, "hello\n", "", AMPS_ERR_PARSE, "g.msh:1: expected a section header like $Nodes, found 'hello'"},
+        {T_GMSH, "$Nodes\n", "", AMPS_ERR_PARSE, "g.msh:1: the file must start with $MeshFormat, found '$Nodes'"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$MeshFormat\n", "", AMPS_ERR_PARSE, "g.msh:4: duplicate $MeshFormat"},
+        {T_GMSH, "$MeshFormat\n3.0 0 8\n$EndMeshFormat\n", "", AMPS_ERR_PARSE, "g.msh:2: unsupported .msh version 3.0 (readable: 2.x, 4.1)"},
+        {T_GMSH, "$MeshFormat\n2.2 1 8\n", "", AMPS_ERR_PARSE, "g.msh:2: binary .msh files are not supported; save the mesh as ASCII"},
+        {T_GMSH, "$MeshFormat\n2.2 5 8\n", "", AMPS_ERR_PARSE, "g.msh:2: invalid file type 5 (0 = ASCII)"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n", "", AMPS_ERR_PARSE, "g.msh:2: unexpected end of file, expected $EndMeshFormat"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n3\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n", "", AMPS_ERR_PARSE, "g.msh:9: expected $EndNodes (node count mismatch?), found '4'"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 0\n$EndNodes\n$Nodes\n", "", AMPS_ERR_PARSE, "g.msh:8: duplicate $Nodes section"},
+        {T_GMSH, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 5\n", "", AMPS_ERR_PARSE, "g.msh:6: block node count 5 exceeds the 4 nodes declared"},
+        {T_GMSH, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 5 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n", "", AMPS_ERR_PARSE, "g.msh:15: $Nodes declares 5 nodes, its blocks hold 4"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n2\n7 0 0 0\n7 1 0 0\n$EndNodes\n", "", AMPS_ERR_PARSE, "g.msh:7: duplicate node tag 7 (first on line 6)"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Elements\n", "", AMPS_ERR_PARSE, "g.msh:4: $Elements before $Nodes"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 4 -2 1 2 3 4\n$EndElements\n", "", AMPS_ERR_PARSE, "g.msh:13: negative tag count -2"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 4 2 0 1 1 2 3 9\n$EndElements\n", "", AMPS_ERR_PARSE, "g.msh:13: element refers to undefined node tag 9"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 4 2 0 1 1 2 3 4\n2 4 2 0 1 1 2 3 4\n$EndElements\n", "", AMPS_ERR_PARSE, "g.msh:14: expected $EndElements (element count mismatch?), found '2'"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n0\n$EndElements\n$Elements\n", "", AMPS_ERR_PARSE, "g.msh:14: duplicate $Elements section"},
+        {T_GMSH, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 1 1 1\n3 1 4 2\n", "", AMPS_ERR_PARSE, "g.msh:18: block element count 2 exceeds the 1 elements declared"},
+        {T_GMSH, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 2 1 2\n2 1 2 2\n1 1 2 3\n", "", AMPS_ERR_PARSE, "g.msh:19: unexpected end of file in an element block"},
+        {T_GMSH, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 2 1 2\n3 1 4 1\n1 1 2 3 4\n$EndElements\n", "", AMPS_ERR_PARSE, "g.msh:20: $Elements declares 2 elements, its blocks hold 1"},
+        {T_GMSH, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 1 1 1\n3 1 4 1\n1 1 2 3 3\n$EndElements\n", "", AMPS_ERR_MESH, "g.msh:19: degenerate tetrahedron (file nodes 0 1 2 2, 0-based)"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Comments\nhello\n", "", AMPS_ERR_PARSE, "g.msh:4: section $Comments is not closed by $EndComments"},
+        {T_GMSH, "\n\n", "", AMPS_ERR_PARSE, "g.msh:2: empty file (no $MeshFormat)"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n", "", AMPS_ERR_PARSE, "g.msh:3: no $Nodes section"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 2 2 0 1 1 2 3\n$EndElements\n", "", AMPS_ERR_PARSE, "g.msh:14: no tetrahedra (element type 4) in the file"},
+        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$ThisSectionNameIsFarTooLongToKeep\n", "", AMPS_ERR_PARSE, "g.msh:4: expected a section header like $Nodes, found '$ThisSectionNameIsFarToo...'"},
+        {T_MEDIT, "Dimension 2\n", "", AMPS_ERR_PARSE, "m.mesh:1: dimension must be 3, found 2"},
+        {T_MEDIT, "Vertices\n1\n0 0 0 0\nVertices\n", "", AMPS_ERR_PARSE, "m.mesh:4: duplicate Vertices section"},
+        {T_MEDIT, "Tetrahedra\n0\n", "", AMPS_ERR_PARSE, "m.mesh:1: Tetrahedra before Vertices"},
+        {T_MEDIT, "Vertices\n1\n0 0 0 0\nTetrahedra\n0\nTetrahedra\n", "", AMPS_ERR_PARSE, "m.mesh:6: duplicate Tetrahedra section"},
+        {T_MEDIT, "Vertices\n1\n0 0 0 0\nTetrahedra\n1\n1 1 1 2 0\n", "", AMPS_ERR_PARSE, "m.mesh:6: vertex index 2 out of range [1, 1]"},
+        {T_MEDIT, "Vertices\n1\n0 0 0 0\n7\n", "", AMPS_ERR_PARSE, "m.mesh:4: expected a keyword, found '7'"},
+        {T_MEDIT, "MeshVersionFormatted 2\nEnd\n", "", AMPS_ERR_PARSE, "m.mesh:2: no Vertices section"},
+        {T_MEDIT, "Vertices\n1\n0 0 0 0\nCorners 1 1\nEnd\n", "", AMPS_ERR_PARSE, "m.mesh:5: no Tetrahedra in the file"},
+        {T_MEDIT, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 0 0\nTetrahedra\n1\n1 2 3 4 0\n", "", AMPS_ERR_MESH, "m.mesh:9: degenerate tetrahedron (file nodes 0 1 2 3, 0-based)"},
+        {T_MEDIT, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\nTetrahedra\n1\n1 2 3 4\n", "", AMPS_ERR_PARSE, "m.mesh:9: missing tetrahedron reference"},
+    };
+    amps_ctx ctx;
+    size_t k;
+    amps_ctx_init(&ctx);
+    for (k = 0; k < sizeof(cases) / sizeof(cases[0]); k++) {
+        amps_mesh *m = cases[k].reader == T_TETGEN ? t_tetgen(&ctx, cases[k].in, cases[k].ele)
+                       : cases[k].reader == T_GMSH ? t_gmsh(&ctx, cases[k].in)
+                                                   : t_medit(&ctx, cases[k].in);
+        CHECK(!m && ctx.status == cases[k].st && !strcmp(ctx.msg, cases[k].msg), "message %d: want %d '%s', got %s (%d: %s)", (int)k,
+              (int)cases[k].st, cases[k].msg, m ? "a mesh" : "NULL", (int)ctx.status, ctx.msg);
+        amps_mesh_free(&ctx, m);
+    }
 }
 
 #ifndef AMPS_NO_STDIO
@@ -558,6 +644,7 @@ int main(int argc, char **argv) {
     test_malformed_tetgen();
     test_malformed_gmsh();
     test_malformed_medit();
+    test_messages();
 #ifndef AMPS_NO_STDIO
     test_roundtrip();
     test_vtu();
