@@ -344,7 +344,7 @@ int main(int argc, char **argv) {
         if (!strcmp(argv[a], "-q")) R.quiet = 1;
         else if (!strcmp(argv[a], "--residual")) R.residual_on = 1;
         else if (!strcmp(argv[a], "--dual")) R.opts.update.formulation = AMPS_FORM_DUAL;
-        else if (!strcmp(argv[a], "--eq320")) R.opts.update.eq320 = 1;
+        else if (!strcmp(argv[a], "--eq320")) R.opts.update.xs_from_dense = 1;
         else if (!strcmp(argv[a], "--threads") && a + 1 < argc) R.ctx.nthreads = atoi(argv[++a]);
         else if (!strcmp(argv[a], "--surface") && a + 1 < argc) surface = argv[++a];
         else if (!strcmp(argv[a], "--order") && a + 1 < argc) {
