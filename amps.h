@@ -4793,11 +4793,13 @@ static double amps__cur_entry(const amps_update *U, amps_int r, amps_int c) {
     return v;
 }
 
-AMPS_API amps_status amps_update_set_rows(amps_ctx *ctx, amps_update *U, amps_int nrow, const amps_int *rows,
-                                          const amps_int *cp, const amps_int *ci, const double *cx) {
-    amps_int k, j, q, N, start, *iw;
+/* Arguments of amps_update_set_rows: indices, values, no column twice in a row, and agreement
+   where two given rows meet. The given rows are left marked in work.mark_N. */
+static amps_status amps__set_rows_check(amps_ctx *ctx, amps_update *U, amps_int nrow, const amps_int *rows,
+                                        const amps_int *cp, const amps_int *ci, const double *cx) {
+    const amps_marker *mk = &U->work.mark_N;
+    amps_int k, j, q, N;
     amps_status s;
-    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: NULL engine");
     if (nrow < 0 || (nrow > 0 && (!rows || !cp))) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: bad count or NULL array");
     if ((s = amps__chk_idx(ctx, U, "amps_update_set_rows", nrow, rows, NULL, 1, &U->work.mark_N)) != AMPS_OK) return s;
     N = U->N + U->pending.n_dofs;
@@ -4814,7 +4816,7 @@ AMPS_API amps_status amps_update_set_rows(amps_ctx *ctx, amps_update *U, amps_in
     /* symmetry where two given rows meet: row a's entry at b must equal row b's entry at a */
     for (k = 0; k < nrow; k++)
         for (j = cp[k]; j < cp[k + 1]; j++)
-            if (U->work.mark_N.mark[ci[j]] == U->work.mark_N.stamp) {
+            if (mk->mark[ci[j]] == mk->stamp) {
                 amps_int kk, b = ci[j];
                 double vb = 0;
                 for (kk = 0; kk < nrow && rows[kk] != b; kk++) {}
@@ -4822,40 +4824,58 @@ AMPS_API amps_status amps_update_set_rows(amps_ctx *ctx, amps_update *U, amps_in
                 if (fabs(vb - cx[j]) > 1e-12 * (fabs(vb) + fabs(cx[j])))
                     return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: rows %ld and %ld disagree at their crossing (%g vs %g)", (long)rows[k], (long)b, cx[j], vb);
             }
+    return AMPS_OK;
+}
+
+/* Columns of row r of the current K^ (base pattern, Delta row, the changes recorded before
+   pending entry `start`) and the new columns ci[0..nc-1], ascending without repeats, into iw;
+   returns their count. a: r's U position or -1. */
+static amps_int amps__row_columns(const amps_update *U, amps_int r, amps_int a, amps_int start, const amps_int *ci, amps_int nc, amps_int *iw) {
+    amps_int q, cnt = 0, m = 0;
+    if (r < U->n) for (q = U->base.Kp[r]; q < U->base.Kp[r + 1]; q++) iw[cnt++] = U->base.Ki[q];
+    else iw[cnt++] = r;
+    if (a >= 0) for (q = 0; q < U->delta.row_len[a]; q++) iw[cnt++] = U->aug.idx[U->delta.col[U->delta.row_start[a] + q]];
+    for (q = 0; q < start; q++) {
+        if (U->pending.delta[q].r == r) iw[cnt++] = U->pending.delta[q].c;
+        else if (U->pending.delta[q].c == r) iw[cnt++] = U->pending.delta[q].r;
+    }
+    for (q = 0; q < nc; q++) iw[cnt++] = ci[q];
+    qsort(iw, (size_t)cnt, sizeof(amps_int), amps__int_cmp);
+    for (q = 0; q < cnt; q++) if (m == 0 || iw[m - 1] != iw[q]) iw[m++] = iw[q];
+    return m;
+}
+
+AMPS_API amps_status amps_update_set_rows(amps_ctx *ctx, amps_update *U, amps_int nrow, const amps_int *rows,
+                                          const amps_int *cp, const amps_int *ci, const double *cx) {
+    const amps_marker *mk;
+    amps_int k, j, q, start, *iw;
+    amps_status s;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: NULL engine");
+    if ((s = amps__set_rows_check(ctx, U, nrow, rows, cp, ci, cx)) != AMPS_OK) return s;
     /* the changes: for each row r, every column c of the current or the new row gets
        new - current; a pair of two given rows is recorded once (from the smaller row) */
+    mk = &U->work.mark_N;
     start = U->pending.n_delta;
     iw = U->work.idx;
     for (k = 0; k < nrow; k++) {
-        amps_int r = rows[k], a, cnt = 0;
+        amps_int r = rows[k], a, cnt;
         a = r < U->N ? U->aug.pos[r] : -1;
         if ((r < U->n ? U->base.Kp[r + 1] - U->base.Kp[r] : 1) + (a >= 0 ? U->delta.row_len[a] : 0) + U->pending.n_delta + (cp[k + 1] - cp[k]) > U->n + U->cap_N) {
             U->pending.n_delta = start;
             return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update_set_rows: too many changes recorded; commit first");
         }
-        /* columns of the current row: base pattern, Delta row, recorded changes; then new ones */
-        if (r < U->n) for (q = U->base.Kp[r]; q < U->base.Kp[r + 1]; q++) iw[cnt++] = U->base.Ki[q];
-        else iw[cnt++] = r;
-        if (a >= 0) for (q = 0; q < U->delta.row_len[a]; q++) iw[cnt++] = U->aug.idx[U->delta.col[U->delta.row_start[a] + q]];
-        for (q = 0; q < start; q++) {
-            if (U->pending.delta[q].r == r) iw[cnt++] = U->pending.delta[q].c;
-            else if (U->pending.delta[q].c == r) iw[cnt++] = U->pending.delta[q].r;
-        }
-        for (j = cp[k]; j < cp[k + 1]; j++) iw[cnt++] = ci[j];
-        qsort(iw, (size_t)cnt, sizeof(amps_int), amps__int_cmp);
-        {
-            amps_int i2, m2 = 0;
-            for (i2 = 0; i2 < cnt; i2++) if (m2 == 0 || iw[m2 - 1] != iw[i2]) iw[m2++] = iw[i2];
-            cnt = m2;
-        }
+        cnt = amps__row_columns(U, r, a, start, ci + cp[k], cp[k + 1] - cp[k], iw);
         if ((s = amps__need_pending(ctx, U, cnt, 0)) != AMPS_OK) { U->pending.n_delta = start; return s; }
         for (q = 0; q < cnt; q++) {
             amps_int c = iw[q];
             double nv = 0, d;
-            if (U->work.mark_N.mark[c] == U->work.mark_N.stamp && c < r) continue;   /* recorded from row c */
+            amps__pdelta *e;
+            if (mk->mark[c] == mk->stamp && c < r) continue;   /* recorded from row c */
             for (j = cp[k]; j < cp[k + 1]; j++) if (ci[j] == c) { nv = cx[j]; break; }
             d = nv - amps__cur_entry(U, r, c);
-            if (d != 0) { U->pending.delta[U->pending.n_delta].r = r; U->pending.delta[U->pending.n_delta].c = c; U->pending.delta[U->pending.n_delta].v = d; U->pending.n_delta++; }
+            if (d == 0) continue;
+            e = U->pending.delta + U->pending.n_delta++;
+            e->r = r; e->c = c; e->v = d;
         }
     }
     return AMPS_OK;
@@ -5267,103 +5287,130 @@ static void amps__gemm_sub(amps_int m, amps_int w, amps_int kk, const double *A,
     }
 }
 
-/* Factors positions nf..u-1 given positions 0..nf-1 factored for physical rows 0..u_old-1;
-   rows u_old..u-1 are new (rowperm set). Returns AMPS_OK, AMPS_ERR_SINGULAR_UPDATE (position in
-   *bad), or AMPS_ERR_CAPACITY when the new rows' multipliers grow past 1e6 (refactor from 0). */
-static amps_status amps__lu_extend(amps_update *U, amps_int nf, amps_int u_old, amps_int *bad) {
-    amps_int u = U->aug.size, q, qp, r;
+/* The new rows u_old..u-1 of L on the factored positions 0..nf-1: L(r, 0:nf) solves
+   l U11 = A(r, col_order[0:nf]), by groups of 4 rows kept row-major in lu.panel, so that each
+   entry is one dot product with a column of U11. AMPS_ERR_CAPACITY when a multiplier exceeds 1e6. */
+static amps_status amps__lu_new_rows(amps_update *U, amps_int nf, amps_int u_old) {
+    amps_int u = U->aug.size, q;
     size_t ld = (size_t)U->aug.cap;
-    double *LU = U->lu.LU;
-    /* new rows: L(r, 0:nf) solves l U11 = A(r, colorder[0:nf]), by groups of 4 rows kept
-       row-major in pbuf, so that each entry is one dot product with a column of U11 */
-    if (nf > 0 && u > u_old) {
-        double growth = 0;
-        amps_int r0, i;
-        for (r0 = u_old; r0 < u; r0 += 4) {
-            amps_int nr = u - r0 < 4 ? u - r0 : 4;
-            double *lr = U->lu.panel;
-            for (q = 0; q < nf; q++) {
-                const double *uq = LU + (size_t)q * ld;
-                amps_int j = U->lu.col_order[q];
-                double d[4];
-                amps__dot4(lr, ld, nr, uq, q, d);
-                for (i = 0; i < nr; i++)
-                    lr[(size_t)i * ld + (size_t)q] = (amps__aentry(U, U->lu.row_perm[r0 + i], j) - d[i]) / uq[q];
-            }
+    double *LU = U->lu.LU, growth = 0;
+    amps_int r0, i;
+    for (r0 = u_old; r0 < u; r0 += 4) {
+        amps_int nr = u - r0 < 4 ? u - r0 : 4;
+        double *lr = U->lu.panel;
+        for (q = 0; q < nf; q++) {
+            const double *uq = LU + (size_t)q * ld;
+            amps_int j = U->lu.col_order[q];
+            double d[4];
+            amps__dot4(lr, ld, nr, uq, q, d);
             for (i = 0; i < nr; i++)
-                for (q = 0; q < nf; q++) {
-                    double v = lr[(size_t)i * ld + (size_t)q];
-                    LU[(size_t)q * ld + (size_t)(r0 + i)] = v;
-                    if (fabs(v) > growth) growth = fabs(v);
-                }
+                lr[(size_t)i * ld + (size_t)q] = (amps__aentry(U, U->lu.row_perm[r0 + i], j) - d[i]) / uq[q];
         }
-        if (!(growth <= 1e6)) return AMPS_ERR_CAPACITY;
+        for (i = 0; i < nr; i++)
+            for (q = 0; q < nf; q++) {
+                double v = lr[(size_t)i * ld + (size_t)q];
+                LU[(size_t)q * ld + (size_t)(r0 + i)] = v;
+                if (fabs(v) > growth) growth = fabs(v);
+            }
     }
-    for (qp = nf; qp < u; qp += AMPS__NB) {
-        amps_int w = u - qp < AMPS__NB ? u - qp : AMPS__NB, c, kb;
-        double *P = LU + (size_t)qp * ld;
-        /* load the panel: A(rowperm, colorder[qp:qp+w]) and its column norms */
+    return growth <= 1e6 ? AMPS_OK : AMPS_ERR_CAPACITY;
+}
+
+/* Panel qp..qp+w-1 of the factor: A(row_perm, col_order[qp:qp+w]), and the column norms. */
+static void amps__lu_panel_load(amps_update *U, amps_int qp, amps_int w) {
+    amps_int u = U->aug.size, c;
+    size_t ld = (size_t)U->aug.cap;
+    double *P = U->lu.LU + (size_t)qp * ld;
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) num_threads(U->nthr) if (w > 1 && u > 64)
 #endif
-        for (c = 0; c < w; c++) {
+    for (c = 0; c < w; c++) {
 #ifdef _OPENMP
-            double *buf = U->lu.panel + (size_t)omp_get_thread_num() * ld;
+        double *buf = U->lu.panel + (size_t)omp_get_thread_num() * ld;
 #else
-            double *buf = U->lu.panel;
+        double *buf = U->lu.panel;
 #endif
-            amps_int j = U->lu.col_order[qp + c], rr;
-            double nrm = 0, *col = P + (size_t)c * ld;
-            amps__acol(U, j, buf);
-            for (rr = 0; rr < u; rr++) { col[rr] = buf[U->lu.row_perm[rr]]; if (fabs(buf[rr]) > nrm) nrm = fabs(buf[rr]); }
-            U->lu.col_norm[j] = nrm;
-        }
-        /* apply the factored columns 0..qp-1: P(0:qp) = L11^{-1} P(0:qp) (unit lower) by blocks
-           of AMPS__TB rows: the diagonal block per column, the rows below it by one product;
-           then P(qp:u) -= L(qp:u, 0:qp) P(0:qp) */
-        for (kb = 0; kb < qp; kb += AMPS__TB) {
-            amps_int k1 = kb + AMPS__TB < qp ? kb + AMPS__TB : qp, kk;
-            amps_int ib;
-            for (ib = kb; ib < k1; ib += 8) {            /* the diagonal block by blocks of 8 */
-                amps_int i1 = ib + 8 < k1 ? ib + 8 : k1;
-                for (c = 0; c < w; c++) {
-                    double *col = P + (size_t)c * ld;
-                    for (kk = ib; kk < i1; kk++) {
-                        const double *lk = LU + (size_t)kk * ld;
-                        double x = col[kk];
-                        if (x != 0.0) for (r = kk + 1; r < i1; r++) col[r] -= lk[r] * x;
-                    }
-                }
-                amps__gemm_tile(i1, k1, w, ib, i1, LU, ld, P, ld, P, ld);
-            }
-            amps__gemm_sub(qp - k1, w, k1 - kb, LU + (size_t)kb * ld + (size_t)k1, ld, P + (size_t)kb, ld, P + (size_t)k1, ld, U->nthr);
-        }
-        amps__gemm_sub(u - qp, w, qp, LU + (size_t)qp, ld, P, ld, P + (size_t)qp, ld, U->nthr);
-        /* factor the panel with partial pivoting; swaps act on whole rows 0..qp+w-1 */
-        for (c = 0; c < w; c++) {
-            amps_int qq = qp + c, pr = qq, j = U->lu.col_order[qq], cc;
-            double *col = LU + (size_t)qq * ld, pmax = fabs(col[qq]), piv;
-            for (r = qq + 1; r < u; r++) if (fabs(col[r]) > pmax) { pmax = fabs(col[r]); pr = r; }
-            if (!amps__pivot_ok(U, j, pmax)) {
-                *bad = j;
-                return AMPS_ERR_SINGULAR_UPDATE;
-            }
-            if (pr != qq) {
-                amps_int t = U->lu.row_perm[pr];
-                U->lu.row_perm[pr] = U->lu.row_perm[qq]; U->lu.row_perm[qq] = t;
-                for (cc = 0; cc < qp + w; cc++) {
-                    double *cl = LU + (size_t)cc * ld, tv = cl[pr];
-                    cl[pr] = cl[qq]; cl[qq] = tv;
+        amps_int j = U->lu.col_order[qp + c], rr;
+        double nrm = 0, *col = P + (size_t)c * ld;
+        amps__acol(U, j, buf);
+        for (rr = 0; rr < u; rr++) { col[rr] = buf[U->lu.row_perm[rr]]; if (fabs(buf[rr]) > nrm) nrm = fabs(buf[rr]); }
+        U->lu.col_norm[j] = nrm;
+    }
+}
+
+/* The factored columns 0..qp-1 applied to the panel P = qp..qp+w-1: P(0:qp) = L11^{-1} P(0:qp)
+   (unit lower) by blocks of AMPS__TB rows: the diagonal block per column, the rows below it by
+   one product; then P(qp:u) -= L(qp:u, 0:qp) P(0:qp). */
+static void amps__lu_panel_apply(amps_update *U, amps_int qp, amps_int w) {
+    amps_int u = U->aug.size, c, r, kb;
+    size_t ld = (size_t)U->aug.cap;
+    const double *LU = U->lu.LU;
+    double *P = U->lu.LU + (size_t)qp * ld;
+    for (kb = 0; kb < qp; kb += AMPS__TB) {
+        amps_int k1 = kb + AMPS__TB < qp ? kb + AMPS__TB : qp, kk;
+        amps_int ib;
+        for (ib = kb; ib < k1; ib += 8) {            /* the diagonal block by blocks of 8 */
+            amps_int i1 = ib + 8 < k1 ? ib + 8 : k1;
+            for (c = 0; c < w; c++) {
+                double *col = P + (size_t)c * ld;
+                for (kk = ib; kk < i1; kk++) {
+                    const double *lk = LU + (size_t)kk * ld;
+                    double x = col[kk];
+                    if (x != 0.0) for (r = kk + 1; r < i1; r++) col[r] -= lk[r] * x;
                 }
             }
-            piv = col[qq];
-            for (r = qq + 1; r < u; r++) col[r] /= piv;
-            for (cc = qq + 1; cc < qp + w; cc++) {
-                double *cl = LU + (size_t)cc * ld, x = cl[qq];
-                if (x == 0.0) continue;
-                for (r = qq + 1; r < u; r++) cl[r] -= col[r] * x;
+            amps__gemm_tile(i1, k1, w, ib, i1, LU, ld, P, ld, P, ld);
+        }
+        amps__gemm_sub(qp - k1, w, k1 - kb, LU + (size_t)kb * ld + (size_t)k1, ld, P + (size_t)kb, ld, P + (size_t)k1, ld, U->nthr);
+    }
+    amps__gemm_sub(u - qp, w, qp, LU + (size_t)qp, ld, P, ld, P + (size_t)qp, ld, U->nthr);
+}
+
+/* Factors the panel qp..qp+w-1 with partial pivoting (swaps act on whole rows 0..qp+w-1);
+   AMPS_ERR_SINGULAR_UPDATE (U position in *bad) at a pivot that fails amps__pivot_ok. */
+static amps_status amps__lu_panel_factor(amps_update *U, amps_int qp, amps_int w, amps_int *bad) {
+    amps_int u = U->aug.size, c, r;
+    size_t ld = (size_t)U->aug.cap;
+    double *LU = U->lu.LU;
+    for (c = 0; c < w; c++) {
+        amps_int qq = qp + c, pr = qq, j = U->lu.col_order[qq], cc;
+        double *col = LU + (size_t)qq * ld, pmax = fabs(col[qq]), piv;
+        for (r = qq + 1; r < u; r++) if (fabs(col[r]) > pmax) { pmax = fabs(col[r]); pr = r; }
+        if (!amps__pivot_ok(U, j, pmax)) {
+            *bad = j;
+            return AMPS_ERR_SINGULAR_UPDATE;
+        }
+        if (pr != qq) {
+            amps_int t = U->lu.row_perm[pr];
+            U->lu.row_perm[pr] = U->lu.row_perm[qq]; U->lu.row_perm[qq] = t;
+            for (cc = 0; cc < qp + w; cc++) {
+                double *cl = LU + (size_t)cc * ld, tv = cl[pr];
+                cl[pr] = cl[qq]; cl[qq] = tv;
             }
         }
+        piv = col[qq];
+        for (r = qq + 1; r < u; r++) col[r] /= piv;
+        for (cc = qq + 1; cc < qp + w; cc++) {
+            double *cl = LU + (size_t)cc * ld, x = cl[qq];
+            if (x == 0.0) continue;
+            for (r = qq + 1; r < u; r++) cl[r] -= col[r] * x;
+        }
+    }
+    return AMPS_OK;
+}
+
+/* Factors positions nf..u-1 given positions 0..nf-1 factored for physical rows 0..u_old-1;
+   rows u_old..u-1 are new (lu.row_perm set). Returns AMPS_OK, AMPS_ERR_SINGULAR_UPDATE (position in
+   *bad), or AMPS_ERR_CAPACITY when the new rows' multipliers grow past 1e6 (refactor from 0). */
+static amps_status amps__lu_extend(amps_update *U, amps_int nf, amps_int u_old, amps_int *bad) {
+    amps_int u = U->aug.size, q, qp;
+    amps_status s;
+    if (nf > 0 && u > u_old && (s = amps__lu_new_rows(U, nf, u_old)) != AMPS_OK) return s;
+    for (qp = nf; qp < u; qp += AMPS__NB) {
+        amps_int w = u - qp < AMPS__NB ? u - qp : AMPS__NB;
+        amps__lu_panel_load(U, qp, w);
+        amps__lu_panel_apply(U, qp, w);
+        if ((s = amps__lu_panel_factor(U, qp, w, bad)) != AMPS_OK) return s;
     }
     for (q = 0; q < u; q++) U->lu.col_pos[U->lu.col_order[q]] = q;
     return AMPS_OK;
