@@ -6388,22 +6388,26 @@ enum { AMPS__BG_RUNNING = 1, AMPS__BG_READY = 2, AMPS__BG_FAILED = 3 };
 #endif
 
 typedef struct amps__bg {
-    /* the snapshot at the start (owned) and the parent's base (immutable until the swap) */
-    amps_int N0, n, nthr;
-    double sigma;
-    amps_int nt; amps_int *ti, *tj; double *tx;  /* K^ - K on the upper triangle, sigma on appended and constrained diagonals */
-    amps_int nc; amps_int *ci; double *cg;       /* constrained indices and values */
-    double *f;                                   /* N0 forces */
-    const amps_int *Kp, *Ki; const double *Kx;
-    amps_update_opts opts;
-    void *alloc_user;
-    /* the m' log: appended by the engine's thread, read by the worker (under mu) */
-    amps__lentry *log; amps_int nlog, caplog, done;
-    /* results */
-    amps_csc *K2; amps_factor *F2; amps_update *U2;
-    amps_status status; char msg[256];
-    double t0, t1;
-    int state, cancel;
+    struct {                                     /* the snapshot at the start (owned) and the parent's base (immutable until the swap) */
+        amps_int N, n, nthr;                     /* order, base order, the parent's threads */
+        double sigma;
+        amps_int nt; amps_int *ti, *tj; double *tx;  /* K^ - K on the upper triangle, sigma on appended and constrained diagonals */
+        amps_int nc; amps_int *ci; double *cg;   /* constrained indices and values */
+        double *f;                               /* N forces */
+        const amps_int *Kp, *Ki; const double *Kx;  /* the parent's base K */
+        amps_update_opts opts;
+        void *alloc_user;
+    } snap;
+    struct {                                     /* the m' log: appended by the engine's thread, read by the worker (under mu) */
+        amps__lentry *entries; amps_int n, cap;
+        amps_int done;                           /* entries the worker has replayed */
+    } log;
+    struct {                                     /* the new base: matrix, factor, engine */
+        amps_csc *K; amps_factor *F; amps_update *U;
+    } result;
+    amps_status status; char msg[256];           /* the failure */
+    double t0, t1;                               /* start and ready times */
+    int state, cancel;                           /* AMPS__BG_*; cancel requested (under mu) */
 #ifndef AMPS_NO_THREADS
     pthread_mutex_t mu; pthread_t th; int has_thread, has_mu;
 #endif
@@ -6433,9 +6437,9 @@ static int amps__bg_get(amps__bg *b, const int *field) {
 
 static void amps__bg_free(amps_ctx *ctx, amps__bg *b) {
     if (!b) return;
-    amps_update_free(ctx, b->U2); amps_factor_free(ctx, b->F2); amps_csc_free(ctx, b->K2);
-    amps__free(ctx, b->ti); amps__free(ctx, b->tj); amps__free(ctx, b->tx);
-    amps__free(ctx, b->ci); amps__free(ctx, b->cg); amps__free(ctx, b->f); amps__free(ctx, b->log);
+    amps_update_free(ctx, b->result.U); amps_factor_free(ctx, b->result.F); amps_csc_free(ctx, b->result.K);
+    amps__free(ctx, b->snap.ti); amps__free(ctx, b->snap.tj); amps__free(ctx, b->snap.tx);
+    amps__free(ctx, b->snap.ci); amps__free(ctx, b->snap.cg); amps__free(ctx, b->snap.f); amps__free(ctx, b->log.entries);
 #ifndef AMPS_NO_THREADS
     if (b->has_mu) pthread_mutex_destroy(&b->mu);
 #endif
@@ -6447,35 +6451,35 @@ static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U) {
     amps__bg *b = AMPS__CAST(amps__bg *, amps__calloc(ctx, 1, sizeof(amps__bg)));
     amps_int a, k, nt = 0, nc = 0, cap;
     if (!b) return NULL;
-    b->N0 = U->N; b->n = U->n; b->sigma = U->sigma; b->nthr = U->nthr;
-    b->Kp = U->base.Kp; b->Ki = U->base.Ki; b->Kx = U->base.Kx;
-    b->opts = U->refac.opts; b->alloc_user = ctx ? ctx->alloc_user : NULL;
+    b->snap.N = U->N; b->snap.n = U->n; b->snap.sigma = U->sigma; b->snap.nthr = U->nthr;
+    b->snap.Kp = U->base.Kp; b->snap.Ki = U->base.Ki; b->snap.Kx = U->base.Kx;
+    b->snap.opts = U->refac.opts; b->snap.alloc_user = ctx ? ctx->alloc_user : NULL;
     for (a = 0; a < U->aug.size; a++) if (U->aug.kind[a] & AMPS__UCON) nc++;
     cap = U->delta.used + (U->N - U->n) + nc + 1;
-    b->ti = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
-    b->tj = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
-    b->tx = AMPS__CAST(double *, amps__malloc(ctx, (size_t)cap, sizeof(double)));
-    b->ci = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nc + 1, sizeof(amps_int)));
-    b->cg = AMPS__CAST(double *, amps__malloc(ctx, (size_t)nc + 1, sizeof(double)));
-    b->f = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->N + 1, sizeof(double)));
-    b->caplog = 4 * U->refac.opts.cap_pending;          /* > 0: amps__create_opts */
-    b->log = AMPS__CAST(amps__lentry *, amps__malloc(ctx, (size_t)b->caplog, sizeof(amps__lentry)));
-    if (!b->ti || !b->tj || !b->tx || !b->ci || !b->cg || !b->f || !b->log) { amps__bg_free(ctx, b); return NULL; }
+    b->snap.ti = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
+    b->snap.tj = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
+    b->snap.tx = AMPS__CAST(double *, amps__malloc(ctx, (size_t)cap, sizeof(double)));
+    b->snap.ci = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nc + 1, sizeof(amps_int)));
+    b->snap.cg = AMPS__CAST(double *, amps__malloc(ctx, (size_t)nc + 1, sizeof(double)));
+    b->snap.f = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->N + 1, sizeof(double)));
+    b->log.cap = 4 * U->refac.opts.cap_pending;          /* > 0: amps__create_opts */
+    b->log.entries = AMPS__CAST(amps__lentry *, amps__malloc(ctx, (size_t)b->log.cap, sizeof(amps__lentry)));
+    if (!b->snap.ti || !b->snap.tj || !b->snap.tx || !b->snap.ci || !b->snap.cg || !b->snap.f || !b->log.entries) { amps__bg_free(ctx, b); return NULL; }
     for (a = 0; a < U->aug.size; a++) {
         amps_int i = U->aug.idx[a];
         for (k = 0; k < U->delta.row_len[a]; k++) {
             amps_int j = U->aug.idx[U->delta.col[U->delta.row_start[a] + k]];
             if (i > j) continue;                                  /* Delta is stored in both rows */
-            b->ti[nt] = i; b->tj[nt] = j; b->tx[nt] = U->delta.val[U->delta.row_start[a] + k]; nt++;
+            b->snap.ti[nt] = i; b->snap.tj[nt] = j; b->snap.tx[nt] = U->delta.val[U->delta.row_start[a] + k]; nt++;
         }
         if (U->aug.kind[a] & AMPS__UCON) {                           /* + sigma e_i e_i^T */
-            b->ti[nt] = i; b->tj[nt] = i; b->tx[nt] = U->sigma; nt++;
-            b->ci[b->nc] = i; b->cg[b->nc] = U->aug.g[a]; b->nc++;
+            b->snap.ti[nt] = i; b->snap.tj[nt] = i; b->snap.tx[nt] = U->sigma; nt++;
+            b->snap.ci[b->snap.nc] = i; b->snap.cg[b->snap.nc] = U->aug.g[a]; b->snap.nc++;
         }
     }
-    for (k = U->n; k < U->N; k++) { b->ti[nt] = k; b->tj[nt] = k; b->tx[nt] = U->sigma; nt++; }   /* K-bar */
-    b->nt = nt;
-    memcpy(b->f, U->force.f, sizeof(double) * (size_t)U->N);
+    for (k = U->n; k < U->N; k++) { b->snap.ti[nt] = k; b->snap.tj[nt] = k; b->snap.tx[nt] = U->sigma; nt++; }   /* K-bar */
+    b->snap.nt = nt;
+    memcpy(b->snap.f, U->force.f, sizeof(double) * (size_t)U->N);
 #ifndef AMPS_NO_THREADS
     if (pthread_mutex_init(&b->mu, NULL) != 0) {
         amps__bg_free(ctx, b);
@@ -6506,24 +6510,24 @@ static void amps__bg_log(amps_update *U, amps_int kpend, const amps__pdelta *pd,
     amps__bg *b = U->refac.job;
     amps_int need, k;
     amps__bg_lock(b);
-    need = b->nlog + npd + (kpend > 0);
+    need = b->log.n + npd + (kpend > 0);
     if (b->state == AMPS__BG_FAILED) { amps__bg_unlock(b); return; }
-    if (need > b->caplog) {
-        amps_int cap = b->caplog;
+    if (need > b->log.cap) {
+        amps_int cap = b->log.cap;
         amps_ctx c2;
-        amps_ctx_init(&c2); c2.alloc_user = b->alloc_user;
+        amps_ctx_init(&c2); c2.alloc_user = b->snap.alloc_user;
         while (cap < need) cap = cap * 2 + 1024;
-        if (!U->grow || amps__realloc(&c2, (void **)&b->log, (size_t)cap, sizeof(amps__lentry))) {
+        if (!U->grow || amps__realloc(&c2, (void **)&b->log.entries, (size_t)cap, sizeof(amps__lentry))) {
             b->cancel = 1;
             b->status = AMPS_ERR_CAPACITY;
             memcpy(b->msg, "re-factorization cancelled: its log of changes is full", 55);
             amps__bg_unlock(b);
             return;
         }
-        b->caplog = cap;
+        b->log.cap = cap;
     }
-    if (kpend > 0) { b->log[b->nlog].r = -1; b->log[b->nlog].c = kpend; b->log[b->nlog].v = 0; b->nlog++; }
-    for (k = 0; k < npd; k++) { b->log[b->nlog].r = pd[k].r; b->log[b->nlog].c = pd[k].c; b->log[b->nlog].v = pd[k].v; b->nlog++; }
+    if (kpend > 0) { b->log.entries[b->log.n].r = -1; b->log.entries[b->log.n].c = kpend; b->log.entries[b->log.n].v = 0; b->log.n++; }
+    for (k = 0; k < npd; k++) { b->log.entries[b->log.n].r = pd[k].r; b->log.entries[b->log.n].c = pd[k].c; b->log.entries[b->log.n].v = pd[k].v; b->log.n++; }
     amps__bg_unlock(b);
 }
 
@@ -6543,79 +6547,107 @@ static amps_status amps__bg_replay(amps_ctx *ctx, amps_update *U2, const amps__l
     return AMPS_OK;
 }
 
+/* Worker step 1: B = K^(t0) + sigma P_C on the upper triangle, into b->result.K. Couplings a
+   change cancelled exactly (a cut moves K[i, j] to a copy of j) leave the pattern, so that they
+   cause no fill; with node blocks detected (block 0) the pattern stays whole. */
+static amps_status amps__bg_assemble(amps_ctx *c2, amps__bg *b) {
+    amps_int j, p, nz = 0, nt = b->snap.nt, *ti, *tj;
+    double *tx;
+    for (j = 0; j < b->snap.n; j++) for (p = b->snap.Kp[j]; p < b->snap.Kp[j + 1]; p++) if (b->snap.Ki[p] <= j) nz++;
+    ti = AMPS__CAST(amps_int *, amps__malloc(c2, (size_t)(nz + nt) + 1, sizeof(amps_int)));
+    tj = AMPS__CAST(amps_int *, amps__malloc(c2, (size_t)(nz + nt) + 1, sizeof(amps_int)));
+    tx = AMPS__CAST(double *, amps__malloc(c2, (size_t)(nz + nt) + 1, sizeof(double)));
+    if (ti && tj && tx) {
+        nz = 0;
+        for (j = 0; j < b->snap.n; j++)
+            for (p = b->snap.Kp[j]; p < b->snap.Kp[j + 1]; p++)
+                if (b->snap.Ki[p] <= j) { ti[nz] = b->snap.Ki[p]; tj[nz] = j; tx[nz] = b->snap.Kx[p]; nz++; }
+        memcpy(ti + nz, b->snap.ti, sizeof(amps_int) * (size_t)nt);
+        memcpy(tj + nz, b->snap.tj, sizeof(amps_int) * (size_t)nt);
+        memcpy(tx + nz, b->snap.tx, sizeof(double) * (size_t)nt);
+        b->result.K = amps_csc_from_triplets(c2, b->snap.N, nz + nt, ti, tj, tx, AMPS_UPPER);
+    }
+    amps__free(c2, ti); amps__free(c2, tj); amps__free(c2, tx);
+    if (!ti || !tj || !tx) return AMPS_ERR_OOM;
+    if (!b->result.K) return c2->status;
+    if (b->snap.opts.refactor_order.block != 0) amps__csc_drop_zeros(b->result.K);
+    return AMPS_OK;
+}
+
+/* Worker step 2: ordering, analysis and factorization of B, into b->result.F; stops early when
+   cancelled. */
+static amps_status amps__bg_factor(amps_ctx *c2, amps__bg *b) {
+    amps_status s;
+    if (amps__bg_get(b, &b->cancel)) return AMPS_ERR_STATE;
+    if (AMPS_TEST_BG_FAULT(1)) return amps__err(c2, AMPS_ERR_OOM, "injected failure in the analysis");
+    b->result.F = amps_analyze(c2, b->result.K, AMPS_UPPER, &b->snap.opts.refactor_order);
+    if (!b->result.F) return c2->status;
+    if (amps__bg_get(b, &b->cancel)) return AMPS_ERR_STATE;
+    if (AMPS_TEST_BG_FAULT(2)) return amps__err(c2, AMPS_ERR_NOT_SPD, "injected failure in the factorization");
+    if ((s = amps_factorize(c2, b->result.F, b->result.K, AMPS_UPPER)) != AMPS_OK) return s;
+    if (amps__bg_get(b, &b->cancel)) return AMPS_ERR_STATE;
+    return AMPS_OK;
+}
+
+/* Worker step 3: the engine of the new base, b->result.U: the forces, C with Delta = -sigma and
+   the constraints, committed. */
+static amps_status amps__bg_engine(amps_ctx *c2, amps__bg *b) {
+    amps_update_opts o2 = b->snap.opts;
+    amps_update *V;
+    amps_int j;
+    amps_status s;
+    o2.grow = 1; o2.refactor = AMPS_REFACTOR_OFF;
+    c2->nthreads = b->snap.nthr;                     /* per-thread buffers for the owner's threads */
+    V = b->result.U = amps_update_create(c2, b->result.K, AMPS_UPPER, b->result.F, &o2);
+    if (!V) return c2->status;
+    V->nthr = 1;                                     /* the catch-up runs on this thread alone */
+    for (j = 0; j < b->snap.N; j++)
+        if (b->snap.f[j] != 0.0 && (s = amps_update_set_force(c2, V, 1, &j, b->snap.f + j)) != AMPS_OK) return s;
+    for (j = 0; j < b->snap.nc; j++) {
+        double ms = -b->snap.sigma;
+        if ((s = amps_update_add(c2, V, 1, b->snap.ci + j, b->snap.ci + j, &ms)) != AMPS_OK) return s;
+    }
+    if ((s = amps_update_constrain(c2, V, b->snap.nc, b->snap.ci, b->snap.cg)) != AMPS_OK) return s;
+    return amps_update_commit(c2, V);
+}
+
+/* Worker step 4: catches up with the log while it grows (at most 8 rounds of at least 32
+   entries; the swap commits the rest). */
+static amps_status amps__bg_follow_log(amps_ctx *c2, amps__bg *b) {
+    amps_int round;
+    amps_status s;
+    for (round = 0; round < 8; round++) {
+        amps_int lo, cnt;
+        amps__lentry *chunk;
+        amps__bg_lock(b);
+        lo = b->log.done; cnt = b->log.n - lo;
+        if (b->cancel || cnt < 32) { amps__bg_unlock(b); break; }
+        chunk = AMPS__CAST(amps__lentry *, amps__malloc(c2, (size_t)cnt, sizeof(amps__lentry)));
+        if (chunk) memcpy(chunk, b->log.entries + lo, sizeof(amps__lentry) * (size_t)cnt);
+        amps__bg_unlock(b);
+        if (!chunk) return AMPS_ERR_OOM;
+        if (AMPS_TEST_BG_FAULT(3)) s = amps__err(c2, AMPS_ERR_SINGULAR_UPDATE, "injected failure in the catch-up");
+        else if ((s = amps__bg_replay(c2, b->result.U, chunk, cnt, b->snap.sigma)) == AMPS_OK) s = amps_update_commit(c2, b->result.U);
+        amps__free(c2, chunk);
+        if (s != AMPS_OK) return s;
+        amps__bg_lock(b); b->log.done = lo + cnt; amps__bg_unlock(b);
+    }
+    return AMPS_OK;
+}
+
 /* The worker: B = K^(t0) + sigma P_C assembled, ordered, analyzed and factored; the engine of
    the new base gets the forces, Delta = -sigma on C with the constraints, and catches up with
    the log while it grows. */
 static void amps__bg_work(amps__bg *b) {
     amps_ctx c2;
-    amps_int j, p, nz = 0, *ti = NULL, *tj = NULL, round;
-    double *tx = NULL;
-    amps_status s = AMPS_OK;
-    amps_update_opts o2;
-    amps__lentry *chunk = NULL;
+    amps_status s;
     amps_ctx_init(&c2);
-    c2.alloc_user = b->alloc_user;
-    c2.nthreads = b->opts.refactor_threads;        /* > 0: amps__create_opts */
+    c2.alloc_user = b->snap.alloc_user;
+    c2.nthreads = b->snap.opts.refactor_threads;        /* > 0: amps__create_opts */
     b->t0 = amps_now();
-    /* 1. B on the upper triangle */
-    for (j = 0; j < b->n; j++) for (p = b->Kp[j]; p < b->Kp[j + 1]; p++) if (b->Ki[p] <= j) nz++;
-    ti = AMPS__CAST(amps_int *, amps__malloc(&c2, (size_t)(nz + b->nt) + 1, sizeof(amps_int)));
-    tj = AMPS__CAST(amps_int *, amps__malloc(&c2, (size_t)(nz + b->nt) + 1, sizeof(amps_int)));
-    tx = AMPS__CAST(double *, amps__malloc(&c2, (size_t)(nz + b->nt) + 1, sizeof(double)));
-    if (!ti || !tj || !tx) { s = AMPS_ERR_OOM; goto done; }
-    nz = 0;
-    for (j = 0; j < b->n; j++)
-        for (p = b->Kp[j]; p < b->Kp[j + 1]; p++)
-            if (b->Ki[p] <= j) { ti[nz] = b->Ki[p]; tj[nz] = j; tx[nz] = b->Kx[p]; nz++; }
-    memcpy(ti + nz, b->ti, sizeof(amps_int) * (size_t)b->nt);
-    memcpy(tj + nz, b->tj, sizeof(amps_int) * (size_t)b->nt);
-    memcpy(tx + nz, b->tx, sizeof(double) * (size_t)b->nt);
-    b->K2 = amps_csc_from_triplets(&c2, b->N0, nz + b->nt, ti, tj, tx, AMPS_UPPER);
-    amps__free(&c2, ti); amps__free(&c2, tj); amps__free(&c2, tx); ti = tj = NULL; tx = NULL;
-    if (!b->K2) { s = c2.status; goto done; }
-    /* couplings a change cancelled exactly (a cut moves K[i, j] to a copy of j) leave the pattern,
-       so that they cause no fill; with node blocks detected (block 0) the pattern stays whole */
-    if (b->opts.refactor_order.block != 0) amps__csc_drop_zeros(b->K2);
-    /* 2. ordering, analysis, factorization */
-    if (amps__bg_get(b, &b->cancel)) { s = AMPS_ERR_STATE; goto done; }
-    if (AMPS_TEST_BG_FAULT(1)) { s = amps__err(&c2, AMPS_ERR_OOM, "injected failure in the analysis"); goto done; }
-    b->F2 = amps_analyze(&c2, b->K2, AMPS_UPPER, &b->opts.refactor_order);
-    if (!b->F2) { s = c2.status; goto done; }
-    if (amps__bg_get(b, &b->cancel)) { s = AMPS_ERR_STATE; goto done; }
-    if (AMPS_TEST_BG_FAULT(2)) { s = amps__err(&c2, AMPS_ERR_NOT_SPD, "injected failure in the factorization"); goto done; }
-    if ((s = amps_factorize(&c2, b->F2, b->K2, AMPS_UPPER)) != AMPS_OK) goto done;
-    if (amps__bg_get(b, &b->cancel)) { s = AMPS_ERR_STATE; goto done; }
-    /* 3. the engine of the new base: forces, C with Delta = -sigma, then the log */
-    o2 = b->opts; o2.grow = 1; o2.refactor = AMPS_REFACTOR_OFF;
-    c2.nthreads = b->nthr;                          /* per-thread buffers for the owner's threads */
-    b->U2 = amps_update_create(&c2, b->K2, AMPS_UPPER, b->F2, &o2);
-    if (!b->U2) { s = c2.status; goto done; }
-    b->U2->nthr = 1;                                /* the catch-up runs on this thread alone */
-    for (j = 0; j < b->N0; j++)
-        if (b->f[j] != 0.0 && (s = amps_update_set_force(&c2, b->U2, 1, &j, b->f + j)) != AMPS_OK) goto done;
-    for (j = 0; j < b->nc; j++) {
-        double ms = -b->sigma;
-        if ((s = amps_update_add(&c2, b->U2, 1, b->ci + j, b->ci + j, &ms)) != AMPS_OK) goto done;
-    }
-    if ((s = amps_update_constrain(&c2, b->U2, b->nc, b->ci, b->cg)) != AMPS_OK) goto done;
-    if ((s = amps_update_commit(&c2, b->U2)) != AMPS_OK) goto done;
-    for (round = 0; round < 8; round++) {
-        amps_int lo, cnt;
-        amps__bg_lock(b);
-        lo = b->done; cnt = b->nlog - lo;
-        if (b->cancel || cnt < 32) { amps__bg_unlock(b); break; }
-        chunk = AMPS__CAST(amps__lentry *, amps__malloc(&c2, (size_t)cnt, sizeof(amps__lentry)));
-        if (chunk) memcpy(chunk, b->log + lo, sizeof(amps__lentry) * (size_t)cnt);
-        amps__bg_unlock(b);
-        if (!chunk) { s = AMPS_ERR_OOM; goto done; }
-        if (AMPS_TEST_BG_FAULT(3)) { s = amps__err(&c2, AMPS_ERR_SINGULAR_UPDATE, "injected failure in the catch-up"); goto done; }
-        if ((s = amps__bg_replay(&c2, b->U2, chunk, cnt, b->sigma)) != AMPS_OK) goto done;
-        if ((s = amps_update_commit(&c2, b->U2)) != AMPS_OK) goto done;
-        amps__free(&c2, chunk); chunk = NULL;
-        amps__bg_lock(b); b->done = lo + cnt; amps__bg_unlock(b);
-    }
-done:
-    amps__free(&c2, ti); amps__free(&c2, tj); amps__free(&c2, tx); amps__free(&c2, chunk);
+    if ((s = amps__bg_assemble(&c2, b)) == AMPS_OK && (s = amps__bg_factor(&c2, b)) == AMPS_OK &&
+        (s = amps__bg_engine(&c2, b)) == AMPS_OK)
+        s = amps__bg_follow_log(&c2, b);
     amps__bg_lock(b);
     if (s == AMPS_OK && b->cancel) s = b->status ? b->status : AMPS_ERR_STATE;
     if (s != AMPS_OK) {
@@ -6664,8 +6696,8 @@ static double amps__fact_estimate(const amps_factor *F, double t_solve) {
 static amps_status amps__bg_catch_up(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg *b) {
     amps_int lo, cnt, a, i;
     amps_status s;
-    amps__bg_lock(b); lo = b->done; cnt = b->nlog - lo; amps__bg_unlock(b);
-    if ((s = amps__bg_replay(c2, V, b->log + lo, cnt, b->sigma)) != AMPS_OK) return s;
+    amps__bg_lock(b); lo = b->log.done; cnt = b->log.n - lo; amps__bg_unlock(b);
+    if ((s = amps__bg_replay(c2, V, b->log.entries + lo, cnt, b->snap.sigma)) != AMPS_OK) return s;
     /* constraints and forces as they are now */
     for (a = 0; a < V->aug.size; a++) {
         i = V->aug.idx[a];
@@ -6687,7 +6719,7 @@ static amps_status amps__bg_catch_up(amps_ctx *c2, amps_update *U, amps_update *
     if (U->pending.n_dofs > 0) {
         amps__lentry e;
         e.r = -1; e.c = U->pending.n_dofs; e.v = 0;
-        if ((s = amps__bg_replay(c2, V, &e, 1, b->sigma)) != AMPS_OK) return s;
+        if ((s = amps__bg_replay(c2, V, &e, 1, b->snap.sigma)) != AMPS_OK) return s;
         memcpy(V->force.f + U->N, U->force.f + U->N, sizeof(double) * (size_t)U->pending.n_dofs);
     }
     for (a = 0; a < U->pending.n_delta; a++)
@@ -6709,8 +6741,8 @@ static void amps__bg_take(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg
     U->grow = old.grow; U->nthr = old.nbuf; U->guard.tol = old.guard.tol;
     U->refac = old.refac;
     U->refac.job = NULL;
-    U->refac.F_own = b->F2; U->refac.K_own = b->K2;
-    b->F2 = NULL; b->K2 = NULL; b->U2 = NULL;
+    U->refac.F_own = b->result.F; U->refac.K_own = b->result.K;
+    b->result.F = NULL; b->result.K = NULL; b->result.U = NULL;
     U->refac.t_factor = b->t1 - b->t0;
     U->refac.t_step_base = 0; U->refac.t_extra = 0; U->refac.size_base = U->aug.size;
     U->watch = old.watch;                           /* no job in progress (the callers check) */
@@ -6740,7 +6772,7 @@ static void amps__bg_take(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg
    On failure the engine keeps its old factors (the re-factorization is dropped). */
 static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
     amps__bg *b = U->refac.job;
-    amps_update *V = b->U2;
+    amps_update *V = b->result.U;
     amps_ctx c2;
     amps_status s;
     double t0 = amps_now();
