@@ -6126,10 +6126,34 @@ static void amps__solve_stats_begin(amps_update *U) {
     }
 }
 
+/* Accuracy guard after the full solve into sol.x: the relative residual of the full system, and
+   refinement steps with the same factors (at most 3) while it is above guard.tol. Sets
+   stats.relres, guard_steps and guard_result (pass 1: after a re-factorization); returns the
+   residual. */
+static double amps__guard_refine(amps_update *U, int pass) {
+    double *rho = U->work.resid, *dx = U->work.resid + U->cap_N, *tmp = U->guard.scratch;
+    double rel = amps__residual_vec(U, U->sol.x, rho, tmp);
+    amps_int it, k;
+    for (it = 0; it < 3 && rel > U->guard.tol; it++) {
+        const amps_factor *F = U->F;
+        for (k = 0; k < U->n; k++) U->guard.ct[k] = rho[F->perm[k]];
+        amps_lsolve(F, U->guard.ct);
+        for (k = 0; k < U->n; k++) U->guard.ct[k] *= U->base.inv_sqrt_d[k];
+        amps__solve_core(U, U->guard.ct, rho, 1, 0, dx);
+        for (k = 0; k < U->N; k++) U->sol.x[k] += dx[k];
+        rel = amps__residual_vec(U, U->sol.x, rho, tmp);
+        U->stats.guard_steps++;
+    }
+    U->stats.relres = rel;
+    U->stats.guard_result = !(rel <= U->guard.tol) ? AMPS_GUARD_NOT_MET
+                            : pass ? AMPS_GUARD_REFACTORED : U->stats.guard_steps > 0 ? AMPS_GUARD_REFINED : AMPS_GUARD_MET;
+    return rel;
+}
+
 AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xout) {
     amps_int a, k;
     amps_status s;
-    int it, pass = 0;
+    int pass = 0;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve: NULL engine");
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
     if (!U->sol.x_stale && U->sol.has_x) {
@@ -6141,24 +6165,8 @@ again:
     amps__solve_core(U, U->force.ct, U->force.f, 0, 0, U->sol.x);
     U->stats.guard_steps = 0; U->stats.guard_result = AMPS_GUARD_MET;
     U->stats.relres = -1;
-    /* accuracy guard: the residual of the full system, and refinement steps with the same
-       factors while it is above guard_tol */
     if (U->guard.tol > 0) {
-        double *rho = U->work.resid, *dx = U->work.resid + U->cap_N, *tmp = U->guard.scratch;
-        double rel = amps__residual_vec(U, U->sol.x, rho, tmp);
-        for (it = 0; it < 3 && rel > U->guard.tol; it++) {
-            const amps_factor *F = U->F;
-            for (k = 0; k < U->n; k++) U->guard.ct[k] = rho[F->perm[k]];
-            amps_lsolve(F, U->guard.ct);
-            for (k = 0; k < U->n; k++) U->guard.ct[k] *= U->base.inv_sqrt_d[k];
-            amps__solve_core(U, U->guard.ct, rho, 1, 0, dx);
-            for (k = 0; k < U->N; k++) U->sol.x[k] += dx[k];
-            rel = amps__residual_vec(U, U->sol.x, rho, tmp);
-            U->stats.guard_steps++;
-        }
-        U->stats.relres = rel;
-        U->stats.guard_result = rel > U->guard.tol ? AMPS_GUARD_NOT_MET
-                                : pass ? AMPS_GUARD_REFACTORED : U->stats.guard_steps > 0 ? AMPS_GUARD_REFINED : AMPS_GUARD_MET;
+        double rel = amps__guard_refine(U, pass);
         if (rel > U->guard.tol && pass == 0 && U->refac.opts.refactor != AMPS_REFACTOR_OFF && U->aug.size > 0) {
             /* the augmentation is the suspect: a fresh base, then the same solve again */
             pass = 1;
