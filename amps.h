@@ -264,10 +264,10 @@ AMPS_API void amps_touch_reset(const amps_factor *F);
    K's rows in its original numbering, n.. are appended DOFs in order of creation.
 
    Changes are recorded by the update calls and applied atomically by amps_update_commit (called
-   by amps_update_solve and the other solves). A failed call leaves the engine as it was, with
-   one exception: a failed commit also discards every change recorded since the last successful
-   commit (see amps_update_commit). Calls that commit first and fail after their commit went
-   through say so.
+   by amps_update_solve and the other solves). A failed call leaves the engine as it was (only
+   capacities may have grown), with one exception: a failed commit also discards every change
+   recorded since the last successful commit (see amps_update_commit). The calls that commit
+   first and can fail after their commit went through say so.
 
    Allocation: amps_update_create allocates everything for the capacities in opts. Update,
    commit and solve calls allocate only when a capacity is exceeded and opts.grow is set
@@ -406,9 +406,17 @@ AMPS_API amps_status amps_update_release(amps_ctx *ctx, amps_update *U, amps_int
 AMPS_API amps_status amps_update_set_force(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx, const double *val);
 /* Drops every change recorded since the last commit (forces stay). */
 AMPS_API void amps_update_discard(amps_update *U);
-/* Applies the recorded changes (Steps 1-5). On failure discards them all. */
+/* Applies the recorded changes (Steps 1-5). On failure (AMPS_ERR_SINGULAR_UPDATE, AMPS_ERR_CAPACITY,
+   AMPS_ERR_OOM) the committed system is restored: matrix, constraints, forces and watch set as
+   before the call; the solution and reactions are marked stale and the dense factor is
+   recomputed, so later results agree with the earlier ones to rounding, not bitwise. The
+   exception to the failure rule: every change recorded since the last successful commit is
+   discarded (as by amps_update_discard); record them again, corrected, to retry. A finished
+   re-factorization the call swapped in first stays swapped in. */
 AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U);
-/* Commits, then solves (Step 6): x (room for amps_update_dim, may be NULL) receives the solution. */
+/* Commits, then solves (Step 6): x (room for amps_update_dim, may be NULL) receives the solution.
+   A failed commit: see amps_update_commit. AMPS_WARN_INACCURATE (accuracy guard) is a warning:
+   the solution is stored, and the guard may have re-factored. */
 AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *x);
 /* Watch set: the indices amps_update_solve_watched computes (replaces the previous set; m = 0
    clears it). closure_L of the watched indices is computed here, once. Allocates the set (and
@@ -417,7 +425,9 @@ AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m
 /* Commits, then computes x on the watched indices only: xw[k] = x[idx[k]] (xw may be NULL; the
    values also land in amps_update_solution, whose other entries are then stale). The backward
    solve reads L only on closure_L(watched) and, for the local refinement, on the closure of
-   S u C and its neighbours. Updates the reactions too. No accuracy guard. Allocates nothing. */
+   S u C and its neighbours. Updates the reactions too. No accuracy guard. Allocates nothing.
+   AMPS_ERR_INDEX (a watched index no longer exists) comes before the commit; a failed commit:
+   see amps_update_commit. */
 AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, double *xw);
 /* The same in two phases, for a caller whose second thread runs the backward solve outside the
    lock it holds for every other engine call (a 60 Hz visual loop beside a 1 kHz haptic loop):
@@ -431,7 +441,10 @@ AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, do
                                 closure_L(watched), completing xw;
      amps_update_watched_end    (under the lock) ends the job.
    One job at a time; the watch set must not change between begin and end; other engine calls
-   may run meanwhile (the factor the job reads stays alive until end). Allocates nothing. */
+   may run meanwhile (the factor the job reads stays alive until end). Allocates nothing.
+   amps_update_watched_begin fails before its commit (bad arguments, a job in progress, a watched
+   index gone: nothing changes), in the commit (see amps_update_commit), or after it with
+   AMPS_ERR_CAPACITY (y too short): then the changes stay committed and no job is started. */
 typedef struct amps_update_job {
     const amps_factor *F;         /* the factor the job reads */
     amps_int nw, ncw;             /* watched entries, closure size */
@@ -447,7 +460,7 @@ AMPS_API void amps_update_watched_end(amps_update *U, amps_update_job *job);
    alone (Steps 4-5, no full solve): O(|S u C|^2) when only prescribed values moved, plus a sparse
    forward solve over closure_L of the changed forces and O(sum of root paths) when forces
    changed. The haptic path: a pin moved, read its force. amps_update_solution is not updated.
-   Allocates nothing. */
+   Allocates nothing. A failed commit: see amps_update_commit. */
 AMPS_API amps_status amps_update_solve_reactions(amps_ctx *ctx, amps_update *U);
 /* Solution of the last solve (amps_update_dim entries at that time). */
 AMPS_API const double *amps_update_solution(const amps_update *U);
@@ -470,7 +483,9 @@ AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U);
 /* Stops a running re-factorization and frees it; blocks until the thread has stopped (at most
    one phase: ordering, analysis, factorization or a catch-up commit). */
 AMPS_API void amps_update_refactor_cancel(amps_ctx *ctx, amps_update *U);
-/* Commits, then re-factors synchronously (start + wait). Blocks. */
+/* Commits, then re-factors synchronously (start + wait). Blocks. A failed commit: see
+   amps_update_commit; a failed re-factorization leaves the changes committed and the engine on
+   its old factors. */
 AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U);
 
 /* ================================ FEM scene ================================ */

@@ -541,6 +541,12 @@ static void test_errors(void) {
         CHECK(amps_update_add_dofs(&m2.ctx, m2.U, 1, &first) == AMPS_ERR_CAPACITY, "cap_new not enforced");
         { int idx2[3] = {4, 7, 9}; double v[3] = {1, -1, 1}; change_term(&m2, 3, idx2, v, 2.0, 0); }
         CHECK(amps_update_commit(&m2.ctx, m2.U) == AMPS_ERR_CAPACITY, "cap_mod not enforced: %s", m2.ctx.msg);
+        {   /* the failed commit restored the system and discarded the recorded changes */
+            amps_update_stats st2;
+            amps_update_get_stats(m2.U, &st2);
+            CHECK(st2.nsys == 0 && st2.ncommit == 0 && amps_update_dim(m2.U) == 40, "failed commit changed the system");
+            CHECK(amps_update_commit(&m2.ctx, m2.U) == AMPS_OK, "failed commit kept its changes: %s", m2.ctx.msg);
+        }
         trip_free(&m2.T);
         { int k; for (k = 0; k < nz; k++) trip_add(&m2.T, ti[k], tj[k], tx[k]); }
         model_check(&m2, 1e-10, "after capacity error");
