@@ -4432,7 +4432,7 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
 
 /* ---- allocation of the capacity-dependent arrays ---- */
 
-/* Grows every U-sized array to capacity cap (> capu). All-or-nothing. */
+/* Grows every U-sized array to capacity cap (> aug.cap). All-or-nothing. */
 static amps_status amps__grow_u(amps_ctx *ctx, amps_update *U, amps_int cap) {
     double *G = NULL, *LU = NULL;
     amps_int old = U->aug.cap, u = U->aug.size;
@@ -4791,7 +4791,7 @@ AMPS_API amps_status amps_update_add(amps_ctx *ctx, amps_update *U, amps_int nz,
     return AMPS_OK;
 }
 
-/* Current value K^[r, c] including recorded changes (r, c < N + kpend). */
+/* Current value K^[r, c] including recorded changes (r, c < N + pending.n_dofs). */
 static double amps__cur_entry(const amps_update *U, amps_int r, amps_int c) {
     double v = 0;
     amps_int p, k, a;
@@ -4931,7 +4931,7 @@ AMPS_API amps_status amps_update_set_force(amps_ctx *ctx, amps_update *U, amps_i
     for (k = 0; k < m; k++) {
         amps_int i = idx[k];
         if (U->force.f[i] == val[k]) continue;
-        /* base forces reach ct at the next solve, from the difference f - fct */
+        /* base forces reach ct at the next solve, from the difference f - f_ct */
         if (i < U->n) { if (U->force.n_changed < U->n) U->force.changed[U->force.n_changed++] = i; else U->force.changed_all = 1; }
         U->force.f[i] = val[k];
     }
@@ -5021,11 +5021,12 @@ AMPS__WSOLVE(16)
 #undef AMPS__WSOLVE
 
 /* W columns (W = D^{-1/2} L^{-1} e_p on the root path of p, ascending) of the U positions
-   list[0..nb-1], written at voff/vlen. The columns are split into chunks of at most AMPS__VB,
+   list[0..nb-1], written at memo.off/memo.len. The columns are split into chunks of at most AMPS__VB,
    one chunk per thread at a time; a chunk is one forward solve over the union of its paths
    (ascending = topological), X(t, j) row-major over the chunk, so each column of L on the
    union is read once per chunk. The rows of L(:, k) lie on the path of k, so no solve leaves
-   the union. Workspace per thread: xb (xrows * AMPS__VB), lmap (n, -1 outside use), clo (n). */
+   the union. Workspace per thread: work.chunk (chunk_rows * AMPS__VB), work.row_map (n, -1
+   outside use), work.closure (n). */
 static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
     const amps_factor *F = U->F;
     amps_int nchunk, csize, ch;
