@@ -5692,14 +5692,15 @@ static size_t amps__grow_aug(amps_update *U) {
 
 /* Room for vneed more memoized entries (grows the pool when allowed). */
 static amps_status amps__need_memo(amps_ctx *ctx, amps_update *U, size_t vneed) {
-    size_t cap = U->memo.cap;
-    if (U->memo.used + vneed <= cap) return AMPS_OK;
-    if (!U->grow)
+    size_t need = U->memo.used + vneed, cap = U->memo.cap;
+    if (need > cap && !U->grow)
         return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: memoized columns need %.0f entries, cap_vpool is %.0f (raise it or set grow)",
-                         (double)(U->memo.used + vneed), (double)U->memo.cap);
-    while (cap < U->memo.used + vneed) cap = cap * 2 + 1024;
-    if (amps__realloc(ctx, (void **)&U->memo.val, cap, sizeof(double)) || amps__realloc(ctx, (void **)&U->memo.idx, cap, sizeof(amps_int))) return AMPS_ERR_OOM;
-    U->memo.cap = cap;
+                         (double)need, (double)cap);
+    if (need > cap) {
+        while (cap < need) cap = cap * 2 + 1024;
+        if (amps__realloc(ctx, (void **)&U->memo.val, cap, sizeof(double)) || amps__realloc(ctx, (void **)&U->memo.idx, cap, sizeof(amps_int))) return AMPS_ERR_OOM;
+        U->memo.cap = cap;
+    }
     return AMPS_OK;
 }
 
