@@ -279,8 +279,8 @@ typedef enum amps_formulation {
     AMPS_FORM_DUAL = 1      /* unknowns the correction forces ([AMPS] Eq. 3.16-3.17) */
 } amps_formulation;
 
-/* Re-factorization ([Interactive cutting] Sec. 3.6): the augmentation (S u C, the memoized columns, the
-   dense system) only grows, and every step pays for it. A re-factorization factors the current
+/* Re-factorization ([Interactive cutting] Sec. 3.6): the augmentation (S u C, the memoized
+   columns, the dense system) only grows, and every step pays for it. A re-factorization factors the current
    matrix K^ + sigma P_C (C: the indices constrained at its start, whose rows stay in the
    augmentation with Delta = -sigma e_i e_i^T) with its own analysis, in a background thread,
    while updates and solves go on with the old factors. When it is done, the next call that
