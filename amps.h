@@ -5981,7 +5981,8 @@ static double amps__krow(const amps_update *U, amps_int i, const double *v) {
 
 /* Refinement: x~ = K-bar^{-1}(f - H w) on U and its neighbours by a partial backward solve of
    sv (a copy), rho = (f - K^ x~) on the free rows of U, and the correction problem K^ d = H rho
-   (d_C = 0) gives wd; afterwards the full solve uses w + wd - rho. x~ is gathered into U->sol.x. */
+   (d_C = 0) gives dense.w_corr; afterwards the full solve uses w + w_corr - rho. x~ is gathered
+   into x. */
 static void amps__refine(amps_update *U, const double *sv, const double *wv, const double *fv, int hom, double *x) {
     const amps_factor *F = U->F;
     amps_int u = U->aug.size, n = U->n, a, k, p, nreq = 0, *req = U->work.idx, *clo = U->work.idx + n, ncl;
@@ -6022,7 +6023,8 @@ static void amps__refine(amps_update *U, const double *sv, const double *wv, con
 }
 
 /* Step 4: r = H^T K-bar^{-1} f = W^T ct on base positions, f/sigma on appended ones. With
-   cache (ct is U->force.ct), the base entries r[0..nr-1] are current and only later ones are formed. */
+   cache (ct is force.ct), the base entries r[0..sol.n_rhs-1] are current and only later ones
+   are formed. */
 static void amps__step4(amps_update *U, const double *ct, const double *fv, int cache, double *r) {
     amps_int u = U->aug.size, n = U->n, a, a0 = cache ? U->sol.n_rhs : 0;
     double t0 = amps_now();
