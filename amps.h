@@ -267,12 +267,14 @@ AMPS_API void amps_touch_reset(const amps_factor *F);
 /* @@API update: owned by engine */
 /* The update engine keeps the exact solution of K^ x = f^ while K^ changes from the factored
    base K (order n) by principal submatrix updates, appended degrees of freedom and Dirichlet
-   constraints (paper 000, Table 1, Steps 1-6). Indices are in the current numbering: 0..n-1 are
+   constraints ([AMPS] Table 1, Steps 1-6). Indices are in the current numbering: 0..n-1 are
    K's rows in its original numbering, n.. are appended DOFs in order of creation.
 
    Changes are recorded by the update calls and applied atomically by amps_update_commit (called
-   by amps_update_solve). If a commit fails (singular system, capacity) every change since the
-   last successful commit is discarded and the engine is as it was.
+   by amps_update_solve and the other solves). A failed call leaves the engine as it was (only
+   capacities may have grown), with one exception: a failed commit also discards every change
+   recorded since the last successful commit (see amps_update_commit). The calls that commit
+   first and can fail after their commit went through say so.
 
    Allocation: amps_update_create allocates everything for the capacities in opts. Update,
    commit and solve calls allocate only when a capacity is exceeded and opts.grow is set
@@ -280,12 +282,12 @@ AMPS_API void amps_touch_reset(const amps_factor *F);
 typedef struct amps_update amps_update;
 
 typedef enum amps_formulation {
-    AMPS_FORM_PRIMAL = 0,   /* unknowns x_S (Eq. 3.8); with opts.eq320, x_S taken from the small system (Eq. 3.20) */
-    AMPS_FORM_DUAL = 1      /* unknowns the correction forces (Eq. 3.16-3.17) */
+    AMPS_FORM_PRIMAL = 0,   /* unknowns x_S ([AMPS] Eq. 3.8); with opts.xs_from_dense, x_S taken from the small system (Eq. 3.20) */
+    AMPS_FORM_DUAL = 1      /* unknowns the correction forces ([AMPS] Eq. 3.16-3.17) */
 } amps_formulation;
 
-/* Re-factorization (paper 001, Sec. 3.6): the augmentation (S u C, the memoized columns, the
-   dense system) only grows, and every step pays for it. A re-factorization factors the current
+/* Re-factorization ([Interactive cutting] Sec. 3.6): the augmentation (S u C, the memoized
+   columns, the dense system) only grows, and every step pays for it. A re-factorization factors the current
    matrix K^ + sigma P_C (C: the indices constrained at its start, whose rows stay in the
    augmentation with Delta = -sigma e_i e_i^T) with its own analysis, in a background thread,
    while updates and solves go on with the old factors. When it is done, the next call that
@@ -303,6 +305,8 @@ typedef enum amps_refactor_policy {
     AMPS_REFACTOR_OFF = 2     /* never */
 } amps_refactor_policy;
 
+/* Options; amps_update_opts_default gives the defaults. A capacity, refactor_threads or
+   refactor_ratio that is 0 or negative means its default. */
 typedef struct amps_update_opts {
     amps_int cap_mod;       /* capacity of |S u C| (order of the dense system); default 256 */
     amps_int cap_new;       /* capacity of appended DOFs; default 3 * 256 */
@@ -315,7 +319,8 @@ typedef struct amps_update_opts {
     int refine;             /* refinement steps on the residual of the modified rows inside the same
                                full solve (default 1; each adds a partial backward solve over
                                closure(S u C u neighbours) and O(|S u C|^2)); 0 = none */
-    int eq320;              /* 1: take x_S from the small system (Eq. 3.20); default 0 (see bench/RESULTS.md) */
+    int xs_from_dense;      /* 1: take x_S from the small dense system ([AMPS] Eq. 3.20) instead of the full
+                               solve; default 0 (see bench/RESULTS.md) */
     double guard_tol;       /* accuracy guard: > 0 computes the relative residual of every solve (one
                                product with K^) and, while it exceeds guard_tol, refines with the
                                same factors (each step one more forward and backward solve), at
@@ -336,10 +341,28 @@ typedef struct amps_update_opts {
                                lose less than its time (1 would be rent or buy; bench/RESULTS.md) */
 } amps_update_opts;
 
+/* The steps of [AMPS] Table 1, indices of amps_update_stats.t_step. */
+typedef enum amps_update_step {
+    AMPS_STEP_WCOLS = 0,    /* Step 1: L^{-1} columns */
+    AMPS_STEP_GRAM = 1,     /* Step 2: inverse principal submatrix G */
+    AMPS_STEP_DCOLS = 2,    /* Step 3: dense columns */
+    AMPS_STEP_RHS = 3,      /* Step 4: right-hand side */
+    AMPS_STEP_DENSE = 4,    /* Step 5: dense factor and solve */
+    AMPS_STEP_SOLVE = 5,    /* Step 6: full solution */
+    AMPS_STEP_COUNT = 6
+} amps_update_step;
+
+/* Outcome of the accuracy guard in the last solve (amps_update_stats.guard_result). */
+typedef enum amps_guard_result {
+    AMPS_GUARD_MET = 0,        /* tolerance met at once (also: guard off) */
+    AMPS_GUARD_REFINED = 1,    /* met after refinement steps */
+    AMPS_GUARD_REFACTORED = 2, /* met after a synchronous re-factorization */
+    AMPS_GUARD_NOT_MET = 3     /* not met (AMPS_WARN_INACCURATE) */
+} amps_guard_result;
+
 /* Per-commit and per-solve measurements (seconds) and sizes. */
 typedef struct amps_update_stats {
-    double t_step[7];       /* [1] L^{-1} columns, [2] inverse principal submatrix, [3] dense
-                               columns, [4] right-hand side, [5] dense factor+solve, [6] full solution */
+    double t_step[AMPS_STEP_COUNT]; /* time of each step (amps_update_step) */
     amps_int dim;           /* current order n + k */
     amps_int nmod;          /* |S|: indices whose row differs from K-bar */
     amps_int ncon;          /* |C|: constrained indices */
@@ -353,8 +376,7 @@ typedef struct amps_update_stats {
     double vpool_entries;   /* memoized entries of L^{-1} H */
     amps_int ncommit, nsolve;
     amps_int guard_steps;   /* refinement steps the accuracy guard took in the last solve */
-    int guard_result;       /* last solve: 0 tolerance met at once, 1 after refinement, 2 after a
-                               synchronous re-factorization, 3 not met (AMPS_WARN_INACCURATE) */
+    amps_guard_result guard_result; /* last solve (AMPS_GUARD_MET when the guard is off) */
     double relres;          /* relative residual of the last solve when the guard is on, else -1 */
     amps_int nrefactor;     /* re-factorizations swapped in */
     amps_int refactor_failed; /* re-factorizations that failed (the engine kept its factors) */
@@ -391,9 +413,17 @@ AMPS_API amps_status amps_update_release(amps_ctx *ctx, amps_update *U, amps_int
 AMPS_API amps_status amps_update_set_force(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx, const double *val);
 /* Drops every change recorded since the last commit (forces stay). */
 AMPS_API void amps_update_discard(amps_update *U);
-/* Applies the recorded changes (Steps 1-5). On failure discards them all. */
+/* Applies the recorded changes (Steps 1-5). On failure (AMPS_ERR_SINGULAR_UPDATE, AMPS_ERR_CAPACITY,
+   AMPS_ERR_OOM) the committed system is restored: matrix, constraints, forces and watch set as
+   before the call; the solution and reactions are marked stale and the dense factor is
+   recomputed, so later results agree with the earlier ones to rounding, not bitwise. The
+   exception to the failure rule: every change recorded since the last successful commit is
+   discarded (as by amps_update_discard); record them again, corrected, to retry. A finished
+   re-factorization the call swapped in first stays swapped in. */
 AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U);
-/* Commits, then solves (Step 6): x (room for amps_update_dim, may be NULL) receives the solution. */
+/* Commits, then solves (Step 6): x (room for amps_update_dim, may be NULL) receives the solution.
+   A failed commit: see amps_update_commit. AMPS_WARN_INACCURATE (accuracy guard) is a warning:
+   the solution is stored, and the guard may have re-factored. */
 AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *x);
 /* Watch set: the indices amps_update_solve_watched computes (replaces the previous set; m = 0
    clears it). closure_L of the watched indices is computed here, once. Allocates the set (and
@@ -402,7 +432,9 @@ AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m
 /* Commits, then computes x on the watched indices only: xw[k] = x[idx[k]] (xw may be NULL; the
    values also land in amps_update_solution, whose other entries are then stale). The backward
    solve reads L only on closure_L(watched) and, for the local refinement, on the closure of
-   S u C and its neighbours. Updates the reactions too. No accuracy guard. Allocates nothing. */
+   S u C and its neighbours. Updates the reactions too. No accuracy guard. Allocates nothing.
+   AMPS_ERR_INDEX (a watched index no longer exists) comes before the commit; a failed commit:
+   see amps_update_commit. */
 AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, double *xw);
 /* The same in two phases, for a caller whose second thread runs the backward solve outside the
    lock it holds for every other engine call (a 60 Hz visual loop beside a 1 kHz haptic loop):
@@ -416,7 +448,10 @@ AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, do
                                 closure_L(watched), completing xw;
      amps_update_watched_end    (under the lock) ends the job.
    One job at a time; the watch set must not change between begin and end; other engine calls
-   may run meanwhile (the factor the job reads stays alive until end). Allocates nothing. */
+   may run meanwhile (the factor the job reads stays alive until end). Allocates nothing.
+   amps_update_watched_begin fails before its commit (bad arguments, a job in progress, a watched
+   index gone: nothing changes), in the commit (see amps_update_commit), or after it with
+   AMPS_ERR_CAPACITY (y too short): then the changes stay committed and no job is started. */
 typedef struct amps_update_job {
     const amps_factor *F;         /* the factor the job reads */
     amps_int nw, ncw;             /* watched entries, closure size */
@@ -432,7 +467,7 @@ AMPS_API void amps_update_watched_end(amps_update *U, amps_update_job *job);
    alone (Steps 4-5, no full solve): O(|S u C|^2) when only prescribed values moved, plus a sparse
    forward solve over closure_L of the changed forces and O(sum of root paths) when forces
    changed. The haptic path: a pin moved, read its force. amps_update_solution is not updated.
-   Allocates nothing. */
+   Allocates nothing. A failed commit: see amps_update_commit. */
 AMPS_API amps_status amps_update_solve_reactions(amps_ctx *ctx, amps_update *U);
 /* Solution of the last solve (amps_update_dim entries at that time). */
 AMPS_API const double *amps_update_solution(const amps_update *U);
@@ -455,7 +490,9 @@ AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U);
 /* Stops a running re-factorization and frees it; blocks until the thread has stopped (at most
    one phase: ordering, analysis, factorization or a catch-up commit). */
 AMPS_API void amps_update_refactor_cancel(amps_ctx *ctx, amps_update *U);
-/* Commits, then re-factors synchronously (start + wait). Blocks. */
+/* Commits, then re-factors synchronously (start + wait). Blocks. A failed commit: see
+   amps_update_commit; a failed re-factorization leaves the changes committed and the engine on
+   its old factors. */
 AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U);
 
 /* ================================ FEM scene ================================ */
@@ -4283,7 +4320,12 @@ done:
 
 /* ============================ augmented updates impl ============================ */
 /* @@SECTION update: owned by engine */
-/* Notation. n = order of the factored base K = P L D L^T P^T, N = n + k the current order,
+/* References:
+     [AMPS]  Yeung, Pothen, Crouch, "AMPS: real-time mesh cutting with augmented matrices for
+             surgical simulations" (the algorithm: Eq. 3.x, Table 1 Steps 1-6);
+     [Interactive cutting]  Yeung, Crouch, Pothen, "Interactively cutting and constraining
+             vertices in meshes using augmented matrices" (background re-factorization, Sec. 3.6).
+   Notation. n = order of the factored base K = P L D L^T P^T, N = n + k the current order,
    K-bar = diag(K, sigma I) (sigma = mean diagonal of K, so appended DOFs are scaled like K),
    K^ = K-bar + H Delta H^T the current matrix, H = I(:, U) for the index set U = S u C
    (S: indices whose rows differ from K-bar, C: constrained indices, x_C = g), and
@@ -4295,10 +4337,10 @@ done:
      (I~ + G Delta~) z = r - G d - g^                                                 (Steps 3, 5)
    where I~ = diag(1 on F', 0 on C), Delta~[:, j] = Delta[F', j] (rows in C dropped) for j in F'
    and e_j for j in C, d = Delta[F', C] g, g^ = g on C and 0 on F'. Then
-     w_F' = Delta[F', :] y,  x = K-bar^{-1} (f^ - H w),  x_U = y (Eq. 3.20),             (Step 6)
+     w_F' = Delta[F', :] y,  x = K-bar^{-1} (f^ - H w),  x_U = y ([AMPS] Eq. 3.20),      (Step 6)
      reaction (K^ x - f^)_C = (Delta y)_C - w_C.
-   Without constraints this is Eq. 3.8 with E-bar = -Delta; with S empty it is Eq. 3.30.
-   The dual formulation (Eq. 3.16-3.17) solves the transposed system (I~ + G Delta~)^T w~ = b'
+   Without constraints this is [AMPS] Eq. 3.8 with E-bar = -Delta; with S empty Eq. 3.30.
+   The dual formulation ([AMPS] Eq. 3.16-3.17) solves the transposed system (I~ + G Delta~)^T w~ = b'
    for the correction forces w directly (b'_F' = Delta[F', :] r^, b'_C = r_C - g, r^ = r on F',
    g on C) and takes x_U from the full solve.
 
@@ -4320,70 +4362,120 @@ done:
 #define AMPS__DLMAX 64.0   /* largest entry of L it may create */
 #define AMPS__VB 16    /* right-hand sides per chunk of Step 1 */
 
+/* A recorded change K^[r, c] += v (and K^[c, r] += v). */
 typedef struct amps__pdelta { amps_int r, c; double v; } amps__pdelta;
+/* A recorded constraint change: x_i = v, or its release. */
 typedef struct amps__pcon { amps_int i; int release; double v; } amps__pcon;
-typedef struct amps__djour { amps_int a, st, ln, cp; } amps__djour;
-typedef struct amps__kjour { amps_int a; unsigned char kind; double g; } amps__kjour;
+/* Delta row header of position pos before the commit. */
+typedef struct amps__djour { amps_int pos, start, len, cap; } amps__djour;
+/* Kind and prescribed value of position pos before the commit. */
+typedef struct amps__kjour { amps_int pos; unsigned char kind; double g; } amps__kjour;
 
 struct amps_update {
-    const amps_factor *F;
+    const amps_factor *F;                  /* base factor: the one given, or refac.F_own */
     amps_formulation form;
-    double tol, sigma;
-    int grow, nthr, refine, eq320, committed;
+    double singular_tol;                   /* pivot test of the dense LU (opts.singular_tol) */
+    double sigma;                          /* K-bar's diagonal on appended DOFs */
+    int grow;                              /* capacities grow on demand (opts.grow) */
+    int refine;                            /* refinement steps of a full solve (opts.refine) */
+    int xs_from_dense;                     /* x_U from the dense system (opts.xs_from_dense) */
+    int nthr;                              /* threads of the kernels */
     int nbuf;                              /* threads the per-thread buffers are sized for (>= nthr) */
-    double guard_tol;                      /* accuracy guard (0: off) */
-    double *ctr, *gbuf;                    /* guard: forward solve of the residual (n), 2 * capN scratch */
-    amps_int n, N, kpend, capN;
-    amps_int *Kp, *Ki;  double *Kx;        /* base K, both triangles, original numbering */
-    double *f;                             /* capN forces */
-    double *ct;                            /* n: D^{-1/2} L^{-1} P^T fct, permuted */
-    double *fct;                           /* n: the base forces ct was computed from */
-    int pf_all;                            /* pf overflowed: recompute ct in full */
-    double *isd;                           /* n: D^{-1/2} */
-    amps_int *pf; amps_int npf, nct_inc;   /* base forces changed since ct was updated */
-    amps__pdelta *pd; amps_int npd, cappd; /* recorded K^ changes */
-    amps__pcon *pc; amps_int npc, cappc;   /* recorded constraint changes */
-    amps_int u, capu;                      /* |U| and capacity */
-    amps_int *uidx, *upos;                 /* U position -> index; index -> U position or -1 */
-    unsigned char *ukind;
-    double *g;                             /* prescribed values (constrained positions) */
-    size_t *voff; amps_int *vlen;          /* memoized W columns (base positions) */
-    double *vval; amps_int *vidx; size_t vused, vcap;
-    amps_int *dst, *dln, *dcp;             /* Delta rows (U positions): start, length, capacity */
-    amps_int *dcol; double *dval; amps_int dused, dcap;
-    double *G, *LU, *cnorm;                /* capu x capu column major; column norms of A */
-    amps_int *rowperm, *colorder, *colpos, *cstamp; amps_int stamp;
-    amps_int *rst, *rcnt; amps_int rstamp;  /* rows touched by a commit, their added entries */
-    double *pbuf;                          /* max(nbuf, 4) * capu column buffers */
-    double *hbuf;                          /* 3 AMPS__DMAX capu: row transforms of amps__lu_drop */
-    double *rv;                            /* 2 * capN residual vectors */
-    amps__djour *dj; amps_int ndj;         /* Delta row headers before this commit */
-    amps__kjour *kj; amps_int nkj;         /* kinds and values before this commit (cappc) */
-    double *x, *react, *z, *rhs, *tmp, *yv, *wv; /* solution and dense vectors */
-    double *sb, *rd, *wd, *yd, *rho;       /* dense vectors of the refinement step */
-    double *work;                          /* nthr * n, zero between uses */
-    double *work2;                         /* n: copy for the partial backward solve */
-    double *xb; amps_int xrows;            /* Step 1 chunks: nthr * xrows * AMPS__VB */
-    amps_int *lmap, *clo;                  /* Step 1: nthr * n each (lmap -1 between uses) */
-    amps_int *iwork;                       /* n + capN */
-    amps_marker mk, mkN;
-    int dirty, has_sol;                    /* x is stale / x was computed at least once */
-    int rdirty, has_react;                 /* reactions stale / computed */
-    int wdirty;                            /* watched entries of x stale */
-    amps_int solN;
-    amps_int nr;                           /* rhs[0..nr-1] = W^T ct is current on base positions */
-    /* re-factorization */
-    amps_update_opts opts;                 /* as created (for the engine of a new base) */
-    amps_factor *Fown; amps_csc *Kown;     /* base factor and matrix owned by the engine (after a swap) */
-    struct amps__bg *bg;                   /* the one in progress, or NULL */
-    double t_fact;                         /* measured (or estimated) factorization time */
-    double t_step0, t_extra;               /* step time after the last swap, extra time since */
-    amps_int u0;                           /* |U| after the last swap */
-    amps_int nw, ncw, capw;                /* watch set: size, |closure_L of its base indices|, capacity */
-    amps_int *widx, *wclo;
-    unsigned char *wovr;                   /* watched entry given by the dense system */
-    double *job_y, *job_xw;                /* the two-phase job in progress (NULL: none) */
-    amps_update_stats st;
+    amps_int n, N, cap_N;                  /* base order, committed order n + k, capacity of N */
+    struct {                               /* the base matrix */
+        amps_int *Kp, *Ki; double *Kx;     /* K, both triangles, original numbering */
+        double *inv_sqrt_d;                /* n: D^{-1/2} */
+    } base;
+    struct {                               /* forces and ct = D^{-1/2} L^{-1} P^T f_ct */
+        double *f;                         /* cap_N: f^ */
+        double *ct;                        /* n, permuted */
+        double *f_ct;                      /* n: the base forces ct was computed from */
+        amps_int *changed, n_changed;      /* n: base forces changed since ct was updated */
+        int changed_all;                   /* the list overflowed: recompute ct in full */
+        amps_int n_increments;             /* sparse updates of ct since its last full solve */
+    } force;
+    struct {                               /* changes recorded since the last commit */
+        amps__pdelta *delta; amps_int n_delta, cap_delta;   /* K^ entries */
+        amps__pcon *con; amps_int n_con, cap_con;           /* constraints */
+        amps_int n_dofs;                   /* appended DOFs */
+    } pending;
+    struct {                               /* the index set U = S u C */
+        amps_int size, cap;                /* |U| and capacity */
+        amps_int *idx;                     /* U position -> index */
+        amps_int *pos;                     /* cap_N: index -> U position or -1 */
+        unsigned char *kind;               /* AMPS__UMOD | AMPS__UCON per position */
+        double *g;                         /* prescribed values (constrained positions) */
+    } aug;
+    struct {                               /* memoized W columns (base positions) in a pool */
+        size_t *off; amps_int *len;        /* per position: start in the pool, length (root path) */
+        double *val; amps_int *idx;        /* the pool: values and rows (permuted numbering) */
+        size_t used, cap;                  /* pool entries used, capacity */
+    } memo;
+    struct {                               /* Delta rows (U positions) in a pool */
+        amps_int *row_start, *row_len, *row_cap;  /* per position */
+        amps_int *col; double *val;        /* the pool: columns (U positions) and values */
+        amps_int used, cap;                /* pool entries used, capacity */
+        amps_marker touched;               /* aug.cap: rows the commit changes */
+        amps_int *n_add;                   /* aug.cap: entries the commit adds to each */
+    } delta;
+    struct {                               /* the dense system A = I~ + G Delta~ and P A Q = L U */
+        double *G, *LU;                    /* aug.cap x aug.cap, column major */
+        double *col_norm;                  /* column norms of A (pivot test) */
+        amps_int *row_perm;                /* P: factor row -> U position */
+        amps_int *col_order, *col_pos;     /* Q: factor column -> U position, and inverse */
+        amps_marker changed;               /* aug.cap: columns the commit changes */
+        double *panel;                     /* max(nbuf, 4) * aug.cap column buffers */
+        double *transforms;                /* 3 AMPS__DMAX aug.cap: row transforms of amps__lu_drop */
+    } lu;
+    struct {                               /* state before the commit, for its rollback */
+        amps__djour *rows; amps_int n_rows;   /* aug.cap: Delta row headers */
+        amps__kjour *kinds; amps_int n_kinds; /* pending.cap_con: kinds and prescribed values */
+    } journal;
+    struct {                               /* dense vectors (U positions) */
+        double *z, *rhs, *tmp;             /* Step 5 unknowns, Step 4 r, scratch */
+        double *y, *w;                     /* y = x_U, the forces w of the augmentation */
+        double *b;                         /* Step 5 right-hand side */
+        double *r_corr, *y_corr, *w_corr, *rho;  /* the refinement step's r, y, w and residual */
+    } dense;
+    struct {                               /* workspace */
+        double *vec;                       /* nthr * n, zero between uses */
+        double *vec2;                      /* n: copy for the partial backward solve */
+        double *chunk; amps_int chunk_rows;   /* Step 1 chunks: nthr * chunk_rows * AMPS__VB */
+        amps_int *row_map, *closure;       /* Step 1: nthr * n each (row_map -1 between uses) */
+        amps_int *idx;                     /* n + cap_N */
+        double *resid;                     /* 2 * cap_N residual vectors */
+        amps_marker mark_n, mark_N;        /* over base nodes (n) and indices (cap_N) */
+    } work;
+    struct {                               /* the solution */
+        double *x;                         /* cap_N */
+        double *react;                     /* aug.cap: reactions (K^ x - f^) at U positions */
+        int x_stale, has_x;                /* x is stale / x was computed at least once */
+        int react_stale, has_react;        /* reactions stale / computed */
+        int watched_stale;                 /* watched entries of x stale */
+        amps_int x_dim;                    /* order of the last solve */
+        amps_int n_rhs;                    /* dense.rhs[0..n_rhs-1] = W^T ct is current on base positions */
+        int commit_unsolved;               /* a commit since the last solve (its step times count) */
+    } sol;
+    struct {                               /* accuracy guard */
+        double tol;                        /* 0: off */
+        double *ct;                        /* n: forward solve of the residual */
+        double *scratch;                   /* 2 * cap_N */
+    } guard;
+    struct {                               /* re-factorization */
+        amps_update_opts opts;             /* as created (for the engine of a new base) */
+        amps_factor *F_own; amps_csc *K_own;  /* base factor and matrix owned by the engine (after a swap) */
+        struct amps__bg *job;              /* the one in progress, or NULL */
+        double t_factor;                   /* measured (or estimated) factorization time */
+        double t_step_base, t_extra;       /* step time after the last swap, extra time since */
+        amps_int size_base;                /* |U| after the last swap */
+    } refac;
+    struct {                               /* watch set */
+        amps_int n, n_closure, cap;        /* size, |closure_L of its base indices|, capacity */
+        amps_int *idx, *closure;
+        unsigned char *from_dense;         /* watched entry given by the dense system */
+        double *job_y, *job_xw;            /* the two-phase job in progress (NULL: none) */
+    } watch;
+    amps_update_stats stats;
 };
 
 
@@ -4398,7 +4490,7 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
     o->formulation = AMPS_FORM_PRIMAL;
     o->singular_tol = 1e-15;
     o->refine = 1;
-    o->eq320 = 0;
+    o->xs_from_dense = 0;
     o->refactor = AMPS_REFACTOR_AUTO;
     o->refactor_order.method = AMPS_ORDER_ND;
     o->refactor_order.block = 0;
@@ -4408,111 +4500,113 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
 
 /* ---- allocation of the capacity-dependent arrays ---- */
 
-/* Grows every U-sized array to capacity cap (> capu). All-or-nothing. */
+/* Grows every U-sized array to capacity cap (> aug.cap). All-or-nothing. */
 static amps_status amps__grow_u(amps_ctx *ctx, amps_update *U, amps_int cap) {
     double *G = NULL, *LU = NULL;
-    amps_int old = U->capu, u = U->u;
+    amps_int old = U->aug.cap, u = U->aug.size;
     size_t c = (size_t)cap;
+    amps_marker changed = {0, 0, NULL}, touched = {0, 0, NULL};
     G = AMPS__CAST(double *, amps__malloc(ctx, c * c, sizeof(double)));
     LU = AMPS__CAST(double *, amps__malloc(ctx, c * c, sizeof(double)));
-    if (!G || !LU) { amps__free(ctx, G); amps__free(ctx, LU); return amps__err(ctx, AMPS_ERR_OOM, "amps_update: out of memory growing the dense system to %ld", (long)cap); }
+    if (!G || !LU || amps_marker_init(ctx, &changed, cap) || amps_marker_init(ctx, &touched, cap)) {
+        amps__free(ctx, G); amps__free(ctx, LU); amps_marker_free(ctx, &changed); amps_marker_free(ctx, &touched);
+        return amps__err(ctx, AMPS_ERR_OOM, "amps_update: out of memory growing the dense system to %ld", (long)cap);
+    }
     /* vector arrays: a failure leaves earlier ones larger, which is harmless */
-    if (amps__realloc(ctx, (void **)&U->uidx, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->ukind, c, 1) ||
-        amps__realloc(ctx, (void **)&U->g, c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->voff, c, sizeof(size_t)) ||
-        amps__realloc(ctx, (void **)&U->vlen, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->dst, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->dln, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->dcp, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->cnorm, c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->rowperm, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->colorder, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->colpos, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->cstamp, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->rst, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->rcnt, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->pbuf, c * (size_t)(U->nbuf > 4 ? U->nbuf : 4), sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->hbuf, c * (size_t)(3 * AMPS__DMAX), sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->dj, c, sizeof(amps__djour)) ||
-        amps__realloc(ctx, (void **)&U->react, c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->z, c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->rhs, c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->tmp, c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->yv, c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->wv, c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->sb, c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->rd, c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->wd, c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->yd, c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->rho, c, sizeof(double))) {
-        amps__free(ctx, G); amps__free(ctx, LU);
+    if (amps__realloc(ctx, (void **)&U->aug.idx, c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&U->aug.kind, c, 1) ||
+        amps__realloc(ctx, (void **)&U->aug.g, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->memo.off, c, sizeof(size_t)) ||
+        amps__realloc(ctx, (void **)&U->memo.len, c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&U->delta.row_start, c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&U->delta.row_len, c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&U->delta.row_cap, c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&U->lu.col_norm, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->lu.row_perm, c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&U->lu.col_order, c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&U->lu.col_pos, c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&U->delta.n_add, c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&U->lu.panel, c * (size_t)(U->nbuf > 4 ? U->nbuf : 4), sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->lu.transforms, c * (size_t)(3 * AMPS__DMAX), sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->journal.rows, c, sizeof(amps__djour)) ||
+        amps__realloc(ctx, (void **)&U->sol.react, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->dense.z, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->dense.rhs, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->dense.tmp, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->dense.y, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->dense.w, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->dense.b, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->dense.r_corr, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->dense.w_corr, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->dense.y_corr, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->dense.rho, c, sizeof(double))) {
+        amps__free(ctx, G); amps__free(ctx, LU); amps_marker_free(ctx, &changed); amps_marker_free(ctx, &touched);
         return amps__err(ctx, AMPS_ERR_OOM, "amps_update: out of memory growing to %ld modified indices", (long)cap);
     }
     {
         amps_int j;
         for (j = 0; j < u; j++) {
-            memcpy(G + (size_t)j * c, U->G + (size_t)j * (size_t)old, sizeof(double) * (size_t)u);
-            memcpy(LU + (size_t)j * c, U->LU + (size_t)j * (size_t)old, sizeof(double) * (size_t)u);
+            memcpy(G + (size_t)j * c, U->lu.G + (size_t)j * (size_t)old, sizeof(double) * (size_t)u);
+            memcpy(LU + (size_t)j * c, U->lu.LU + (size_t)j * (size_t)old, sizeof(double) * (size_t)u);
         }
-        for (j = old; j < cap; j++) { U->cstamp[j] = 0; U->rst[j] = 0; }
     }
-    amps__free(ctx, U->G); amps__free(ctx, U->LU);
-    U->G = G; U->LU = LU; U->capu = cap;
+    amps__free(ctx, U->lu.G); amps__free(ctx, U->lu.LU);
+    amps_marker_free(ctx, &U->lu.changed); amps_marker_free(ctx, &U->delta.touched);
+    U->lu.G = G; U->lu.LU = LU; U->lu.changed = changed; U->delta.touched = touched; U->aug.cap = cap;
     return AMPS_OK;
 }
 
 /* Ensures room for `need` more U positions (grows by doubling when allowed). */
 static amps_status amps__need_u(amps_ctx *ctx, amps_update *U, amps_int need) {
-    amps_int cap = U->capu;
-    if (U->u + need <= cap) return AMPS_OK;
+    amps_int cap = U->aug.cap;
+    if (U->aug.size + need <= cap) return AMPS_OK;
     if (!U->grow)
         return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: %ld modified/constrained indices exceed cap_mod = %ld (raise it or set grow)",
-                         (long)(U->u + need), (long)cap);
-    while (cap < U->u + need) cap = cap * 2 + 16;
+                         (long)(U->aug.size + need), (long)cap);
+    while (cap < U->aug.size + need) cap = cap * 2 + 16;
     return amps__grow_u(ctx, U, cap);
 }
 
 static amps_status amps__need_N(amps_ctx *ctx, amps_update *U, amps_int need) {
-    amps_int cap = U->capN, old = U->capN, i;
-    if (U->N + U->kpend + need <= cap) return AMPS_OK;
+    amps_int cap = U->cap_N, old = U->cap_N, i;
+    if (U->N + U->pending.n_dofs + need <= cap) return AMPS_OK;
     if (!U->grow)
         return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: %ld appended DOFs exceed cap_new = %ld (raise it or set grow)",
-                         (long)(U->N + U->kpend + need - U->n), (long)(cap - U->n));
-    while (cap < U->N + U->kpend + need) cap = cap + cap / 2 + 16;
-    if (amps__realloc(ctx, (void **)&U->f, (size_t)cap, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->x, (size_t)cap, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->upos, (size_t)cap, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->iwork, (size_t)(U->n + cap), sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->rv, 2 * (size_t)cap, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&U->gbuf, 2 * (size_t)cap, sizeof(double)))
+                         (long)(U->N + U->pending.n_dofs + need - U->n), (long)(cap - U->n));
+    while (cap < U->N + U->pending.n_dofs + need) cap = cap + cap / 2 + 16;
+    if (amps__realloc(ctx, (void **)&U->force.f, (size_t)cap, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->sol.x, (size_t)cap, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->aug.pos, (size_t)cap, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&U->work.idx, (size_t)(U->n + cap), sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&U->work.resid, 2 * (size_t)cap, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->guard.scratch, 2 * (size_t)cap, sizeof(double)))
         return AMPS_ERR_OOM;
     {
         amps_marker m2;
         if (amps_marker_init(ctx, &m2, cap)) return AMPS_ERR_OOM;
-        amps_marker_free(ctx, &U->mkN);
-        U->mkN = m2;
+        amps_marker_free(ctx, &U->work.mark_N);
+        U->work.mark_N = m2;
     }
-    for (i = old; i < cap; i++) { U->f[i] = 0; U->x[i] = 0; U->upos[i] = -1; }
-    U->capN = cap;
+    for (i = old; i < cap; i++) { U->force.f[i] = 0; U->sol.x[i] = 0; U->aug.pos[i] = -1; }
+    U->cap_N = cap;
     return AMPS_OK;
 }
 
 static amps_status amps__need_pending(amps_ctx *ctx, amps_update *U, amps_int nd, amps_int nc) {
-    if (U->npd + nd > U->cappd) {
-        amps_int cap = U->cappd;
+    if (U->pending.n_delta + nd > U->pending.cap_delta) {
+        amps_int cap = U->pending.cap_delta;
         if (!U->grow) return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: more than cap_pending = %ld changes recorded before a commit", (long)cap);
-        while (cap < U->npd + nd) cap = cap * 2 + 64;
-        if (amps__realloc(ctx, (void **)&U->pd, (size_t)cap, sizeof(amps__pdelta))) return AMPS_ERR_OOM;
-        U->cappd = cap;
+        while (cap < U->pending.n_delta + nd) cap = cap * 2 + 64;
+        if (amps__realloc(ctx, (void **)&U->pending.delta, (size_t)cap, sizeof(amps__pdelta))) return AMPS_ERR_OOM;
+        U->pending.cap_delta = cap;
     }
-    if (U->npc + nc > U->cappc) {
-        amps_int cap = U->cappc;
+    if (U->pending.n_con + nc > U->pending.cap_con) {
+        amps_int cap = U->pending.cap_con;
         if (!U->grow) return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: more than cap_pending = %ld constraint changes recorded before a commit", (long)cap);
-        while (cap < U->npc + nc) cap = cap * 2 + 64;
-        if (amps__realloc(ctx, (void **)&U->pc, (size_t)cap, sizeof(amps__pcon)) ||
-            amps__realloc(ctx, (void **)&U->kj, (size_t)cap, sizeof(amps__kjour))) return AMPS_ERR_OOM;
-        U->cappc = cap;
+        while (cap < U->pending.n_con + nc) cap = cap * 2 + 64;
+        if (amps__realloc(ctx, (void **)&U->pending.con, (size_t)cap, sizeof(amps__pcon)) ||
+            amps__realloc(ctx, (void **)&U->journal.kinds, (size_t)cap, sizeof(amps__kjour))) return AMPS_ERR_OOM;
+        U->pending.cap_con = cap;
     }
     return AMPS_OK;
 }
@@ -4525,26 +4619,28 @@ static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t);
 AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     if (!U) return;
     amps__bg_discard(ctx, U);
-    amps_factor_free(ctx, U->Fown); amps_csc_free(ctx, U->Kown);
-    amps__free(ctx, U->Kp); amps__free(ctx, U->Ki); amps__free(ctx, U->Kx);
-    amps__free(ctx, U->f); amps__free(ctx, U->ct); amps__free(ctx, U->fct); amps__free(ctx, U->isd); amps__free(ctx, U->pf);
-    amps__free(ctx, U->pd); amps__free(ctx, U->pc);
-    amps__free(ctx, U->uidx); amps__free(ctx, U->upos); amps__free(ctx, U->ukind); amps__free(ctx, U->g);
-    amps__free(ctx, U->voff); amps__free(ctx, U->vlen); amps__free(ctx, U->vval); amps__free(ctx, U->vidx);
-    amps__free(ctx, U->dst); amps__free(ctx, U->dln); amps__free(ctx, U->dcp);
-    amps__free(ctx, U->dcol); amps__free(ctx, U->dval);
-    amps__free(ctx, U->G); amps__free(ctx, U->LU); amps__free(ctx, U->cnorm);
-    amps__free(ctx, U->rowperm); amps__free(ctx, U->colorder); amps__free(ctx, U->colpos); amps__free(ctx, U->cstamp);
-    amps__free(ctx, U->rst); amps__free(ctx, U->rcnt); amps__free(ctx, U->pbuf); amps__free(ctx, U->hbuf); amps__free(ctx, U->rv);
-    amps__free(ctx, U->gbuf); amps__free(ctx, U->ctr);
-    amps__free(ctx, U->dj); amps__free(ctx, U->kj);
-    amps__free(ctx, U->x); amps__free(ctx, U->react); amps__free(ctx, U->z); amps__free(ctx, U->rhs);
-    amps__free(ctx, U->tmp); amps__free(ctx, U->yv); amps__free(ctx, U->wv);
-    amps__free(ctx, U->sb); amps__free(ctx, U->rd); amps__free(ctx, U->wd); amps__free(ctx, U->yd); amps__free(ctx, U->rho);
-    amps__free(ctx, U->work); amps__free(ctx, U->work2); amps__free(ctx, U->iwork);
-    amps__free(ctx, U->xb); amps__free(ctx, U->lmap); amps__free(ctx, U->clo);
-    amps__free(ctx, U->widx); amps__free(ctx, U->wclo); amps__free(ctx, U->wovr);
-    amps_marker_free(ctx, &U->mk); amps_marker_free(ctx, &U->mkN);
+    amps_factor_free(ctx, U->refac.F_own); amps_csc_free(ctx, U->refac.K_own);
+    amps__free(ctx, U->base.Kp); amps__free(ctx, U->base.Ki); amps__free(ctx, U->base.Kx); amps__free(ctx, U->base.inv_sqrt_d);
+    amps__free(ctx, U->force.f); amps__free(ctx, U->force.ct); amps__free(ctx, U->force.f_ct); amps__free(ctx, U->force.changed);
+    amps__free(ctx, U->pending.delta); amps__free(ctx, U->pending.con);
+    amps__free(ctx, U->aug.idx); amps__free(ctx, U->aug.pos); amps__free(ctx, U->aug.kind); amps__free(ctx, U->aug.g);
+    amps__free(ctx, U->memo.off); amps__free(ctx, U->memo.len); amps__free(ctx, U->memo.val); amps__free(ctx, U->memo.idx);
+    amps__free(ctx, U->delta.row_start); amps__free(ctx, U->delta.row_len); amps__free(ctx, U->delta.row_cap);
+    amps__free(ctx, U->delta.col); amps__free(ctx, U->delta.val); amps__free(ctx, U->delta.n_add);
+    amps_marker_free(ctx, &U->delta.touched);
+    amps__free(ctx, U->lu.G); amps__free(ctx, U->lu.LU); amps__free(ctx, U->lu.col_norm);
+    amps__free(ctx, U->lu.row_perm); amps__free(ctx, U->lu.col_order); amps__free(ctx, U->lu.col_pos);
+    amps__free(ctx, U->lu.panel); amps__free(ctx, U->lu.transforms); amps_marker_free(ctx, &U->lu.changed);
+    amps__free(ctx, U->journal.rows); amps__free(ctx, U->journal.kinds);
+    amps__free(ctx, U->dense.z); amps__free(ctx, U->dense.rhs); amps__free(ctx, U->dense.tmp);
+    amps__free(ctx, U->dense.y); amps__free(ctx, U->dense.w); amps__free(ctx, U->dense.b);
+    amps__free(ctx, U->dense.r_corr); amps__free(ctx, U->dense.y_corr); amps__free(ctx, U->dense.w_corr); amps__free(ctx, U->dense.rho);
+    amps__free(ctx, U->work.vec); amps__free(ctx, U->work.vec2); amps__free(ctx, U->work.chunk);
+    amps__free(ctx, U->work.row_map); amps__free(ctx, U->work.closure); amps__free(ctx, U->work.idx); amps__free(ctx, U->work.resid);
+    amps_marker_free(ctx, &U->work.mark_n); amps_marker_free(ctx, &U->work.mark_N);
+    amps__free(ctx, U->sol.x); amps__free(ctx, U->sol.react);
+    amps__free(ctx, U->guard.ct); amps__free(ctx, U->guard.scratch);
+    amps__free(ctx, U->watch.idx); amps__free(ctx, U->watch.closure); amps__free(ctx, U->watch.from_dense);
     amps__free(ctx, U);
 }
 
@@ -4582,32 +4678,84 @@ oom:
     return AMPS_ERR_OOM;
 }
 
+/* Options of a new engine: opts (NULL: the defaults) with the sizes and rates that are 0 or
+   negative replaced by the defaults of amps_update_opts_default. */
+static amps_status amps__create_opts(amps_ctx *ctx, const amps_update_opts *opts, amps_update_opts *o) {
+    amps_update_opts d;
+    amps_update_opts_default(&d);
+    *o = opts ? *opts : d;
+    if (o->cap_mod <= 0) o->cap_mod = d.cap_mod;
+    if (o->cap_new < 0) o->cap_new = 0;
+    if (o->cap_pending <= 0) o->cap_pending = d.cap_pending;
+    if (!(o->singular_tol >= 0) || o->singular_tol >= 1) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_create: singular_tol must be in [0, 1)");
+    if (!(o->refactor_ratio > 0)) o->refactor_ratio = d.refactor_ratio;
+    if (o->refactor_threads <= 0) o->refactor_threads = d.refactor_threads;
+    if (o->refactor_order.method == AMPS_ORDER_GIVEN) o->refactor_order.method = d.refactor_order.method;  /* a given perm has the old order */
+    o->refactor_order.perm = NULL; o->refactor_order.coords = NULL;
+    return AMPS_OK;
+}
+
+/* Allocates the arrays of U for capacities capu (|U|) and U->cap_N (order); U->n, nthr and the
+   pool capacities are set. */
+static amps_status amps__create_alloc(amps_ctx *ctx, amps_update *U, amps_int capu) {
+    amps_int n = U->n, capN = U->cap_N, j;
+    size_t nt = (size_t)U->nthr;
+    U->force.f = AMPS__CAST(double *, amps__calloc(ctx, (size_t)capN, sizeof(double)));
+    U->sol.x = AMPS__CAST(double *, amps__calloc(ctx, (size_t)capN, sizeof(double)));
+    U->aug.pos = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)capN, sizeof(amps_int)));
+    U->work.idx = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(n + capN), sizeof(amps_int)));
+    U->force.ct = AMPS__CAST(double *, amps__calloc(ctx, (size_t)n, sizeof(double)));
+    U->force.f_ct = AMPS__CAST(double *, amps__calloc(ctx, (size_t)n, sizeof(double)));
+    U->base.inv_sqrt_d = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
+    U->force.changed = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n, sizeof(amps_int)));
+    U->work.vec = AMPS__CAST(double *, amps__calloc(ctx, (size_t)n * nt, sizeof(double)));
+    U->work.vec2 = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
+    U->work.chunk = AMPS__CAST(double *, amps__malloc(ctx, nt * (size_t)U->work.chunk_rows * AMPS__VB, sizeof(double)));
+    U->work.row_map = AMPS__CAST(amps_int *, amps__malloc(ctx, nt * (size_t)n, sizeof(amps_int)));
+    U->work.closure = AMPS__CAST(amps_int *, amps__malloc(ctx, nt * (size_t)n, sizeof(amps_int)));
+    U->pending.delta = AMPS__CAST(amps__pdelta *, amps__malloc(ctx, (size_t)U->pending.cap_delta, sizeof(amps__pdelta)));
+    U->pending.con = AMPS__CAST(amps__pcon *, amps__malloc(ctx, (size_t)U->pending.cap_con, sizeof(amps__pcon)));
+    U->memo.val = AMPS__CAST(double *, amps__malloc(ctx, U->memo.cap, sizeof(double)));
+    U->memo.idx = AMPS__CAST(amps_int *, amps__malloc(ctx, U->memo.cap, sizeof(amps_int)));
+    U->delta.col = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)U->delta.cap, sizeof(amps_int)));
+    U->delta.val = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->delta.cap, sizeof(double)));
+    U->journal.kinds = AMPS__CAST(amps__kjour *, amps__malloc(ctx, (size_t)U->pending.cap_con, sizeof(amps__kjour)));
+    U->work.resid = AMPS__CAST(double *, amps__malloc(ctx, 2 * (size_t)capN, sizeof(double)));
+    U->guard.scratch = AMPS__CAST(double *, amps__malloc(ctx, 2 * (size_t)capN, sizeof(double)));
+    U->guard.ct = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
+    if (!U->force.f || !U->sol.x || !U->aug.pos || !U->work.idx || !U->force.ct || !U->force.f_ct || !U->base.inv_sqrt_d ||
+        !U->force.changed || !U->work.vec || !U->work.vec2 || !U->work.chunk || !U->work.row_map || !U->work.closure ||
+        !U->pending.delta || !U->pending.con || !U->memo.val || !U->memo.idx || !U->delta.col || !U->delta.val ||
+        !U->journal.kinds || !U->work.resid || !U->guard.scratch || !U->guard.ct)
+        return AMPS_ERR_OOM;
+    if (amps_marker_init(ctx, &U->work.mark_n, n > 0 ? n : 1) || amps_marker_init(ctx, &U->work.mark_N, capN > 0 ? capN : 1)) return AMPS_ERR_OOM;
+    U->lu.G = AMPS__CAST(double *, amps__malloc(ctx, 1, sizeof(double)));
+    U->lu.LU = AMPS__CAST(double *, amps__malloc(ctx, 1, sizeof(double)));
+    if (!U->lu.G || !U->lu.LU) return AMPS_ERR_OOM;
+    if (amps__grow_u(ctx, U, capu)) return AMPS_ERR_OOM;
+    for (j = 0; j < capN; j++) U->aug.pos[j] = -1;
+    for (j = 0; j < n * U->nthr; j++) U->work.row_map[j] = -1;
+    return AMPS_OK;
+}
+
 AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_stype stype,
                                          const amps_factor *F, const amps_update_opts *opts) {
     amps_update_opts o;
     amps_update *U;
-    amps_int n, j, capu, capN;
-    double sdiag = 0;
-    size_t vcap;
+    amps_int n, j, p;
+    double s = 0;
     if (!K || !F) { amps__err(ctx, AMPS_ERR_ARG, "amps_update_create: NULL matrix or factor"); return NULL; }
     if (!F->is_numeric) { amps__err(ctx, AMPS_ERR_STATE, "amps_update_create: the factor has no numeric values (call amps_factorize)"); return NULL; }
     if (K->ncol != F->n || K->nrow != F->n) { amps__err(ctx, AMPS_ERR_ARG, "amps_update_create: K is %ldx%ld but the factor has order %ld", (long)K->nrow, (long)K->ncol, (long)F->n); return NULL; }
     if (amps_csc_check(ctx, K, stype) != AMPS_OK) return NULL;
-    if (opts) o = *opts; else amps_update_opts_default(&o);
-    if (o.cap_mod <= 0) o.cap_mod = 256;
-    if (o.cap_new < 0) o.cap_new = 0;
-    if (o.cap_pending <= 0) o.cap_pending = 4096;
-    if (!(o.singular_tol >= 0) || o.singular_tol >= 1) { amps__err(ctx, AMPS_ERR_ARG, "amps_update_create: singular_tol must be in [0, 1)"); return NULL; }
-    n = F->n; capu = o.cap_mod; capN = n + o.cap_new;
+    if (amps__create_opts(ctx, opts, &o) != AMPS_OK) return NULL;
+    n = F->n;
     U = AMPS__CAST(amps_update *, amps__calloc(ctx, 1, sizeof(amps_update)));
     if (!U) return NULL;
-    U->F = F; U->form = o.formulation; U->tol = o.singular_tol; U->grow = o.grow;
-    U->refine = o.refine; U->eq320 = o.eq320; U->guard_tol = o.guard_tol;
-    if (!(o.refactor_ratio > 0)) o.refactor_ratio = 0.25;
-    if (o.refactor_order.method == AMPS_ORDER_GIVEN) o.refactor_order.method = AMPS_ORDER_ND;  /* a given perm has the old order */
-    o.refactor_order.perm = NULL; o.refactor_order.coords = NULL;
-    U->opts = o;
-    U->n = n; U->N = n; U->capN = capN; U->capu = 0; U->u = 0;
+    U->F = F; U->form = o.formulation; U->singular_tol = o.singular_tol; U->grow = o.grow;
+    U->refine = o.refine; U->xs_from_dense = o.xs_from_dense; U->guard.tol = o.guard_tol;
+    U->refac.opts = o;
+    U->n = n; U->N = n; U->cap_N = n + o.cap_new;
 #ifdef _OPENMP
     U->nthr = ctx && ctx->nthreads > 0 ? ctx->nthreads : omp_get_max_threads();
 #else
@@ -4615,60 +4763,20 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
 #endif
     if (U->nthr < 1) U->nthr = 1;
     U->nbuf = U->nthr;
-    if (amps__sym_full(ctx, K, stype, &U->Kp, &U->Ki, &U->Kx)) goto fail;
-    vcap = o.cap_vpool > 0 ? (size_t)o.cap_vpool : (size_t)capu * (size_t)(F->height > 0 ? F->height : 1);
-    U->vcap = vcap;
-    U->dcap = o.cap_delta > 0 ? o.cap_delta : 96 * capu;
-    U->cappd = o.cap_pending; U->cappc = o.cap_pending;
-    U->f = AMPS__CAST(double *, amps__calloc(ctx, (size_t)capN, sizeof(double)));
-    U->x = AMPS__CAST(double *, amps__calloc(ctx, (size_t)capN, sizeof(double)));
-    U->upos = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)capN, sizeof(amps_int)));
-    U->iwork = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(n + capN), sizeof(amps_int)));
-    U->ct = AMPS__CAST(double *, amps__calloc(ctx, (size_t)n, sizeof(double)));
-    U->fct = AMPS__CAST(double *, amps__calloc(ctx, (size_t)n, sizeof(double)));
-    U->isd = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
-    U->pf = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n, sizeof(amps_int)));
-    U->work = AMPS__CAST(double *, amps__calloc(ctx, (size_t)n * (size_t)U->nthr, sizeof(double)));
-    U->work2 = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
-    U->xrows = F->height > 0 && (double)F->height * AMPS__VB < (double)n ? F->height * AMPS__VB : n;
-    U->xb = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->nthr * (size_t)U->xrows * AMPS__VB, sizeof(double)));
-    U->lmap = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)U->nthr * (size_t)n, sizeof(amps_int)));
-    U->clo = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)U->nthr * (size_t)n, sizeof(amps_int)));
-    U->pd = AMPS__CAST(amps__pdelta *, amps__malloc(ctx, (size_t)U->cappd, sizeof(amps__pdelta)));
-    U->pc = AMPS__CAST(amps__pcon *, amps__malloc(ctx, (size_t)U->cappc, sizeof(amps__pcon)));
-    U->vval = AMPS__CAST(double *, amps__malloc(ctx, vcap, sizeof(double)));
-    U->vidx = AMPS__CAST(amps_int *, amps__malloc(ctx, vcap, sizeof(amps_int)));
-    U->dcol = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)U->dcap, sizeof(amps_int)));
-    U->dval = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->dcap, sizeof(double)));
-    U->kj = AMPS__CAST(amps__kjour *, amps__malloc(ctx, (size_t)U->cappc, sizeof(amps__kjour)));
-    U->rv = AMPS__CAST(double *, amps__malloc(ctx, 2 * (size_t)capN, sizeof(double)));
-    U->gbuf = AMPS__CAST(double *, amps__malloc(ctx, 2 * (size_t)capN, sizeof(double)));
-    U->ctr = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
-    if (!U->f || !U->x || !U->upos || !U->iwork || !U->ct || !U->fct || !U->isd || !U->pf || !U->work || !U->work2 || !U->xb || !U->lmap || !U->clo || !U->pd || !U->pc ||
-        !U->vval || !U->vidx || !U->dcol || !U->dval || !U->kj || !U->rv || !U->gbuf || !U->ctr)
-        goto fail;
-    if (amps_marker_init(ctx, &U->mk, n > 0 ? n : 1) || amps_marker_init(ctx, &U->mkN, capN > 0 ? capN : 1)) goto fail;
-    U->G = AMPS__CAST(double *, amps__malloc(ctx, 1, sizeof(double)));
-    U->LU = AMPS__CAST(double *, amps__malloc(ctx, 1, sizeof(double)));
-    if (!U->G || !U->LU) goto fail;
-    if (amps__grow_u(ctx, U, capu)) goto fail;
-    for (j = 0; j < capN; j++) U->upos[j] = -1;
-    for (j = 0; j < n * U->nthr; j++) U->lmap[j] = -1;
-    for (j = 0; j < n; j++) {
-        U->isd[j] = 1.0 / sqrt(F->D[j]);
-        sdiag += F->D[j];
-    }
+    if (amps__sym_full(ctx, K, stype, &U->base.Kp, &U->base.Ki, &U->base.Kx)) goto fail;
+    U->memo.cap = o.cap_vpool > 0 ? (size_t)o.cap_vpool : (size_t)o.cap_mod * (size_t)(F->height > 0 ? F->height : 1);
+    U->delta.cap = o.cap_delta > 0 ? o.cap_delta : 96 * o.cap_mod;
+    U->pending.cap_delta = o.cap_pending; U->pending.cap_con = o.cap_pending;
+    U->work.chunk_rows = F->height > 0 && (double)F->height * AMPS__VB < (double)n ? F->height * AMPS__VB : n;
+    if (amps__create_alloc(ctx, U, o.cap_mod) != AMPS_OK) goto fail;
+    for (j = 0; j < n; j++) U->base.inv_sqrt_d[j] = 1.0 / sqrt(F->D[j]);
     /* sigma: scale of K-bar's identity block; mean of the diagonal of K */
-    {
-        double s = 0; amps_int p;
-        for (j = 0; j < n; j++)
-            for (p = U->Kp[j]; p < U->Kp[j + 1]; p++)
-                if (U->Ki[p] == j) s += U->Kx[p];
-        U->sigma = n > 0 && s > 0 ? s / (double)n : 1.0;
-        (void)sdiag;
-    }
-    U->dirty = U->rdirty = U->wdirty = 1;
-    U->st.dim = n;
+    for (j = 0; j < n; j++)
+        for (p = U->base.Kp[j]; p < U->base.Kp[j + 1]; p++)
+            if (U->base.Ki[p] == j) s += U->base.Kx[p];
+    U->sigma = n > 0 && s > 0 ? s / (double)n : 1.0;
+    U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
+    U->stats.dim = n;
     return U;
 fail:
     if (ctx && ctx->status != AMPS_ERR_OOM) amps__err(ctx, AMPS_ERR_OOM, "amps_update_create: out of memory");
@@ -4676,13 +4784,13 @@ fail:
     return NULL;
 }
 
-AMPS_API amps_int amps_update_dim(const amps_update *U) { return U ? U->N + U->kpend : 0; }
+AMPS_API amps_int amps_update_dim(const amps_update *U) { return U ? U->N + U->pending.n_dofs : 0; }
 
 /* ---- recording changes ---- */
 
 static amps_status amps__chk_idx(amps_ctx *ctx, const amps_update *U, const char *fn, amps_int m,
                                  const amps_int *idx, const double *val, int nodup, amps_marker *mk) {
-    amps_int k, N = U->N + U->kpend;
+    amps_int k, N = U->N + U->pending.n_dofs;
     if (m < 0) return amps__err(ctx, AMPS_ERR_ARG, "%s: negative count %ld", fn, (long)m);
     if (m > 0 && !idx) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL index array", fn);
     if (nodup) amps_marker_next(mk);
@@ -4703,13 +4811,13 @@ AMPS_API amps_status amps_update_add_dofs(amps_ctx *ctx, amps_update *U, amps_in
     if (!U || k < 0) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add_dofs: %s", U ? "negative count" : "NULL engine");
     if ((s = amps__need_N(ctx, U, k)) != AMPS_OK) return s;
     if ((s = amps__need_pending(ctx, U, k, 0)) != AMPS_OK) return s;
-    base = U->N + U->kpend;
+    base = U->N + U->pending.n_dofs;
     for (i = 0; i < k; i++) {
         /* K-bar has sigma on the new diagonal; the recorded -sigma makes the new row zero */
-        U->pd[U->npd].r = base + i; U->pd[U->npd].c = base + i; U->pd[U->npd].v = -U->sigma; U->npd++;
-        U->f[base + i] = 0;
+        U->pending.delta[U->pending.n_delta].r = base + i; U->pending.delta[U->pending.n_delta].c = base + i; U->pending.delta[U->pending.n_delta].v = -U->sigma; U->pending.n_delta++;
+        U->force.f[base + i] = 0;
     }
-    U->kpend += k;
+    U->pending.n_dofs += k;
     if (first) *first = base;
     return AMPS_OK;
 }
@@ -4734,48 +4842,50 @@ AMPS_API amps_status amps_update_add(amps_ctx *ctx, amps_update *U, amps_int nz,
     amps_status s;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: NULL engine");
     if (nz < 0 || (nz > 0 && (!r || !c || !v))) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: bad count or NULL array");
-    N = U->N + U->kpend;
+    N = U->N + U->pending.n_dofs;
     for (k = 0; k < nz; k++) {
         if (r[k] < 0 || r[k] >= N || c[k] < 0 || c[k] >= N)
             return amps__err(ctx, AMPS_ERR_INDEX, "amps_update_add: entry %ld (%ld, %ld) out of range [0, %ld)", (long)k, (long)r[k], (long)c[k], (long)N);
         if (!amps__isfinite(v[k])) return amps__err(ctx, AMPS_ERR_VALUE, "amps_update_add: value of entry %ld (%ld, %ld) is not finite", (long)k, (long)r[k], (long)c[k]);
     }
     if ((s = amps__need_pending(ctx, U, nz, 0)) != AMPS_OK) return s;
-    start = U->npd;
-    for (k = 0; k < nz; k++) { U->pd[start + k].r = r[k]; U->pd[start + k].c = c[k]; U->pd[start + k].v = v[k]; }
-    qsort(U->pd + start, (size_t)nz, sizeof(amps__pdelta), amps__pd_cmp);
+    start = U->pending.n_delta;
+    for (k = 0; k < nz; k++) { U->pending.delta[start + k].r = r[k]; U->pending.delta[start + k].c = c[k]; U->pending.delta[start + k].v = v[k]; }
+    qsort(U->pending.delta + start, (size_t)nz, sizeof(amps__pdelta), amps__pd_cmp);
     for (k = start + 1; k < start + nz; k++)
-        if (amps__pd_cmp(U->pd + k - 1, U->pd + k) == 0)
-            return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: entry (%ld, %ld) given twice", (long)U->pd[k].r, (long)U->pd[k].c);
-    U->npd = start + nz;
+        if (amps__pd_cmp(U->pending.delta + k - 1, U->pending.delta + k) == 0)
+            return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: entry (%ld, %ld) given twice", (long)U->pending.delta[k].r, (long)U->pending.delta[k].c);
+    U->pending.n_delta = start + nz;
     return AMPS_OK;
 }
 
-/* Current value K^[r, c] including recorded changes (r, c < N + kpend). */
+/* Current value K^[r, c] including recorded changes (r, c < N + pending.n_dofs). */
 static double amps__cur_entry(const amps_update *U, amps_int r, amps_int c) {
     double v = 0;
     amps_int p, k, a;
     if (r < U->n && c < U->n) {
-        for (p = U->Kp[c]; p < U->Kp[c + 1]; p++) if (U->Ki[p] == r) { v = U->Kx[p]; break; }
+        for (p = U->base.Kp[c]; p < U->base.Kp[c + 1]; p++) if (U->base.Ki[p] == r) { v = U->base.Kx[p]; break; }
     } else if (r == c) v = U->sigma;
-    a = r < U->N ? U->upos[r] : -1;
-    if (a >= 0 && (c < U->N ? U->upos[c] : -1) >= 0) {
-        amps_int b = U->upos[c];
-        for (k = 0; k < U->dln[a]; k++) if (U->dcol[U->dst[a] + k] == b) { v += U->dval[U->dst[a] + k]; break; }
+    a = r < U->N ? U->aug.pos[r] : -1;
+    if (a >= 0 && (c < U->N ? U->aug.pos[c] : -1) >= 0) {
+        amps_int b = U->aug.pos[c];
+        for (k = 0; k < U->delta.row_len[a]; k++) if (U->delta.col[U->delta.row_start[a] + k] == b) { v += U->delta.val[U->delta.row_start[a] + k]; break; }
     }
-    for (k = 0; k < U->npd; k++)
-        if ((U->pd[k].r == r && U->pd[k].c == c) || (U->pd[k].r == c && U->pd[k].c == r)) v += U->pd[k].v;
+    for (k = 0; k < U->pending.n_delta; k++)
+        if ((U->pending.delta[k].r == r && U->pending.delta[k].c == c) || (U->pending.delta[k].r == c && U->pending.delta[k].c == r)) v += U->pending.delta[k].v;
     return v;
 }
 
-AMPS_API amps_status amps_update_set_rows(amps_ctx *ctx, amps_update *U, amps_int nrow, const amps_int *rows,
-                                          const amps_int *cp, const amps_int *ci, const double *cx) {
-    amps_int k, j, q, N, start, *iw;
+/* Arguments of amps_update_set_rows: indices, values, no column twice in a row, and agreement
+   where two given rows meet. The given rows are left marked in work.mark_N. */
+static amps_status amps__set_rows_check(amps_ctx *ctx, amps_update *U, amps_int nrow, const amps_int *rows,
+                                        const amps_int *cp, const amps_int *ci, const double *cx) {
+    const amps_marker *mk = &U->work.mark_N;
+    amps_int k, j, q, N;
     amps_status s;
-    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: NULL engine");
     if (nrow < 0 || (nrow > 0 && (!rows || !cp))) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: bad count or NULL array");
-    if ((s = amps__chk_idx(ctx, U, "amps_update_set_rows", nrow, rows, NULL, 1, &U->mkN)) != AMPS_OK) return s;
-    N = U->N + U->kpend;
+    if ((s = amps__chk_idx(ctx, U, "amps_update_set_rows", nrow, rows, NULL, 1, &U->work.mark_N)) != AMPS_OK) return s;
+    N = U->N + U->pending.n_dofs;
     if (cp[0] != 0) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: cp[0] must be 0");
     for (k = 0; k < nrow; k++) {
         if (cp[k + 1] < cp[k]) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: cp decreases at row %ld", (long)k);
@@ -4789,7 +4899,7 @@ AMPS_API amps_status amps_update_set_rows(amps_ctx *ctx, amps_update *U, amps_in
     /* symmetry where two given rows meet: row a's entry at b must equal row b's entry at a */
     for (k = 0; k < nrow; k++)
         for (j = cp[k]; j < cp[k + 1]; j++)
-            if (U->mkN.mark[ci[j]] == U->mkN.stamp) {
+            if (mk->mark[ci[j]] == mk->stamp) {
                 amps_int kk, b = ci[j];
                 double vb = 0;
                 for (kk = 0; kk < nrow && rows[kk] != b; kk++) {}
@@ -4797,40 +4907,58 @@ AMPS_API amps_status amps_update_set_rows(amps_ctx *ctx, amps_update *U, amps_in
                 if (fabs(vb - cx[j]) > 1e-12 * (fabs(vb) + fabs(cx[j])))
                     return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: rows %ld and %ld disagree at their crossing (%g vs %g)", (long)rows[k], (long)b, cx[j], vb);
             }
+    return AMPS_OK;
+}
+
+/* Columns of row r of the current K^ (base pattern, Delta row, the changes recorded before
+   pending entry `start`) and the new columns ci[0..nc-1], ascending without repeats, into iw;
+   returns their count. a: r's U position or -1. */
+static amps_int amps__row_columns(const amps_update *U, amps_int r, amps_int a, amps_int start, const amps_int *ci, amps_int nc, amps_int *iw) {
+    amps_int q, cnt = 0, m = 0;
+    if (r < U->n) for (q = U->base.Kp[r]; q < U->base.Kp[r + 1]; q++) iw[cnt++] = U->base.Ki[q];
+    else iw[cnt++] = r;
+    if (a >= 0) for (q = 0; q < U->delta.row_len[a]; q++) iw[cnt++] = U->aug.idx[U->delta.col[U->delta.row_start[a] + q]];
+    for (q = 0; q < start; q++) {
+        if (U->pending.delta[q].r == r) iw[cnt++] = U->pending.delta[q].c;
+        else if (U->pending.delta[q].c == r) iw[cnt++] = U->pending.delta[q].r;
+    }
+    for (q = 0; q < nc; q++) iw[cnt++] = ci[q];
+    qsort(iw, (size_t)cnt, sizeof(amps_int), amps__int_cmp);
+    for (q = 0; q < cnt; q++) if (m == 0 || iw[m - 1] != iw[q]) iw[m++] = iw[q];
+    return m;
+}
+
+AMPS_API amps_status amps_update_set_rows(amps_ctx *ctx, amps_update *U, amps_int nrow, const amps_int *rows,
+                                          const amps_int *cp, const amps_int *ci, const double *cx) {
+    const amps_marker *mk;
+    amps_int k, j, q, start, *iw;
+    amps_status s;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: NULL engine");
+    if ((s = amps__set_rows_check(ctx, U, nrow, rows, cp, ci, cx)) != AMPS_OK) return s;
     /* the changes: for each row r, every column c of the current or the new row gets
        new - current; a pair of two given rows is recorded once (from the smaller row) */
-    start = U->npd;
-    iw = U->iwork;
+    mk = &U->work.mark_N;
+    start = U->pending.n_delta;
+    iw = U->work.idx;
     for (k = 0; k < nrow; k++) {
-        amps_int r = rows[k], a, cnt = 0;
-        a = r < U->N ? U->upos[r] : -1;
-        if ((r < U->n ? U->Kp[r + 1] - U->Kp[r] : 1) + (a >= 0 ? U->dln[a] : 0) + U->npd + (cp[k + 1] - cp[k]) > U->n + U->capN) {
-            U->npd = start;
+        amps_int r = rows[k], a, cnt;
+        a = r < U->N ? U->aug.pos[r] : -1;
+        if ((r < U->n ? U->base.Kp[r + 1] - U->base.Kp[r] : 1) + (a >= 0 ? U->delta.row_len[a] : 0) + U->pending.n_delta + (cp[k + 1] - cp[k]) > U->n + U->cap_N) {
+            U->pending.n_delta = start;
             return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update_set_rows: too many changes recorded; commit first");
         }
-        /* columns of the current row: base pattern, Delta row, recorded changes; then new ones */
-        if (r < U->n) for (q = U->Kp[r]; q < U->Kp[r + 1]; q++) iw[cnt++] = U->Ki[q];
-        else iw[cnt++] = r;
-        if (a >= 0) for (q = 0; q < U->dln[a]; q++) iw[cnt++] = U->uidx[U->dcol[U->dst[a] + q]];
-        for (q = 0; q < start; q++) {
-            if (U->pd[q].r == r) iw[cnt++] = U->pd[q].c;
-            else if (U->pd[q].c == r) iw[cnt++] = U->pd[q].r;
-        }
-        for (j = cp[k]; j < cp[k + 1]; j++) iw[cnt++] = ci[j];
-        qsort(iw, (size_t)cnt, sizeof(amps_int), amps__int_cmp);
-        {
-            amps_int i2, m2 = 0;
-            for (i2 = 0; i2 < cnt; i2++) if (m2 == 0 || iw[m2 - 1] != iw[i2]) iw[m2++] = iw[i2];
-            cnt = m2;
-        }
-        if ((s = amps__need_pending(ctx, U, cnt, 0)) != AMPS_OK) { U->npd = start; return s; }
+        cnt = amps__row_columns(U, r, a, start, ci + cp[k], cp[k + 1] - cp[k], iw);
+        if ((s = amps__need_pending(ctx, U, cnt, 0)) != AMPS_OK) { U->pending.n_delta = start; return s; }
         for (q = 0; q < cnt; q++) {
             amps_int c = iw[q];
             double nv = 0, d;
-            if (U->mkN.mark[c] == U->mkN.stamp && c < r) continue;   /* recorded from row c */
+            amps__pdelta *e;
+            if (mk->mark[c] == mk->stamp && c < r) continue;   /* recorded from row c */
             for (j = cp[k]; j < cp[k + 1]; j++) if (ci[j] == c) { nv = cx[j]; break; }
             d = nv - amps__cur_entry(U, r, c);
-            if (d != 0) { U->pd[U->npd].r = r; U->pd[U->npd].c = c; U->pd[U->npd].v = d; U->npd++; }
+            if (d == 0) continue;
+            e = U->pending.delta + U->pending.n_delta++;
+            e->r = r; e->c = c; e->v = d;
         }
     }
     return AMPS_OK;
@@ -4843,13 +4971,13 @@ static amps_status amps__record_con(amps_ctx *ctx, amps_update *U, const char *f
     amps_status s;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL engine", fn);
     if (!release && m > 0 && !val) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL values", fn);
-    if ((s = amps__chk_idx(ctx, U, fn, m, idx, release ? NULL : val, 1, &U->mkN)) != AMPS_OK) return s;
+    if ((s = amps__chk_idx(ctx, U, fn, m, idx, release ? NULL : val, 1, &U->work.mark_N)) != AMPS_OK) return s;
     if ((s = amps__need_pending(ctx, U, 0, m)) != AMPS_OK) return s;
     for (k = 0; k < m; k++) {
-        U->pc[U->npc].i = idx[k];
-        U->pc[U->npc].release = release;
-        U->pc[U->npc].v = release ? 0.0 : val[k];
-        U->npc++;
+        U->pending.con[U->pending.n_con].i = idx[k];
+        U->pending.con[U->pending.n_con].release = release;
+        U->pending.con[U->pending.n_con].v = release ? 0.0 : val[k];
+        U->pending.n_con++;
     }
     return AMPS_OK;
 }
@@ -4867,15 +4995,15 @@ AMPS_API amps_status amps_update_set_force(amps_ctx *ctx, amps_update *U, amps_i
     amps_status s;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_force: NULL engine");
     if (m > 0 && !val) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_force: NULL values");
-    if ((s = amps__chk_idx(ctx, U, "amps_update_set_force", m, idx, val, 1, &U->mkN)) != AMPS_OK) return s;
+    if ((s = amps__chk_idx(ctx, U, "amps_update_set_force", m, idx, val, 1, &U->work.mark_N)) != AMPS_OK) return s;
     for (k = 0; k < m; k++) {
         amps_int i = idx[k];
-        if (U->f[i] == val[k]) continue;
-        /* base forces reach ct at the next solve, from the difference f - fct */
-        if (i < U->n) { if (U->npf < U->n) U->pf[U->npf++] = i; else U->pf_all = 1; }
-        U->f[i] = val[k];
+        if (U->force.f[i] == val[k]) continue;
+        /* base forces reach ct at the next solve, from the difference f - f_ct */
+        if (i < U->n) { if (U->force.n_changed < U->n) U->force.changed[U->force.n_changed++] = i; else U->force.changed_all = 1; }
+        U->force.f[i] = val[k];
     }
-    if (m > 0) U->dirty = U->rdirty = U->wdirty = 1;
+    if (m > 0) U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
     return AMPS_OK;
 }
 
@@ -4961,11 +5089,12 @@ AMPS__WSOLVE(16)
 #undef AMPS__WSOLVE
 
 /* W columns (W = D^{-1/2} L^{-1} e_p on the root path of p, ascending) of the U positions
-   list[0..nb-1], written at voff/vlen. The columns are split into chunks of at most AMPS__VB,
+   list[0..nb-1], written at memo.off/memo.len. The columns are split into chunks of at most AMPS__VB,
    one chunk per thread at a time; a chunk is one forward solve over the union of its paths
    (ascending = topological), X(t, j) row-major over the chunk, so each column of L on the
    union is read once per chunk. The rows of L(:, k) lie on the path of k, so no solve leaves
-   the union. Workspace per thread: xb (xrows * AMPS__VB), lmap (n, -1 outside use), clo (n). */
+   the union. Workspace per thread: work.chunk (chunk_rows * AMPS__VB), work.row_map (n, -1
+   outside use), work.closure (n). */
 static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
     const amps_factor *F = U->F;
     amps_int nchunk, csize, ch;
@@ -4973,7 +5102,7 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
     {   /* threads only when the work (entries of L on one path, times nb) is worth a fork */
         double work = 0;
         amps_int k;
-        for (k = F->iperm[U->uidx[list[0]]]; k != -1; k = F->parent[k]) work += (double)(F->Lp[k + 1] - F->Lp[k]);
+        for (k = F->iperm[U->aug.idx[list[0]]]; k != -1; k = F->parent[k]) work += (double)(F->Lp[k + 1] - F->Lp[k]);
         work *= (double)nb;
         csize = work > 2e6 ? (nb + U->nthr - 1) / U->nthr : nb;
     }
@@ -4988,17 +5117,17 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
 #else
         int th = 0;
 #endif
-        double *X = U->xb + (size_t)th * (size_t)U->xrows * AMPS__VB;
-        amps_int *lmap = U->lmap + (size_t)th * (size_t)U->n, *clo = U->clo + (size_t)th * (size_t)U->n;
+        double *X = U->work.chunk + (size_t)th * (size_t)U->work.chunk_rows * AMPS__VB;
+        amps_int *lmap = U->work.row_map + (size_t)th * (size_t)U->n, *clo = U->work.closure + (size_t)th * (size_t)U->n;
         amps_int j0 = ch * csize, m = nb - j0 < csize ? nb - j0 : csize, nc = 0, j, t, k, mw;
         /* union of the root paths, ascending */
         for (j = 0; j < m; j++)
-            for (k = F->iperm[U->uidx[list[j0 + j]]]; k != -1 && lmap[k] < 0; k = F->parent[k]) { lmap[k] = 0; clo[nc++] = k; }
+            for (k = F->iperm[U->aug.idx[list[j0 + j]]]; k != -1 && lmap[k] < 0; k = F->parent[k]) { lmap[k] = 0; clo[nc++] = k; }
         qsort(clo, (size_t)nc, sizeof(amps_int), amps__int_cmp);
         for (t = 0; t < nc; t++) lmap[clo[t]] = t;
         mw = amps__width(m);
         memset(X, 0, sizeof(double) * (size_t)nc * (size_t)mw);
-        for (j = 0; j < m; j++) X[(size_t)lmap[F->iperm[U->uidx[list[j0 + j]]]] * (size_t)mw + (size_t)j] = 1.0;
+        for (j = 0; j < m; j++) X[(size_t)lmap[F->iperm[U->aug.idx[list[j0 + j]]]] * (size_t)mw + (size_t)j] = 1.0;
         /* X := L^{-1} X on the union, with a fixed row width mw >= m (zero padding) */
         if (m <= 4) amps__wsolve4(F, clo, nc, lmap, X);
         else if (m <= 8) amps__wsolve8(F, clo, nc, lmap, X);
@@ -5007,11 +5136,11 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
         /* gather each column along its own path, scaled by D^{-1/2} */
         for (j = 0; j < m; j++) {
             amps_int aa = list[j0 + j], len = 0;
-            double *wv = U->vval + U->voff[aa];
-            amps_int *wi = U->vidx + U->voff[aa];
-            for (k = F->iperm[U->uidx[aa]]; k != -1; k = F->parent[k]) {
+            double *wv = U->memo.val + U->memo.off[aa];
+            amps_int *wi = U->memo.idx + U->memo.off[aa];
+            for (k = F->iperm[U->aug.idx[aa]]; k != -1; k = F->parent[k]) {
                 wi[len] = k;
-                wv[len] = X[(size_t)lmap[k] * (size_t)mw + (size_t)j] * U->isd[k];
+                wv[len] = X[(size_t)lmap[k] * (size_t)mw + (size_t)j] * U->base.inv_sqrt_d[k];
                 len++;
             }
         }
@@ -5054,23 +5183,23 @@ AMPS__GSCAN(16)
    of its root paths, and each W_b is then read once for the whole chunk (its suffix in the
    union), the products W_b^T X in one pass; threads share the b. */
 static void amps__gcols(amps_update *U, amps_int u_old) {
-    amps_int u = U->u, n = U->n, a0;
-    size_t ld = (size_t)U->capu;
-    double *X = U->xb;                                   /* thread 0's Step 1 workspace */
-    amps_int *lmap = U->lmap, *clo = U->clo;
+    amps_int u = U->aug.size, n = U->n, a0;
+    size_t ld = (size_t)U->aug.cap;
+    double *X = U->work.chunk;                                   /* thread 0's Step 1 workspace */
+    amps_int *lmap = U->work.row_map, *clo = U->work.closure;
     for (a0 = u_old; a0 < u; a0 += AMPS__VB) {
         amps_int m = u - a0 < AMPS__VB ? u - a0 : AMPS__VB, mw = amps__width(m), nc = 0, j, t, b;
         for (j = 0; j < m; j++) {
-            const amps_int *wi = U->vidx + U->voff[a0 + j];
-            if (U->uidx[a0 + j] >= n) continue;
-            for (t = 0; t < U->vlen[a0 + j]; t++) if (lmap[wi[t]] < 0) { lmap[wi[t]] = nc; clo[nc++] = wi[t]; }
+            const amps_int *wi = U->memo.idx + U->memo.off[a0 + j];
+            if (U->aug.idx[a0 + j] >= n) continue;
+            for (t = 0; t < U->memo.len[a0 + j]; t++) if (lmap[wi[t]] < 0) { lmap[wi[t]] = nc; clo[nc++] = wi[t]; }
         }
         memset(X, 0, sizeof(double) * (size_t)nc * (size_t)mw);
         for (j = 0; j < m; j++) {
-            const amps_int *wi = U->vidx + U->voff[a0 + j];
-            const double *wv = U->vval + U->voff[a0 + j];
-            if (U->uidx[a0 + j] >= n) continue;
-            for (t = 0; t < U->vlen[a0 + j]; t++) X[(size_t)lmap[wi[t]] * (size_t)mw + (size_t)j] = wv[t];
+            const amps_int *wi = U->memo.idx + U->memo.off[a0 + j];
+            const double *wv = U->memo.val + U->memo.off[a0 + j];
+            if (U->aug.idx[a0 + j] >= n) continue;
+            for (t = 0; t < U->memo.len[a0 + j]; t++) X[(size_t)lmap[wi[t]] * (size_t)mw + (size_t)j] = wv[t];
         }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 16) num_threads(U->nthr) if ((double)u * nc > 1e5)
@@ -5078,21 +5207,21 @@ static void amps__gcols(amps_update *U, amps_int u_old) {
         for (b = 0; b < u; b++) {
             double acc[AMPS__VB];
             amps_int jj;
-            if (U->uidx[b] < n) {
-                const amps_int *wi = U->vidx + U->voff[b];
-                const double *wv = U->vval + U->voff[b];
-                if (mw == 4) amps__gscan4(wi, wv, U->vlen[b], lmap, X, acc);
-                else if (mw == 8) amps__gscan8(wi, wv, U->vlen[b], lmap, X, acc);
-                else if (mw == 12) amps__gscan12(wi, wv, U->vlen[b], lmap, X, acc);
-                else amps__gscan16(wi, wv, U->vlen[b], lmap, X, acc);
+            if (U->aug.idx[b] < n) {
+                const amps_int *wi = U->memo.idx + U->memo.off[b];
+                const double *wv = U->memo.val + U->memo.off[b];
+                if (mw == 4) amps__gscan4(wi, wv, U->memo.len[b], lmap, X, acc);
+                else if (mw == 8) amps__gscan8(wi, wv, U->memo.len[b], lmap, X, acc);
+                else if (mw == 12) amps__gscan12(wi, wv, U->memo.len[b], lmap, X, acc);
+                else amps__gscan16(wi, wv, U->memo.len[b], lmap, X, acc);
             }
             for (jj = 0; jj < m; jj++) {
                 amps_int a = a0 + jj;
                 double gv;
                 if (b >= u_old && b > a) continue;       /* the chunk of b writes it */
-                gv = (U->uidx[a] >= n || U->uidx[b] >= n) ? (a == b ? 1.0 / U->sigma : 0.0) : acc[jj];
-                U->G[(size_t)b * ld + (size_t)a] = gv;
-                U->G[(size_t)a * ld + (size_t)b] = gv;
+                gv = (U->aug.idx[a] >= n || U->aug.idx[b] >= n) ? (a == b ? 1.0 / U->sigma : 0.0) : acc[jj];
+                U->lu.G[(size_t)b * ld + (size_t)a] = gv;
+                U->lu.G[(size_t)a * ld + (size_t)b] = gv;
             }
         }
         for (t = 0; t < nc; t++) lmap[clo[t]] = -1;
@@ -5103,32 +5232,32 @@ static void amps__gcols(amps_update *U, amps_int u_old) {
 
 /* out (U positions) = A(:, j). */
 static void amps__acol(const amps_update *U, amps_int j, double *out) {
-    amps_int u = U->u, i, k;
-    size_t ld = (size_t)U->capu;
-    if (U->ukind[j] & AMPS__UCON) { memcpy(out, U->G + (size_t)j * ld, sizeof(double) * (size_t)u); return; }
+    amps_int u = U->aug.size, i, k;
+    size_t ld = (size_t)U->aug.cap;
+    if (U->aug.kind[j] & AMPS__UCON) { memcpy(out, U->lu.G + (size_t)j * ld, sizeof(double) * (size_t)u); return; }
     memset(out, 0, sizeof(double) * (size_t)u);
     out[j] = 1.0;
-    for (k = 0; k < U->dln[j]; k++) {
-        amps_int b = U->dcol[U->dst[j] + k];
-        double v = U->dval[U->dst[j] + k];
+    for (k = 0; k < U->delta.row_len[j]; k++) {
+        amps_int b = U->delta.col[U->delta.row_start[j] + k];
+        double v = U->delta.val[U->delta.row_start[j] + k];
         const double *gb;
-        if (U->ukind[b] & AMPS__UCON) continue;      /* rows of Delta in C are dropped */
-        gb = U->G + (size_t)b * ld;                  /* G symmetric: G(:, b) */
+        if (U->aug.kind[b] & AMPS__UCON) continue;      /* rows of Delta in C are dropped */
+        gb = U->lu.G + (size_t)b * ld;                  /* G symmetric: G(:, b) */
         for (i = 0; i < u; i++) out[i] += gb[i] * v;
     }
 }
 
 /* A(i, j). */
 static double amps__aentry(const amps_update *U, amps_int i, amps_int j) {
-    size_t ld = (size_t)U->capu;
+    size_t ld = (size_t)U->aug.cap;
     double s;
     amps_int k;
-    const double *gi = U->G + (size_t)i * ld;       /* G(i, :) = G(:, i): contiguous */
-    if (U->ukind[j] & AMPS__UCON) return gi[j];
+    const double *gi = U->lu.G + (size_t)i * ld;       /* G(i, :) = G(:, i): contiguous */
+    if (U->aug.kind[j] & AMPS__UCON) return gi[j];
     s = (i == j) ? 1.0 : 0.0;
-    for (k = 0; k < U->dln[j]; k++) {
-        amps_int b = U->dcol[U->dst[j] + k];
-        if (!(U->ukind[b] & AMPS__UCON)) s += gi[b] * U->dval[U->dst[j] + k];
+    for (k = 0; k < U->delta.row_len[j]; k++) {
+        amps_int b = U->delta.col[U->delta.row_start[j] + k];
+        if (!(U->aug.kind[b] & AMPS__UCON)) s += gi[b] * U->delta.val[U->delta.row_start[j] + k];
     }
     return s;
 }
@@ -5139,7 +5268,7 @@ static double amps__aentry(const amps_update *U, amps_int i, amps_int j) {
    for unconstrained columns at least the identity part (so that a column cancelled to rounding
    level, a row with no stiffness, is caught). */
 static int amps__pivot_ok(const amps_update *U, amps_int j, double apiv) {
-    return apiv > U->tol * ((U->ukind[j] & AMPS__UCON) || U->cnorm[j] > 1.0 ? U->cnorm[j] : 1.0) && apiv != 0.0;
+    return apiv > U->singular_tol * ((U->aug.kind[j] & AMPS__UCON) || U->lu.col_norm[j] > 1.0 ? U->lu.col_norm[j] : 1.0) && apiv != 0.0;
 }
 
 /* C(r0:r1, 0:w) -= A(r0:r1, k0:k1) B(k0:k1, 0:w), column major, by tiles of 4 columns and
@@ -5242,105 +5371,132 @@ static void amps__gemm_sub(amps_int m, amps_int w, amps_int kk, const double *A,
     }
 }
 
-/* Factors positions nf..u-1 given positions 0..nf-1 factored for physical rows 0..u_old-1;
-   rows u_old..u-1 are new (rowperm set). Returns AMPS_OK, AMPS_ERR_SINGULAR_UPDATE (position in
-   *bad), or AMPS_ERR_CAPACITY when the new rows' multipliers grow past 1e6 (refactor from 0). */
-static amps_status amps__lu_extend(amps_update *U, amps_int nf, amps_int u_old, amps_int *bad) {
-    amps_int u = U->u, q, qp, r;
-    size_t ld = (size_t)U->capu;
-    double *LU = U->LU;
-    /* new rows: L(r, 0:nf) solves l U11 = A(r, colorder[0:nf]), by groups of 4 rows kept
-       row-major in pbuf, so that each entry is one dot product with a column of U11 */
-    if (nf > 0 && u > u_old) {
-        double growth = 0;
-        amps_int r0, i;
-        for (r0 = u_old; r0 < u; r0 += 4) {
-            amps_int nr = u - r0 < 4 ? u - r0 : 4;
-            double *lr = U->pbuf;
-            for (q = 0; q < nf; q++) {
-                const double *uq = LU + (size_t)q * ld;
-                amps_int j = U->colorder[q];
-                double d[4];
-                amps__dot4(lr, ld, nr, uq, q, d);
-                for (i = 0; i < nr; i++)
-                    lr[(size_t)i * ld + (size_t)q] = (amps__aentry(U, U->rowperm[r0 + i], j) - d[i]) / uq[q];
-            }
+/* The new rows u_old..u-1 of L on the factored positions 0..nf-1: L(r, 0:nf) solves
+   l U11 = A(r, col_order[0:nf]), by groups of 4 rows kept row-major in lu.panel, so that each
+   entry is one dot product with a column of U11. AMPS_ERR_CAPACITY when a multiplier exceeds 1e6. */
+static amps_status amps__lu_new_rows(amps_update *U, amps_int nf, amps_int u_old) {
+    amps_int u = U->aug.size, q;
+    size_t ld = (size_t)U->aug.cap;
+    double *LU = U->lu.LU, growth = 0;
+    amps_int r0, i;
+    for (r0 = u_old; r0 < u; r0 += 4) {
+        amps_int nr = u - r0 < 4 ? u - r0 : 4;
+        double *lr = U->lu.panel;
+        for (q = 0; q < nf; q++) {
+            const double *uq = LU + (size_t)q * ld;
+            amps_int j = U->lu.col_order[q];
+            double d[4];
+            amps__dot4(lr, ld, nr, uq, q, d);
             for (i = 0; i < nr; i++)
-                for (q = 0; q < nf; q++) {
-                    double v = lr[(size_t)i * ld + (size_t)q];
-                    LU[(size_t)q * ld + (size_t)(r0 + i)] = v;
-                    if (fabs(v) > growth) growth = fabs(v);
-                }
+                lr[(size_t)i * ld + (size_t)q] = (amps__aentry(U, U->lu.row_perm[r0 + i], j) - d[i]) / uq[q];
         }
-        if (!(growth <= 1e6)) return AMPS_ERR_CAPACITY;
+        for (i = 0; i < nr; i++)
+            for (q = 0; q < nf; q++) {
+                double v = lr[(size_t)i * ld + (size_t)q];
+                LU[(size_t)q * ld + (size_t)(r0 + i)] = v;
+                if (fabs(v) > growth) growth = fabs(v);
+            }
     }
-    for (qp = nf; qp < u; qp += AMPS__NB) {
-        amps_int w = u - qp < AMPS__NB ? u - qp : AMPS__NB, c, kb;
-        double *P = LU + (size_t)qp * ld;
-        /* load the panel: A(rowperm, colorder[qp:qp+w]) and its column norms */
+    return growth <= 1e6 ? AMPS_OK : AMPS_ERR_CAPACITY;
+}
+
+/* Panel qp..qp+w-1 of the factor: A(row_perm, col_order[qp:qp+w]), and the column norms. */
+static void amps__lu_panel_load(amps_update *U, amps_int qp, amps_int w) {
+    amps_int u = U->aug.size, c;
+    size_t ld = (size_t)U->aug.cap;
+    double *P = U->lu.LU + (size_t)qp * ld;
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) num_threads(U->nthr) if (w > 1 && u > 64)
 #endif
-        for (c = 0; c < w; c++) {
+    for (c = 0; c < w; c++) {
 #ifdef _OPENMP
-            double *buf = U->pbuf + (size_t)omp_get_thread_num() * ld;
+        double *buf = U->lu.panel + (size_t)omp_get_thread_num() * ld;
 #else
-            double *buf = U->pbuf;
+        double *buf = U->lu.panel;
 #endif
-            amps_int j = U->colorder[qp + c], rr;
-            double nrm = 0, *col = P + (size_t)c * ld;
-            amps__acol(U, j, buf);
-            for (rr = 0; rr < u; rr++) { col[rr] = buf[U->rowperm[rr]]; if (fabs(buf[rr]) > nrm) nrm = fabs(buf[rr]); }
-            U->cnorm[j] = nrm;
-        }
-        /* apply the factored columns 0..qp-1: P(0:qp) = L11^{-1} P(0:qp) (unit lower) by blocks
-           of AMPS__TB rows: the diagonal block per column, the rows below it by one product;
-           then P(qp:u) -= L(qp:u, 0:qp) P(0:qp) */
-        for (kb = 0; kb < qp; kb += AMPS__TB) {
-            amps_int k1 = kb + AMPS__TB < qp ? kb + AMPS__TB : qp, kk;
-            amps_int ib;
-            for (ib = kb; ib < k1; ib += 8) {            /* the diagonal block by blocks of 8 */
-                amps_int i1 = ib + 8 < k1 ? ib + 8 : k1;
-                for (c = 0; c < w; c++) {
-                    double *col = P + (size_t)c * ld;
-                    for (kk = ib; kk < i1; kk++) {
-                        const double *lk = LU + (size_t)kk * ld;
-                        double x = col[kk];
-                        if (x != 0.0) for (r = kk + 1; r < i1; r++) col[r] -= lk[r] * x;
-                    }
-                }
-                amps__gemm_tile(i1, k1, w, ib, i1, LU, ld, P, ld, P, ld);
-            }
-            amps__gemm_sub(qp - k1, w, k1 - kb, LU + (size_t)kb * ld + (size_t)k1, ld, P + (size_t)kb, ld, P + (size_t)k1, ld, U->nthr);
-        }
-        amps__gemm_sub(u - qp, w, qp, LU + (size_t)qp, ld, P, ld, P + (size_t)qp, ld, U->nthr);
-        /* factor the panel with partial pivoting; swaps act on whole rows 0..qp+w-1 */
-        for (c = 0; c < w; c++) {
-            amps_int qq = qp + c, pr = qq, j = U->colorder[qq], cc;
-            double *col = LU + (size_t)qq * ld, pmax = fabs(col[qq]), piv;
-            for (r = qq + 1; r < u; r++) if (fabs(col[r]) > pmax) { pmax = fabs(col[r]); pr = r; }
-            if (!amps__pivot_ok(U, j, pmax)) {
-                *bad = j;
-                return AMPS_ERR_SINGULAR_UPDATE;
-            }
-            if (pr != qq) {
-                amps_int t = U->rowperm[pr];
-                U->rowperm[pr] = U->rowperm[qq]; U->rowperm[qq] = t;
-                for (cc = 0; cc < qp + w; cc++) {
-                    double *cl = LU + (size_t)cc * ld, tv = cl[pr];
-                    cl[pr] = cl[qq]; cl[qq] = tv;
+        amps_int j = U->lu.col_order[qp + c], rr;
+        double nrm = 0, *col = P + (size_t)c * ld;
+        amps__acol(U, j, buf);
+        for (rr = 0; rr < u; rr++) { col[rr] = buf[U->lu.row_perm[rr]]; if (fabs(buf[rr]) > nrm) nrm = fabs(buf[rr]); }
+        U->lu.col_norm[j] = nrm;
+    }
+}
+
+/* The factored columns 0..qp-1 applied to the panel P = qp..qp+w-1: P(0:qp) = L11^{-1} P(0:qp)
+   (unit lower) by blocks of AMPS__TB rows: the diagonal block per column, the rows below it by
+   one product; then P(qp:u) -= L(qp:u, 0:qp) P(0:qp). */
+static void amps__lu_panel_apply(amps_update *U, amps_int qp, amps_int w) {
+    amps_int u = U->aug.size, c, r, kb;
+    size_t ld = (size_t)U->aug.cap;
+    const double *LU = U->lu.LU;
+    double *P = U->lu.LU + (size_t)qp * ld;
+    for (kb = 0; kb < qp; kb += AMPS__TB) {
+        amps_int k1 = kb + AMPS__TB < qp ? kb + AMPS__TB : qp, kk;
+        amps_int ib;
+        for (ib = kb; ib < k1; ib += 8) {            /* the diagonal block by blocks of 8 */
+            amps_int i1 = ib + 8 < k1 ? ib + 8 : k1;
+            for (c = 0; c < w; c++) {
+                double *col = P + (size_t)c * ld;
+                for (kk = ib; kk < i1; kk++) {
+                    const double *lk = LU + (size_t)kk * ld;
+                    double x = col[kk];
+                    if (x != 0.0) for (r = kk + 1; r < i1; r++) col[r] -= lk[r] * x;
                 }
             }
-            piv = col[qq];
-            for (r = qq + 1; r < u; r++) col[r] /= piv;
-            for (cc = qq + 1; cc < qp + w; cc++) {
-                double *cl = LU + (size_t)cc * ld, x = cl[qq];
-                if (x == 0.0) continue;
-                for (r = qq + 1; r < u; r++) cl[r] -= col[r] * x;
+            amps__gemm_tile(i1, k1, w, ib, i1, LU, ld, P, ld, P, ld);
+        }
+        amps__gemm_sub(qp - k1, w, k1 - kb, LU + (size_t)kb * ld + (size_t)k1, ld, P + (size_t)kb, ld, P + (size_t)k1, ld, U->nthr);
+    }
+    amps__gemm_sub(u - qp, w, qp, LU + (size_t)qp, ld, P, ld, P + (size_t)qp, ld, U->nthr);
+}
+
+/* Factors the panel qp..qp+w-1 with partial pivoting (swaps act on whole rows 0..qp+w-1);
+   AMPS_ERR_SINGULAR_UPDATE (U position in *bad) at a pivot that fails amps__pivot_ok. */
+static amps_status amps__lu_panel_factor(amps_update *U, amps_int qp, amps_int w, amps_int *bad) {
+    amps_int u = U->aug.size, c, r;
+    size_t ld = (size_t)U->aug.cap;
+    double *LU = U->lu.LU;
+    for (c = 0; c < w; c++) {
+        amps_int qq = qp + c, pr = qq, j = U->lu.col_order[qq], cc;
+        double *col = LU + (size_t)qq * ld, pmax = fabs(col[qq]), piv;
+        for (r = qq + 1; r < u; r++) if (fabs(col[r]) > pmax) { pmax = fabs(col[r]); pr = r; }
+        if (!amps__pivot_ok(U, j, pmax)) {
+            *bad = j;
+            return AMPS_ERR_SINGULAR_UPDATE;
+        }
+        if (pr != qq) {
+            amps_int t = U->lu.row_perm[pr];
+            U->lu.row_perm[pr] = U->lu.row_perm[qq]; U->lu.row_perm[qq] = t;
+            for (cc = 0; cc < qp + w; cc++) {
+                double *cl = LU + (size_t)cc * ld, tv = cl[pr];
+                cl[pr] = cl[qq]; cl[qq] = tv;
             }
+        }
+        piv = col[qq];
+        for (r = qq + 1; r < u; r++) col[r] /= piv;
+        for (cc = qq + 1; cc < qp + w; cc++) {
+            double *cl = LU + (size_t)cc * ld, x = cl[qq];
+            if (x == 0.0) continue;
+            for (r = qq + 1; r < u; r++) cl[r] -= col[r] * x;
         }
     }
-    for (q = 0; q < u; q++) U->colpos[U->colorder[q]] = q;
+    return AMPS_OK;
+}
+
+/* Factors positions nf..u-1 given positions 0..nf-1 factored for physical rows 0..u_old-1;
+   rows u_old..u-1 are new (lu.row_perm set). Returns AMPS_OK, AMPS_ERR_SINGULAR_UPDATE (position in
+   *bad), or AMPS_ERR_CAPACITY when the new rows' multipliers grow past 1e6 (refactor from 0). */
+static amps_status amps__lu_extend(amps_update *U, amps_int nf, amps_int u_old, amps_int *bad) {
+    amps_int u = U->aug.size, q, qp;
+    amps_status s;
+    if (nf > 0 && u > u_old && (s = amps__lu_new_rows(U, nf, u_old)) != AMPS_OK) return s;
+    for (qp = nf; qp < u; qp += AMPS__NB) {
+        amps_int w = u - qp < AMPS__NB ? u - qp : AMPS__NB;
+        amps__lu_panel_load(U, qp, w);
+        amps__lu_panel_apply(U, qp, w);
+        if ((s = amps__lu_panel_factor(U, qp, w, bad)) != AMPS_OK) return s;
+    }
+    for (q = 0; q < u; q++) U->lu.col_pos[U->lu.col_order[q]] = q;
     return AMPS_OK;
 }
 
@@ -5359,15 +5515,15 @@ static void amps__pair(double *x, amps_int r, const double *h) {
    l = L(r, r-1) above the diagonal; R = I + l e_{r-1} e_r^T removes it (column r -= l column r-1,
    U row r-1 += l row r: the h[1] of amps__pair); then E as before. L stays unit lower. */
 static double amps__lpair(amps_update *U, amps_int q0, amps_int u_old, amps_int r, const double *h, amps_int *perm) {
-    size_t ld = (size_t)U->capu;
-    double *L0 = U->LU + (size_t)(r - 1) * ld, *L1 = U->LU + (size_t)r * ld, m = h[0], l = h[1], g = 0.0;
+    size_t ld = (size_t)U->aug.cap;
+    double *L0 = U->lu.LU + (size_t)(r - 1) * ld, *L1 = U->lu.LU + (size_t)r * ld, m = h[0], l = h[1], g = 0.0;
     amps_int i, c;
     if (h[2] != 0.0) {
-        amps_int t = U->rowperm[r - 1];
-        U->rowperm[r - 1] = U->rowperm[r]; U->rowperm[r] = t;
+        amps_int t = U->lu.row_perm[r - 1];
+        U->lu.row_perm[r - 1] = U->lu.row_perm[r]; U->lu.row_perm[r] = t;
         t = perm[r - 1 - q0]; perm[r - 1 - q0] = perm[r - q0]; perm[r - q0] = t;
         for (c = q0; c < r - 1; c++) {
-            double *lc = U->LU + (size_t)c * ld, tv = lc[r - 1];
+            double *lc = U->lu.LU + (size_t)c * ld, tv = lc[r - 1];
             lc[r - 1] = lc[r]; lc[r] = tv;
         }
         for (i = r + 1; i < u_old; i++) {
@@ -5400,20 +5556,20 @@ static double amps__lpair(amps_update *U, amps_int q0, amps_int u_old, amps_int 
    fails the test of amps__lu_extend. Returns the number of positions factored (q0..q0+nk);
    the rest must be refactored. */
 static amps_int amps__lu_drop(amps_update *U, amps_int q0, amps_int nk, amps_int u_old) {
-    size_t ld = (size_t)U->capu;
-    double *LU = U->LU, *x = U->pbuf;
-    amps_int *perm = U->iwork, p, k, r, i, c, nr = u_old - q0;
+    size_t ld = (size_t)U->aug.cap;
+    double *LU = U->lu.LU, *x = U->lu.panel;
+    amps_int *perm = U->work.idx, p, k, r, i, c, nr = u_old - q0;
     int fail = 0;
     for (i = 0; i < nr; i++) perm[i] = i;
     for (p = q0; p < q0 + nk; p++) {
-        amps_int j = U->colorder[p], op = U->colpos[j];
-        double *dst = LU + (size_t)p * ld, *h = U->hbuf + (size_t)(p - q0) * 3 * AMPS__DMAX;
+        amps_int j = U->lu.col_order[p], op = U->lu.col_pos[j];
+        double *dst = LU + (size_t)p * ld, *h = U->lu.transforms + (size_t)(p - q0) * 3 * AMPS__DMAX;
         const double *src = LU + (size_t)op * ld;
         /* column p of U': rows q0..op of old column op, then the transforms of columns q0..p-1 */
         for (r = q0; r <= op; r++) x[r] = src[r];
         for (k = q0; k < p; k++) {
-            amps_int dk = U->colpos[U->colorder[k]] - k;
-            const double *hk = U->hbuf + (size_t)(k - q0) * 3 * AMPS__DMAX;
+            amps_int dk = U->lu.col_pos[U->lu.col_order[k]] - k;
+            const double *hk = U->lu.transforms + (size_t)(k - q0) * 3 * AMPS__DMAX;
             for (r = k + dk; r > k; r--, hk += 3) amps__pair(x, r, hk);
         }
         /* its own subdiagonals, bottom-up: the pair (r-1, r) zeroes x_r */
@@ -5444,49 +5600,49 @@ static amps_int amps__lu_drop(amps_update *U, amps_int q0, amps_int nk, amps_int
 
 /* z = A^{-1} b (U positions); t is scratch of length u. */
 static void amps__lu_solve(const amps_update *U, const double *b, double *z, double *t) {
-    amps_int u = U->u, q, r;
-    size_t ld = (size_t)U->capu;
-    for (r = 0; r < u; r++) t[r] = b[U->rowperm[r]];
+    amps_int u = U->aug.size, q, r;
+    size_t ld = (size_t)U->aug.cap;
+    for (r = 0; r < u; r++) t[r] = b[U->lu.row_perm[r]];
     for (q = 0; q < u; q++) {
-        const double *l = U->LU + (size_t)q * ld;
+        const double *l = U->lu.LU + (size_t)q * ld;
         double x = t[q];
         if (x != 0.0) for (r = q + 1; r < u; r++) t[r] -= l[r] * x;
     }
     for (q = u - 1; q >= 0; q--) {
-        const double *col = U->LU + (size_t)q * ld;
+        const double *col = U->lu.LU + (size_t)q * ld;
         double x = t[q] / col[q];
         t[q] = x;
         if (x != 0.0) for (r = 0; r < q; r++) t[r] -= col[r] * x;
     }
-    for (q = 0; q < u; q++) z[U->colorder[q]] = t[q];
+    for (q = 0; q < u; q++) z[U->lu.col_order[q]] = t[q];
 }
 
 /* z = A^{-T} b (U positions). */
 static void amps__lu_solve_t(const amps_update *U, const double *b, double *z, double *t) {
-    amps_int u = U->u, q, r;
-    size_t ld = (size_t)U->capu;
-    for (q = 0; q < u; q++) t[q] = b[U->colorder[q]];
+    amps_int u = U->aug.size, q, r;
+    size_t ld = (size_t)U->aug.cap;
+    for (q = 0; q < u; q++) t[q] = b[U->lu.col_order[q]];
     for (q = 0; q < u; q++) {                 /* U^T v = t */
-        const double *col = U->LU + (size_t)q * ld;
+        const double *col = U->lu.LU + (size_t)q * ld;
         double s = t[q];
         for (r = 0; r < q; r++) s -= col[r] * t[r];
         t[q] = s / col[q];
     }
     for (q = u - 1; q >= 0; q--) {            /* L^T */
-        const double *l = U->LU + (size_t)q * ld;
+        const double *l = U->lu.LU + (size_t)q * ld;
         double s = t[q];
         for (r = q + 1; r < u; r++) s -= l[r] * t[r];
         t[q] = s;
     }
-    for (r = 0; r < u; r++) z[U->rowperm[r]] = t[r];
+    for (r = 0; r < u; r++) z[U->lu.row_perm[r]] = t[r];
 }
 
 /* Full refactorization of A in position order. */
 static amps_status amps__lu_full(amps_update *U, amps_int *bad) {
     amps_int q;
-    for (q = 0; q < U->u; q++) { U->colorder[q] = q; U->rowperm[q] = q; }
-    U->st.lu_full++;
-    U->st.lu_cols = U->u;
+    for (q = 0; q < U->aug.size; q++) { U->lu.col_order[q] = q; U->lu.row_perm[q] = q; }
+    U->stats.lu_full++;
+    U->stats.lu_cols = U->aug.size;
     return amps__lu_extend(U, 0, 0, bad);
 }
 
@@ -5494,246 +5650,292 @@ static amps_status amps__lu_full(amps_update *U, amps_int *bad) {
 
 /* Moves rows to the front of the pool in position order, dropping holes. */
 static void amps__delta_compact(amps_update *U) {
-    amps_int a, used = 0, *order = U->iwork, k;
+    amps_int a, used = 0, *order = U->work.idx, k;
     /* rows sorted by their start so that moving towards the front never overwrites */
-    for (a = 0; a < U->u; a++) order[a] = a;
-    for (a = 1; a < U->u; a++) {
+    for (a = 0; a < U->aug.size; a++) order[a] = a;
+    for (a = 1; a < U->aug.size; a++) {
         amps_int v = order[a], b = a - 1;
-        while (b >= 0 && U->dst[order[b]] > U->dst[v]) { order[b + 1] = order[b]; b--; }
+        while (b >= 0 && U->delta.row_start[order[b]] > U->delta.row_start[v]) { order[b + 1] = order[b]; b--; }
         order[b + 1] = v;
     }
-    for (k = 0; k < U->u; k++) {
+    for (k = 0; k < U->aug.size; k++) {
         a = order[k];
-        if (U->dcp[a] == 0) continue;
-        memmove(U->dcol + used, U->dcol + U->dst[a], sizeof(amps_int) * (size_t)U->dln[a]);
-        memmove(U->dval + used, U->dval + U->dst[a], sizeof(double) * (size_t)U->dln[a]);
-        U->dst[a] = used;
-        U->dcp[a] = U->dln[a];
-        used += U->dln[a];
+        if (U->delta.row_cap[a] == 0) continue;
+        memmove(U->delta.col + used, U->delta.col + U->delta.row_start[a], sizeof(amps_int) * (size_t)U->delta.row_len[a]);
+        memmove(U->delta.val + used, U->delta.val + U->delta.row_start[a], sizeof(double) * (size_t)U->delta.row_len[a]);
+        U->delta.row_start[a] = used;
+        U->delta.row_cap[a] = U->delta.row_len[a];
+        used += U->delta.row_len[a];
     }
-    U->dused = used;
+    U->delta.used = used;
 }
 
 /* Delta(a, b) += v; row a has been relocated with room for its additions this commit. */
 static void amps__delta_add(amps_update *U, amps_int a, amps_int b, double v) {
-    amps_int k, st = U->dst[a];
-    for (k = 0; k < U->dln[a]; k++) if (U->dcol[st + k] == b) { U->dval[st + k] += v; return; }
-    AMPS_ASSERT(U->dln[a] < U->dcp[a]);
-    U->dcol[st + U->dln[a]] = b; U->dval[st + U->dln[a]] = v; U->dln[a]++;
+    amps_int k, st = U->delta.row_start[a];
+    for (k = 0; k < U->delta.row_len[a]; k++) if (U->delta.col[st + k] == b) { U->delta.val[st + k] += v; return; }
+    AMPS_ASSERT(U->delta.row_len[a] < U->delta.row_cap[a]);
+    U->delta.col[st + U->delta.row_len[a]] = b; U->delta.val[st + U->delta.row_len[a]] = v; U->delta.row_len[a]++;
 }
 
-/* Undo a failed commit: drop new positions, restore Delta rows, kinds and values, refactor. */
+/* Rollback of a failed commit: drops the new positions, restores the Delta row headers, kinds
+   and prescribed values from the journal and the pool sizes, refactors the old system, and
+   discards the recorded changes. */
 static void amps__rollback(amps_update *U, amps_int u_old, size_t vused_old, amps_int dused_old) {
     amps_int a, k, bad;
-    for (a = u_old; a < U->u; a++) U->upos[U->uidx[a]] = -1;
-    for (k = U->ndj - 1; k >= 0; k--) {
-        amps__djour *d = U->dj + k;
-        if (d->a < u_old) { U->dst[d->a] = d->st; U->dln[d->a] = d->ln; U->dcp[d->a] = d->cp; }
+    for (a = u_old; a < U->aug.size; a++) U->aug.pos[U->aug.idx[a]] = -1;
+    for (k = U->journal.n_rows - 1; k >= 0; k--) {
+        const amps__djour *d = U->journal.rows + k;
+        if (d->pos < u_old) { U->delta.row_start[d->pos] = d->start; U->delta.row_len[d->pos] = d->len; U->delta.row_cap[d->pos] = d->cap; }
     }
-    for (k = U->nkj - 1; k >= 0; k--)
-        if (U->kj[k].a < u_old) { U->ukind[U->kj[k].a] = U->kj[k].kind; U->g[U->kj[k].a] = U->kj[k].g; }
-    U->u = u_old; U->vused = vused_old; U->dused = dused_old;
-    if (U->nr > u_old) U->nr = u_old;
-    U->ndj = 0; U->nkj = 0;
-    U->npd = 0; U->npc = 0; U->kpend = 0;
+    for (k = U->journal.n_kinds - 1; k >= 0; k--) {
+        const amps__kjour *j = U->journal.kinds + k;
+        if (j->pos < u_old) { U->aug.kind[j->pos] = j->kind; U->aug.g[j->pos] = j->g; }
+    }
+    U->aug.size = u_old; U->memo.used = vused_old; U->delta.used = dused_old;
+    if (U->sol.n_rhs > u_old) U->sol.n_rhs = u_old;
+    U->journal.n_rows = 0; U->journal.n_kinds = 0;
+    amps_update_discard(U);
     /* refactor the old system from scratch. It was accepted, but a fresh elimination order can
        meet a pivot below tol; the singularity test must not stop this factorization halfway
-       (that left a partial LU and garbage solutions: beam 5x5x4096 in tests/test_stress.c) */
-    if (U->u > 0) {
-        double tol = U->tol;
-        U->tol = 0.0;
+       (a partial LU gives garbage solutions: beam 5x5x4096 in tests/test_stress.c) */
+    if (U->aug.size > 0) {
+        double tol = U->singular_tol;
+        U->singular_tol = 0.0;
         (void)amps__lu_full(U, &bad);
-        U->tol = tol;
+        U->singular_tol = tol;
     }
-    U->dirty = U->rdirty = U->wdirty = 1;
+    U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
 }
 
 AMPS_API void amps_update_discard(amps_update *U) {
     if (!U) return;
-    U->npd = 0; U->npc = 0; U->kpend = 0;
+    U->pending.n_delta = 0; U->pending.n_con = 0; U->pending.n_dofs = 0;
+}
+
+/* ---- the steps of a commit ---- */
+
+/* Indices the recorded changes add to U: ends of changed entries and newly constrained indices. */
+static amps_int amps__count_new(amps_update *U) {
+    amps_marker *mk = &U->work.mark_N;
+    amps_int k, t, nnew = 0;
+    amps_marker_next(mk);
+    for (k = 0; k < U->pending.n_delta; k++) {
+        amps_int e[2];
+        e[0] = U->pending.delta[k].r; e[1] = U->pending.delta[k].c;
+        for (t = 0; t < 2; t++) {
+            amps_int i = e[t];
+            if ((i >= U->N || U->aug.pos[i] < 0) && mk->mark[i] != mk->stamp) { mk->mark[i] = mk->stamp; nnew++; }
+        }
+    }
+    for (k = 0; k < U->pending.n_con; k++) {
+        amps_int i = U->pending.con[k].i;
+        if (!U->pending.con[k].release && (i >= U->N || U->aug.pos[i] < 0) && mk->mark[i] != mk->stamp) { mk->mark[i] = mk->stamp; nnew++; }
+    }
+    return nnew;
+}
+
+/* Grows U (room checked by amps__need_u): the new indices get positions in order of first
+   appearance, with empty Delta rows and the lengths of their W columns. Returns the memoized
+   entries these need. */
+static size_t amps__grow_aug(amps_update *U) {
+    amps_int k, t, a, nd = U->pending.n_delta;
+    size_t vneed = 0;
+    for (k = 0; k < nd + U->pending.n_con; k++) {
+        amps_int e[2], ne;
+        if (k < nd) { e[0] = U->pending.delta[k].r; e[1] = U->pending.delta[k].c; ne = 2; }
+        else { if (U->pending.con[k - nd].release) continue; e[0] = U->pending.con[k - nd].i; ne = 1; }
+        for (t = 0; t < ne; t++) {
+            amps_int i = e[t];
+            if (U->aug.pos[i] >= 0 && U->aug.pos[i] < U->aug.size && U->aug.idx[U->aug.pos[i]] == i) continue;
+            a = U->aug.size++;
+            U->aug.pos[i] = a; U->aug.idx[a] = i; U->aug.kind[a] = 0; U->aug.g[a] = 0;
+            U->delta.row_start[a] = 0; U->delta.row_len[a] = 0; U->delta.row_cap[a] = 0; U->memo.off[a] = 0;
+            U->memo.len[a] = i < U->n ? amps__path_len(U->F, U->F->iperm[i]) : 0;
+            vneed += (size_t)U->memo.len[a];
+        }
+    }
+    return vneed;
+}
+
+/* Room for vneed more memoized entries (grows the pool when allowed). */
+static amps_status amps__need_memo(amps_ctx *ctx, amps_update *U, size_t vneed) {
+    size_t need = U->memo.used + vneed, cap = U->memo.cap;
+    if (need > cap && !U->grow)
+        return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: memoized columns need %.0f entries, cap_vpool is %.0f (raise it or set grow)",
+                         (double)need, (double)cap);
+    if (need > cap) {
+        while (cap < need) cap = cap * 2 + 1024;
+        if (amps__realloc(ctx, (void **)&U->memo.val, cap, sizeof(double)) || amps__realloc(ctx, (void **)&U->memo.idx, cap, sizeof(amps_int))) return AMPS_ERR_OOM;
+        U->memo.cap = cap;
+    }
+    return AMPS_OK;
+}
+
+/* Step 1: W columns of the new base positions u_old.., in batches over the union of their paths. */
+static void amps__step1(amps_update *U, amps_int u_old) {
+    amps_int a, nb = 0, *list = U->work.idx;
+    for (a = u_old; a < U->aug.size; a++)
+        if (U->aug.idx[a] < U->n) {
+            U->memo.off[a] = U->memo.used;              /* memo.len was set with the position */
+            U->memo.used += (size_t)U->memo.len[a];
+            list[nb++] = a;
+        }
+    amps__wcols(U, list, nb);
+}
+
+/* Delta: relocates every row the changes touch to the end of the pool with room for its
+   additions (old locations stay intact, so a rollback only restores the journaled headers).
+   Compacting the pool first moves the old locations: *dused_old follows. */
+static amps_status amps__delta_relocate(amps_ctx *ctx, amps_update *U, amps_int *dused_old) {
+    amps_marker *tm = &U->delta.touched;
+    amps_int *n_add = U->delta.n_add, k, t, a, need = 0;
+    amps_marker_next(tm);
+    for (k = 0; k < U->pending.n_delta; k++) {
+        amps_int e[2];
+        e[0] = U->aug.pos[U->pending.delta[k].r]; e[1] = U->aug.pos[U->pending.delta[k].c];
+        for (t = 0; t < (e[0] == e[1] ? 1 : 2); t++) {
+            if (tm->mark[e[t]] != tm->stamp) { tm->mark[e[t]] = tm->stamp; n_add[e[t]] = 0; }
+            n_add[e[t]]++;
+        }
+    }
+    for (a = 0; a < U->aug.size; a++) if (tm->mark[a] == tm->stamp) need += U->delta.row_len[a] + n_add[a];
+    if (U->delta.used + need > U->delta.cap) {
+        amps__delta_compact(U);
+        *dused_old = U->delta.used;
+    }
+    if (U->delta.used + need > U->delta.cap) {
+        amps_int cap = U->delta.cap;
+        if (!U->grow)
+            return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: %ld stored changes exceed cap_delta = %ld (raise it or set grow)", (long)(U->delta.used + need), (long)U->delta.cap);
+        while (cap < U->delta.used + need) cap = cap * 2 + 256;
+        if (amps__realloc(ctx, (void **)&U->delta.col, (size_t)cap, sizeof(amps_int)) || amps__realloc(ctx, (void **)&U->delta.val, (size_t)cap, sizeof(double))) return AMPS_ERR_OOM;
+        U->delta.cap = cap;
+    }
+    for (a = 0; a < U->aug.size; a++)
+        if (tm->mark[a] == tm->stamp) {
+            amps__djour *d = U->journal.rows + U->journal.n_rows++;
+            amps_int st = U->delta.row_start[a], len = U->delta.row_len[a], used = U->delta.used;
+            d->pos = a; d->start = st; d->len = len; d->cap = U->delta.row_cap[a];
+            memcpy(U->delta.col + used, U->delta.col + st, sizeof(amps_int) * (size_t)len);
+            memcpy(U->delta.val + used, U->delta.val + st, sizeof(double) * (size_t)len);
+            U->delta.row_start[a] = used; U->delta.row_cap[a] = len + n_add[a];
+            U->delta.used += U->delta.row_cap[a];
+        }
+    return AMPS_OK;
+}
+
+/* Applies the recorded changes to Delta and the kinds (journaled) and marks the dense columns
+   they change in lu.changed: the touched rows, the new positions, and where a kind changes the
+   column and those of its Delta-neighbours. */
+static void amps__apply_pending(amps_update *U, amps_int u_old) {
+    amps_marker *cm = &U->lu.changed;
+    amps_int k, a;
+    amps_marker_next(cm);
+    for (k = 0; k < U->pending.n_delta; k++) {
+        amps_int ra = U->aug.pos[U->pending.delta[k].r], rb = U->aug.pos[U->pending.delta[k].c];
+        amps__delta_add(U, ra, rb, U->pending.delta[k].v);
+        if (ra != rb) amps__delta_add(U, rb, ra, U->pending.delta[k].v);
+        cm->mark[ra] = cm->stamp; cm->mark[rb] = cm->stamp;
+    }
+    for (a = u_old; a < U->aug.size; a++) cm->mark[a] = cm->stamp;
+    for (k = 0; k < U->pending.n_con; k++) {
+        amps_int i = U->pending.con[k].i;
+        amps__kjour *j;
+        a = (i < U->N + U->pending.n_dofs && U->aug.pos[i] >= 0) ? U->aug.pos[i] : -1;
+        if (a < 0) continue;                      /* release of an unconstrained index */
+        if (U->pending.con[k].release && !(U->aug.kind[a] & AMPS__UCON)) continue;
+        j = U->journal.kinds + U->journal.n_kinds++;
+        j->pos = a; j->kind = U->aug.kind[a]; j->g = U->aug.g[a];
+        if (U->pending.con[k].release) U->aug.kind[a] &= (unsigned char)~AMPS__UCON;
+        else { U->aug.kind[a] |= AMPS__UCON; U->aug.g[a] = U->pending.con[k].v; }
+        if ((j->kind ^ U->aug.kind[a]) & AMPS__UCON) {
+            amps_int t;
+            cm->mark[a] = cm->stamp;
+            for (t = 0; t < U->delta.row_len[a]; t++) cm->mark[U->delta.col[U->delta.row_start[a] + t]] = cm->stamp;
+        }
+    }
+}
+
+/* Step 3: the column order from the first changed column q0 on keeps the unchanged columns in
+   their order and puts the changed ones after them, then the new ones. Returns q0. */
+static amps_int amps__reorder_columns(amps_update *U, amps_int u_old) {
+    const amps_marker *cm = &U->lu.changed;
+    amps_int *order = U->lu.col_order, *tmp = U->work.idx, q0 = u_old, q, m, a;
+    for (a = 0; a < u_old; a++) if (cm->mark[a] == cm->stamp && U->lu.col_pos[a] < q0) q0 = U->lu.col_pos[a];
+    m = q0;
+    for (q = q0; q < u_old; q++) if (cm->mark[order[q]] != cm->stamp) tmp[m++] = order[q];
+    for (q = q0; q < u_old; q++) if (cm->mark[order[q]] == cm->stamp) tmp[m++] = order[q];
+    for (q = q0; q < u_old; q++) order[q] = tmp[q];
+    for (a = u_old; a < U->aug.size; a++) { order[a] = a; U->lu.row_perm[a] = a; }
+    return q0;
+}
+
+/* Step 5: the LU from column q0 on. The unchanged columns after q0 keep their factor when the
+   changed ones are few (amps__lu_drop); a growth of the new rows' multipliers refactors all. */
+static amps_status amps__lu_update(amps_update *U, amps_int q0, amps_int u_old, amps_int *bad) {
+    const amps_marker *cm = &U->lu.changed;
+    amps_int nk = 0, q, nf = q0;
+    amps_status s;
+    for (q = q0; q < u_old; q++) if (cm->mark[U->lu.col_order[q]] != cm->stamp) nk++;
+    if (nk >= 8 && u_old - q0 - nk <= AMPS__DMAX) {
+        U->stats.lu_drops++;
+        nf = amps__lu_drop(U, q0, nk, u_old);
+        if (nf < q0 + nk) U->stats.lu_drop_fails++;
+    }
+    U->stats.lu_cols = U->aug.size - nf;
+    s = amps__lu_extend(U, nf, u_old, bad);
+    if (s == AMPS_ERR_CAPACITY) s = amps__lu_full(U, bad);
+    return s;
 }
 
 AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
-    amps_int u_old, k, a, nnew = 0, q0, bad = -1, touched = 0;
-    size_t vused_old, vneed = 0;
-    amps_int dused_old;
+    amps_int u_old, dused_old, q0, bad = -1;
+    size_t vused_old;
     amps_status s;
     double t0, t1;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit: NULL engine");
     /* a finished re-factorization is swapped in first: the recorded changes move along and are
        then committed on the new base, against its small augmentation */
-    if (U->bg) amps__bg_poll(ctx, U);
-    if (!U->npd && !U->npc && !U->kpend) return AMPS_OK;
+    if (U->refac.job) amps__bg_poll(ctx, U);
+    if (!U->pending.n_delta && !U->pending.n_con && !U->pending.n_dofs) return AMPS_OK;
     t0 = amps_now();
-    u_old = U->u; vused_old = U->vused; dused_old = U->dused;
-    U->ndj = 0; U->nkj = 0;
-    /* 1. new members of U: ends of recorded changes and newly constrained indices */
-    amps_marker_next(&U->mkN);
-    for (k = 0; k < U->npd; k++) {
-        amps_int e[2], t;
-        e[0] = U->pd[k].r; e[1] = U->pd[k].c;
-        for (t = 0; t < 2; t++) {
-            amps_int i = e[t];
-            if ((i >= U->N || U->upos[i] < 0) && U->mkN.mark[i] != U->mkN.stamp) { U->mkN.mark[i] = U->mkN.stamp; nnew++; }
-        }
-    }
-    for (k = 0; k < U->npc; k++) {
-        amps_int i = U->pc[k].i;
-        if (!U->pc[k].release && (i >= U->N || U->upos[i] < 0) && U->mkN.mark[i] != U->mkN.stamp) { U->mkN.mark[i] = U->mkN.stamp; nnew++; }
-    }
-    if ((s = amps__need_u(ctx, U, nnew)) != AMPS_OK) goto fail_nochange;
-    /* assign positions in order of first appearance */
-    amps_marker_next(&U->mkN);
-    for (k = 0; k < U->npd + U->npc; k++) {
-        amps_int e[2], t, ne;
-        if (k < U->npd) { e[0] = U->pd[k].r; e[1] = U->pd[k].c; ne = 2; }
-        else { if (U->pc[k - U->npd].release) continue; e[0] = U->pc[k - U->npd].i; ne = 1; }
-        for (t = 0; t < ne; t++) {
-            amps_int i = e[t];
-            if (U->upos[i] >= 0 && U->upos[i] < U->u && U->uidx[U->upos[i]] == i) continue;
-            a = U->u++;
-            U->upos[i] = a; U->uidx[a] = i; U->ukind[a] = 0; U->g[a] = 0;
-            U->dst[a] = 0; U->dln[a] = 0; U->dcp[a] = 0; U->voff[a] = 0;
-            U->vlen[a] = i < U->n ? amps__path_len(U->F, U->F->iperm[i]) : 0;
-            vneed += (size_t)U->vlen[a];
-        }
-    }
-    if (U->vused + vneed > U->vcap) {
-        size_t cap = U->vcap;
-        if (!U->grow) {
-            s = amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: memoized columns need %.0f entries, cap_vpool is %.0f (raise it or set grow)",
-                          (double)(U->vused + vneed), (double)U->vcap);
-            goto fail;
-        }
-        while (cap < U->vused + vneed) cap = cap * 2 + 1024;
-        if (amps__realloc(ctx, (void **)&U->vval, cap, sizeof(double)) || amps__realloc(ctx, (void **)&U->vidx, cap, sizeof(amps_int))) { s = AMPS_ERR_OOM; goto fail; }
-        U->vcap = cap;
-    }
-    /* Step 1: W columns of the new base positions, in batches over the union of their paths */
-    {
-        amps_int nb = 0, *list = U->iwork;
-        for (a = u_old; a < U->u; a++)
-            if (U->uidx[a] < U->n) {
-                U->voff[a] = U->vused;              /* vlen was set with the position */
-                U->vused += (size_t)U->vlen[a];
-                list[nb++] = a;
-            }
-        amps__wcols(U, list, nb);
-    }
-    t1 = amps_now(); U->st.t_step[1] = t1 - t0; t0 = t1;
-    /* Step 2: trapezoidal augmentation of G (Eq. 3.25-3.27), both triangles stored */
+    u_old = U->aug.size; vused_old = U->memo.used; dused_old = U->delta.used;
+    U->journal.n_rows = 0; U->journal.n_kinds = 0;
+    /* grow U */
+    if ((s = amps__need_u(ctx, U, amps__count_new(U))) != AMPS_OK) { amps_update_discard(U); return s; }
+    if ((s = amps__need_memo(ctx, U, amps__grow_aug(U))) != AMPS_OK) goto fail;
+    /* Step 1: W columns */
+    amps__step1(U, u_old);
+    t1 = amps_now(); U->stats.t_step[AMPS_STEP_WCOLS] = t1 - t0; t0 = t1;
+    /* Step 2: trapezoidal augmentation of G ([AMPS] Eq. 3.25-3.27), both triangles stored */
     amps__gcols(U, u_old);
-    t1 = amps_now(); U->st.t_step[2] = t1 - t0; t0 = t1;
-    /* Delta: relocate every touched row to the end of the pool with room for its additions
-       (old locations stay intact, so a rollback only restores headers) */
-    U->rstamp++;
-    if (U->rstamp == 0x7fffffff) { for (a = 0; a < U->capu; a++) U->rst[a] = 0; U->rstamp = 1; }
-    for (k = 0; k < U->npd; k++) {
-        amps_int ra = U->upos[U->pd[k].r], rb = U->upos[U->pd[k].c], t, e[2];
-        e[0] = ra; e[1] = rb;
-        for (t = 0; t < (ra == rb ? 1 : 2); t++) {
-            if (U->rst[e[t]] != U->rstamp) { U->rst[e[t]] = U->rstamp; U->rcnt[e[t]] = 0; touched++; }
-            U->rcnt[e[t]]++;
-        }
-    }
-    {
-        amps_int need = 0;
-        for (a = 0; a < U->u; a++) if (U->rst[a] == U->rstamp) need += U->dln[a] + U->rcnt[a];
-        if (U->dused + need > U->dcap) {
-            amps__delta_compact(U);
-            dused_old = U->dused;
-        }
-        if (U->dused + need > U->dcap) {
-            amps_int cap = U->dcap;
-            if (!U->grow) {
-                s = amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: %ld stored changes exceed cap_delta = %ld (raise it or set grow)", (long)(U->dused + need), (long)U->dcap);
-                goto fail;
-            }
-            while (cap < U->dused + need) cap = cap * 2 + 256;
-            if (amps__realloc(ctx, (void **)&U->dcol, (size_t)cap, sizeof(amps_int)) || amps__realloc(ctx, (void **)&U->dval, (size_t)cap, sizeof(double))) { s = AMPS_ERR_OOM; goto fail; }
-            U->dcap = cap;
-        }
-        for (a = 0; a < U->u; a++)
-            if (U->rst[a] == U->rstamp) {
-                amps__djour *d = U->dj + U->ndj++;
-                d->a = a; d->st = U->dst[a]; d->ln = U->dln[a]; d->cp = U->dcp[a];
-                memcpy(U->dcol + U->dused, U->dcol + U->dst[a], sizeof(amps_int) * (size_t)U->dln[a]);
-                memcpy(U->dval + U->dused, U->dval + U->dst[a], sizeof(double) * (size_t)U->dln[a]);
-                U->dst[a] = U->dused; U->dcp[a] = U->dln[a] + U->rcnt[a];
-                U->dused += U->dcp[a];
-            }
-    }
-    /* apply the changes; every touched row's column changes */
-    U->stamp++;
-    if (U->stamp == 0x7fffffff) { for (a = 0; a < U->capu; a++) U->cstamp[a] = 0; U->stamp = 1; }
-    for (k = 0; k < U->npd; k++) {
-        amps_int ra = U->upos[U->pd[k].r], rb = U->upos[U->pd[k].c];
-        amps__delta_add(U, ra, rb, U->pd[k].v);
-        if (ra != rb) amps__delta_add(U, rb, ra, U->pd[k].v);
-        U->cstamp[ra] = U->stamp; U->cstamp[rb] = U->stamp;
-    }
-    for (a = u_old; a < U->u; a++) U->cstamp[a] = U->stamp;
-    /* constraints: a change of kind changes the column and the columns of Delta-neighbours */
-    for (k = 0; k < U->npc; k++) {
-        amps_int i = U->pc[k].i;
-        amps__kjour *j;
-        a = (i < U->N + U->kpend && U->upos[i] >= 0) ? U->upos[i] : -1;
-        if (a < 0) continue;                      /* release of an unconstrained index */
-        if (U->pc[k].release && !(U->ukind[a] & AMPS__UCON)) continue;
-        j = U->kj + U->nkj++;
-        j->a = a; j->kind = U->ukind[a]; j->g = U->g[a];
-        if (U->pc[k].release) U->ukind[a] &= (unsigned char)~AMPS__UCON;
-        else { U->ukind[a] |= AMPS__UCON; U->g[a] = U->pc[k].v; }
-        if ((j->kind ^ U->ukind[a]) & AMPS__UCON) {
-            amps_int t;
-            U->cstamp[a] = U->stamp;
-            for (t = 0; t < U->dln[a]; t++) U->cstamp[U->dcol[U->dst[a] + t]] = U->stamp;
-        }
-    }
+    t1 = amps_now(); U->stats.t_step[AMPS_STEP_GRAM] = t1 - t0; t0 = t1;
+    /* apply the pending changes to Delta and the kinds */
+    if ((s = amps__delta_relocate(ctx, U, &dused_old)) != AMPS_OK) goto fail;
+    amps__apply_pending(U, u_old);
     /* Steps 3 and 5: refactor from the first changed column; the changed ones go last */
-    q0 = u_old;
-    for (a = 0; a < u_old; a++) if (U->cstamp[a] == U->stamp && U->colpos[a] < q0) q0 = U->colpos[a];
-    {
-        amps_int q, m = q0;
-        for (q = q0; q < u_old; q++) if (U->cstamp[U->colorder[q]] != U->stamp) U->iwork[m++] = U->colorder[q];
-        for (q = q0; q < u_old; q++) if (U->cstamp[U->colorder[q]] == U->stamp) U->iwork[m++] = U->colorder[q];
-        for (q = q0; q < u_old; q++) U->colorder[q] = U->iwork[q];
-        for (a = u_old; a < U->u; a++) { U->colorder[a] = a; U->rowperm[a] = a; }
-    }
-    t1 = amps_now(); U->st.t_step[3] = t1 - t0; t0 = t1;
-    {   /* the unchanged columns after q0 keep their factor when the changed ones are few */
-        amps_int nk = 0, q, nf = q0;
-        for (q = q0; q < u_old; q++) if (U->cstamp[U->colorder[q]] != U->stamp) nk++;
-        if (nk >= 8 && u_old - q0 - nk <= AMPS__DMAX) {
-            U->st.lu_drops++;
-            nf = amps__lu_drop(U, q0, nk, u_old);
-            if (nf < q0 + nk) U->st.lu_drop_fails++;
-        }
-        U->st.lu_cols = U->u - nf;
-        s = amps__lu_extend(U, nf, u_old, &bad);
-    }
-    if (s == AMPS_ERR_CAPACITY) s = amps__lu_full(U, &bad);     /* multipliers grew: refactor */
-    t1 = amps_now(); U->st.t_step[5] = t1 - t0;
+    q0 = amps__reorder_columns(U, u_old);
+    t1 = amps_now(); U->stats.t_step[AMPS_STEP_DCOLS] = t1 - t0; t0 = t1;
+    s = amps__lu_update(U, q0, u_old, &bad);
+    t1 = amps_now(); U->stats.t_step[AMPS_STEP_DENSE] = t1 - t0;
     if (s != AMPS_OK) {
-        amps_int bi = bad >= 0 ? U->uidx[bad] : -1;
+        amps_int bi = bad >= 0 ? U->aug.idx[bad] : -1;
         amps__rollback(U, u_old, vused_old, dused_old);
         return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
                          "amps_update_commit: the updated system is singular (pivot of index %ld below %g of its column); the changes were discarded",
-                         (long)bi, U->tol);
+                         (long)bi, U->singular_tol);
     }
-    if (U->bg) amps__bg_log(U, U->kpend, U->pd, U->npd);
-    U->N += U->kpend; U->kpend = 0;
-    U->npd = 0; U->npc = 0;
-    U->dirty = U->rdirty = U->wdirty = 1;
-    U->committed = 1;
-    U->st.ncommit++;
-    (void)touched;
+    /* done: the log of a running re-factorization, the new order, the solution stale */
+    if (U->refac.job) amps__bg_log(U, U->pending.n_dofs, U->pending.delta, U->pending.n_delta);
+    U->N += U->pending.n_dofs;
+    amps_update_discard(U);
+    U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
+    U->sol.commit_unsolved = 1;
+    U->stats.ncommit++;
     return AMPS_OK;
 fail:
     amps__rollback(U, u_old, vused_old, dused_old);
-    return s;
-fail_nochange:
-    U->npd = 0; U->npc = 0; U->kpend = 0;
     return s;
 }
 
@@ -5743,82 +5945,82 @@ fail_nochange:
    forward solve over their closure; after many increments (or a long list) a full solve. */
 static void amps__update_ct(amps_update *U) {
     const amps_factor *F = U->F;
-    amps_int n = U->n, k, nb = 0, *list = U->iwork, *clo = U->iwork + n;
-    double *x = U->work;
-    if (U->npf == 0 && !U->pf_all) return;
-    U->nr = 0;
-    if (U->pf_all || U->nct_inc >= 1024 || U->npf > n / 8) {
-        for (k = 0; k < n; k++) x[k] = U->f[F->perm[k]];
+    amps_int n = U->n, k, nb = 0, *list = U->work.idx, *clo = U->work.idx + n;
+    double *x = U->work.vec;
+    if (U->force.n_changed == 0 && !U->force.changed_all) return;
+    U->sol.n_rhs = 0;
+    if (U->force.changed_all || U->force.n_increments >= 1024 || U->force.n_changed > n / 8) {
+        for (k = 0; k < n; k++) x[k] = U->force.f[F->perm[k]];
         amps_lsolve(F, x);
-        for (k = 0; k < n; k++) { U->ct[k] = x[k] * U->isd[k]; x[k] = 0; }
-        memcpy(U->fct, U->f, sizeof(double) * (size_t)n);
-        U->nct_inc = 0;
+        for (k = 0; k < n; k++) { U->force.ct[k] = x[k] * U->base.inv_sqrt_d[k]; x[k] = 0; }
+        memcpy(U->force.f_ct, U->force.f, sizeof(double) * (size_t)n);
+        U->force.n_increments = 0;
     } else {
         amps_int ncl;
-        amps_marker_next(&U->mk);
-        for (k = 0; k < U->npf; k++) {
-            amps_int i = U->pf[k], p = F->iperm[i];
-            double d = U->f[i] - U->fct[i];
-            U->fct[i] = U->f[i];
+        amps_marker_next(&U->work.mark_n);
+        for (k = 0; k < U->force.n_changed; k++) {
+            amps_int i = U->force.changed[k], p = F->iperm[i];
+            double d = U->force.f[i] - U->force.f_ct[i];
+            U->force.f_ct[i] = U->force.f[i];
             if (d == 0.0) continue;
             x[p] += d;
-            if (U->mk.mark[p] != U->mk.stamp) { U->mk.mark[p] = U->mk.stamp; list[nb++] = p; }
+            if (U->work.mark_n.mark[p] != U->work.mark_n.stamp) { U->work.mark_n.mark[p] = U->work.mark_n.stamp; list[nb++] = p; }
         }
         if (nb > 0) {
-            ncl = amps_lsolve_sparse(F, nb, list, x, clo, &U->mk);
-            for (k = 0; k < ncl; k++) { amps_int j = clo[k]; U->ct[j] += x[j] * U->isd[j]; x[j] = 0; }
-            U->nct_inc++;
+            ncl = amps_lsolve_sparse(F, nb, list, x, clo, &U->work.mark_n);
+            for (k = 0; k < ncl; k++) { amps_int j = clo[k]; U->force.ct[j] += x[j] * U->base.inv_sqrt_d[j]; x[j] = 0; }
+            U->force.n_increments++;
         }
     }
-    U->npf = 0; U->pf_all = 0;
+    U->force.n_changed = 0; U->force.changed_all = 0;
 }
 
 /* Step 5: the forces w of the augmentation (and y = x_U, primal form) for right-hand side
    r = H^T K-bar^{-1} f and prescribed values g on C (hom: g = 0). */
 static void amps__dense_step(amps_update *U, const double *r, int hom, double *yv, double *wv) {
-    amps_int u = U->u, a, k;
-    size_t ld = (size_t)U->capu;
-    double *z = U->z, *b = U->sb, *d = U->tmp;
-#define AMPS__G(a) (hom ? 0.0 : U->g[a])
+    amps_int u = U->aug.size, a, k;
+    size_t ld = (size_t)U->aug.cap;
+    double *z = U->dense.z, *b = U->dense.b, *d = U->dense.tmp;
+#define AMPS__G(a) (hom ? 0.0 : U->aug.g[a])
     if (U->form == AMPS_FORM_PRIMAL) {
         /* b = r - G d - g^, d = Delta[F', C] g; z = A^{-1} b; y = (z_F', g); w = (Delta_F' y, z_C) */
-        for (a = 0; a < u; a++) b[a] = r[a] - ((U->ukind[a] & AMPS__UCON) ? AMPS__G(a) : 0.0);
+        for (a = 0; a < u; a++) b[a] = r[a] - ((U->aug.kind[a] & AMPS__UCON) ? AMPS__G(a) : 0.0);
         if (!hom) {
             for (a = 0; a < u; a++) {
                 double sum = 0;
-                if (!(U->ukind[a] & AMPS__UCON))
-                    for (k = 0; k < U->dln[a]; k++) {
-                        amps_int bb = U->dcol[U->dst[a] + k];
-                        if (U->ukind[bb] & AMPS__UCON) sum += U->dval[U->dst[a] + k] * U->g[bb];
+                if (!(U->aug.kind[a] & AMPS__UCON))
+                    for (k = 0; k < U->delta.row_len[a]; k++) {
+                        amps_int bb = U->delta.col[U->delta.row_start[a] + k];
+                        if (U->aug.kind[bb] & AMPS__UCON) sum += U->delta.val[U->delta.row_start[a] + k] * U->aug.g[bb];
                     }
                 d[a] = sum;
             }
             for (k = 0; k < u; k++)
                 if (d[k] != 0.0) {
-                    const double *gk = U->G + (size_t)k * ld;
+                    const double *gk = U->lu.G + (size_t)k * ld;
                     for (a = 0; a < u; a++) b[a] -= gk[a] * d[k];
                 }
         }
-        amps__lu_solve(U, b, z, U->tmp);
-        for (a = 0; a < u; a++) yv[a] = (U->ukind[a] & AMPS__UCON) ? AMPS__G(a) : z[a];
+        amps__lu_solve(U, b, z, U->dense.tmp);
+        for (a = 0; a < u; a++) yv[a] = (U->aug.kind[a] & AMPS__UCON) ? AMPS__G(a) : z[a];
         for (a = 0; a < u; a++) {
             double sum = 0;
-            if (U->ukind[a] & AMPS__UCON) { wv[a] = z[a]; continue; }
-            for (k = 0; k < U->dln[a]; k++) sum += U->dval[U->dst[a] + k] * yv[U->dcol[U->dst[a] + k]];
+            if (U->aug.kind[a] & AMPS__UCON) { wv[a] = z[a]; continue; }
+            for (k = 0; k < U->delta.row_len[a]; k++) sum += U->delta.val[U->delta.row_start[a] + k] * yv[U->delta.col[U->delta.row_start[a] + k]];
             wv[a] = sum;
         }
     } else {
         /* b'_F' = Delta[F', :] r^ (r^ = r on F', g on C), b'_C = r_C - g; w = A^{-T} b' */
         double *rh = yv;
-        for (a = 0; a < u; a++) rh[a] = (U->ukind[a] & AMPS__UCON) ? AMPS__G(a) : r[a];
+        for (a = 0; a < u; a++) rh[a] = (U->aug.kind[a] & AMPS__UCON) ? AMPS__G(a) : r[a];
         for (a = 0; a < u; a++) {
             double sum = 0;
-            if (U->ukind[a] & AMPS__UCON) { b[a] = r[a] - AMPS__G(a); continue; }
-            for (k = 0; k < U->dln[a]; k++) sum += U->dval[U->dst[a] + k] * rh[U->dcol[U->dst[a] + k]];
+            if (U->aug.kind[a] & AMPS__UCON) { b[a] = r[a] - AMPS__G(a); continue; }
+            for (k = 0; k < U->delta.row_len[a]; k++) sum += U->delta.val[U->delta.row_start[a] + k] * rh[U->delta.col[U->delta.row_start[a] + k]];
             b[a] = sum;
         }
-        amps__lu_solve_t(U, b, wv, U->tmp);
-        for (a = 0; a < u; a++) yv[a] = (U->ukind[a] & AMPS__UCON) ? AMPS__G(a) : 0.0;
+        amps__lu_solve_t(U, b, wv, U->dense.tmp);
+        for (a = 0; a < u; a++) yv[a] = (U->aug.kind[a] & AMPS__UCON) ? AMPS__G(a) : 0.0;
     }
 #undef AMPS__G
 }
@@ -5826,101 +6028,103 @@ static void amps__dense_step(amps_update *U, const double *r, int hom, double *y
 /* sv -= D^{-1/2} sum_a c_a W_a (permuted n-vector; appended DOFs have no W). */
 static void amps__scatter_w(const amps_update *U, const double *c, double *sv) {
     amps_int a, t;
-    for (a = 0; a < U->u; a++) {
-        const double *w = U->vval + U->voff[a];
-        const amps_int *wi = U->vidx + U->voff[a];
+    for (a = 0; a < U->aug.size; a++) {
+        const double *w = U->memo.val + U->memo.off[a];
+        const amps_int *wi = U->memo.idx + U->memo.off[a];
         double ca = c[a];
-        if (U->uidx[a] >= U->n || ca == 0.0) continue;
-        for (t = 0; t < U->vlen[a]; t++) sv[wi[t]] -= ca * w[t] * U->isd[wi[t]];
+        if (U->aug.idx[a] >= U->n || ca == 0.0) continue;
+        for (t = 0; t < U->memo.len[a]; t++) sv[wi[t]] -= ca * w[t] * U->base.inv_sqrt_d[wi[t]];
     }
 }
 
 /* (K^ v)_i for the committed K^, reading v[j] for the neighbours j of i only. */
 static double amps__krow(const amps_update *U, amps_int i, const double *v) {
-    amps_int p, a = U->upos[i], k;
+    amps_int p, a = U->aug.pos[i], k;
     double s = 0;
-    if (i < U->n) for (p = U->Kp[i]; p < U->Kp[i + 1]; p++) s += U->Kx[p] * v[U->Ki[p]];
+    if (i < U->n) for (p = U->base.Kp[i]; p < U->base.Kp[i + 1]; p++) s += U->base.Kx[p] * v[U->base.Ki[p]];
     else s = U->sigma * v[i];
-    if (a >= 0) for (k = 0; k < U->dln[a]; k++) s += U->dval[U->dst[a] + k] * v[U->uidx[U->dcol[U->dst[a] + k]]];
+    if (a >= 0) for (k = 0; k < U->delta.row_len[a]; k++) s += U->delta.val[U->delta.row_start[a] + k] * v[U->aug.idx[U->delta.col[U->delta.row_start[a] + k]]];
     return s;
 }
 
 /* Refinement: x~ = K-bar^{-1}(f - H w) on U and its neighbours by a partial backward solve of
    sv (a copy), rho = (f - K^ x~) on the free rows of U, and the correction problem K^ d = H rho
-   (d_C = 0) gives wd; afterwards the full solve uses w + wd - rho. x~ is gathered into U->x. */
+   (d_C = 0) gives dense.w_corr; afterwards the full solve uses w + w_corr - rho. x~ is gathered
+   into x. */
 static void amps__refine(amps_update *U, const double *sv, const double *wv, const double *fv, int hom, double *x) {
     const amps_factor *F = U->F;
-    amps_int u = U->u, n = U->n, a, k, p, nreq = 0, *req = U->iwork, *clo = U->iwork + n, ncl;
-    double *s2 = U->work2;
-    size_t ld = (size_t)U->capu;
-    amps_marker_next(&U->mk);
+    amps_int u = U->aug.size, n = U->n, a, k, p, nreq = 0, *req = U->work.idx, *clo = U->work.idx + n, ncl;
+    double *s2 = U->work.vec2;
+    size_t ld = (size_t)U->aug.cap;
+    amps_marker_next(&U->work.mark_n);
     for (a = 0; a < u; a++) {
-        amps_int i = U->uidx[a];
+        amps_int i = U->aug.idx[a];
         if (i >= n) continue;
-        for (p = U->Kp[i]; p < U->Kp[i + 1]; p++) {
-            amps_int q = F->iperm[U->Ki[p]];
-            if (U->mk.mark[q] != U->mk.stamp) { U->mk.mark[q] = U->mk.stamp; req[nreq++] = q; }
+        for (p = U->base.Kp[i]; p < U->base.Kp[i + 1]; p++) {
+            amps_int q = F->iperm[U->base.Ki[p]];
+            if (U->work.mark_n.mark[q] != U->work.mark_n.stamp) { U->work.mark_n.mark[q] = U->work.mark_n.stamp; req[nreq++] = q; }
         }
         {
             amps_int q = F->iperm[i];
-            if (U->mk.mark[q] != U->mk.stamp) { U->mk.mark[q] = U->mk.stamp; req[nreq++] = q; }
+            if (U->work.mark_n.mark[q] != U->work.mark_n.stamp) { U->work.mark_n.mark[q] = U->work.mark_n.stamp; req[nreq++] = q; }
         }
     }
     memcpy(s2, sv, sizeof(double) * (size_t)n);
-    ncl = amps_closure(F, nreq, req, clo, &U->mk);
+    ncl = amps_closure(F, nreq, req, clo, &U->work.mark_n);
     amps__ltsolve_closure_par(F, ncl, clo, s2, U->nthr, req);      /* req is free again */
     for (k = 0; k < ncl; k++) x[F->perm[clo[k]]] = s2[clo[k]];
-    for (k = n; k < U->N; k++) { a = U->upos[k]; x[k] = (fv[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma; }
-    for (a = 0; a < u; a++) if (U->ukind[a] & AMPS__UCON) x[U->uidx[a]] = hom ? 0.0 : U->g[a];
+    for (k = n; k < U->N; k++) { a = U->aug.pos[k]; x[k] = (fv[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma; }
+    for (a = 0; a < u; a++) if (U->aug.kind[a] & AMPS__UCON) x[U->aug.idx[a]] = hom ? 0.0 : U->aug.g[a];
     for (a = 0; a < u; a++) {
-        amps_int i = U->uidx[a];
-        U->rho[a] = (U->ukind[a] & AMPS__UCON) ? 0.0 : fv[i] - amps__krow(U, i, x);
+        amps_int i = U->aug.idx[a];
+        U->dense.rho[a] = (U->aug.kind[a] & AMPS__UCON) ? 0.0 : fv[i] - amps__krow(U, i, x);
     }
     /* r_d = G rho */
-    for (a = 0; a < u; a++) U->rd[a] = 0;
+    for (a = 0; a < u; a++) U->dense.r_corr[a] = 0;
     for (k = 0; k < u; k++)
-        if (U->rho[k] != 0.0) {
-            const double *gk = U->G + (size_t)k * ld;
-            for (a = 0; a < u; a++) U->rd[a] += gk[a] * U->rho[k];
+        if (U->dense.rho[k] != 0.0) {
+            const double *gk = U->lu.G + (size_t)k * ld;
+            for (a = 0; a < u; a++) U->dense.r_corr[a] += gk[a] * U->dense.rho[k];
         }
-    amps__dense_step(U, U->rd, 1, U->yd, U->wd);
-    for (a = 0; a < u; a++) U->wd[a] -= U->rho[a];
+    amps__dense_step(U, U->dense.r_corr, 1, U->dense.y_corr, U->dense.w_corr);
+    for (a = 0; a < u; a++) U->dense.w_corr[a] -= U->dense.rho[a];
 }
 
 /* Step 4: r = H^T K-bar^{-1} f = W^T ct on base positions, f/sigma on appended ones. With
-   cache (ct is U->ct), the base entries r[0..nr-1] are current and only later ones are formed. */
+   cache (ct is force.ct), the base entries r[0..sol.n_rhs-1] are current and only later ones
+   are formed. */
 static void amps__step4(amps_update *U, const double *ct, const double *fv, int cache, double *r) {
-    amps_int u = U->u, n = U->n, a, a0 = cache ? U->nr : 0;
+    amps_int u = U->aug.size, n = U->n, a, a0 = cache ? U->sol.n_rhs : 0;
     double t0 = amps_now();
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 16) num_threads(U->nthr) if (u - a0 > 64)
 #endif
     for (a = a0; a < u; a++) {
-        amps_int i = U->uidx[a], t;
+        amps_int i = U->aug.idx[a], t;
         if (i < n) {
-            const double *w = U->vval + U->voff[a];
-            const amps_int *wi = U->vidx + U->voff[a];
+            const double *w = U->memo.val + U->memo.off[a];
+            const amps_int *wi = U->memo.idx + U->memo.off[a];
             double sum = 0;
-            for (t = 0; t < U->vlen[a]; t++) sum += w[t] * ct[wi[t]];
+            for (t = 0; t < U->memo.len[a]; t++) sum += w[t] * ct[wi[t]];
             r[a] = sum;
         }
     }
-    for (a = 0; a < u; a++) if (U->uidx[a] >= n) r[a] = fv[U->uidx[a]] / U->sigma;
-    if (cache) U->nr = u;
-    U->st.t_step[4] += amps_now() - t0;
+    for (a = 0; a < u; a++) if (U->aug.idx[a] >= n) r[a] = fv[U->aug.idx[a]] / U->sigma;
+    if (cache) U->sol.n_rhs = u;
+    U->stats.t_step[AMPS_STEP_RHS] += amps_now() - t0;
 }
 
 /* Watched entries that do not come from the backward solve: appended DOFs ((f - w) / sigma)
-   and members of U whose value the dense system gives (constrained; eq320). x[i] is set and
+   and members of U whose value the dense system gives (constrained; all with xs_from_dense). x[i] is set and
    wovr[k] = 1 for those (i = widx[k]), wovr[k] = 0 for the others. */
 static void amps__watch_fixed(amps_update *U, const double *fv, double *x) {
     amps_int k;
-    for (k = 0; k < U->nw; k++) {
-        amps_int i = U->widx[k], a = U->upos[i];
-        U->wovr[k] = 1;
-        if (a >= 0 && ((U->ukind[a] & AMPS__UCON) || (U->eq320 && U->form == AMPS_FORM_PRIMAL))) x[i] = U->yv[a];
-        else if (i >= U->n) x[i] = (fv[i] - (a >= 0 ? U->wv[a] : 0.0)) / U->sigma;
-        else U->wovr[k] = 0;
+    for (k = 0; k < U->watch.n; k++) {
+        amps_int i = U->watch.idx[k], a = U->aug.pos[i];
+        U->watch.from_dense[k] = 1;
+        if (a >= 0 && ((U->aug.kind[a] & AMPS__UCON) || (U->xs_from_dense && U->form == AMPS_FORM_PRIMAL))) x[i] = U->dense.y[a];
+        else if (i >= U->n) x[i] = (fv[i] - (a >= 0 ? U->dense.w[a] : 0.0)) / U->sigma;
+        else U->watch.from_dense[k] = 0;
     }
 }
 
@@ -5928,49 +6132,49 @@ static void amps__watch_fixed(amps_update *U, const double *fv, double *x) {
    (hom: zero) into x (N). */
 static void amps__solve_core(amps_update *U, const double *ct, const double *fv, int hom, int watched, double *x) {
     const amps_factor *F = U->F;
-    amps_int u = U->u, n = U->n, a, k;
-    double t0, t1, *r = hom ? U->rd : U->rhs, *yv = U->yv, *wv = U->wv, *sv = U->work;
+    amps_int u = U->aug.size, n = U->n, a, k;
+    double t0, t1, *r = hom ? U->dense.r_corr : U->dense.rhs, *yv = U->dense.y, *wv = U->dense.w, *sv = U->work.vec;
     amps__step4(U, ct, fv, !hom, r);
     t0 = amps_now();
     /* Step 5 */
     amps__dense_step(U, r, hom, yv, wv);
-    t1 = amps_now(); U->st.t_step[5] += t1 - t0; t0 = t1;
+    t1 = amps_now(); U->stats.t_step[AMPS_STEP_DENSE] += t1 - t0; t0 = t1;
     /* Step 6: x = K-bar^{-1} (f - H w), permuted: L^{-T} D^{-1/2} (ct - sum_a w_a W_a) */
-    for (k = 0; k < n; k++) sv[k] = ct[k] * U->isd[k];
+    for (k = 0; k < n; k++) sv[k] = ct[k] * U->base.inv_sqrt_d[k];
     amps__scatter_w(U, wv, sv);
     if (u > 0) {
         int it;
         for (it = 0; it < U->refine; it++) {
             amps__refine(U, sv, wv, fv, hom, x);
-            amps__scatter_w(U, U->wd, sv);
-            for (a = 0; a < u; a++) { wv[a] += U->wd[a]; yv[a] += U->yd[a]; }
+            amps__scatter_w(U, U->dense.w_corr, sv);
+            for (a = 0; a < u; a++) { wv[a] += U->dense.w_corr[a]; yv[a] += U->dense.y_corr[a]; }
         }
     }
     if (watched) {
         amps__watch_fixed(U, fv, x);
         if (watched == 2) {
             /* a two-phase job: the backward solve runs later, in amps_update_watched_run */
-            for (k = 0; k < U->nw; k++) if (U->wovr[k]) U->job_xw[k] = x[U->widx[k]];
-            memcpy(U->job_y, sv, sizeof(double) * (size_t)n);
+            for (k = 0; k < U->watch.n; k++) if (U->watch.from_dense[k]) U->watch.job_xw[k] = x[U->watch.idx[k]];
+            memcpy(U->watch.job_y, sv, sizeof(double) * (size_t)n);
         } else {
             /* the watched entries only: L^{-T} on their closure */
-            amps_ltsolve_closure(F, U->ncw, U->wclo, sv);
-            for (k = 0; k < U->nw; k++) if (!U->wovr[k]) x[U->widx[k]] = sv[F->iperm[U->widx[k]]];
+            amps_ltsolve_closure(F, U->watch.n_closure, U->watch.closure, sv);
+            for (k = 0; k < U->watch.n; k++) if (!U->watch.from_dense[k]) x[U->watch.idx[k]] = sv[F->iperm[U->watch.idx[k]]];
         }
         memset(sv, 0, sizeof(double) * (size_t)n);
-        U->st.t_step[6] += amps_now() - t0;
+        U->stats.t_step[AMPS_STEP_SOLVE] += amps_now() - t0;
         return;
     } else {
         amps__ltsolve_par(F, sv, U->nthr);
         for (k = 0; k < n; k++) { x[F->perm[k]] = sv[k]; sv[k] = 0.0; }
         for (k = n; k < U->N; k++) {
-            a = U->upos[k];
+            a = U->aug.pos[k];
             x[k] = (fv[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma;
         }
     }
     for (a = 0; a < u; a++)
-        if ((U->ukind[a] & AMPS__UCON) || (U->eq320 && U->form == AMPS_FORM_PRIMAL)) x[U->uidx[a]] = yv[a];
-    U->st.t_step[6] += amps_now() - t0;
+        if ((U->aug.kind[a] & AMPS__UCON) || (U->xs_from_dense && U->form == AMPS_FORM_PRIMAL)) x[U->aug.idx[a]] = yv[a];
+    U->stats.t_step[AMPS_STEP_SOLVE] += amps_now() - t0;
 }
 
 static void amps__kmul(const amps_update *U, const double *v, double *y);
@@ -5981,17 +6185,17 @@ static double amps__residual_vec(amps_update *U, const double *x, double *rho, d
     double num = 0, den = 0;
     amps__kmul(U, x, rho);
     for (i = 0; i < N; i++) {
-        a = U->upos[i];
-        rho[i] = (a >= 0 && (U->ukind[a] & AMPS__UCON)) ? 0.0 : U->f[i] - rho[i];
+        a = U->aug.pos[i];
+        rho[i] = (a >= 0 && (U->aug.kind[a] & AMPS__UCON)) ? 0.0 : U->force.f[i] - rho[i];
         num += rho[i] * rho[i];
     }
     for (i = 0; i < N; i++) tmp[i] = 0;
-    for (a = 0; a < U->u; a++) if (U->ukind[a] & AMPS__UCON) tmp[U->uidx[a]] = U->g[a];
+    for (a = 0; a < U->aug.size; a++) if (U->aug.kind[a] & AMPS__UCON) tmp[U->aug.idx[a]] = U->aug.g[a];
     amps__kmul(U, tmp, tmp + N);
     for (i = 0; i < N; i++) {
-        a = U->upos[i];
-        if (a >= 0 && (U->ukind[a] & AMPS__UCON)) continue;
-        den += (U->f[i] - tmp[N + i]) * (U->f[i] - tmp[N + i]);
+        a = U->aug.pos[i];
+        if (a >= 0 && (U->aug.kind[a] & AMPS__UCON)) continue;
+        den += (U->force.f[i] - tmp[N + i]) * (U->force.f[i] - tmp[N + i]);
     }
     return den > 0 ? sqrt(num / den) : sqrt(num);
 }
@@ -5999,94 +6203,103 @@ static double amps__residual_vec(amps_update *U, const double *x, double *rho, d
 /* Step times of a solve: those of the commit since the last solve (if any) plus its own. */
 static void amps__solve_stats_begin(amps_update *U) {
     amps_int k;
-    if (!U->committed) for (k = 1; k <= 5; k++) U->st.t_step[k] = 0;
-    U->committed = 0;
-    U->st.t_step[4] = 0; U->st.t_step[6] = 0;
+    if (!U->sol.commit_unsolved) for (k = 0; k < AMPS_STEP_SOLVE; k++) U->stats.t_step[k] = 0;
+    U->sol.commit_unsolved = 0;
+    U->stats.t_step[AMPS_STEP_RHS] = 0; U->stats.t_step[AMPS_STEP_SOLVE] = 0;
     {
         double t0 = amps_now();
         amps__update_ct(U);
-        U->st.t_step[4] += amps_now() - t0;
+        U->stats.t_step[AMPS_STEP_RHS] += amps_now() - t0;
     }
+}
+
+/* Accuracy guard after the full solve into sol.x: the relative residual of the full system, and
+   refinement steps with the same factors (at most 3) while it is above guard.tol. Sets
+   stats.relres, guard_steps and guard_result (pass 1: after a re-factorization); returns the
+   residual. */
+static double amps__guard_refine(amps_update *U, int pass) {
+    double *rho = U->work.resid, *dx = U->work.resid + U->cap_N, *tmp = U->guard.scratch;
+    double rel = amps__residual_vec(U, U->sol.x, rho, tmp);
+    amps_int it, k;
+    for (it = 0; it < 3 && rel > U->guard.tol; it++) {
+        const amps_factor *F = U->F;
+        for (k = 0; k < U->n; k++) U->guard.ct[k] = rho[F->perm[k]];
+        amps_lsolve(F, U->guard.ct);
+        for (k = 0; k < U->n; k++) U->guard.ct[k] *= U->base.inv_sqrt_d[k];
+        amps__solve_core(U, U->guard.ct, rho, 1, 0, dx);
+        for (k = 0; k < U->N; k++) U->sol.x[k] += dx[k];
+        rel = amps__residual_vec(U, U->sol.x, rho, tmp);
+        U->stats.guard_steps++;
+    }
+    U->stats.relres = rel;
+    U->stats.guard_result = !(rel <= U->guard.tol) ? AMPS_GUARD_NOT_MET
+                            : pass ? AMPS_GUARD_REFACTORED : U->stats.guard_steps > 0 ? AMPS_GUARD_REFINED : AMPS_GUARD_MET;
+    return rel;
 }
 
 AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xout) {
     amps_int a, k;
     amps_status s;
-    int it, pass = 0;
+    int pass = 0;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve: NULL engine");
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
-    if (!U->dirty && U->has_sol) {
-        if (xout) memcpy(xout, U->x, sizeof(double) * (size_t)U->N);
+    if (!U->sol.x_stale && U->sol.has_x) {
+        if (xout) memcpy(xout, U->sol.x, sizeof(double) * (size_t)U->N);
         return AMPS_OK;
     }
 again:
     amps__solve_stats_begin(U);
-    amps__solve_core(U, U->ct, U->f, 0, 0, U->x);
-    U->st.guard_steps = 0; U->st.guard_result = 0;
-    U->st.relres = -1;
-    /* accuracy guard: the residual of the full system, and refinement steps with the same
-       factors while it is above guard_tol */
-    if (U->guard_tol > 0) {
-        double *rho = U->rv, *dx = U->rv + U->capN, *tmp = U->gbuf;
-        double rel = amps__residual_vec(U, U->x, rho, tmp);
-        for (it = 0; it < 3 && rel > U->guard_tol; it++) {
-            const amps_factor *F = U->F;
-            for (k = 0; k < U->n; k++) U->ctr[k] = rho[F->perm[k]];
-            amps_lsolve(F, U->ctr);
-            for (k = 0; k < U->n; k++) U->ctr[k] *= U->isd[k];
-            amps__solve_core(U, U->ctr, rho, 1, 0, dx);
-            for (k = 0; k < U->N; k++) U->x[k] += dx[k];
-            rel = amps__residual_vec(U, U->x, rho, tmp);
-            U->st.guard_steps++;
-        }
-        U->st.relres = rel;
-        U->st.guard_result = rel <= U->guard_tol ? (pass ? 2 : U->st.guard_steps > 0) : 3;
-        if (rel > U->guard_tol && pass == 0 && U->opts.refactor != AMPS_REFACTOR_OFF && U->u > 0) {
+    amps__solve_core(U, U->force.ct, U->force.f, 0, 0, U->sol.x);
+    U->stats.guard_steps = 0; U->stats.guard_result = AMPS_GUARD_MET;
+    U->stats.relres = -1;
+    if (U->guard.tol > 0) {
+        double rel = amps__guard_refine(U, pass);
+        if (rel > U->guard.tol && pass == 0 && U->refac.opts.refactor != AMPS_REFACTOR_OFF && U->aug.size > 0) {
             /* the augmentation is the suspect: a fresh base, then the same solve again */
             pass = 1;
             if (amps_update_refactor(ctx, U) == AMPS_OK) goto again;
         }
     }
     /* reactions (K^ x - f^)_C */
-    for (a = 0; a < U->u; a++) {
-        amps_int i = U->uidx[a];
-        U->react[a] = (U->ukind[a] & AMPS__UCON) ? amps__krow(U, i, U->x) - U->f[i] : 0.0;
+    for (a = 0; a < U->aug.size; a++) {
+        amps_int i = U->aug.idx[a];
+        U->sol.react[a] = (U->aug.kind[a] & AMPS__UCON) ? amps__krow(U, i, U->sol.x) - U->force.f[i] : 0.0;
     }
-    U->dirty = 0; U->has_sol = 1; U->solN = U->N;
-    U->rdirty = 0; U->has_react = 1; U->wdirty = 0;
-    U->st.nsolve++;
-    if (xout) memcpy(xout, U->x, sizeof(double) * (size_t)U->N);
+    U->sol.x_stale = 0; U->sol.has_x = 1; U->sol.x_dim = U->N;
+    U->sol.react_stale = 0; U->sol.has_react = 1; U->sol.watched_stale = 0;
+    U->stats.nsolve++;
+    if (xout) memcpy(xout, U->sol.x, sizeof(double) * (size_t)U->N);
     {
         double t = 0;
-        for (k = 1; k <= 6; k++) t += U->st.t_step[k];
+        for (k = 0; k < AMPS_STEP_COUNT; k++) t += U->stats.t_step[k];
         amps__bg_policy(ctx, U, t);
     }
-    if (U->guard_tol > 0 && U->st.guard_result == 3)
-        return amps__err(ctx, AMPS_WARN_INACCURATE, "amps_update_solve: relative residual %.3g above the guard's %.3g", U->st.relres, U->guard_tol);
+    if (U->guard.tol > 0 && U->stats.guard_result == AMPS_GUARD_NOT_MET)
+        return amps__err(ctx, AMPS_WARN_INACCURATE, "amps_update_solve: relative residual %.3g above the guard's %.3g", U->stats.relres, U->guard.tol);
     return AMPS_OK;
 }
 
-AMPS_API const double *amps_update_solution(const amps_update *U) { return U ? U->x : NULL; }
+AMPS_API const double *amps_update_solution(const amps_update *U) { return U ? U->sol.x : NULL; }
 
 /* Reactions (K^ x - f^)_C = (Delta y)_C - w_C from the dense step's y = x_U (F' entries formed
    as y = r - G w in the dual form) and w. */
 static void amps__small_reactions(amps_update *U, const double *r, double *yv, const double *wv) {
-    amps_int u = U->u, a, b, k;
-    size_t ld = (size_t)U->capu;
+    amps_int u = U->aug.size, a, b, k;
+    size_t ld = (size_t)U->aug.cap;
     if (U->form == AMPS_FORM_DUAL)
         for (a = 0; a < u; a++) {
             double sum = r[a];
-            if (U->ukind[a] & AMPS__UCON) continue;
-            for (b = 0; b < u; b++) sum -= U->G[(size_t)b * ld + (size_t)a] * wv[b];
+            if (U->aug.kind[a] & AMPS__UCON) continue;
+            for (b = 0; b < u; b++) sum -= U->lu.G[(size_t)b * ld + (size_t)a] * wv[b];
             yv[a] = sum;
         }
     for (a = 0; a < u; a++) {
         double sum = 0;
-        if (!(U->ukind[a] & AMPS__UCON)) { U->react[a] = 0.0; continue; }
-        for (k = 0; k < U->dln[a]; k++) sum += U->dval[U->dst[a] + k] * yv[U->dcol[U->dst[a] + k]];
-        U->react[a] = sum - wv[a];
+        if (!(U->aug.kind[a] & AMPS__UCON)) { U->sol.react[a] = 0.0; continue; }
+        for (k = 0; k < U->delta.row_len[a]; k++) sum += U->delta.val[U->delta.row_start[a] + k] * yv[U->delta.col[U->delta.row_start[a] + k]];
+        U->sol.react[a] = sum - wv[a];
     }
-    U->rdirty = 0; U->has_react = 1;
+    U->sol.react_stale = 0; U->sol.has_react = 1;
 }
 
 AMPS_API amps_status amps_update_solve_reactions(amps_ctx *ctx, amps_update *U) {
@@ -6094,13 +6307,13 @@ AMPS_API amps_status amps_update_solve_reactions(amps_ctx *ctx, amps_update *U) 
     double t0;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve_reactions: NULL engine");
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
-    if (!U->rdirty && U->has_react) return AMPS_OK;
+    if (!U->sol.react_stale && U->sol.has_react) return AMPS_OK;
     amps__solve_stats_begin(U);
-    amps__step4(U, U->ct, U->f, 1, U->rhs);
+    amps__step4(U, U->force.ct, U->force.f, 1, U->dense.rhs);
     t0 = amps_now();
-    amps__dense_step(U, U->rhs, 0, U->yv, U->wv);
-    amps__small_reactions(U, U->rhs, U->yv, U->wv);
-    U->st.t_step[5] += amps_now() - t0;
+    amps__dense_step(U, U->dense.rhs, 0, U->dense.y, U->dense.w);
+    amps__small_reactions(U, U->dense.rhs, U->dense.y, U->dense.w);
+    U->stats.t_step[AMPS_STEP_DENSE] += amps_now() - t0;
     return AMPS_OK;
 }
 
@@ -6108,27 +6321,27 @@ AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m
     amps_int k, *wi, *wc, nb = 0;
     amps_status s;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_watch: NULL engine");
-    if ((s = amps__chk_idx(ctx, U, "amps_update_watch", m, idx, NULL, 1, &U->mkN)) != AMPS_OK) return s;
-    if (U->job_y) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_watch: a watched-solve job is in progress");
-    if (m > U->capw || !U->wclo) {
+    if ((s = amps__chk_idx(ctx, U, "amps_update_watch", m, idx, NULL, 1, &U->work.mark_N)) != AMPS_OK) return s;
+    if (U->watch.job_y) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_watch: a watched-solve job is in progress");
+    if (m > U->watch.cap || !U->watch.closure) {
         unsigned char *wo = AMPS__CAST(unsigned char *, amps__malloc(ctx, (size_t)(m > 0 ? m : 1), 1));
         wi = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(m > 0 ? m : 1), sizeof(amps_int)));
-        wc = U->wclo ? U->wclo : AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(U->n > 0 ? U->n : 1), sizeof(amps_int)));
+        wc = U->watch.closure ? U->watch.closure : AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(U->n > 0 ? U->n : 1), sizeof(amps_int)));
         if (!wi || !wc || !wo) {
             amps__free(ctx, wi); amps__free(ctx, wo);
-            if (wc != U->wclo) amps__free(ctx, wc);
+            if (wc != U->watch.closure) amps__free(ctx, wc);
             return amps__err(ctx, AMPS_ERR_OOM, "amps_update_watch: out of memory for %ld indices", (long)m);
         }
-        amps__free(ctx, U->widx); amps__free(ctx, U->wovr);
-        U->widx = wi; U->wclo = wc; U->wovr = wo; U->capw = m;
+        amps__free(ctx, U->watch.idx); amps__free(ctx, U->watch.from_dense);
+        U->watch.idx = wi; U->watch.closure = wc; U->watch.from_dense = wo; U->watch.cap = m;
     }
     for (k = 0; k < m; k++) {
-        U->widx[k] = idx[k];
-        if (idx[k] < U->n) U->iwork[nb++] = U->F->iperm[idx[k]];
+        U->watch.idx[k] = idx[k];
+        if (idx[k] < U->n) U->work.idx[nb++] = U->F->iperm[idx[k]];
     }
-    U->nw = m;
-    U->ncw = amps_closure(U->F, nb, U->iwork, U->wclo, &U->mk);
-    U->wdirty = 1;
+    U->watch.n = m;
+    U->watch.n_closure = amps_closure(U->F, nb, U->work.idx, U->watch.closure, &U->work.mark_n);
+    U->sol.watched_stale = 1;
     return AMPS_OK;
 }
 
@@ -6137,27 +6350,27 @@ AMPS_API amps_int amps_update_base_order(const amps_update *U) { return U ? U->n
 /* Every watched index still exists (DOFs appended later are never removed; a discarded batch is). */
 static amps_status amps__watch_valid(amps_ctx *ctx, const amps_update *U, const char *fn) {
     amps_int k;
-    for (k = 0; k < U->nw; k++)
-        if (U->widx[k] >= U->N + U->kpend)
-            return amps__err(ctx, AMPS_ERR_INDEX, "%s: watched index %ld no longer exists", fn, (long)U->widx[k]);
+    for (k = 0; k < U->watch.n; k++)
+        if (U->watch.idx[k] >= U->N + U->pending.n_dofs)
+            return amps__err(ctx, AMPS_ERR_INDEX, "%s: watched index %ld no longer exists", fn, (long)U->watch.idx[k]);
     return AMPS_OK;
 }
 AMPS_API const amps_factor *amps_update_factor(const amps_update *U) { return U ? U->F : NULL; }
 
 AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, amps_update_job *job, double *y, amps_int ylen, double *xw) {
     amps_status s;
-    if (!U || !job || !y || (!xw && U->nw > 0)) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_watched_begin: NULL argument");
-    if (U->job_y) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_watched_begin: a job is already in progress");
+    if (!U || !job || !y || (!xw && U->watch.n > 0)) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_watched_begin: NULL argument");
+    if (U->watch.job_y) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_watched_begin: a job is already in progress");
     if ((s = amps__watch_valid(ctx, U, "amps_update_watched_begin")) != AMPS_OK) return s;
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
     if (ylen < U->n) return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update_watched_begin: y has %ld entries, the base order is %ld", (long)ylen, (long)U->n);
-    U->job_y = y; U->job_xw = xw;
+    U->watch.job_y = y; U->watch.job_xw = xw;
     amps__solve_stats_begin(U);
-    amps__solve_core(U, U->ct, U->f, 0, 2, U->x);
-    amps__small_reactions(U, U->rhs, U->yv, U->wv);
-    U->st.nsolve++;
-    job->F = U->F; job->nw = U->nw; job->ncw = U->ncw; job->widx = U->widx; job->wclo = U->wclo;
-    job->wovr = U->wovr; job->y = y; job->xw = xw;
+    amps__solve_core(U, U->force.ct, U->force.f, 0, 2, U->sol.x);
+    amps__small_reactions(U, U->dense.rhs, U->dense.y, U->dense.w);
+    U->stats.nsolve++;
+    job->F = U->F; job->nw = U->watch.n; job->ncw = U->watch.n_closure; job->widx = U->watch.idx; job->wclo = U->watch.closure;
+    job->wovr = U->watch.from_dense; job->y = y; job->xw = xw;
     return AMPS_OK;
 }
 
@@ -6171,7 +6384,7 @@ AMPS_API void amps_update_watched_run(amps_update_job *job) {
 
 AMPS_API void amps_update_watched_end(amps_update *U, amps_update_job *job) {
     if (!U || !job) return;
-    U->job_y = NULL; U->job_xw = NULL;
+    U->watch.job_y = NULL; U->watch.job_xw = NULL;
     job->F = NULL;
 }
 
@@ -6181,22 +6394,22 @@ AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, do
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve_watched: NULL engine");
     if ((s = amps__watch_valid(ctx, U, "amps_update_solve_watched")) != AMPS_OK) return s;
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
-    if (U->wdirty || !U->has_sol) {
+    if (U->sol.watched_stale || !U->sol.has_x) {
         amps__solve_stats_begin(U);
-        amps__solve_core(U, U->ct, U->f, 0, 1, U->x);
-        amps__small_reactions(U, U->rhs, U->yv, U->wv);
-        U->wdirty = 0;
-        U->st.nsolve++;
+        amps__solve_core(U, U->force.ct, U->force.f, 0, 1, U->sol.x);
+        amps__small_reactions(U, U->dense.rhs, U->dense.y, U->dense.w);
+        U->sol.watched_stale = 0;
+        U->stats.nsolve++;
     }
-    if (xw) for (k = 0; k < U->nw; k++) xw[k] = U->x[U->widx[k]];
+    if (xw) for (k = 0; k < U->watch.n; k++) xw[k] = U->sol.x[U->watch.idx[k]];
     return AMPS_OK;
 }
 
 AMPS_API double amps_update_reaction(const amps_update *U, amps_int i) {
     amps_int a;
-    if (!U || i < 0 || i >= U->N || !U->has_react) return 0.0;
-    a = U->upos[i];
-    return (a >= 0 && (U->ukind[a] & AMPS__UCON)) ? U->react[a] : 0.0;
+    if (!U || i < 0 || i >= U->N || !U->sol.has_react) return 0.0;
+    a = U->aug.pos[i];
+    return (a >= 0 && (U->aug.kind[a] & AMPS__UCON)) ? U->sol.react[a] : 0.0;
 }
 
 /* y = K^ v for the committed K^ (v and y of length N). */
@@ -6204,14 +6417,14 @@ static void amps__kmul(const amps_update *U, const double *v, double *y) {
     amps_int n = U->n, j, p, a, k;
     for (j = 0; j < n; j++) {
         double s = 0;
-        for (p = U->Kp[j]; p < U->Kp[j + 1]; p++) s += U->Kx[p] * v[U->Ki[p]];
+        for (p = U->base.Kp[j]; p < U->base.Kp[j + 1]; p++) s += U->base.Kx[p] * v[U->base.Ki[p]];
         y[j] = s;
     }
     for (j = n; j < U->N; j++) y[j] = U->sigma * v[j];
-    for (a = 0; a < U->u; a++) {
+    for (a = 0; a < U->aug.size; a++) {
         double s = 0;
-        for (k = 0; k < U->dln[a]; k++) s += U->dval[U->dst[a] + k] * v[U->uidx[U->dcol[U->dst[a] + k]]];
-        y[U->uidx[a]] += s;
+        for (k = 0; k < U->delta.row_len[a]; k++) s += U->delta.val[U->delta.row_start[a] + k] * v[U->aug.idx[U->delta.col[U->delta.row_start[a] + k]]];
+        y[U->aug.idx[a]] += s;
     }
 }
 
@@ -6219,24 +6432,24 @@ AMPS_API amps_status amps_update_residual(amps_ctx *ctx, amps_update *U, double 
     double *y, *gh, num = 0, den = 0;
     amps_int i, a, N;
     if (!U || !relres) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_residual: NULL argument");
-    if (!U->has_sol || U->dirty || U->npd || U->npc || U->kpend)
+    if (!U->sol.has_x || U->sol.x_stale || U->pending.n_delta || U->pending.n_con || U->pending.n_dofs)
         return amps__err(ctx, AMPS_ERR_STATE, "amps_update_residual: no current solution (call amps_update_solve)");
-    N = U->N; y = U->rv; gh = U->rv + U->capN;
+    N = U->N; y = U->work.resid; gh = U->work.resid + U->cap_N;
     /* numerator: (K^ x - f^) on free rows */
-    amps__kmul(U, U->x, y);
+    amps__kmul(U, U->sol.x, y);
     for (i = 0; i < N; i++) {
-        a = U->upos[i];
-        if (a >= 0 && (U->ukind[a] & AMPS__UCON)) continue;
-        num += (y[i] - U->f[i]) * (y[i] - U->f[i]);
+        a = U->aug.pos[i];
+        if (a >= 0 && (U->aug.kind[a] & AMPS__UCON)) continue;
+        num += (y[i] - U->force.f[i]) * (y[i] - U->force.f[i]);
     }
     /* denominator: f^_F - K^_FC g, the right-hand side of the reduced system */
     for (i = 0; i < N; i++) gh[i] = 0;
-    for (a = 0; a < U->u; a++) if (U->ukind[a] & AMPS__UCON) gh[U->uidx[a]] = U->g[a];
+    for (a = 0; a < U->aug.size; a++) if (U->aug.kind[a] & AMPS__UCON) gh[U->aug.idx[a]] = U->aug.g[a];
     amps__kmul(U, gh, y);
     for (i = 0; i < N; i++) {
-        a = U->upos[i];
-        if (a >= 0 && (U->ukind[a] & AMPS__UCON)) continue;
-        den += (U->f[i] - y[i]) * (U->f[i] - y[i]);
+        a = U->aug.pos[i];
+        if (a >= 0 && (U->aug.kind[a] & AMPS__UCON)) continue;
+        den += (U->force.f[i] - y[i]) * (U->force.f[i] - y[i]);
     }
     *relres = den > 0 ? sqrt(num / den) : sqrt(num);
     return AMPS_OK;
@@ -6245,18 +6458,18 @@ AMPS_API amps_status amps_update_residual(amps_ctx *ctx, amps_update *U, double 
 AMPS_API void amps_update_get_stats(const amps_update *U, amps_update_stats *st) {
     amps_int a, nm = 0, nc = 0;
     if (!U || !st) return;
-    *st = U->st;
-    for (a = 0; a < U->u; a++) {
-        if (U->dln[a] > 0) nm++;
-        if (U->ukind[a] & AMPS__UCON) nc++;
+    *st = U->stats;
+    for (a = 0; a < U->aug.size; a++) {
+        if (U->delta.row_len[a] > 0) nm++;
+        if (U->aug.kind[a] & AMPS__UCON) nc++;
     }
-    st->dim = U->N; st->nmod = nm; st->ncon = nc; st->nsys = U->u;
-    st->vpool_entries = (double)U->vused;
-    st->refactor_running = U->bg != NULL;
+    st->dim = U->N; st->nmod = nm; st->ncon = nc; st->nsys = U->aug.size;
+    st->vpool_entries = (double)U->memo.used;
+    st->refactor_running = U->refac.job != NULL;
     st->refactor_nnzL = (double)U->F->Lp[U->F->n] + (double)U->F->n;
 }
 
-/* ---- re-factorization (paper 001, Sec. 3.6) ---- */
+/* ---- re-factorization ([Interactive cutting] Sec. 3.6) ---- */
 
 /* An entry of the m' log: r >= 0: K^[r,c] += v (and K^[c,r]); r < 0: c DOFs appended. */
 typedef struct amps__lentry { amps_int r, c; double v; } amps__lentry;
@@ -6270,22 +6483,26 @@ enum { AMPS__BG_RUNNING = 1, AMPS__BG_READY = 2, AMPS__BG_FAILED = 3 };
 #endif
 
 typedef struct amps__bg {
-    /* the snapshot at the start (owned) and the parent's base (immutable until the swap) */
-    amps_int N0, n, nthr;
-    double sigma;
-    amps_int nt; amps_int *ti, *tj; double *tx;  /* K^ - K on the upper triangle, sigma on appended and constrained diagonals */
-    amps_int nc; amps_int *ci; double *cg;       /* constrained indices and values */
-    double *f;                                   /* N0 forces */
-    const amps_int *Kp, *Ki; const double *Kx;
-    amps_update_opts opts;
-    void *alloc_user;
-    /* the m' log: appended by the engine's thread, read by the worker (under mu) */
-    amps__lentry *log; amps_int nlog, caplog, done;
-    /* results */
-    amps_csc *K2; amps_factor *F2; amps_update *U2;
-    amps_status status; char msg[256];
-    double t0, t1;
-    int state, cancel;
+    struct {                                     /* the snapshot at the start (owned) and the parent's base (immutable until the swap) */
+        amps_int N, n, nthr;                     /* order, base order, the parent's threads */
+        double sigma;
+        amps_int nt; amps_int *ti, *tj; double *tx;  /* K^ - K on the upper triangle, sigma on appended and constrained diagonals */
+        amps_int nc; amps_int *ci; double *cg;   /* constrained indices and values */
+        double *f;                               /* N forces */
+        const amps_int *Kp, *Ki; const double *Kx;  /* the parent's base K */
+        amps_update_opts opts;
+        void *alloc_user;
+    } snap;
+    struct {                                     /* the m' log: appended by the engine's thread, read by the worker (under mu) */
+        amps__lentry *entries; amps_int n, cap;
+        amps_int done;                           /* entries the worker has replayed */
+    } log;
+    struct {                                     /* the new base: matrix, factor, engine */
+        amps_csc *K; amps_factor *F; amps_update *U;
+    } result;
+    amps_status status; char msg[256];           /* the failure */
+    double t0, t1;                               /* start and ready times */
+    int state, cancel;                           /* AMPS__BG_*; cancel requested (under mu) */
 #ifndef AMPS_NO_THREADS
     pthread_mutex_t mu; pthread_t th; int has_thread, has_mu;
 #endif
@@ -6315,9 +6532,9 @@ static int amps__bg_get(amps__bg *b, const int *field) {
 
 static void amps__bg_free(amps_ctx *ctx, amps__bg *b) {
     if (!b) return;
-    amps_update_free(ctx, b->U2); amps_factor_free(ctx, b->F2); amps_csc_free(ctx, b->K2);
-    amps__free(ctx, b->ti); amps__free(ctx, b->tj); amps__free(ctx, b->tx);
-    amps__free(ctx, b->ci); amps__free(ctx, b->cg); amps__free(ctx, b->f); amps__free(ctx, b->log);
+    amps_update_free(ctx, b->result.U); amps_factor_free(ctx, b->result.F); amps_csc_free(ctx, b->result.K);
+    amps__free(ctx, b->snap.ti); amps__free(ctx, b->snap.tj); amps__free(ctx, b->snap.tx);
+    amps__free(ctx, b->snap.ci); amps__free(ctx, b->snap.cg); amps__free(ctx, b->snap.f); amps__free(ctx, b->log.entries);
 #ifndef AMPS_NO_THREADS
     if (b->has_mu) pthread_mutex_destroy(&b->mu);
 #endif
@@ -6329,35 +6546,35 @@ static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U) {
     amps__bg *b = AMPS__CAST(amps__bg *, amps__calloc(ctx, 1, sizeof(amps__bg)));
     amps_int a, k, nt = 0, nc = 0, cap;
     if (!b) return NULL;
-    b->N0 = U->N; b->n = U->n; b->sigma = U->sigma; b->nthr = U->nthr;
-    b->Kp = U->Kp; b->Ki = U->Ki; b->Kx = U->Kx;
-    b->opts = U->opts; b->alloc_user = ctx ? ctx->alloc_user : NULL;
-    for (a = 0; a < U->u; a++) if (U->ukind[a] & AMPS__UCON) nc++;
-    cap = U->dused + (U->N - U->n) + nc + 1;
-    b->ti = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
-    b->tj = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
-    b->tx = AMPS__CAST(double *, amps__malloc(ctx, (size_t)cap, sizeof(double)));
-    b->ci = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nc + 1, sizeof(amps_int)));
-    b->cg = AMPS__CAST(double *, amps__malloc(ctx, (size_t)nc + 1, sizeof(double)));
-    b->f = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->N + 1, sizeof(double)));
-    b->caplog = U->opts.cap_pending > 0 ? 4 * U->opts.cap_pending : 16384;
-    b->log = AMPS__CAST(amps__lentry *, amps__malloc(ctx, (size_t)b->caplog, sizeof(amps__lentry)));
-    if (!b->ti || !b->tj || !b->tx || !b->ci || !b->cg || !b->f || !b->log) { amps__bg_free(ctx, b); return NULL; }
-    for (a = 0; a < U->u; a++) {
-        amps_int i = U->uidx[a];
-        for (k = 0; k < U->dln[a]; k++) {
-            amps_int j = U->uidx[U->dcol[U->dst[a] + k]];
+    b->snap.N = U->N; b->snap.n = U->n; b->snap.sigma = U->sigma; b->snap.nthr = U->nthr;
+    b->snap.Kp = U->base.Kp; b->snap.Ki = U->base.Ki; b->snap.Kx = U->base.Kx;
+    b->snap.opts = U->refac.opts; b->snap.alloc_user = ctx ? ctx->alloc_user : NULL;
+    for (a = 0; a < U->aug.size; a++) if (U->aug.kind[a] & AMPS__UCON) nc++;
+    cap = U->delta.used + (U->N - U->n) + nc + 1;
+    b->snap.ti = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
+    b->snap.tj = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
+    b->snap.tx = AMPS__CAST(double *, amps__malloc(ctx, (size_t)cap, sizeof(double)));
+    b->snap.ci = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nc + 1, sizeof(amps_int)));
+    b->snap.cg = AMPS__CAST(double *, amps__malloc(ctx, (size_t)nc + 1, sizeof(double)));
+    b->snap.f = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->N + 1, sizeof(double)));
+    b->log.cap = 4 * U->refac.opts.cap_pending;          /* > 0: amps__create_opts */
+    b->log.entries = AMPS__CAST(amps__lentry *, amps__malloc(ctx, (size_t)b->log.cap, sizeof(amps__lentry)));
+    if (!b->snap.ti || !b->snap.tj || !b->snap.tx || !b->snap.ci || !b->snap.cg || !b->snap.f || !b->log.entries) { amps__bg_free(ctx, b); return NULL; }
+    for (a = 0; a < U->aug.size; a++) {
+        amps_int i = U->aug.idx[a];
+        for (k = 0; k < U->delta.row_len[a]; k++) {
+            amps_int j = U->aug.idx[U->delta.col[U->delta.row_start[a] + k]];
             if (i > j) continue;                                  /* Delta is stored in both rows */
-            b->ti[nt] = i; b->tj[nt] = j; b->tx[nt] = U->dval[U->dst[a] + k]; nt++;
+            b->snap.ti[nt] = i; b->snap.tj[nt] = j; b->snap.tx[nt] = U->delta.val[U->delta.row_start[a] + k]; nt++;
         }
-        if (U->ukind[a] & AMPS__UCON) {                           /* + sigma e_i e_i^T */
-            b->ti[nt] = i; b->tj[nt] = i; b->tx[nt] = U->sigma; nt++;
-            b->ci[b->nc] = i; b->cg[b->nc] = U->g[a]; b->nc++;
+        if (U->aug.kind[a] & AMPS__UCON) {                           /* + sigma e_i e_i^T */
+            b->snap.ti[nt] = i; b->snap.tj[nt] = i; b->snap.tx[nt] = U->sigma; nt++;
+            b->snap.ci[b->snap.nc] = i; b->snap.cg[b->snap.nc] = U->aug.g[a]; b->snap.nc++;
         }
     }
-    for (k = U->n; k < U->N; k++) { b->ti[nt] = k; b->tj[nt] = k; b->tx[nt] = U->sigma; nt++; }   /* K-bar */
-    b->nt = nt;
-    memcpy(b->f, U->f, sizeof(double) * (size_t)U->N);
+    for (k = U->n; k < U->N; k++) { b->snap.ti[nt] = k; b->snap.tj[nt] = k; b->snap.tx[nt] = U->sigma; nt++; }   /* K-bar */
+    b->snap.nt = nt;
+    memcpy(b->snap.f, U->force.f, sizeof(double) * (size_t)U->N);
 #ifndef AMPS_NO_THREADS
     if (pthread_mutex_init(&b->mu, NULL) != 0) {
         amps__bg_free(ctx, b);
@@ -6385,27 +6602,27 @@ static void amps__csc_drop_zeros(amps_csc *A) {
 
 /* Records the changes of one commit in the log; on failure the re-factorization is cancelled. */
 static void amps__bg_log(amps_update *U, amps_int kpend, const amps__pdelta *pd, amps_int npd) {
-    amps__bg *b = U->bg;
+    amps__bg *b = U->refac.job;
     amps_int need, k;
     amps__bg_lock(b);
-    need = b->nlog + npd + (kpend > 0);
+    need = b->log.n + npd + (kpend > 0);
     if (b->state == AMPS__BG_FAILED) { amps__bg_unlock(b); return; }
-    if (need > b->caplog) {
-        amps_int cap = b->caplog;
+    if (need > b->log.cap) {
+        amps_int cap = b->log.cap;
         amps_ctx c2;
-        amps_ctx_init(&c2); c2.alloc_user = b->alloc_user;
+        amps_ctx_init(&c2); c2.alloc_user = b->snap.alloc_user;
         while (cap < need) cap = cap * 2 + 1024;
-        if (!U->grow || amps__realloc(&c2, (void **)&b->log, (size_t)cap, sizeof(amps__lentry))) {
+        if (!U->grow || amps__realloc(&c2, (void **)&b->log.entries, (size_t)cap, sizeof(amps__lentry))) {
             b->cancel = 1;
             b->status = AMPS_ERR_CAPACITY;
             memcpy(b->msg, "re-factorization cancelled: its log of changes is full", 55);
             amps__bg_unlock(b);
             return;
         }
-        b->caplog = cap;
+        b->log.cap = cap;
     }
-    if (kpend > 0) { b->log[b->nlog].r = -1; b->log[b->nlog].c = kpend; b->log[b->nlog].v = 0; b->nlog++; }
-    for (k = 0; k < npd; k++) { b->log[b->nlog].r = pd[k].r; b->log[b->nlog].c = pd[k].c; b->log[b->nlog].v = pd[k].v; b->nlog++; }
+    if (kpend > 0) { b->log.entries[b->log.n].r = -1; b->log.entries[b->log.n].c = kpend; b->log.entries[b->log.n].v = 0; b->log.n++; }
+    for (k = 0; k < npd; k++) { b->log.entries[b->log.n].r = pd[k].r; b->log.entries[b->log.n].c = pd[k].c; b->log.entries[b->log.n].v = pd[k].v; b->log.n++; }
     amps__bg_unlock(b);
 }
 
@@ -6425,79 +6642,107 @@ static amps_status amps__bg_replay(amps_ctx *ctx, amps_update *U2, const amps__l
     return AMPS_OK;
 }
 
+/* Worker step 1: B = K^(t0) + sigma P_C on the upper triangle, into b->result.K. Couplings a
+   change cancelled exactly (a cut moves K[i, j] to a copy of j) leave the pattern, so that they
+   cause no fill; with node blocks detected (block 0) the pattern stays whole. */
+static amps_status amps__bg_assemble(amps_ctx *c2, amps__bg *b) {
+    amps_int j, p, nz = 0, nt = b->snap.nt, *ti, *tj;
+    double *tx;
+    for (j = 0; j < b->snap.n; j++) for (p = b->snap.Kp[j]; p < b->snap.Kp[j + 1]; p++) if (b->snap.Ki[p] <= j) nz++;
+    ti = AMPS__CAST(amps_int *, amps__malloc(c2, (size_t)(nz + nt) + 1, sizeof(amps_int)));
+    tj = AMPS__CAST(amps_int *, amps__malloc(c2, (size_t)(nz + nt) + 1, sizeof(amps_int)));
+    tx = AMPS__CAST(double *, amps__malloc(c2, (size_t)(nz + nt) + 1, sizeof(double)));
+    if (ti && tj && tx) {
+        nz = 0;
+        for (j = 0; j < b->snap.n; j++)
+            for (p = b->snap.Kp[j]; p < b->snap.Kp[j + 1]; p++)
+                if (b->snap.Ki[p] <= j) { ti[nz] = b->snap.Ki[p]; tj[nz] = j; tx[nz] = b->snap.Kx[p]; nz++; }
+        memcpy(ti + nz, b->snap.ti, sizeof(amps_int) * (size_t)nt);
+        memcpy(tj + nz, b->snap.tj, sizeof(amps_int) * (size_t)nt);
+        memcpy(tx + nz, b->snap.tx, sizeof(double) * (size_t)nt);
+        b->result.K = amps_csc_from_triplets(c2, b->snap.N, nz + nt, ti, tj, tx, AMPS_UPPER);
+    }
+    amps__free(c2, ti); amps__free(c2, tj); amps__free(c2, tx);
+    if (!ti || !tj || !tx) return AMPS_ERR_OOM;
+    if (!b->result.K) return c2->status;
+    if (b->snap.opts.refactor_order.block != 0) amps__csc_drop_zeros(b->result.K);
+    return AMPS_OK;
+}
+
+/* Worker step 2: ordering, analysis and factorization of B, into b->result.F; stops early when
+   cancelled. */
+static amps_status amps__bg_factor(amps_ctx *c2, amps__bg *b) {
+    amps_status s;
+    if (amps__bg_get(b, &b->cancel)) return AMPS_ERR_STATE;
+    if (AMPS_TEST_BG_FAULT(1)) return amps__err(c2, AMPS_ERR_OOM, "injected failure in the analysis");
+    b->result.F = amps_analyze(c2, b->result.K, AMPS_UPPER, &b->snap.opts.refactor_order);
+    if (!b->result.F) return c2->status;
+    if (amps__bg_get(b, &b->cancel)) return AMPS_ERR_STATE;
+    if (AMPS_TEST_BG_FAULT(2)) return amps__err(c2, AMPS_ERR_NOT_SPD, "injected failure in the factorization");
+    if ((s = amps_factorize(c2, b->result.F, b->result.K, AMPS_UPPER)) != AMPS_OK) return s;
+    if (amps__bg_get(b, &b->cancel)) return AMPS_ERR_STATE;
+    return AMPS_OK;
+}
+
+/* Worker step 3: the engine of the new base, b->result.U: the forces, C with Delta = -sigma and
+   the constraints, committed. */
+static amps_status amps__bg_engine(amps_ctx *c2, amps__bg *b) {
+    amps_update_opts o2 = b->snap.opts;
+    amps_update *V;
+    amps_int j;
+    amps_status s;
+    o2.grow = 1; o2.refactor = AMPS_REFACTOR_OFF;
+    c2->nthreads = b->snap.nthr;                     /* per-thread buffers for the owner's threads */
+    V = b->result.U = amps_update_create(c2, b->result.K, AMPS_UPPER, b->result.F, &o2);
+    if (!V) return c2->status;
+    V->nthr = 1;                                     /* the catch-up runs on this thread alone */
+    for (j = 0; j < b->snap.N; j++)
+        if (b->snap.f[j] != 0.0 && (s = amps_update_set_force(c2, V, 1, &j, b->snap.f + j)) != AMPS_OK) return s;
+    for (j = 0; j < b->snap.nc; j++) {
+        double ms = -b->snap.sigma;
+        if ((s = amps_update_add(c2, V, 1, b->snap.ci + j, b->snap.ci + j, &ms)) != AMPS_OK) return s;
+    }
+    if ((s = amps_update_constrain(c2, V, b->snap.nc, b->snap.ci, b->snap.cg)) != AMPS_OK) return s;
+    return amps_update_commit(c2, V);
+}
+
+/* Worker step 4: catches up with the log while it grows (at most 8 rounds of at least 32
+   entries; the swap commits the rest). */
+static amps_status amps__bg_follow_log(amps_ctx *c2, amps__bg *b) {
+    amps_int round;
+    amps_status s;
+    for (round = 0; round < 8; round++) {
+        amps_int lo, cnt;
+        amps__lentry *chunk;
+        amps__bg_lock(b);
+        lo = b->log.done; cnt = b->log.n - lo;
+        if (b->cancel || cnt < 32) { amps__bg_unlock(b); break; }
+        chunk = AMPS__CAST(amps__lentry *, amps__malloc(c2, (size_t)cnt, sizeof(amps__lentry)));
+        if (chunk) memcpy(chunk, b->log.entries + lo, sizeof(amps__lentry) * (size_t)cnt);
+        amps__bg_unlock(b);
+        if (!chunk) return AMPS_ERR_OOM;
+        if (AMPS_TEST_BG_FAULT(3)) s = amps__err(c2, AMPS_ERR_SINGULAR_UPDATE, "injected failure in the catch-up");
+        else if ((s = amps__bg_replay(c2, b->result.U, chunk, cnt, b->snap.sigma)) == AMPS_OK) s = amps_update_commit(c2, b->result.U);
+        amps__free(c2, chunk);
+        if (s != AMPS_OK) return s;
+        amps__bg_lock(b); b->log.done = lo + cnt; amps__bg_unlock(b);
+    }
+    return AMPS_OK;
+}
+
 /* The worker: B = K^(t0) + sigma P_C assembled, ordered, analyzed and factored; the engine of
    the new base gets the forces, Delta = -sigma on C with the constraints, and catches up with
    the log while it grows. */
 static void amps__bg_work(amps__bg *b) {
     amps_ctx c2;
-    amps_int j, p, nz = 0, *ti = NULL, *tj = NULL, round;
-    double *tx = NULL;
-    amps_status s = AMPS_OK;
-    amps_update_opts o2;
-    amps__lentry *chunk = NULL;
+    amps_status s;
     amps_ctx_init(&c2);
-    c2.alloc_user = b->alloc_user;
-    c2.nthreads = b->opts.refactor_threads > 0 ? b->opts.refactor_threads : 1;
+    c2.alloc_user = b->snap.alloc_user;
+    c2.nthreads = b->snap.opts.refactor_threads;        /* > 0: amps__create_opts */
     b->t0 = amps_now();
-    /* 1. B on the upper triangle */
-    for (j = 0; j < b->n; j++) for (p = b->Kp[j]; p < b->Kp[j + 1]; p++) if (b->Ki[p] <= j) nz++;
-    ti = AMPS__CAST(amps_int *, amps__malloc(&c2, (size_t)(nz + b->nt) + 1, sizeof(amps_int)));
-    tj = AMPS__CAST(amps_int *, amps__malloc(&c2, (size_t)(nz + b->nt) + 1, sizeof(amps_int)));
-    tx = AMPS__CAST(double *, amps__malloc(&c2, (size_t)(nz + b->nt) + 1, sizeof(double)));
-    if (!ti || !tj || !tx) { s = AMPS_ERR_OOM; goto done; }
-    nz = 0;
-    for (j = 0; j < b->n; j++)
-        for (p = b->Kp[j]; p < b->Kp[j + 1]; p++)
-            if (b->Ki[p] <= j) { ti[nz] = b->Ki[p]; tj[nz] = j; tx[nz] = b->Kx[p]; nz++; }
-    memcpy(ti + nz, b->ti, sizeof(amps_int) * (size_t)b->nt);
-    memcpy(tj + nz, b->tj, sizeof(amps_int) * (size_t)b->nt);
-    memcpy(tx + nz, b->tx, sizeof(double) * (size_t)b->nt);
-    b->K2 = amps_csc_from_triplets(&c2, b->N0, nz + b->nt, ti, tj, tx, AMPS_UPPER);
-    amps__free(&c2, ti); amps__free(&c2, tj); amps__free(&c2, tx); ti = tj = NULL; tx = NULL;
-    if (!b->K2) { s = c2.status; goto done; }
-    /* couplings a change cancelled exactly (a cut moves K[i, j] to a copy of j) leave the pattern,
-       so that they cause no fill; with node blocks detected (block 0) the pattern stays whole */
-    if (b->opts.refactor_order.block != 0) amps__csc_drop_zeros(b->K2);
-    /* 2. ordering, analysis, factorization */
-    if (amps__bg_get(b, &b->cancel)) { s = AMPS_ERR_STATE; goto done; }
-    if (AMPS_TEST_BG_FAULT(1)) { s = amps__err(&c2, AMPS_ERR_OOM, "injected failure in the analysis"); goto done; }
-    b->F2 = amps_analyze(&c2, b->K2, AMPS_UPPER, &b->opts.refactor_order);
-    if (!b->F2) { s = c2.status; goto done; }
-    if (amps__bg_get(b, &b->cancel)) { s = AMPS_ERR_STATE; goto done; }
-    if (AMPS_TEST_BG_FAULT(2)) { s = amps__err(&c2, AMPS_ERR_NOT_SPD, "injected failure in the factorization"); goto done; }
-    if ((s = amps_factorize(&c2, b->F2, b->K2, AMPS_UPPER)) != AMPS_OK) goto done;
-    if (amps__bg_get(b, &b->cancel)) { s = AMPS_ERR_STATE; goto done; }
-    /* 3. the engine of the new base: forces, C with Delta = -sigma, then the log */
-    o2 = b->opts; o2.grow = 1; o2.refactor = AMPS_REFACTOR_OFF;
-    c2.nthreads = b->nthr;                          /* per-thread buffers for the owner's threads */
-    b->U2 = amps_update_create(&c2, b->K2, AMPS_UPPER, b->F2, &o2);
-    if (!b->U2) { s = c2.status; goto done; }
-    b->U2->nthr = 1;                                /* the catch-up runs on this thread alone */
-    for (j = 0; j < b->N0; j++)
-        if (b->f[j] != 0.0 && (s = amps_update_set_force(&c2, b->U2, 1, &j, b->f + j)) != AMPS_OK) goto done;
-    for (j = 0; j < b->nc; j++) {
-        double ms = -b->sigma;
-        if ((s = amps_update_add(&c2, b->U2, 1, b->ci + j, b->ci + j, &ms)) != AMPS_OK) goto done;
-    }
-    if ((s = amps_update_constrain(&c2, b->U2, b->nc, b->ci, b->cg)) != AMPS_OK) goto done;
-    if ((s = amps_update_commit(&c2, b->U2)) != AMPS_OK) goto done;
-    for (round = 0; round < 8; round++) {
-        amps_int lo, cnt;
-        amps__bg_lock(b);
-        lo = b->done; cnt = b->nlog - lo;
-        if (b->cancel || cnt < 32) { amps__bg_unlock(b); break; }
-        chunk = AMPS__CAST(amps__lentry *, amps__malloc(&c2, (size_t)cnt, sizeof(amps__lentry)));
-        if (chunk) memcpy(chunk, b->log + lo, sizeof(amps__lentry) * (size_t)cnt);
-        amps__bg_unlock(b);
-        if (!chunk) { s = AMPS_ERR_OOM; goto done; }
-        if (AMPS_TEST_BG_FAULT(3)) { s = amps__err(&c2, AMPS_ERR_SINGULAR_UPDATE, "injected failure in the catch-up"); goto done; }
-        if ((s = amps__bg_replay(&c2, b->U2, chunk, cnt, b->sigma)) != AMPS_OK) goto done;
-        if ((s = amps_update_commit(&c2, b->U2)) != AMPS_OK) goto done;
-        amps__free(&c2, chunk); chunk = NULL;
-        amps__bg_lock(b); b->done = lo + cnt; amps__bg_unlock(b);
-    }
-done:
-    amps__free(&c2, ti); amps__free(&c2, tj); amps__free(&c2, tx); amps__free(&c2, chunk);
+    if ((s = amps__bg_assemble(&c2, b)) == AMPS_OK && (s = amps__bg_factor(&c2, b)) == AMPS_OK &&
+        (s = amps__bg_engine(&c2, b)) == AMPS_OK)
+        s = amps__bg_follow_log(&c2, b);
     amps__bg_lock(b);
     if (s == AMPS_OK && b->cancel) s = b->status ? b->status : AMPS_ERR_STATE;
     if (s != AMPS_OK) {
@@ -6524,11 +6769,11 @@ static void amps__bg_join(amps__bg *b) {
 
 /* Ends the background job of U (joined, freed); the kernels get their threads back. */
 static void amps__bg_end(amps_ctx *ctx, amps_update *U, int failed) {
-    amps__bg_join(U->bg);
-    amps__bg_free(ctx, U->bg);
-    U->bg = NULL;
+    amps__bg_join(U->refac.job);
+    amps__bg_free(ctx, U->refac.job);
+    U->refac.job = NULL;
     U->nthr = U->nbuf;
-    if (failed) U->st.refactor_failed++;
+    if (failed) U->stats.refactor_failed++;
 }
 
 #ifndef AMPS_NO_THREADS
@@ -6541,96 +6786,112 @@ static double amps__fact_estimate(const amps_factor *F, double t_solve) {
 }
 #endif
 
-/* Swaps a ready re-factorization in: the rest of the log, the constraints and forces now, a
-   commit on the new base, then the new base takes the handle's place. The system is unchanged,
-   so the solution, reactions and their freshness carry over. On failure the engine keeps its
-   old factors. */
-static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
-    amps__bg *b = U->bg;
-    amps_update *V = b->U2, old;
-    amps_ctx c2;
+/* Brings the engine V of a ready re-factorization up to U: the rest of the log, the constraints
+   and forces as they are now (committed on V), then U's recorded changes (recorded on V). */
+static amps_status amps__bg_catch_up(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg *b) {
     amps_int lo, cnt, a, i;
-    amps_status s = AMPS_OK;
+    amps_status s;
+    amps__bg_lock(b); lo = b->log.done; cnt = b->log.n - lo; amps__bg_unlock(b);
+    if ((s = amps__bg_replay(c2, V, b->log.entries + lo, cnt, b->snap.sigma)) != AMPS_OK) return s;
+    /* constraints and forces as they are now */
+    for (a = 0; a < V->aug.size; a++) {
+        i = V->aug.idx[a];
+        if ((V->aug.kind[a] & AMPS__UCON) && !(U->aug.pos[i] >= 0 && (U->aug.kind[U->aug.pos[i]] & AMPS__UCON)))
+            if ((s = amps_update_release(c2, V, 1, &i)) != AMPS_OK) return s;
+    }
+    for (a = 0; a < U->aug.size; a++) {
+        amps_int a2;
+        i = U->aug.idx[a];
+        if (!(U->aug.kind[a] & AMPS__UCON)) continue;
+        a2 = i < V->N ? V->aug.pos[i] : -1;
+        if (a2 < 0 || !(V->aug.kind[a2] & AMPS__UCON) || V->aug.g[a2] != U->aug.g[a])
+            if ((s = amps_update_constrain(c2, V, 1, &i, U->aug.g + a)) != AMPS_OK) return s;
+    }
+    if ((s = amps_update_commit(c2, V)) != AMPS_OK) return s;
+    for (i = 0; i < U->N; i++)
+        if (V->force.f[i] != U->force.f[i] && (s = amps_update_set_force(c2, V, 1, &i, U->force.f + i)) != AMPS_OK) return s;
+    /* changes recorded but not committed move along (as the log does) */
+    if (U->pending.n_dofs > 0) {
+        amps__lentry e;
+        e.r = -1; e.c = U->pending.n_dofs; e.v = 0;
+        if ((s = amps__bg_replay(c2, V, &e, 1, b->snap.sigma)) != AMPS_OK) return s;
+        memcpy(V->force.f + U->N, U->force.f + U->N, sizeof(double) * (size_t)U->pending.n_dofs);
+    }
+    for (a = 0; a < U->pending.n_delta; a++)
+        if ((s = amps_update_add(c2, V, 1, &U->pending.delta[a].r, &U->pending.delta[a].c, &U->pending.delta[a].v)) != AMPS_OK) return s;
+    for (a = 0; a < U->pending.n_con; a++) {
+        s = U->pending.con[a].release ? amps_update_release(c2, V, 1, &U->pending.con[a].i) : amps_update_constrain(c2, V, 1, &U->pending.con[a].i, &U->pending.con[a].v);
+        if (s != AMPS_OK) return s;
+    }
+    return AMPS_OK;
+}
+
+/* The new base V takes the handle's place: U gets V's contents with U's options, watch set,
+   solution, reactions, freshness and stats; U's old contents are freed. The watch set's
+   closure (room for V->n) is recomputed on the new factor. */
+static void amps__bg_take(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg *b) {
+    amps_update old = *U;
+    amps_int a;
+    *U = *V;
+    U->grow = old.grow; U->nthr = old.nbuf; U->guard.tol = old.guard.tol;
+    U->refac = old.refac;
+    U->refac.job = NULL;
+    U->refac.F_own = b->result.F; U->refac.K_own = b->result.K;
+    b->result.F = NULL; b->result.K = NULL; b->result.U = NULL;
+    U->refac.t_factor = b->t1 - b->t0;
+    U->refac.t_step_base = 0; U->refac.t_extra = 0; U->refac.size_base = U->aug.size;
+    U->watch = old.watch;                           /* no job in progress (the callers check) */
+    old.watch.idx = NULL; old.watch.from_dense = NULL; old.watch.closure = NULL; old.refac.job = NULL;
+    U->watch.n_closure = 0;
+    if (U->watch.closure) {
+        amps_int nb = 0, k;
+        for (k = 0; k < U->watch.n; k++) if (U->watch.idx[k] < U->n) U->work.idx[nb++] = U->F->iperm[U->watch.idx[k]];
+        U->watch.n_closure = amps_closure(U->F, nb, U->work.idx, U->watch.closure, &U->work.mark_n);
+    }
+    memcpy(U->sol.x, old.sol.x, sizeof(double) * (size_t)old.N);
+    for (a = 0; a < U->aug.size; a++) {
+        amps_int ao = old.aug.pos[U->aug.idx[a]];
+        U->sol.react[a] = ao >= 0 ? old.sol.react[ao] : 0.0;
+    }
+    U->sol.x_stale = old.sol.x_stale; U->sol.has_x = old.sol.has_x; U->sol.react_stale = old.sol.react_stale; U->sol.has_react = old.sol.has_react;
+    U->sol.watched_stale = old.sol.watched_stale; U->sol.x_dim = old.sol.x_dim; U->sol.commit_unsolved = old.sol.commit_unsolved;
+    U->stats = old.stats;
+    U->stats.nrefactor++;
+    U->stats.t_refactor = b->t1 - b->t0;
+    *V = old;
+    amps_update_free(c2, V);
+}
+
+/* Swaps a ready re-factorization in: amps__bg_catch_up, then the new base takes the handle's
+   place. The system is unchanged, so the solution, reactions and their freshness carry over.
+   On failure the engine keeps its old factors (the re-factorization is dropped). */
+static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
+    amps__bg *b = U->refac.job;
+    amps_update *V = b->result.U;
+    amps_ctx c2;
+    amps_status s;
     double t0 = amps_now();
     amps_ctx_init(&c2); c2.alloc_user = ctx ? ctx->alloc_user : NULL;
     amps__bg_join(b);
-    amps__bg_lock(b); lo = b->done; cnt = b->nlog - lo; amps__bg_unlock(b);
     V->nthr = U->nbuf;
-    if ((s = amps__bg_replay(&c2, V, b->log + lo, cnt, b->sigma)) != AMPS_OK) goto fail;
-    /* constraints and forces as they are now */
-    for (a = 0; a < V->u; a++) {
-        i = V->uidx[a];
-        if ((V->ukind[a] & AMPS__UCON) && !(U->upos[i] >= 0 && (U->ukind[U->upos[i]] & AMPS__UCON)))
-            if ((s = amps_update_release(&c2, V, 1, &i)) != AMPS_OK) goto fail;
+    s = amps__bg_catch_up(&c2, U, V, b);
+    if (s == AMPS_OK && U->watch.closure && amps__realloc(&c2, (void **)&U->watch.closure, (size_t)V->n, sizeof(amps_int))) s = AMPS_ERR_OOM;
+    if (s != AMPS_OK) {
+        amps__bg_end(&c2, U, 1);
+        return amps__err(ctx, s, "amps_update: swapping the re-factorization in failed (%s); the engine keeps its factors", c2.msg);
     }
-    for (a = 0; a < U->u; a++) {
-        amps_int a2;
-        i = U->uidx[a];
-        if (!(U->ukind[a] & AMPS__UCON)) continue;
-        a2 = i < V->N ? V->upos[i] : -1;
-        if (a2 < 0 || !(V->ukind[a2] & AMPS__UCON) || V->g[a2] != U->g[a])
-            if ((s = amps_update_constrain(&c2, V, 1, &i, U->g + a)) != AMPS_OK) goto fail;
-    }
-    if ((s = amps_update_commit(&c2, V)) != AMPS_OK) goto fail;
-    for (i = 0; i < U->N; i++)
-        if (V->f[i] != U->f[i] && (s = amps_update_set_force(&c2, V, 1, &i, U->f + i)) != AMPS_OK) goto fail;
-    /* changes recorded but not committed move along (as the log does) */
-    if (U->kpend > 0) {
-        amps__lentry e;
-        e.r = -1; e.c = U->kpend; e.v = 0;
-        if ((s = amps__bg_replay(&c2, V, &e, 1, b->sigma)) != AMPS_OK) goto fail;
-        memcpy(V->f + U->N, U->f + U->N, sizeof(double) * (size_t)U->kpend);
-    }
-    for (a = 0; a < U->npd; a++)
-        if ((s = amps_update_add(&c2, V, 1, &U->pd[a].r, &U->pd[a].c, &U->pd[a].v)) != AMPS_OK) goto fail;
-    for (a = 0; a < U->npc; a++) {
-        s = U->pc[a].release ? amps_update_release(&c2, V, 1, &U->pc[a].i) : amps_update_constrain(&c2, V, 1, &U->pc[a].i, &U->pc[a].v);
-        if (s != AMPS_OK) goto fail;
-    }
-    if (U->wclo && amps__realloc(&c2, (void **)&U->wclo, (size_t)V->n, sizeof(amps_int))) { s = AMPS_ERR_OOM; goto fail; }
-    /* the new base takes the handle's place; the old contents are freed below */
-    old = *U;
-    *U = *V;
-    U->opts = old.opts; U->grow = old.grow; U->nthr = old.nbuf; U->guard_tol = old.guard_tol;
-    U->bg = NULL;
-    U->widx = old.widx; U->wovr = old.wovr; U->wclo = old.wclo; U->capw = old.capw; U->nw = old.nw;
-    old.widx = NULL; old.wovr = NULL; old.wclo = NULL; old.bg = NULL;
-    U->ncw = 0;
-    if (U->wclo) {
-        amps_int nb = 0, k;
-        for (k = 0; k < U->nw; k++) if (U->widx[k] < U->n) U->iwork[nb++] = U->F->iperm[U->widx[k]];
-        U->ncw = amps_closure(U->F, nb, U->iwork, U->wclo, &U->mk);
-    }
-    memcpy(U->x, old.x, sizeof(double) * (size_t)old.N);
-    for (a = 0; a < U->u; a++) {
-        amps_int ao = old.upos[U->uidx[a]];
-        U->react[a] = ao >= 0 ? old.react[ao] : 0.0;
-    }
-    U->dirty = old.dirty; U->has_sol = old.has_sol; U->rdirty = old.rdirty; U->has_react = old.has_react;
-    U->wdirty = old.wdirty; U->solN = old.solN; U->committed = old.committed;
-    U->st = old.st;
-    U->st.nrefactor++;
-    U->st.t_refactor = b->t1 - b->t0;
-    U->Fown = b->F2; U->Kown = b->K2;
-    b->F2 = NULL; b->K2 = NULL; b->U2 = NULL;
-    U->t_fact = b->t1 - b->t0;
-    U->t_step0 = 0; U->t_extra = 0; U->u0 = U->u;
-    *V = old;
-    amps_update_free(&c2, V);
+    amps__bg_take(&c2, U, V, b);
     amps__bg_free(&c2, b);
-    U->st.t_swap = amps_now() - t0;
+    U->stats.t_swap = amps_now() - t0;
     return AMPS_OK;
-fail:
-    amps__bg_end(&c2, U, 1);
-    return amps__err(ctx, s, "amps_update: swapping the re-factorization in failed (%s); the engine keeps its factors", c2.msg);
 }
 
 /* At the start of a commit: swaps a ready re-factorization in (not while a watched-solve job
    runs), drops a failed one; the AUTO policy starts one. Never fails the caller. */
 static void amps__bg_poll(amps_ctx *ctx, amps_update *U) {
-    if (U->bg) {
-        int st = amps__bg_get(U->bg, &U->bg->state);
-        if (st == AMPS__BG_READY && !U->job_y) {
+    if (U->refac.job) {
+        int st = amps__bg_get(U->refac.job, &U->refac.job->state);
+        if (st == AMPS__BG_READY && !U->watch.job_y) {
             amps_ctx c2;
             amps_ctx_init(&c2); c2.alloc_user = ctx ? ctx->alloc_user : NULL;
             (void)amps__bg_swap(&c2, U);
@@ -6643,14 +6904,14 @@ static void amps__bg_poll(amps_ctx *ctx, amps_update *U) {
    factorization (measured, or estimated from the solve), a re-factorization starts. */
 static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t) {
 #ifndef AMPS_NO_THREADS
-    if (U->opts.refactor != AMPS_REFACTOR_AUTO || U->bg || U->u <= U->u0 + 8) {
-        if (!U->bg && (U->t_step0 == 0 || t < U->t_step0)) U->t_step0 = t;
+    if (U->refac.opts.refactor != AMPS_REFACTOR_AUTO || U->refac.job || U->aug.size <= U->refac.size_base + 8) {
+        if (!U->refac.job && (U->refac.t_step_base == 0 || t < U->refac.t_step_base)) U->refac.t_step_base = t;
         return;
     }
-    if (U->t_step0 == 0 || t < U->t_step0) U->t_step0 = t;
-    if (U->t_fact == 0) U->t_fact = amps__fact_estimate(U->F, U->st.t_step[6]);
-    U->t_extra += t - U->t_step0;
-    if (U->t_extra >= U->opts.refactor_ratio * U->t_fact) {
+    if (U->refac.t_step_base == 0 || t < U->refac.t_step_base) U->refac.t_step_base = t;
+    if (U->refac.t_factor == 0) U->refac.t_factor = amps__fact_estimate(U->F, U->stats.t_step[AMPS_STEP_SOLVE]);
+    U->refac.t_extra += t - U->refac.t_step_base;
+    if (U->refac.t_extra >= U->refac.opts.refactor_ratio * U->refac.t_factor) {
         amps_ctx c2;
         amps_ctx_init(&c2); c2.alloc_user = ctx ? ctx->alloc_user : NULL;
         (void)amps_update_refactor_start(&c2, U);
@@ -6663,17 +6924,17 @@ static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t) {
 AMPS_API amps_status amps_update_refactor_start(amps_ctx *ctx, amps_update *U) {
     amps__bg *b;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_refactor_start: NULL engine");
-    if (U->opts.refactor == AMPS_REFACTOR_OFF) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_start: re-factorization is off (opts.refactor)");
-    if (U->bg) return AMPS_WARN_NOOP;
+    if (U->refac.opts.refactor == AMPS_REFACTOR_OFF) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_start: re-factorization is off (opts.refactor)");
+    if (U->refac.job) return AMPS_WARN_NOOP;
     b = amps__bg_snapshot(ctx, U);
     if (!b) return ctx && ctx->status ? ctx->status : AMPS_ERR_OOM;
-    U->bg = b;
-    U->t_extra = 0;
+    U->refac.job = b;
+    U->refac.t_extra = 0;
 #ifndef AMPS_NO_THREADS
     if (pthread_create(&b->th, NULL, amps__bg_main, b) == 0) {
         /* the worker takes refactor_threads cores: the kernels leave them to it (OpenMP teams
            that wait on a descheduled thread are slower than fewer threads) */
-        int nt = U->nbuf - (U->opts.refactor_threads > 0 ? U->opts.refactor_threads : 1);
+        int nt = U->nbuf - U->refac.opts.refactor_threads;
         U->nthr = nt > 1 ? nt : 1;
         b->has_thread = 1;
         return AMPS_OK;
@@ -6686,8 +6947,8 @@ AMPS_API amps_status amps_update_refactor_start(amps_ctx *ctx, amps_update *U) {
 AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U) {
     amps__bg *b;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_refactor_wait: NULL engine");
-    if (!(b = U->bg)) return AMPS_WARN_NOOP;
-    if (U->job_y) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_wait: a watched-solve job is in progress");
+    if (!(b = U->refac.job)) return AMPS_WARN_NOOP;
+    if (U->watch.job_y) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_wait: a watched-solve job is in progress");
     amps__bg_join(b);
     if (b->state == AMPS__BG_READY) return amps__bg_swap(ctx, U);
     {
@@ -6700,8 +6961,8 @@ AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U) {
 }
 
 static void amps__bg_discard(amps_ctx *ctx, amps_update *U) {
-    if (!U->bg) return;
-    amps__bg_lock(U->bg); U->bg->cancel = 1; amps__bg_unlock(U->bg);
+    if (!U->refac.job) return;
+    amps__bg_lock(U->refac.job); U->refac.job->cancel = 1; amps__bg_unlock(U->refac.job);
     amps__bg_end(ctx, U, 0);
 }
 
@@ -6713,7 +6974,7 @@ AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U) {
     amps_status s;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_refactor: NULL engine");
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
-    if (U->bg) amps_update_refactor_cancel(ctx, U);
+    if (U->refac.job) amps_update_refactor_cancel(ctx, U);
     if ((s = amps_update_refactor_start(ctx, U)) != AMPS_OK) return s;
     return amps_update_refactor_wait(ctx, U);
 }

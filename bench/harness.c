@@ -49,10 +49,10 @@ static int cur_step;
 
 static void put(const char *method, double tol, double t, int iters, double res, double err, int conv, long dim, long nsys,
                 const double *ts) {
-    static const double z[7] = {0};
+    static const double z[AMPS_STEP_COUNT] = {0};
     if (!ts) ts = z;
     fprintf(csv, "%d,%s,%g,%.6e,%d,%.3e,%.3e,%d,%ld,%ld,%.4e,%.4e,%.4e,%.4e,%.4e,%.4e\n", cur_step, method, tol, t, iters, res, err,
-            conv, dim, nsys, ts[1], ts[2], ts[3], ts[4], ts[5], ts[6]);
+            conv, dim, nsys, ts[AMPS_STEP_WCOLS], ts[AMPS_STEP_GRAM], ts[AMPS_STEP_DCOLS], ts[AMPS_STEP_RHS], ts[AMPS_STEP_DENSE], ts[AMPS_STEP_SOLVE]);
 }
 
 static int envi(const char *name, int def) { const char *s = getenv(name); return s ? atoi(s) : def; }

@@ -51,10 +51,10 @@ static const double EPS = 2.220446049250313e-16;
 static double min_pivot_ratio(const amps_update *U) {
     amps_int q;
     double r = 1.0;
-    for (q = 0; q < U->u; q++) {
-        amps_int j = U->colorder[q];
-        double piv = fabs(U->LU[(size_t)q * (size_t)U->capu + (size_t)q]);
-        double ref = ((U->ukind[j] & AMPS__UCON) || U->cnorm[j] > 1.0) ? U->cnorm[j] : 1.0;
+    for (q = 0; q < U->aug.size; q++) {
+        amps_int j = U->lu.col_order[q];
+        double piv = fabs(U->lu.LU[(size_t)q * (size_t)U->aug.cap + (size_t)q]);
+        double ref = ((U->aug.kind[j] & AMPS__UCON) || U->lu.col_norm[j] > 1.0) ? U->lu.col_norm[j] : 1.0;
         if (ref > 0 && piv / ref < r) r = piv / ref;
     }
     return r;
@@ -104,7 +104,7 @@ static double bbox_len(const amps_mesh *m, double lo[3], double hi[3]) {
    step), guard (guard_tol = 1e-12), norefactor (no background re-factorization). */
 static const char *variant = "default";
 static void variant_opts(amps_update_opts *o) {
-    if (!strcmp(variant, "eq320")) o->eq320 = 1;
+    if (!strcmp(variant, "eq320")) o->xs_from_dense = 1;
     else if (!strcmp(variant, "norefine")) o->refine = 0;
     else if (!strcmp(variant, "guard")) o->guard_tol = 1e-12;
     else if (!strcmp(variant, "norefactor")) o->refactor = AMPS_REFACTOR_OFF;

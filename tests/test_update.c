@@ -541,6 +541,12 @@ static void test_errors(void) {
         CHECK(amps_update_add_dofs(&m2.ctx, m2.U, 1, &first) == AMPS_ERR_CAPACITY, "cap_new not enforced");
         { int idx2[3] = {4, 7, 9}; double v[3] = {1, -1, 1}; change_term(&m2, 3, idx2, v, 2.0, 0); }
         CHECK(amps_update_commit(&m2.ctx, m2.U) == AMPS_ERR_CAPACITY, "cap_mod not enforced: %s", m2.ctx.msg);
+        {   /* the failed commit restored the system and discarded the recorded changes */
+            amps_update_stats st2;
+            amps_update_get_stats(m2.U, &st2);
+            CHECK(st2.nsys == 0 && st2.ncommit == 0 && amps_update_dim(m2.U) == 40, "failed commit changed the system");
+            CHECK(amps_update_commit(&m2.ctx, m2.U) == AMPS_OK, "failed commit kept its changes: %s", m2.ctx.msg);
+        }
         trip_free(&m2.T);
         { int k; for (k = 0; k < nz; k++) trip_add(&m2.T, ti[k], tj[k], tx[k]); }
         model_check(&m2, 1e-10, "after capacity error");
@@ -564,17 +570,17 @@ static void test_guard(void) {
     amps_update_get_stats(m.U, &st);
     amps_update_residual(&m.ctx, m.U, &res);
     CHECK(st.relres >= 0 && fabs(st.relres - res) <= 0.5 * res + 1e-15, "guard residual %.3e vs %.3e", st.relres, res);
-    CHECK(st.guard_result >= 0 && st.guard_result <= 2 && st.relres <= 1e-8, "guard: result %d, residual %.3e", st.guard_result, st.relres);
+    CHECK(st.guard_result >= AMPS_GUARD_MET && st.guard_result <= AMPS_GUARD_REFACTORED && st.relres <= 1e-8, "guard: result %d, residual %.3e", (int)st.guard_result, st.relres);
     {   /* an unreachable tolerance: refinement, a re-factorization, then the warning */
         amps_update *U = m.U;
         double *x = (double *)malloc(sizeof(double) * m.N);
         int idx = 0; double fv = 1.0;
-        U->guard_tol = 1e-30;
+        U->guard.tol = 1e-30;
         amps_update_set_force(&m.ctx, U, 1, &idx, &fv);
         CHECK(amps_update_solve(&m.ctx, U, x) == AMPS_WARN_INACCURATE, "unreachable guard tolerance not reported: %s", m.ctx.msg);
         amps_update_get_stats(U, &st);
-        CHECK(st.guard_result == 3 && st.nrefactor >= 1, "guard: result %d, re-factorizations %d", st.guard_result, (int)st.nrefactor);
-        U->guard_tol = 1e-8;
+        CHECK(st.guard_result == AMPS_GUARD_NOT_MET && st.nrefactor >= 1, "guard: result %d, re-factorizations %d", (int)st.guard_result, (int)st.nrefactor);
+        U->guard.tol = 1e-8;
         free(x);
     }
     report("beam 5x5x96 cuts, guard", &m);

@@ -2,7 +2,7 @@
    amps.h and prints one line per solve and a summary.
 
    usage: amps_replay [-q] [--residual] [--threads N] [--order auto|amd|nd|metis|natural]
-                      [--dual] [--eq320] [--surface FILE] scenario
+                      [--dual] [--xs-from-dense] [--surface FILE] scenario
    --surface FILE writes the deformed boundary triangles (cut faces included) at the end, one
    block of 4 lines "x y z |u|" per triangle, for gnuplot's "with polygons".
 
@@ -344,7 +344,7 @@ int main(int argc, char **argv) {
         if (!strcmp(argv[a], "-q")) R.quiet = 1;
         else if (!strcmp(argv[a], "--residual")) R.residual_on = 1;
         else if (!strcmp(argv[a], "--dual")) R.opts.update.formulation = AMPS_FORM_DUAL;
-        else if (!strcmp(argv[a], "--eq320")) R.opts.update.eq320 = 1;
+        else if (!strcmp(argv[a], "--xs-from-dense")) R.opts.update.xs_from_dense = 1;
         else if (!strcmp(argv[a], "--threads") && a + 1 < argc) R.ctx.nthreads = atoi(argv[++a]);
         else if (!strcmp(argv[a], "--surface") && a + 1 < argc) surface = argv[++a];
         else if (!strcmp(argv[a], "--order") && a + 1 < argc) {
@@ -359,7 +359,7 @@ int main(int argc, char **argv) {
         else path = argv[a];
     }
     if (!path) {
-        fprintf(stderr, "usage: amps_replay [-q] [--residual] [--threads N] [--order auto|amd|nd|metis|natural] [--dual] [--eq320] [--surface FILE] scenario\n");
+        fprintf(stderr, "usage: amps_replay [-q] [--residual] [--threads N] [--order auto|amd|nd|metis|natural] [--dual] [--xs-from-dense] [--surface FILE] scenario\n");
         return 2;
     }
 #ifdef _OPENMP

@@ -88,7 +88,7 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size) {
         o.cap_pending = (amps_int)(b2 % 9);
         o.grow = (int)(b3 & 1);
         o.formulation = (b3 & 2) ? AMPS_FORM_DUAL : AMPS_FORM_PRIMAL;
-        o.eq320 = (int)((b3 >> 2) & 1);
+        o.xs_from_dense = (int)((b3 >> 2) & 1);
         o.refine = (int)((b3 >> 3) % 3);
         o.guard_tol = (b3 & 64) ? 1e-12 : 0.0;
         o.cap_delta = (amps_int)(b4 % 40);
