@@ -1,6 +1,7 @@
 /* amps.h - exact real-time solves of finite element models under cuts, pins and forces.
    Augmented Matrix Principal Submatrix updates (AMPS) over a sparse LDL^T factorization.
-   Single-file library, MIT license (see end of file).
+   Single-file library, MIT license (see end of file). The FEM layer is linear elasticity (small
+   strains) on linear tetrahedra.
 
    USAGE
      In exactly one C or C++ file:
@@ -8,28 +9,61 @@
          #include "amps.h"
      Everywhere else just #include "amps.h".
 
+   CONTENTS
+     The header reads in the order the data flows. Each part has its declarations first and its
+     implementation after the IMPLEMENTATION line, in the same order; grep '\[amps:PART' finds
+     both banners (the implementation's tag is "[amps:PART impl]").
+       [amps:common]    status codes, the context (allocator user pointer, threads, last error),
+                        the clock
+       [amps:sparse]    compressed sparse column matrices: triplets, checks, products
+       [amps:ordering]  fill-reducing orderings: minimum degree, nested dissection, METIS
+       [amps:symbolic]  elimination tree, postorder, column counts
+       [amps:numeric]   the LDL^T factor: analysis (ordering + symbolic), numeric factorization
+       [amps:solve]     triangular solves, elimination-tree closures, sparse and partial solves
+       [amps:update]    the AMPS engine: changed rows, appended DOFs, constraints and forces, one
+                        commit (Steps 1-5) and the solves (Step 6); watch sets, reactions, the
+                        accuracy guard, background re-factorization
+       [amps:fem]       the tetrahedral mesh (cuts, assembly, stresses) and P1 elasticity
+       [amps:scene]     a mesh with fixed nodes, forces, pins and cuts, solved by the engine
+       [amps:io]        mesh readers (TetGen, Gmsh, MEDIT) and writers (VTU, TetGen, Gmsh, MEDIT)
+
+   REFERENCES (cited by these short names)
+     [AMPS]  Y.-H. Yeung, A. Pothen, J. Crouch, "AMPS: real-time mesh cutting with augmented
+             matrices for surgical simulations", Numerical Linear Algebra with Applications, 2018.
+     [Interactive cutting]  Y.-H. Yeung, J. Crouch, A. Pothen, "Interactively cutting and
+             constraining vertices in meshes using augmented matrices", ACM Transactions on
+             Graphics, 2016.
+     [CSparse]  T. A. Davis, "Direct Methods for Sparse Linear Systems", SIAM, 2006.
+
    OPTIONS (define before the implementation include)
      AMPS_STATIC          all functions static (private copy per translation unit)
      AMPS_INT             index type (default int; e.g. -DAMPS_INT=int64_t for huge models)
      AMPS_MALLOC(sz,u) AMPS_REALLOC(p,sz,u) AMPS_FREE(p,u)
                           custom allocator; define all three or none. u is amps_ctx.alloc_user.
      AMPS_ASSERT(x)       internal assertion (default assert from <assert.h>)
+     AMPS_NOW()           your monotonic clock in seconds (default: see amps_now)
      AMPS_USE_METIS       enable AMPS_ORDER_METIS (link -lmetis)
      AMPS_PIVOT_TOL       LDL^T pivots below this times the column's diagonal are "not SPD" (1e-12)
      AMPS_COUNT_TOUCH     tests: count the L entries the sparse and partial solves read
      AMPS_NO_FEM          linear algebra only (sparse, ordering, factor, solve, update engine):
                           leaves out the mesh and element layer, the scene and the mesh I/O
      AMPS_NO_STDIO        no <stdio.h>: leaves out the file readers and writers (amps_mesh_read*,
-                          amps_mesh_write_*); the *_mem readers stay. Error messages never use stdio
-                          (a private formatter, the same in every build).
+                          amps_mesh_write_*); the *_mem readers stay. Error messages never use
+                          stdio (a private formatter, the same in every build).
      AMPS_NO_THREADS      leave out amps' own background threads (pthreads); OpenMP is separate
      OpenMP kernels are used when compiled with -fopenmp (_OPENMP defined), else none.
 
-   ERRORS
-     Every call that can fail takes an amps_ctx* and returns an amps_status (or NULL for
-     constructors). On failure ctx->status and ctx->msg say what went wrong, e.g.
-     "amps_factorize: zero or negative pivot at column 17 (original numbering)".
-     A failed call leaves its objects as they were.
+   ERRORS AND OWNERSHIP
+     Every call that can fail takes an amps_ctx* and returns an amps_status (or NULL, or -1 for
+     a count). On failure ctx->status and ctx->msg say what went wrong, e.g.
+     "amps_factorize: zero or negative pivot at column 17 (original numbering)". A positive
+     status (AMPS_WARN_*) is a success with a remark.
+     A failed call leaves its objects as they were, except where its declaration says what
+     changes: amps_factorize leaves the factor without values, a failed amps_update_commit
+     discards the changes recorded since the last commit, and the update calls that commit
+     first can fail after their commit went through. Capacities may have grown.
+     Objects are owned by the caller, who frees them with the matching *_free, except the mesh
+     given to amps_scene_create: the scene owns it from then on, also when the create fails.
 
    EXAMPLE
      amps_ctx ctx; amps_ctx_init(&ctx);
@@ -617,6 +651,9 @@ AMPS_API void amps_sym3_eig(const double s[6], double lam[3]);
    a cut changes the rows of v, its copy v' and the nodes of the tets that moved, computed from
    the element stiffness of those tets only. Lifecycle: create, fix nodes and set materials,
    then any sequence of force / pin / release / cut / solve (the first of these factors K).
+   A failed scene call leaves the scene as it was. Structural changes (a pin of a node not
+   pinned yet, a release, a cut) commit to the engine at once; moved pins and forces wait for
+   the next solve, whose commit then has only values to apply.
    Allocation: amps_scene_prepare (or the first change) allocates everything; later calls
    allocate only when a capacity is exceeded and opts.update.grow is set (the default). */
 typedef struct amps_scene amps_scene;
