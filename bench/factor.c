@@ -31,11 +31,8 @@
    Build: cc -std=c99 -O2 -fopenmp -I. -I/usr/include/suitesparse -o build/bench/factor bench/factor.c -lcholmod -lm */
 #define AMPS_IMPLEMENTATION
 #include "../amps.h"
+#include "bench.h"
 #include <cholmod.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <math.h>
 
 #define NSPARSE 50   /* random indices for the single-nonzero solves */
 
@@ -52,11 +49,6 @@ static unsigned long rng_state = 12345u;
 static unsigned long rng(void) {
     rng_state = rng_state * 6364136223846793005ul + 1442695040888963407ul;
     return (rng_state >> 33) & 0x7fffffffu;
-}
-
-static void die(const char *what, const char *msg) {
-    fprintf(stderr, "factor: %s: %s\n", what, msg);
-    exit(1);
 }
 
 static double relres(const amps_csc *K, const double *x, const double *b, double *r) {
@@ -80,7 +72,7 @@ static double chol_count(cholmod_sparse *A, int *perm, int ordering, cholmod_com
     t0 = amps_now();
     L = ordering == CHOLMOD_GIVEN ? cholmod_analyze_p(A, perm, NULL, 0, c) : cholmod_analyze(A, c);
     if (t) *t = amps_now() - t0;
-    if (!L) die("cholmod_analyze", "failed");
+    if (!L) bench_die("cholmod_analyze", "failed");
     if (ordering != CHOLMOD_GIVEN && L->ordering != ordering)
         fprintf(stderr, "factor: warning: CHOLMOD used ordering %d instead of %d\n", L->ordering, ordering);
     for (j = 0; j < L->n; j++) lnz += ((int *)L->ColCount)[j];
@@ -100,7 +92,7 @@ static int *our_order(amps_ctx *ctx, const amps_csc *K, amps_ordering method, co
     o.block = 3;
     o.coords = coords;
     t0 = amps_now();
-    if (amps_order(ctx, K, AMPS_UPPER, &o, p) != AMPS_OK) die("amps_order", ctx->msg);
+    if (amps_order(ctx, K, AMPS_UPPER, &o, p) != AMPS_OK) bench_die("amps_order", ctx->msg);
     *t = amps_now() - t0;
     for (k = 0; k < K->ncol; k++) ip[k] = (int)p[k];
     free(p);
@@ -116,7 +108,7 @@ int main(int argc, char **argv) {
     const char *spec, *out;
     amps_int nn, v, n, k, *dof, nfree = 0;
     unsigned char *fixed;
-    double *coords, lo = 1e300, hi = -1e300;
+    double *coords, lo[3], hi[3];
     amps_csc *K;
     cholmod_common c;
     cholmod_sparse *A;
@@ -141,37 +133,30 @@ int main(int argc, char **argv) {
     nthr = nthreads();
 
     /* mesh, fixed nodes, K */
-    if (!strncmp(spec, "beam:", 5)) m = amps_mesh_beam(&ctx, atoi(spec + 5));
-    else if (!strncmp(spec, "brick:", 6)) m = amps_mesh_brick(&ctx, atoi(spec + 6));
-    else m = amps_mesh_read(&ctx, spec);
-    if (!m) die(spec, ctx.msg);
-    if (amps_mesh_set_material(&ctx, m, 1000.0, 0.3) != AMPS_OK) die("material", ctx.msg);
+    m = bench_mesh(&ctx, spec);
     nn = m->nnode;
-    fixed = (unsigned char *)calloc((size_t)nn, 1);
+    bench_bbox(m, lo, hi);
+    fixed = bench_base(m, 1, lo, hi);   /* a file: the bunny's base; beam, brick: the face z = 0 */
     if (!strncmp(spec, "beam:", 5)) for (v = 0; v < nn; v++) fixed[v] = m->xyz[3 * v + 2] < 0.5;
     else if (!strncmp(spec, "brick:", 6)) for (v = 0; v < nn; v++) fixed[v] = m->xyz[3 * v + 2] < 1e-9;
-    else {
-        for (v = 0; v < nn; v++) { double yv = m->xyz[3 * v + 1]; if (yv < lo) lo = yv; if (yv > hi) hi = yv; }
-        for (v = 0; v < nn; v++) fixed[v] = m->xyz[3 * v + 1] < lo + 0.04 * (hi - lo) + 1e-12;
-    }
     dof = (amps_int *)malloc(sizeof(amps_int) * 3 * (size_t)nn);
     n = amps_mesh_number_dofs(m, fixed, dof);
-    if (n <= 0) die(spec, "no free DOFs");
+    if (n <= 0) bench_die(spec, "no free DOFs");
     K = amps_mesh_assemble(&ctx, m, dof, n);
-    if (!K) die("amps_mesh_assemble", ctx.msg);
+    if (!K) bench_die("amps_mesh_assemble", ctx.msg);
     nnzK = (double)K->p[n];
     /* coordinates of the free nodes in DOF-block order (as amps_scene_prepare does) */
     coords = (double *)malloc(sizeof(double) * (size_t)n);
     for (v = 0; v < nn; v++)
         if (dof[3 * v] >= 0) { for (k = 0; k < 3; k++) coords[3 * nfree + k] = m->xyz[3 * v + k]; nfree++; }
-    if (3 * nfree != n) die(spec, "free nodes do not have 3 consecutive DOFs each");
+    if (3 * nfree != n) bench_die(spec, "free nodes do not have 3 consecutive DOFs each");
     amps_mesh_free(&ctx, m);
     free(fixed); free(dof);
 
     /* CHOLMOD copy of K (upper, stype 1) */
     cholmod_start(&c);
     A = cholmod_allocate_sparse((size_t)n, (size_t)n, (size_t)K->p[n], 1, 1, 1, CHOLMOD_REAL, &c);
-    if (!A) die("cholmod_allocate_sparse", "out of memory");
+    if (!A) bench_die("cholmod_allocate_sparse", "out of memory");
     for (k = 0; k <= n; k++) ((int *)A->p)[k] = (int)K->p[k];
     for (k = 0; k < K->p[n]; k++) { ((int *)A->i)[k] = (int)K->i[k]; ((double *)A->x)[k] = K->x[k]; }
 
@@ -205,19 +190,19 @@ int main(int argc, char **argv) {
         t_ana = amps_now() - t0;
         free(pg);
     }
-    if (!F) die("amps_analyze", ctx.msg);
+    if (!F) bench_die("amps_analyze", ctx.msg);
     l_nd_amps = amps_factor_nnz(F);
     if (l_nd_amps != l_nd) fprintf(stderr, "factor: warning: nnz(L) of the ND perm: amps %.0f, CHOLMOD symbolic %.0f\n", l_nd_amps, l_nd);
     for (r = 0, nrep = 3; r < nrep; r++) {
         t0 = amps_now();
-        if (amps_factorize(&ctx, F, K, AMPS_UPPER) != AMPS_OK) die("amps_factorize", ctx.msg);
+        if (amps_factorize(&ctx, F, K, AMPS_UPPER) != AMPS_OK) bench_die("amps_factorize", ctx.msg);
         t = amps_now() - t0;
         if (r == 0) nrep = NREP(t);
         if (t < t_f) t_f = t;
     }
     for (r = 0; r < 5; r++) {
         t0 = amps_now();
-        if (amps_solve(&ctx, F, b, x, w) != AMPS_OK) die("amps_solve", ctx.msg);
+        if (amps_solve(&ctx, F, b, x, w) != AMPS_OK) bench_die("amps_solve", ctx.msg);
         t = amps_now() - t0;
         if (t < t_s) t_s = t;
     }
@@ -227,7 +212,7 @@ int main(int argc, char **argv) {
     y0 = (double *)malloc(sizeof(double) * (size_t)n);
     y = (double *)malloc(sizeof(double) * (size_t)n);
     xs = (double *)calloc((size_t)n, sizeof(double));
-    if (amps_marker_init(&ctx, &mk, n) != AMPS_OK) die("amps_marker_init", ctx.msg);
+    if (amps_marker_init(&ctx, &mk, n) != AMPS_OK) bench_die("amps_marker_init", ctx.msg);
     for (k = 0; k < n; k++) y0[k] = b[F->perm[k]];
     amps_lsolve(F, y0);
     amps_dsolve(F, y0);
@@ -261,18 +246,18 @@ int main(int argc, char **argv) {
     /* simplicial LDL^T */
     c.supernodal = CHOLMOD_SIMPLICIAL; c.final_ll = 0;
     L = cholmod_analyze_p(A, p_nd, NULL, 0, &c);
-    if (!L) die("cholmod_analyze_p (simplicial)", "failed");
+    if (!L) bench_die("cholmod_analyze_p (simplicial)", "failed");
     flops = c.fl;
     for (r = 0, nrep = 3; r < nrep; r++) {
         t0 = amps_now();
-        if (!cholmod_factorize(A, L, &c) || L->minor < L->n) die("cholmod_factorize (simplicial)", "failed");
+        if (!cholmod_factorize(A, L, &c) || L->minor < L->n) bench_die("cholmod_factorize (simplicial)", "failed");
         t = amps_now() - t0;
         if (r == 0) nrep = NREP(t);
         if (t < t_fs) t_fs = t;
     }
     for (r = 0; r < 5; r++) {
         t0 = amps_now();
-        if (!cholmod_solve2(CHOLMOD_A, L, B, NULL, &X, NULL, &Y, &E, &c)) die("cholmod_solve2", "failed");
+        if (!cholmod_solve2(CHOLMOD_A, L, B, NULL, &X, NULL, &Y, &E, &c)) bench_die("cholmod_solve2", "failed");
         t = amps_now() - t0;
         if (t < t_ss) t_ss = t;
     }
@@ -283,17 +268,17 @@ int main(int argc, char **argv) {
     t0 = amps_now();
     L = cholmod_analyze_p(A, p_nd, NULL, 0, &c);
     t_cana_S = amps_now() - t0;
-    if (!L) die("cholmod_analyze_p (supernodal)", "failed");
+    if (!L) bench_die("cholmod_analyze_p (supernodal)", "failed");
     for (r = 0, nrep = 3; r < nrep; r++) {
         t0 = amps_now();
-        if (!cholmod_factorize(A, L, &c) || L->minor < L->n) die("cholmod_factorize (supernodal)", "failed");
+        if (!cholmod_factorize(A, L, &c) || L->minor < L->n) bench_die("cholmod_factorize (supernodal)", "failed");
         t = amps_now() - t0;
         if (r == 0) nrep = NREP(t);
         if (t < t_fS) t_fS = t;
     }
     for (r = 0; r < 5; r++) {
         t0 = amps_now();
-        if (!cholmod_solve2(CHOLMOD_A, L, B, NULL, &X, NULL, &Y, &E, &c)) die("cholmod_solve2", "failed");
+        if (!cholmod_solve2(CHOLMOD_A, L, B, NULL, &X, NULL, &Y, &E, &c)) bench_die("cholmod_solve2", "failed");
         t = amps_now() - t0;
         if (t < t_sS) t_sS = t;
     }
@@ -321,15 +306,12 @@ int main(int argc, char **argv) {
                " closure %.0f of %ld)\n",
                1e-9 * flops, 1e-9 * flops / t_f, NSPARSE, clos_avg, (long)n);
         fflush(stdout);
-        csv = fopen(out, "a");
-        if (!csv) die(out, "cannot open for appending");
-        fseek(csv, 0, SEEK_END);
-        if (ftell(csv) == 0)
-            fprintf(csv, "mesh,threads,n,nnzK,nnzL_amd,nnzL_cholmod_amd,ratio_amd,nnzL_nd,nnzL_cholmod_metis,ratio_nd,nnzL_auto,"
+        csv = bench_csv(out, "mesh,threads,n,nnzK,nnzL_amd,nnzL_cholmod_amd,ratio_amd,nnzL_nd,nnzL_cholmod_metis,ratio_nd,nnzL_auto,"
                          "t_order_amd,t_order_nd,t_order_auto,t_cholmod_amd,t_cholmod_metis,t_analyze_given,t_cholmod_analyze_given_simpl,"
                          "t_cholmod_analyze_given_super,flops,t_factor,t_factor_cholmod_simpl,t_factor_cholmod_super,ratio_factor_simpl,"
                          "ratio_factor_super,t_solve,t_solve_cholmod_simpl,t_solve_cholmod_super,ratio_solve_best,t_lsolve_sparse1,"
-                         "closure1,closure1_frac,t_ltsolve_partial1,relres,relres_cholmod_simpl,relres_cholmod_super\n");
+                         "closure1,closure1_frac,t_ltsolve_partial1,relres,relres_cholmod_simpl,relres_cholmod_super");
+        if (!csv) bench_die(out, "cannot open for appending");
         fprintf(csv, "%s,%d,%ld,%.0f,%.0f,%.0f,%.4f,%.0f,%.0f,%.4f,%.0f,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.4f,%.4f,"
                      "%.6e,%.6e,%.6e,%.4f,%.6e,%.1f,%.6f,%.6e,%.3e,%.3e,%.3e\n",
                 spec, nthr, (long)n, nnzK, l_amd, l_camd, l_amd / l_camd, l_nd, l_metis, l_nd / l_metis, l_auto,

@@ -1,7 +1,7 @@
 /* bench/harness: every solver over the same step sequence, time against error, side by side.
 
    usage: harness <mesh> <cut|deform> <steps> <every> <out.csv>
-     mesh: beam:<h> | brick:<R> | TetGen .node / .msh / .mesh (see bench_common.h for the scenario)
+     mesh: beam:<h> | brick:<R> | TetGen .node / .msh / .mesh (see bench.h for the scenario)
      every: the sampled steps are 1, every k-th and the last; the reference solution, CHOLMOD
             refactorization, PCG and GMRES run at sampled steps only; amps.h and CHOLMOD
             update/downdate (stateful) run at every step.
@@ -33,11 +33,11 @@
    The iterative methods run once per step to the tightest tolerance; the time and iterate at
    which each looser tolerance is first met are recorded (a run stopped there would do exactly
    the same work). Reference: CHOLMOD's solution improved by 3 refinement steps (residual in
-   double). Errors and residuals are those of the reduced system (bench_common.h).
+   double). Errors and residuals are those of the reduced system (bench.h).
    Build: see bench/run.sh. */
 #define AMPS_IMPLEMENTATION
 #include "../amps.h"
-#include "bench_common.h"
+#include "bench.h"
 #include <cholmod.h>
 #include <umfpack.h>
 
@@ -60,7 +60,7 @@ static int envi(const char *name, int def) { const char *s = getenv(name); retur
 /* ======================= CHOLMOD on the explicit reduced system ======================= */
 
 /* reduced upper matrix K_FF and b_F; fmap[i] = position of equation i in F or -1 */
-static cholmod_sparse *reduced(const bsys *S, int *fmap, cholmod_dense **B, cholmod_common *c) {
+static cholmod_sparse *reduced(const bench_sys *S, int *fmap, cholmod_dense **B, cholmod_common *c) {
     int i, j, p, nf = 0, nz = 0;
     cholmod_sparse *A;
     for (i = 0; i < S->n; i++) fmap[i] = S->con[i] ? -1 : nf++;
@@ -79,14 +79,14 @@ static cholmod_sparse *reduced(const bsys *S, int *fmap, cholmod_dense **B, chol
     return A;
 }
 
-static void expand(const bsys *S, const int *fmap, const double *xf, double *x) {
+static void expand(const bench_sys *S, const int *fmap, const double *xf, double *x) {
     int i;
     for (i = 0; i < S->n; i++) x[i] = fmap[i] >= 0 ? xf[fmap[i]] : S->g[i];
 }
 
 /* CHOLMOD refactor + solve (timed), a second solve (timed), then xref by 3 refinement steps;
    with simpl, also the simplicial LDL' refactor. Writes the rows of chol_refactor(_simpl), chol_solve. */
-static void reference(const bsys *S, double *xref, double *work, int simpl) {
+static void reference(const bench_sys *S, double *xref, double *work, int simpl) {
     cholmod_common c;
     cholmod_sparse *A;
     cholmod_dense *B, *X, *X2, *R;
@@ -116,8 +116,8 @@ static void reference(const bsys *S, double *xref, double *work, int simpl) {
         cholmod_free_dense(&R, &c); cholmod_free_dense(&D, &c);
     }
     expand(S, fmap, (double *)X2->x, xref);
-    put("chol_refactor", 0, t_ref, 0, bsys_relres(S, x0, work), bsys_relerr(S, x0, xref), 1, S->n, 0, NULL);
-    put("chol_solve", 0, t_sol, 0, bsys_relres(S, x0, work), bsys_relerr(S, x0, xref), 1, S->n, 0, NULL);
+    put("chol_refactor", 0, t_ref, 0, bench_sys_relres(S, x0, work), bench_sys_relerr(S, x0, xref), 1, S->n, 0, NULL);
+    put("chol_solve", 0, t_sol, 0, bench_sys_relres(S, x0, work), bench_sys_relerr(S, x0, xref), 1, S->n, 0, NULL);
     cholmod_free_dense(&X, &c); cholmod_free_dense(&X2, &c); cholmod_free_factor(&L, &c);
     if (simpl) {
         c.supernodal = CHOLMOD_SIMPLICIAL; c.final_ll = 0;
@@ -127,7 +127,7 @@ static void reference(const bsys *S, double *xref, double *work, int simpl) {
         X = cholmod_solve(CHOLMOD_A, L, B, &c);
         t_ref = amps_now() - t0;
         expand(S, fmap, (double *)X->x, x0);
-        put("chol_refactor_simpl", 0, t_ref, 0, bsys_relres(S, x0, work), bsys_relerr(S, x0, xref), 1, S->n, 0, NULL);
+        put("chol_refactor_simpl", 0, t_ref, 0, bench_sys_relres(S, x0, work), bench_sys_relerr(S, x0, xref), 1, S->n, 0, NULL);
         cholmod_free_dense(&X, &c); cholmod_free_factor(&L, &c);
     }
     cholmod_free_dense(&B, &c); cholmod_free_sparse(&A, &c);
@@ -138,7 +138,7 @@ static void reference(const bsys *S, double *xref, double *work, int simpl) {
 /* ============================ CHOLMOD update / downdate ============================
    CHOLMOD cannot change the order of a factorization, so it factors once the padded matrix
        A = [K0 0; 0 I_r],  r = 3 * (steps + 1) reserved equations,
-   with the numbering of bsys (a cut's copy v' gets equations n0 + 3 j .. n0 + 3 j + 2, which
+   with the numbering of bench_sys (a cut's copy v' gets equations n0 + 3 j .. n0 + 3 j + 2, which
    are reserved rows until then; unused reserved rows keep x = 0). The analysis and the
    supernodal factorization with OpenBLAS are converted to a simplicial LDL' once (setup, not
    timed); every step then modifies that LDL' in place:
@@ -161,7 +161,7 @@ typedef struct updown {
     double t_setup, lnz0;
 } updown;
 
-static void updown_init(updown *u, const bsys *S0, int reserve) {
+static void updown_init(updown *u, const bench_sys *S0, int reserve) {
     cholmod_sparse *A;
     int j, p, nz = 0, n0 = S0->n;
     double t0 = amps_now();
@@ -218,7 +218,7 @@ static void tet_w(const amps_mesh *m, amps_int t, double W[72]) {
 
 /* C = [P W_t]_t with v' replaced by `as` in the tets' node lists, plus identity columns of v'
    when ident; rows permuted and sorted */
-static cholmod_sparse *updown_c(updown *u, const amps_mesh *M, const amps_int *ndof, const bstep *s, int as, int ident) {
+static cholmod_sparse *updown_c(updown *u, const amps_mesh *M, const amps_int *ndof, const bench_step *s, int as, int ident) {
     int ncol = 6 * s->nmoved + (ident ? 3 : 0), k, a, q, d, col = 0, nz = 0;
     cholmod_sparse *C = cholmod_allocate_sparse((size_t)u->N, (size_t)ncol, (size_t)(12 * ncol), 1, 1, 0, CHOLMOD_REAL, &u->c);
     int *Cp = (int *)C->p, *Ci = (int *)C->i;
@@ -247,7 +247,7 @@ static cholmod_sparse *updown_c(updown *u, const amps_mesh *M, const amps_int *n
 }
 
 /* one step; x (N) receives the solution. Kf0: the initial full K (pins only happen without cuts) */
-static double updown_step(updown *u, const amps_mesh *M, const amps_int *ndof, const bstep *s, const bscen *sc,
+static double updown_step(updown *u, const amps_mesh *M, const amps_int *ndof, const bench_step *s, const bench_scen *sc,
                           const amps_csc *Kf0, unsigned char *con, double *x) {
     double t0 = amps_now(), *b = (double *)u->B->x;
     cholmod_dense *X;
@@ -280,7 +280,7 @@ static double updown_step(updown *u, const amps_mesh *M, const amps_int *ndof, c
    (recursive residual) or maxit. Records for each tolerance the time, iterations and iterate. */
 typedef struct snaps { double t[NTOL], *x[NTOL]; int it[NTOL], conv[NTOL]; } snaps;
 
-static void cg_run(const bsys *S, const double *x0, int jacobi, int maxit, snaps *sn) {
+static void cg_run(const bench_sys *S, const double *x0, int jacobi, int maxit, snaps *sn) {
     int n = S->n, i, it = 0, ti = 0;
     double *x = (double *)bench_alloc(sizeof(double) * (size_t)n), *r = (double *)bench_alloc(sizeof(double) * (size_t)n);
     double *z = (double *)bench_alloc(sizeof(double) * (size_t)n), *p = (double *)bench_alloc(sizeof(double) * (size_t)n);
@@ -353,7 +353,7 @@ typedef struct gmres {
     void *num;                      /* UMFPACK factor of M */
 } gmres;
 
-static void gm_init(amps_ctx *ctx, gmres *G, const amps_factor *F, const bsys *S0, int ncap) {
+static void gm_init(amps_ctx *ctx, gmres *G, const amps_factor *F, const bench_sys *S0, int ncap) {
     int j, n0 = (int)F->n;
     memset(G, 0, sizeof(*G));
     G->F = F; G->n0 = n0;
@@ -488,7 +488,7 @@ static void hess_solve(const double *H, int mr, const double *g, int j, double *
 }
 
 /* Runs the method for one step to the tightest tolerance; snapshots of the full solution. */
-static void gm_run(gmres *G, const bsys *S, const int *Lset, int m, const double *x0, int prec, int maxit, int restart,
+static void gm_run(gmres *G, const bench_sys *S, const int *Lset, int m, const double *x0, int prec, int maxit, int restart,
                    snaps *sn) {
     int n = S->n, k, p, i, j, it = 0, ti = 0, mr = restart < m ? restart : m;
     double t0 = amps_now(), tpause = 0, nrhs, beta;
@@ -627,9 +627,9 @@ int main(int argc, char **argv) {
     double tmax = getenv("BENCH_TMAX") ? atof(getenv("BENCH_TMAX")) : 0, t_start = amps_now();
     amps_scene *S[MAXCONF];
     amps_mesh *M;
-    bscen sc;
-    bstep s;
-    bsys S0;
+    bench_scen sc;
+    bench_step s;
+    bench_sys S0;
     updown ud;
     gmres gm;
     amps_int *ndof;
@@ -653,7 +653,7 @@ int main(int argc, char **argv) {
         }
     }
     M = bench_mesh(&ctx, spec);
-    bscen_init(&sc, M, spec, cut, steps);
+    bench_scen_init(&sc, M, spec, cut, steps);
     if (amps_mesh_reserve(&ctx, M, sc.cap) != AMPS_OK) bench_die("amps_mesh_reserve", ctx.msg);
     for (v = 0; v < sc.nn0; v++) if (amps_mesh_degree(M, v) > maxdeg) maxdeg = (int)amps_mesh_degree(M, v);
     s.moved = (amps_int *)bench_alloc(sizeof(amps_int) * (size_t)maxdeg);
@@ -668,14 +668,14 @@ int main(int argc, char **argv) {
         /* background re-factorization off: its thread would run while the other methods are
            timed (bench/refactor measures it alone); BENCH_REFACTOR=auto turns it on */
         so.update.refactor = getenv("BENCH_REFACTOR") && !strcmp(getenv("BENCH_REFACTOR"), "auto") ? AMPS_REFACTOR_AUTO : AMPS_REFACTOR_OFF;
-        S[k] = bscen_scene(&cctx[k], &sc, spec, &so);
+        S[k] = bench_scen_scene(&cctx[k], &sc, spec, &so);
         t0 = amps_now();
         if (amps_scene_solve(&cctx[k], S[k]) != AMPS_OK) bench_die("first solve", cctx[k].msg);
         t_amps_setup[k] = amps_now() - t0;
     }
     if (nconf == 0) bench_die("BENCH_AMPS", "no configuration");
-    bsys_build(&ctx, &sc, M, &S0);
-    /* equations by node, kept current as cuts append copies (= bsys numbering) */
+    bench_sys_build(&ctx, &sc, M, &S0);
+    /* equations by node, kept current as cuts append copies (= bench_sys numbering) */
     ndof = (amps_int *)bench_alloc(sizeof(amps_int) * 3 * (size_t)sc.cap);
     memcpy(ndof, S0.dof, sizeof(amps_int) * 3 * (size_t)sc.nn0);
     ndofc = S0.n;
@@ -697,13 +697,13 @@ int main(int argc, char **argv) {
     {
         const amps_factor *F = amps_scene_factor(S[0]);
         printf("%s %s: %d nodes, %d equations, nnz(L) %.0f (CHOLMOD padded %.0f), path %d; setup: amps %.2f s, updown %.2f s\n",
-               spec, argv[2], sc.nn0, S0.n, amps_factor_nnz(F), ud.lnz0, sc.npath, t_amps_setup[0], ud.t_setup);
+               spec, argv[2], sc.nn0, S0.n, amps_factor_nnz(F), ud.lnz0, sc.cp.npath, t_amps_setup[0], ud.t_setup);
         snprintf(metapath, sizeof(metapath), "%.*s_meta.csv", (int)(strlen(out) > 4 ? strlen(out) - 4 : strlen(out)), out);
         meta = fopen(metapath, "w");
         if (!meta) bench_die(metapath, "cannot write");
         fprintf(meta, "mesh,exp,nodes,n0,nnzL,nnzL_updown,height,t_setup_amps,t_setup_updown,path,steps,every\n");
         fprintf(meta, "%s,%s,%d,%d,%.0f,%.0f,%ld,%.4f,%.4f,%d,%d,%d\n", spec, argv[2], sc.nn0, S0.n, amps_factor_nnz(F), ud.lnz0,
-                (long)F->height, t_amps_setup[0], ud.t_setup, sc.npath, steps, every);
+                (long)F->height, t_amps_setup[0], ud.t_setup, sc.cp.npath, steps, every);
         fclose(meta);
     }
     csv = fopen(out, "w");
@@ -715,11 +715,11 @@ int main(int argc, char **argv) {
         int sampled, d, fail = 0;
         memcpy(uprev, amps_scene_displacements(S[0]), sizeof(double) * 3 * (size_t)M->nnode);
         if (tmax > 0 && amps_now() - t_start > tmax) { printf("  stopped after step %d: BENCH_TMAX = %g s reached\n", st - 1, tmax); break; }
-        if (!bscen_next(&ctx, &sc, M, &s)) break;
+        if (!bench_scen_next(&ctx, &sc, M, &s)) break;
         cur_step = st;
         for (k = 0; k < nconf; k++) {
             double t0 = amps_now();
-            amps_status rc = bscen_apply(&cctx[k], S[k], &sc, &s);
+            amps_status rc = bench_scen_apply(&cctx[k], S[k], &sc, &s);
             if (rc == AMPS_OK) rc = amps_scene_solve(&cctx[k], S[k]);
             t_conf[k] = amps_now() - t0;
             if (rc != AMPS_OK) {
@@ -731,7 +731,7 @@ int main(int argc, char **argv) {
             amps_update_get_stats(amps_scene_engine(S[k]), &us[k]);
             amps_scene_residual(&cctx[k], S[k], &res_conf[k]);
         }
-        if (fail) { bscen_undo(&ctx, &sc, M, &s); st--; continue; }
+        if (fail) { bench_scen_undo(&ctx, &sc, M, &s); st--; continue; }
         /* bookkeeping (not timed): new equations, the changed set of paper 001 */
         if (cut) {
             int q, a;
@@ -747,37 +747,37 @@ int main(int argc, char **argv) {
             for (d = 0; d < 3; d++) uprev[3 * s.node + d] = s.u[d];
         }
         t_ud = updown_step(&ud, M, ndof, &s, &sc, S0.Kf, udcon, xud);
-        sampled = st == 1 || st % every == 0 || st == steps || sc.ip >= sc.npath;
+        sampled = st == 1 || st % every == 0 || st == steps || sc.cp.ip >= sc.cp.npath;
         if (!sampled) {
             for (k = 0; k < nconf; k++) put(conf[k], 0, t_conf[k], 0, res_conf[k], -1, 1, us[k].dim, us[k].nsys, us[k].t_step);
             put("chol_updown", 0, t_ud, 0, -1, -1, 1, ndofc, 0, NULL);
         } else {
-            bsys Sy;
+            bench_sys Sy;
             int ti, prec;
-            bsys_build(&ctx, &sc, M, &Sy);
+            bench_sys_build(&ctx, &sc, M, &Sy);
             if (Sy.n != ndofc) bench_die("numbering", "equation count differs from the bookkeeping");
             nsampled++;
             reference(&Sy, xref, work, Sy.n <= simpl_maxn && (nsampled == 1 || st == steps));
             for (k = 0; k < nconf; k++) {
-                bsys_from_disp(&Sy, amps_scene_displacements(S[k]), x);
-                put(conf[k], 0, t_conf[k], 0, bsys_relres(&Sy, x, work), bsys_relerr(&Sy, x, xref), 1, us[k].dim, us[k].nsys, us[k].t_step);
+                bench_sys_from_disp(&Sy, amps_scene_displacements(S[k]), x);
+                put(conf[k], 0, t_conf[k], 0, bench_sys_relres(&Sy, x, work), bench_sys_relerr(&Sy, x, xref), 1, us[k].dim, us[k].nsys, us[k].t_step);
             }
-            put("chol_updown", 0, t_ud, 0, bsys_relres(&Sy, xud, work), bsys_relerr(&Sy, xud, xref), 1, Sy.n, 0, NULL);
-            bsys_from_disp(&Sy, uprev, xprev);
+            put("chol_updown", 0, t_ud, 0, bench_sys_relres(&Sy, xud, work), bench_sys_relerr(&Sy, xud, xref), 1, Sy.n, 0, NULL);
+            bench_sys_from_disp(&Sy, uprev, xprev);
             for (prec = 0; prec < 2 * iter; prec++) {
                 cg_run(&Sy, xprev, prec, cg_maxit, &sn);
                 for (ti = 0; ti < NTOL; ti++)
-                    put(prec ? "cg_jacobi" : "cg_none", tols[ti], sn.t[ti], sn.it[ti], bsys_relres(&Sy, sn.x[ti], work),
-                        bsys_relerr(&Sy, sn.x[ti], xref), sn.conv[ti], Sy.n, 0, NULL);
+                    put(prec ? "cg_jacobi" : "cg_none", tols[ti], sn.t[ti], sn.it[ti], bench_sys_relres(&Sy, sn.x[ti], work),
+                        bench_sys_relerr(&Sy, sn.x[ti], xref), sn.conv[ti], Sy.n, 0, NULL);
             }
             for (prec = 0; prec < 3 * iter; prec++) {
                 static const char *gname[3] = {"gmres_none", "gmres_D", "gmres_tri"};
                 gm_run(&gm, &Sy, Lset, nL, xprev, prec, gm_maxit, gm_restart, &sn);
                 for (ti = 0; ti < NTOL; ti++)
-                    put(gname[prec], tols[ti], sn.t[ti], sn.it[ti], bsys_relres(&Sy, sn.x[ti], work), bsys_relerr(&Sy, sn.x[ti], xref),
+                    put(gname[prec], tols[ti], sn.t[ti], sn.it[ti], bench_sys_relres(&Sy, sn.x[ti], work), bench_sys_relerr(&Sy, sn.x[ti], xref),
                         sn.conv[ti], Sy.n, nL, NULL);
             }
-            bsys_free(&ctx, &Sy);
+            bench_sys_free(&ctx, &Sy);
             printf("  step %d: amps %.2f ms, updown %.2f ms, |Lset| %d\n", st, 1e3 * t_conf[0], 1e3 * t_ud, nL);
             fflush(stdout);
         }
@@ -793,8 +793,8 @@ int main(int argc, char **argv) {
     gm_free(&ctx, &gm);
     for (k = 0; k < nconf; k++) amps_scene_free(&cctx[k], S[k]);
     amps_mesh_free(&ctx, M);
-    bsys_free(&ctx, &S0);
-    bscen_free(&sc);
+    bench_sys_free(&ctx, &S0);
+    bench_scen_free(&sc);
     for (k = 0; k < NTOL; k++) free(sn.x[k]);
     free(s.moved); free(ndof); free(Lset); free(inL); free(udcon); free(uprev); free(xprev); free(x); free(xref); free(work); free(xud);
     return 0;
