@@ -96,7 +96,10 @@ static inline int bench_up_axis(const char *spec) {
 static inline void bench_bbox(const amps_mesh *m, double lo[3], double hi[3]) {
     amps_int v;
     int d;
-    for (d = 0; d < 3; d++) { lo[d] = 1e300; hi[d] = -1e300; }
+    for (d = 0; d < 3; d++) {
+        lo[d] = 1e300;
+        hi[d] = -1e300;
+    }
     for (v = 0; v < m->nnode; v++)
         for (d = 0; d < 3; d++) {
             if (m->xyz[3 * v + d] < lo[d]) lo[d] = m->xyz[3 * v + d];
@@ -163,7 +166,10 @@ static inline void bench_cut_init(bench_cut *c, const amps_mesh *m, const unsign
     c->xc = 0.5 * (lo[0] + hi[0]);
     c->h = pow((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]) / nn, 1.0 / 3.0);
     c->tol = 0.5 * c->h;
-    c->npath = 0; c->ip = 0; c->wrap = 0; c->pass = 0;
+    c->npath = 0;
+    c->ip = 0;
+    c->wrap = 0;
+    c->pass = 0;
     c->path = (int *)bench_alloc(sizeof(int) * (size_t)nn);
     for (v = 0; v < nn; v++)
         if (fabs(m->xyz[3 * v] - c->xc) <= c->tol && !fixed[v]) c->path[c->npath++] = v;
@@ -195,7 +201,10 @@ static inline amps_status bench_cut_next(amps_ctx *ctx, amps_scene *S, bench_cut
     while (s == AMPS_WARN_NOOP && (c->ip < c->npath || (c->wrap && c->npath > 0))) {
         double p[3], nrm[3] = {0, 0, 0};
         amps_int vc;
-        if (c->ip >= c->npath) { c->ip = 0; c->pass++; }
+        if (c->ip >= c->npath) {
+            c->ip = 0;
+            c->pass++;
+        }
         nrm[c->pass % 3] = 1;
         *node = c->path[c->ip++];
         memcpy(p, amps_scene_mesh(S)->xyz + 3 * *node, sizeof(p));
@@ -258,6 +267,12 @@ static inline int bench_cmp_face(const void *a, const void *b) {
     return 0;
 }
 
+static inline void bench_swap(amps_int *a, amps_int *b) {
+    amps_int t = *a;
+    *a = *b;
+    *b = t;
+}
+
 static inline int bench_surface_nodes(const amps_mesh *m, amps_int *out) {
     size_t nf = 4 * (size_t)m->ntet, f, g;
     amps_int *fc = (amps_int *)bench_alloc(sizeof(amps_int) * 3 * nf), t, v;
@@ -265,12 +280,16 @@ static inline int bench_surface_nodes(const amps_mesh *m, amps_int *out) {
     int k, cnt = 0;
     for (t = 0; t < m->ntet; t++)
         for (k = 0; k < 4; k++) {
-            amps_int *q = fc + 3 * (4 * (size_t)t + (size_t)k), a, b, c, w;
-            a = m->tet[4 * t + (k + 1) % 4]; b = m->tet[4 * t + (k + 2) % 4]; c = m->tet[4 * t + (k + 3) % 4];
-            if (a > b) { w = a; a = b; b = w; }
-            if (b > c) { w = b; b = c; c = w; }
-            if (a > b) { w = a; a = b; b = w; }
-            q[0] = a; q[1] = b; q[2] = c;
+            amps_int *q = fc + 3 * (4 * (size_t)t + (size_t)k), a, b, c;
+            a = m->tet[4 * t + (k + 1) % 4];
+            b = m->tet[4 * t + (k + 2) % 4];
+            c = m->tet[4 * t + (k + 3) % 4];
+            if (a > b) bench_swap(&a, &b);
+            if (b > c) bench_swap(&b, &c);
+            if (a > b) bench_swap(&a, &b);
+            q[0] = a;
+            q[1] = b;
+            q[2] = c;
         }
     qsort(fc, nf, 3 * sizeof(amps_int), bench_cmp_face);
     for (f = 0; f < nf; f = g) {
@@ -280,31 +299,34 @@ static inline int bench_surface_nodes(const amps_mesh *m, amps_int *out) {
     }
     for (v = 0; v < m->nnode; v++)
         if (on[v]) out[cnt++] = v;
-    free(fc); free(on);
+    free(fc);
+    free(on);
     return cnt;
 }
 
 /* ---- the step sequences of bench/harness ---- */
 typedef struct bench_scen {
-    int cut, nn0, axis, cap;    /* cap: node capacity (nn0 + steps + 16) */
+    int cut, nn0, axis, cap; /* cap: node capacity (nn0 + steps + 16) */
     double lo[3], hi[3];
-    bench_cut cp;               /* the path: cut / pin order */
-    unsigned char *fixed0;      /* by creation node */
-    double *force;              /* 3 per node (cap nodes) */
-    unsigned char *pinned;      /* per node */
-    double *pinval;             /* 3 per node */
+    bench_cut cp;          /* the path: cut / pin order */
+    unsigned char *fixed0; /* by creation node */
+    double *force;         /* 3 per node (cap nodes) */
+    unsigned char *pinned; /* per node */
+    double *pinval;        /* 3 per node */
 } bench_scen;
 
 /* one step of the sequence: the node cut (plane through p, normal x) or pinned (to u) */
 typedef struct bench_step {
-    int node, vc, nmoved;       /* vc: the copy a cut made; moved: the tets now using vc */
+    int node, vc, nmoved; /* vc: the copy a cut made; moved: the tets now using vc */
     double p[3], u[3];
     amps_int *moved;
 } bench_step;
 
 static inline void bench_scen_init(bench_scen *sc, const amps_mesh *m, const char *spec, int cut, int steps) {
     memset(sc, 0, sizeof(*sc));
-    sc->cut = cut; sc->nn0 = (int)m->nnode; sc->cap = sc->nn0 + steps + 16;
+    sc->cut = cut;
+    sc->nn0 = (int)m->nnode;
+    sc->cap = sc->nn0 + steps + 16;
     bench_bbox(m, sc->lo, sc->hi);
     sc->axis = bench_up_axis(spec);
     sc->fixed0 = bench_base(m, sc->axis, sc->lo, sc->hi);
@@ -316,7 +338,11 @@ static inline void bench_scen_init(bench_scen *sc, const amps_mesh *m, const cha
 }
 
 static inline void bench_scen_free(bench_scen *sc) {
-    free(sc->fixed0); free(sc->cp.path); free(sc->force); free(sc->pinned); free(sc->pinval);
+    free(sc->fixed0);
+    free(sc->cp.path);
+    free(sc->force);
+    free(sc->pinned);
+    free(sc->pinval);
 }
 
 /* A scene over a fresh copy of the mesh with the scenario's material, fixed nodes and forces. */
@@ -335,7 +361,8 @@ static inline amps_scene *bench_scen_scene(amps_ctx *ctx, const bench_scen *sc, 
 /* Next step of the sequence, applied to the plain mesh M (cut) or to the scenario (pin).
    s->moved needs room for the largest node degree. Returns 0 when the path is exhausted. */
 static inline int bench_scen_next(amps_ctx *ctx, bench_scen *sc, amps_mesh *M, bench_step *s) {
-    s->nmoved = 0; s->vc = -1;
+    s->nmoved = 0;
+    s->vc = -1;
     while (sc->cp.ip < sc->cp.npath) {
         s->node = sc->cp.path[sc->cp.ip++];
         memcpy(s->p, M->xyz + 3 * s->node, sizeof(s->p));
@@ -345,7 +372,8 @@ static inline int bench_scen_next(amps_ctx *ctx, bench_scen *sc, amps_mesh *M, b
             amps_status st = amps_mesh_cut(ctx, M, s->node, s->p, nrm, &vc, s->moved, &nm);
             if (st == AMPS_WARN_NOOP) continue;
             if (st != AMPS_OK) bench_die("amps_mesh_cut", ctx->msg);
-            s->vc = (int)vc; s->nmoved = (int)nm;
+            s->vc = (int)vc;
+            s->nmoved = (int)nm;
             return 1;
         }
         memset(s->u, 0, sizeof(s->u));
@@ -379,12 +407,12 @@ static inline amps_status bench_scen_apply(amps_ctx *ctx, amps_scene *S, const b
    K_FF x_F = b_F, b = f - K g, F = unpinned equations. */
 typedef struct bench_sys {
     int nn, n;
-    amps_int *dof;              /* 3 per node, -1 fixed */
-    amps_csc *K;                /* upper triangle */
-    amps_csc *Kf;               /* both triangles (column j = row j) */
+    amps_int *dof; /* 3 per node, -1 fixed */
+    amps_csc *K;   /* upper triangle */
+    amps_csc *Kf;  /* both triangles (column j = row j) */
     double *f, *g, *b;
     unsigned char *con;
-    double nb;                  /* ||b_F|| */
+    double nb; /* ||b_F|| */
 } bench_sys;
 
 /* both triangles of a symmetric matrix given by its upper triangle */
@@ -405,8 +433,12 @@ static inline amps_csc *bench_sym_full(amps_ctx *ctx, const amps_csc *U) {
     for (j = 0; j < n; j++)
         for (p = U->p[j]; p < U->p[j + 1]; p++) {
             amps_int i = U->i[p];
-            A->i[cnt[j]] = i; A->x[cnt[j]++] = U->x[p];
-            if (i != j) { A->i[cnt[i]] = j; A->x[cnt[i]++] = U->x[p]; }
+            A->i[cnt[j]] = i;
+            A->x[cnt[j]++] = U->x[p];
+            if (i != j) {
+                A->i[cnt[i]] = j;
+                A->x[cnt[i]++] = U->x[p];
+            }
         }
     free(cnt);
     /* column j got its own upper entries first (rows <= j) and then rows > j in ascending j: sorted */
@@ -447,7 +479,10 @@ static inline void bench_sys_build(amps_ctx *ctx, const bench_scen *sc, const am
             amps_int e = S->dof[3 * v + d];
             if (e < 0) continue;
             S->f[e] = v < sc->cap ? sc->force[3 * v + d] : 0;
-            if (v < sc->cap && sc->pinned[v]) { S->con[e] = 1; S->g[e] = sc->pinval[3 * v + d]; }
+            if (v < sc->cap && sc->pinned[v]) {
+                S->con[e] = 1;
+                S->g[e] = sc->pinval[3 * v + d];
+            }
         }
     bench_spmv(S->Kf, S->g, t);
     S->nb = 0;
@@ -456,12 +491,18 @@ static inline void bench_sys_build(amps_ctx *ctx, const bench_scen *sc, const am
         if (!S->con[i]) S->nb += S->b[i] * S->b[i];
     }
     S->nb = sqrt(S->nb);
-    free(t); free(fixed);
+    free(t);
+    free(fixed);
 }
 
 static inline void bench_sys_free(amps_ctx *ctx, bench_sys *S) {
-    amps_csc_free(ctx, S->K); amps_csc_free(ctx, S->Kf);
-    free(S->dof); free(S->f); free(S->g); free(S->b); free(S->con);
+    amps_csc_free(ctx, S->K);
+    amps_csc_free(ctx, S->Kf);
+    free(S->dof);
+    free(S->f);
+    free(S->g);
+    free(S->b);
+    free(S->con);
 }
 
 /* equation vector of node displacements (3 per node) */
@@ -487,7 +528,10 @@ static inline double bench_sys_relerr(const bench_sys *S, const double *x, const
     int i;
     double e = 0, r = 0;
     for (i = 0; i < S->n; i++)
-        if (!S->con[i]) { e += (x[i] - xref[i]) * (x[i] - xref[i]); r += xref[i] * xref[i]; }
+        if (!S->con[i]) {
+            e += (x[i] - xref[i]) * (x[i] - xref[i]);
+            r += xref[i] * xref[i];
+        }
     return r > 0 ? sqrt(e / r) : sqrt(e);
 }
 #endif
