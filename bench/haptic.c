@@ -33,7 +33,10 @@ int main(int argc, char **argv) {
     bench_model B;
     amps_update_stats us;
     FILE *csv;
-    if (argc < 5) { fprintf(stderr, "usage: haptic <beam:h|brick:R|file> <steps> <cuts> <out.csv> [npins]\n"); return 2; }
+    if (argc < 5) {
+        fprintf(stderr, "usage: haptic <beam:h|brick:R|file> <steps> <cuts> <out.csv> [npins]\n");
+        return 2;
+    }
     spec = argv[1]; steps = atoi(argv[2]); ncuts = atoi(argv[3]); out = argv[4];
     if (argc > 5) npins = atoi(argv[5]);
     if (steps < 1 || npins < 1) return 2;
@@ -112,13 +115,17 @@ int main(int argc, char **argv) {
         p99 = bench_quantile(t_step, ndone, 0.99);
         med = bench_quantile(t_step, ndone, 0.5);
         fmed = bench_median(t_full, nchk);
-        printf("%s: %d nodes, %ld equations, nnz(L) %.0f, prepare %.2f s; %d cuts, %d pins, |S u C| %ld, amplitude %.3g, max tool force %.3g\n",
+        printf("%s: %d nodes, %ld equations, nnz(L) %.0f, prepare %.2f s; %d cuts, %d pins, |S u C| %ld,"
+               " amplitude %.3g, max tool force %.3g\n",
                name, nn, (long)F->n, amps_factor_nnz(F), t_prep, ndid, npins, (long)us.nsys, amp, fmax);
-        printf("  haptic step (%d steps): mean %.3f ms, median %.3f ms, p99 %.3f ms, max %.3f ms -> %.0f Hz (mean), %.0f Hz (median)\n",
+        printf("  haptic step (%d steps): mean %.3f ms, median %.3f ms, p99 %.3f ms, max %.3f ms"
+               " -> %.0f Hz (mean), %.0f Hz (median)\n",
                ndone, 1e3 * mean, 1e3 * med, 1e3 * p99, 1e3 * mx, 1 / mean, 1 / med);
-        printf("  full solve (visual, %d samples): median %.2f ms (x%.0f the haptic step); reactions vs full solve: max rel diff %.2e, mean %.2e\n",
+        printf("  full solve (visual, %d samples): median %.2f ms (x%.0f the haptic step);"
+               " reactions vs full solve: max rel diff %.2e, mean %.2e\n",
                nchk, 1e3 * fmed, fmed / med, relmax, nchk ? relsum / nchk : 0.0);
-        csv = bench_csv(out, "mesh,nodes,equations,nnzL,cuts,pins,nsys,steps,mean_ms,median_ms,p99_ms,max_ms,rate_hz,full_solve_ms,reaction_reldiff_max,reaction_reldiff_mean");
+        csv = bench_csv(out, "mesh,nodes,equations,nnzL,cuts,pins,nsys,steps,mean_ms,median_ms,p99_ms,max_ms,rate_hz,"
+                             "full_solve_ms,reaction_reldiff_max,reaction_reldiff_mean");
         if (!csv) { fprintf(stderr, "cannot write %s\n", out); return 1; }
         fprintf(csv, "%s,%d,%ld,%.0f,%d,%d,%ld,%d,%.4f,%.4f,%.4f,%.4f,%.0f,%.3f,%.3e,%.3e\n", name, nn, (long)F->n, amps_factor_nnz(F), ndid,
                 npins, (long)us.nsys, ndone, 1e3 * mean, 1e3 * med, 1e3 * p99, 1e3 * mx, 1 / mean, 1e3 * fmed, relmax, nchk ? relsum / nchk : 0.0);

@@ -57,7 +57,8 @@ int main(int argc, char **argv) {
     bench_scene_opts(&so);
     so.update.refactor = on ? AMPS_REFACTOR_AUTO : AMPS_REFACTOR_OFF;
     if (getenv("AMPS_REFACTOR_RATIO")) so.update.refactor_ratio = atof(getenv("AMPS_REFACTOR_RATIO"));
-    if (getenv("AMPS_REFACTOR_ORDER")) so.update.refactor_order.method = !strcmp(getenv("AMPS_REFACTOR_ORDER"), "nd") ? AMPS_ORDER_ND : AMPS_ORDER_AMD;
+    if (getenv("AMPS_REFACTOR_ORDER"))
+        so.update.refactor_order.method = !strcmp(getenv("AMPS_REFACTOR_ORDER"), "nd") ? AMPS_ORDER_ND : AMPS_ORDER_AMD;
     bench_model_init(&ctx, argv[1], &so, &B);
     S = B.S; fixed = B.fixed; force = B.force; cp = B.cp; cp.wrap = 1;
     t = (double *)malloc(sizeof(double) * (size_t)steps);
@@ -107,12 +108,15 @@ int main(int argc, char **argv) {
         for (k = 4; k < 15 && k < steps; k++) first[nf++] = t[k];
         for (k = 0; k < nl; k++) { last[k] = t[steps - 1 - k]; mean += last[k] / nl; }
         m0 = bench_median(first, nf); m1 = bench_median(last, nl);
-        printf("%-10s re-factorization %-3s  steps %d (skipped cuts %d)  step 5-15 median %.2f ms; last %d steps: median %.2f ms (x%.2f), "
+        printf("%-10s re-factorization %-3s  steps %d (skipped cuts %d)  step 5-15 median %.2f ms;"
+               " last %d steps: median %.2f ms (x%.2f), "
                "mean %.2f ms (x%.2f)  |S u C| at the end %d  re-factorizations %d (failed %d)  worst residual %.1e\n",
-               name, pol, steps, nsk, 1e3 * m0, nl, 1e3 * m1, m1 / m0, 1e3 * mean, mean / m0,
-               (int)uend.nsys, (int)uend.nrefactor, (int)uend.refactor_failed, worst_res);
-        if (on) printf("%-10s fresh base after step %d: median %.2f ms (x%.2f of steps 5-15); the last %d steps are x%.2f of it\n",
-                       name, steps, 1e3 * fresh, fresh / m0, nl, m1 / fresh);
+               name, pol, steps, nsk, 1e3 * m0, nl, 1e3 * m1, m1 / m0, 1e3 * mean, mean / m0, (int)uend.nsys,
+               (int)uend.nrefactor, (int)uend.refactor_failed, worst_res);
+        if (on)
+            printf("%-10s fresh base after step %d: median %.2f ms (x%.2f of steps 5-15);"
+                   " the last %d steps are x%.2f of it\n",
+                   name, steps, 1e3 * fresh, fresh / m0, nl, m1 / fresh);
     }
     amps_scene_free(&ctx, S);
     free(fixed); free(force); free(t); free(cp.path);
