@@ -6,10 +6,15 @@
 #   make examples      build the examples (build/default/readme_example, haptic_loop)
 #   make switches      AMPS_NO_FEM / NO_STDIO / NO_THREADS combinations: build, tests, object sizes
 #   make demo          the main job: replay examples/brick_incision.scn (VTU, CSV, PNG in build/demo)
-#   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv
+#   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv (tracked)
+#   make bench-quick   a subset of them; results in build/bench/quick
 #   make stress        the long stress suite (beams to 5x5x4096, 10,000-step runs; CSV/PNG in build/stress)
 #   make fuzz          libFuzzer targets (clang), FUZZ_TIME seconds each (default 60)
 #   make deps          install (as root) or list the Debian packages the tests need
+#   make format        clang-format (.clang-format) on every C source and header
+#   make format-check  the same as a check: fails if any file would change
+#   make clean         remove build/ (every build product; the tracked results stay)
+#   make distclean     also remove bench/data/ (the downloaded and meshed bunny)
 CC      ?= cc
 CXX     ?= c++
 OPT     ?= -O2 -g
@@ -40,7 +45,8 @@ TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
 TEST_SH   := $(wildcard tests/test_*.sh)
 TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example $(BUILD)/haptic_loop
 
-.PHONY: tsan all test deps deps-check tools examples demo bench bench-quick clean cxx switches stress fuzz
+.PHONY: tsan all test deps deps-check tools examples demo bench bench-quick clean distclean cxx switches stress fuzz \
+        format format-check
 all: tools
 
 tools: $(TOOLS)
@@ -62,7 +68,8 @@ demo: $(BUILD)/amps_replay
 	@mkdir -p build/demo
 	cd build/demo && $(abspath $(BUILD))/amps_replay --surface brick_incision.surf $(abspath examples/brick_incision.scn)
 	@bash tools/render.sh build/demo/brick_incision.surf build/demo/brick_incision.png
-	@echo "results: build/demo/brick_incision.vtu (ParaView: Warp By Vector on displacement), build/demo/brick_incision.csv"
+	@echo "results: build/demo/brick_incision.vtu (ParaView: Warp By Vector on displacement)," \
+	      "build/demo/brick_incision.csv"
 
 $(BUILD):
 	mkdir -p $(BUILD)
@@ -89,14 +96,16 @@ deps:
 	@bash tools/deps.sh
 
 cxx: | $(BUILD)
-	printf '#define AMPS_IMPLEMENTATION\n#include "amps.h"\nint main(void){amps_ctx c; amps_ctx_init(&c); return 0;}\n' > $(BUILD)/cxx_check.cpp
+	printf '#define AMPS_IMPLEMENTATION\n#include "amps.h"\n%s\n' \
+	       'int main(void){amps_ctx c; amps_ctx_init(&c); return 0;}' > $(BUILD)/cxx_check.cpp
 	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -c $(BUILD)/cxx_check.cpp -o $(BUILD)/cxx_check.o
 	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -x c++ -c examples/haptic_loop.c -o $(BUILD)/haptic_loop_cxx.o
 
 # libgomp is not instrumented, so without OpenMP; the threads are the re-factorization's
 tsan:
 	$(MAKE) SAN=thread OMP= BUILD=build/tsan OPT="-O1 -g" build/tsan/test_update build/tsan/test_scene
-	@TSAN_OPTIONS="halt_on_error=1 suppressions=$(abspath tests/tsan.supp)" AMPS_BUILD=build/tsan bash tests/run.sh build/tsan/test_update build/tsan/test_scene
+	@TSAN_OPTIONS="halt_on_error=1 suppressions=$(abspath tests/tsan.supp)" AMPS_BUILD=build/tsan \
+	  bash tests/run.sh build/tsan/test_update build/tsan/test_scene
 
 # The compile-time switches, each combination built with -Werror, tested and sized (tests/switches.sh).
 switches: deps-check
@@ -108,5 +117,19 @@ bench:
 bench-quick:
 	bash bench/run.sh quick
 
+# The sources clang-format keeps in the style of .clang-format (CLANG_FORMAT: version 14 or later).
+CLANG_FORMAT ?= clang-format
+FORMAT_SRC   := amps.h $(wildcard bench/*.c bench/*.h examples/*.c tools/*.c) \
+                $(wildcard tests/*.c tests/*.h tests/fuzz/*.c tests/fuzz/*.h)
+format:
+	$(CLANG_FORMAT) -i $(FORMAT_SRC)
+
+format-check:
+	$(CLANG_FORMAT) --dry-run --Werror $(FORMAT_SRC)
+
+# Build products only: bench/out/ holds the tracked results of the last full benchmark run.
 clean:
-	rm -rf build bench/out
+	rm -rf build
+
+distclean: clean
+	rm -rf bench/data

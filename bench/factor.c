@@ -31,13 +31,10 @@
    Build: cc -std=c99 -O2 -fopenmp -I. -I/usr/include/suitesparse -o build/bench/factor bench/factor.c -lcholmod -lm */
 #define AMPS_IMPLEMENTATION
 #include "../amps.h"
+#include "bench.h"
 #include <cholmod.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <math.h>
 
-#define NSPARSE 50   /* random indices for the single-nonzero solves */
+#define NSPARSE 50 /* random indices for the single-nonzero solves */
 
 
 static int nthreads(void) {
@@ -54,16 +51,14 @@ static unsigned long rng(void) {
     return (rng_state >> 33) & 0x7fffffffu;
 }
 
-static void die(const char *what, const char *msg) {
-    fprintf(stderr, "factor: %s: %s\n", what, msg);
-    exit(1);
-}
-
 static double relres(const amps_csc *K, const double *x, const double *b, double *r) {
     amps_int i, n = K->ncol;
     double nr = 0, nb = 0;
     amps_csc_symv(K, AMPS_UPPER, x, r);
-    for (i = 0; i < n; i++) { nr += (r[i] - b[i]) * (r[i] - b[i]); nb += b[i] * b[i]; }
+    for (i = 0; i < n; i++) {
+        nr += (r[i] - b[i]) * (r[i] - b[i]);
+        nb += b[i] * b[i];
+    }
     return nb > 0 ? sqrt(nr / nb) : sqrt(nr);
 }
 
@@ -80,7 +75,7 @@ static double chol_count(cholmod_sparse *A, int *perm, int ordering, cholmod_com
     t0 = amps_now();
     L = ordering == CHOLMOD_GIVEN ? cholmod_analyze_p(A, perm, NULL, 0, c) : cholmod_analyze(A, c);
     if (t) *t = amps_now() - t0;
-    if (!L) die("cholmod_analyze", "failed");
+    if (!L) bench_die("cholmod_analyze", "failed");
     if (ordering != CHOLMOD_GIVEN && L->ordering != ordering)
         fprintf(stderr, "factor: warning: CHOLMOD used ordering %d instead of %d\n", L->ordering, ordering);
     for (j = 0; j < L->n; j++) lnz += ((int *)L->ColCount)[j];
@@ -100,7 +95,7 @@ static int *our_order(amps_ctx *ctx, const amps_csc *K, amps_ordering method, co
     o.block = 3;
     o.coords = coords;
     t0 = amps_now();
-    if (amps_order(ctx, K, AMPS_UPPER, &o, p) != AMPS_OK) die("amps_order", ctx->msg);
+    if (amps_order(ctx, K, AMPS_UPPER, &o, p) != AMPS_OK) bench_die("amps_order", ctx->msg);
     *t = amps_now() - t0;
     for (k = 0; k < K->ncol; k++) ip[k] = (int)p[k];
     free(p);
@@ -116,7 +111,7 @@ int main(int argc, char **argv) {
     const char *spec, *out;
     amps_int nn, v, n, k, *dof, nfree = 0;
     unsigned char *fixed;
-    double *coords, lo = 1e300, hi = -1e300;
+    double *coords, lo[3], hi[3];
     amps_csc *K;
     cholmod_common c;
     cholmod_sparse *A;
@@ -135,45 +130,51 @@ int main(int argc, char **argv) {
     double res, res_s, res_S, err_ltp = 0;
     FILE *csv;
 
-    if (argc < 3) { fprintf(stderr, "usage: factor <beam:h|brick:R|mesh file> <out.csv>\n"); return 2; }
-    spec = argv[1]; out = argv[2];
+    if (argc < 3) {
+        fprintf(stderr, "usage: factor <beam:h|brick:R|mesh file> <out.csv>\n");
+        return 2;
+    }
+    spec = argv[1];
+    out = argv[2];
     amps_ctx_init(&ctx);
     nthr = nthreads();
 
     /* mesh, fixed nodes, K */
-    if (!strncmp(spec, "beam:", 5)) m = amps_mesh_beam(&ctx, atoi(spec + 5));
-    else if (!strncmp(spec, "brick:", 6)) m = amps_mesh_brick(&ctx, atoi(spec + 6));
-    else m = amps_mesh_read(&ctx, spec);
-    if (!m) die(spec, ctx.msg);
-    if (amps_mesh_set_material(&ctx, m, 1000.0, 0.3) != AMPS_OK) die("material", ctx.msg);
+    m = bench_mesh(&ctx, spec);
     nn = m->nnode;
-    fixed = (unsigned char *)calloc((size_t)nn, 1);
-    if (!strncmp(spec, "beam:", 5)) for (v = 0; v < nn; v++) fixed[v] = m->xyz[3 * v + 2] < 0.5;
-    else if (!strncmp(spec, "brick:", 6)) for (v = 0; v < nn; v++) fixed[v] = m->xyz[3 * v + 2] < 1e-9;
-    else {
-        for (v = 0; v < nn; v++) { double yv = m->xyz[3 * v + 1]; if (yv < lo) lo = yv; if (yv > hi) hi = yv; }
-        for (v = 0; v < nn; v++) fixed[v] = m->xyz[3 * v + 1] < lo + 0.04 * (hi - lo) + 1e-12;
-    }
+    bench_bbox(m, lo, hi);
+    fixed = bench_base(m, 1, lo, hi); /* a file: the bunny's base; beam, brick: the face z = 0 */
+    if (!strncmp(spec, "beam:", 5))
+        for (v = 0; v < nn; v++) fixed[v] = m->xyz[3 * v + 2] < 0.5;
+    else if (!strncmp(spec, "brick:", 6))
+        for (v = 0; v < nn; v++) fixed[v] = m->xyz[3 * v + 2] < 1e-9;
     dof = (amps_int *)malloc(sizeof(amps_int) * 3 * (size_t)nn);
     n = amps_mesh_number_dofs(m, fixed, dof);
-    if (n <= 0) die(spec, "no free DOFs");
+    if (n <= 0) bench_die(spec, "no free DOFs");
     K = amps_mesh_assemble(&ctx, m, dof, n);
-    if (!K) die("amps_mesh_assemble", ctx.msg);
+    if (!K) bench_die("amps_mesh_assemble", ctx.msg);
     nnzK = (double)K->p[n];
     /* coordinates of the free nodes in DOF-block order (as amps_scene_prepare does) */
     coords = (double *)malloc(sizeof(double) * (size_t)n);
     for (v = 0; v < nn; v++)
-        if (dof[3 * v] >= 0) { for (k = 0; k < 3; k++) coords[3 * nfree + k] = m->xyz[3 * v + k]; nfree++; }
-    if (3 * nfree != n) die(spec, "free nodes do not have 3 consecutive DOFs each");
+        if (dof[3 * v] >= 0) {
+            for (k = 0; k < 3; k++) coords[3 * nfree + k] = m->xyz[3 * v + k];
+            nfree++;
+        }
+    if (3 * nfree != n) bench_die(spec, "free nodes do not have 3 consecutive DOFs each");
     amps_mesh_free(&ctx, m);
-    free(fixed); free(dof);
+    free(fixed);
+    free(dof);
 
     /* CHOLMOD copy of K (upper, stype 1) */
     cholmod_start(&c);
     A = cholmod_allocate_sparse((size_t)n, (size_t)n, (size_t)K->p[n], 1, 1, 1, CHOLMOD_REAL, &c);
-    if (!A) die("cholmod_allocate_sparse", "out of memory");
+    if (!A) bench_die("cholmod_allocate_sparse", "out of memory");
     for (k = 0; k <= n; k++) ((int *)A->p)[k] = (int)K->p[k];
-    for (k = 0; k < K->p[n]; k++) { ((int *)A->i)[k] = (int)K->i[k]; ((double *)A->x)[k] = K->x[k]; }
+    for (k = 0; k < K->p[n]; k++) {
+        ((int *)A->i)[k] = (int)K->i[k];
+        ((double *)A->x)[k] = K->x[k];
+    }
 
     /* orderings and their fill */
     p_amd = our_order(&ctx, K, AMPS_ORDER_AMD, NULL, &t_amd);
@@ -184,7 +185,8 @@ int main(int argc, char **argv) {
     l_auto = chol_count(A, p_auto, CHOLMOD_GIVEN, &c, NULL);
     l_camd = chol_count(A, NULL, CHOLMOD_AMD, &c, &t_camd);
     l_metis = chol_count(A, NULL, CHOLMOD_METIS, &c, &t_metis);
-    free(p_amd); free(p_auto);
+    free(p_amd);
+    free(p_auto);
 
     /* right-hand side, solution vectors */
     b = (double *)malloc(sizeof(double) * (size_t)n);
@@ -205,19 +207,20 @@ int main(int argc, char **argv) {
         t_ana = amps_now() - t0;
         free(pg);
     }
-    if (!F) die("amps_analyze", ctx.msg);
+    if (!F) bench_die("amps_analyze", ctx.msg);
     l_nd_amps = amps_factor_nnz(F);
-    if (l_nd_amps != l_nd) fprintf(stderr, "factor: warning: nnz(L) of the ND perm: amps %.0f, CHOLMOD symbolic %.0f\n", l_nd_amps, l_nd);
+    if (l_nd_amps != l_nd)
+        fprintf(stderr, "factor: warning: nnz(L) of the ND perm: amps %.0f, CHOLMOD symbolic %.0f\n", l_nd_amps, l_nd);
     for (r = 0, nrep = 3; r < nrep; r++) {
         t0 = amps_now();
-        if (amps_factorize(&ctx, F, K, AMPS_UPPER) != AMPS_OK) die("amps_factorize", ctx.msg);
+        if (amps_factorize(&ctx, F, K, AMPS_UPPER) != AMPS_OK) bench_die("amps_factorize", ctx.msg);
         t = amps_now() - t0;
         if (r == 0) nrep = NREP(t);
         if (t < t_f) t_f = t;
     }
     for (r = 0; r < 5; r++) {
         t0 = amps_now();
-        if (amps_solve(&ctx, F, b, x, w) != AMPS_OK) die("amps_solve", ctx.msg);
+        if (amps_solve(&ctx, F, b, x, w) != AMPS_OK) bench_die("amps_solve", ctx.msg);
         t = amps_now() - t0;
         if (t < t_s) t_s = t;
     }
@@ -227,7 +230,7 @@ int main(int argc, char **argv) {
     y0 = (double *)malloc(sizeof(double) * (size_t)n);
     y = (double *)malloc(sizeof(double) * (size_t)n);
     xs = (double *)calloc((size_t)n, sizeof(double));
-    if (amps_marker_init(&ctx, &mk, n) != AMPS_OK) die("amps_marker_init", ctx.msg);
+    if (amps_marker_init(&ctx, &mk, n) != AMPS_OK) bench_die("amps_marker_init", ctx.msg);
     for (k = 0; k < n; k++) y0[k] = b[F->perm[k]];
     amps_lsolve(F, y0);
     amps_dsolve(F, y0);
@@ -248,31 +251,40 @@ int main(int argc, char **argv) {
         if (d > err_ltp) err_ltp = d;
         for (j = 0; j < cnt; j++) y[clos[j]] = y0[clos[j]];
     }
-    t_lsp /= NSPARSE; t_ltp /= NSPARSE; clos_avg /= NSPARSE;
-    if (err_ltp > 1e-8) fprintf(stderr, "factor: warning: amps_ltsolve_partial differs from amps_solve by %.1e\n", err_ltp);
+    t_lsp /= NSPARSE;
+    t_ltp /= NSPARSE;
+    clos_avg /= NSPARSE;
+    if (err_ltp > 1e-8)
+        fprintf(stderr, "factor: warning: amps_ltsolve_partial differs from amps_solve by %.1e\n", err_ltp);
     amps_marker_free(&ctx, &mk);
-    free(clos); free(y0); free(y); free(xs);
+    free(clos);
+    free(y0);
+    free(y);
+    free(xs);
     amps_factor_free(&ctx, F);
 
     /* ---- CHOLMOD on the same permutation ---- */
     B = cholmod_allocate_dense((size_t)n, 1, (size_t)n, CHOLMOD_REAL, &c);
     memcpy(B->x, b, sizeof(double) * (size_t)n);
-    c.nmethods = 1; c.method[0].ordering = CHOLMOD_GIVEN; c.postorder = 0;
+    c.nmethods = 1;
+    c.method[0].ordering = CHOLMOD_GIVEN;
+    c.postorder = 0;
     /* simplicial LDL^T */
-    c.supernodal = CHOLMOD_SIMPLICIAL; c.final_ll = 0;
+    c.supernodal = CHOLMOD_SIMPLICIAL;
+    c.final_ll = 0;
     L = cholmod_analyze_p(A, p_nd, NULL, 0, &c);
-    if (!L) die("cholmod_analyze_p (simplicial)", "failed");
+    if (!L) bench_die("cholmod_analyze_p (simplicial)", "failed");
     flops = c.fl;
     for (r = 0, nrep = 3; r < nrep; r++) {
         t0 = amps_now();
-        if (!cholmod_factorize(A, L, &c) || L->minor < L->n) die("cholmod_factorize (simplicial)", "failed");
+        if (!cholmod_factorize(A, L, &c) || L->minor < L->n) bench_die("cholmod_factorize (simplicial)", "failed");
         t = amps_now() - t0;
         if (r == 0) nrep = NREP(t);
         if (t < t_fs) t_fs = t;
     }
     for (r = 0; r < 5; r++) {
         t0 = amps_now();
-        if (!cholmod_solve2(CHOLMOD_A, L, B, NULL, &X, NULL, &Y, &E, &c)) die("cholmod_solve2", "failed");
+        if (!cholmod_solve2(CHOLMOD_A, L, B, NULL, &X, NULL, &Y, &E, &c)) bench_die("cholmod_solve2", "failed");
         t = amps_now() - t0;
         if (t < t_ss) t_ss = t;
     }
@@ -283,23 +295,25 @@ int main(int argc, char **argv) {
     t0 = amps_now();
     L = cholmod_analyze_p(A, p_nd, NULL, 0, &c);
     t_cana_S = amps_now() - t0;
-    if (!L) die("cholmod_analyze_p (supernodal)", "failed");
+    if (!L) bench_die("cholmod_analyze_p (supernodal)", "failed");
     for (r = 0, nrep = 3; r < nrep; r++) {
         t0 = amps_now();
-        if (!cholmod_factorize(A, L, &c) || L->minor < L->n) die("cholmod_factorize (supernodal)", "failed");
+        if (!cholmod_factorize(A, L, &c) || L->minor < L->n) bench_die("cholmod_factorize (supernodal)", "failed");
         t = amps_now() - t0;
         if (r == 0) nrep = NREP(t);
         if (t < t_fS) t_fS = t;
     }
     for (r = 0; r < 5; r++) {
         t0 = amps_now();
-        if (!cholmod_solve2(CHOLMOD_A, L, B, NULL, &X, NULL, &Y, &E, &c)) die("cholmod_solve2", "failed");
+        if (!cholmod_solve2(CHOLMOD_A, L, B, NULL, &X, NULL, &Y, &E, &c)) bench_die("cholmod_solve2", "failed");
         t = amps_now() - t0;
         if (t < t_sS) t_sS = t;
     }
     res_S = relres(K, (double *)X->x, b, w);
     cholmod_free_factor(&L, &c);
-    cholmod_free_dense(&X, &c); cholmod_free_dense(&Y, &c); cholmod_free_dense(&E, &c);
+    cholmod_free_dense(&X, &c);
+    cholmod_free_dense(&Y, &c);
+    cholmod_free_dense(&E, &c);
     cholmod_free_dense(&B, &c);
     cholmod_free_sparse(&A, &c);
     cholmod_finish(&c);
@@ -307,37 +321,46 @@ int main(int argc, char **argv) {
     /* ---- report ---- */
     {
         double t_sbest = t_ss < t_sS ? t_ss : t_sS;
-        printf("%-28s %3s %7s %9s | %10s %10s %5s | %10s %10s %5s %10s | %7s %7s %7s | %8s %8s %8s %6s %6s | %8s %8s %8s %6s | %8s %6s %8s | %7s %7s %7s\n",
+        printf("%-28s %3s %7s %9s | %10s %10s %5s | %10s %10s %5s %10s | %7s %7s %7s | %8s %8s %8s %6s %6s | "
+               "%8s %8s %8s %6s | %8s %6s %8s | %7s %7s %7s\n",
                "mesh", "thr", "n", "nnz(K)", "L ourAMD", "L cAMD", "ratio", "L ourND", "L METIS", "ratio", "L AUTO",
-               "ord ND", "anaGIV", "c.ana", "fact", "c.simpl", "c.super", "/simpl", "/super",
-               "solve", "c.simpl", "c.super", "/best", "lsp1", "clos/n", "ltp1", "res", "c.simpl", "c.super");
-        printf("%-28s %3d %7ld %9.0f | %10.0f %10.0f %5.3f | %10.0f %10.0f %5.3f %10.0f | %7.3f %7.3f %7.3f | %8.4f %8.4f %8.4f %6.2f %6.2f | %8.5f %8.5f %8.5f %6.2f | %8.2e %6.4f %8.2e | %7.1e %7.1e %7.1e\n",
-               spec, nthr, (long)n, nnzK, l_amd, l_camd, l_amd / l_camd, l_nd, l_metis, l_nd / l_metis, l_auto,
-               t_nd, t_ana, t_cana_s, t_f, t_fs, t_fS, t_f / t_fs, t_f / t_fS, t_s, t_ss, t_sS, t_s / t_sbest,
-               t_lsp, clos_avg / (double)n, t_ltp, res, res_s, res_S);
+               "ord ND", "anaGIV", "c.ana", "fact", "c.simpl", "c.super", "/simpl", "/super", "solve", "c.simpl",
+               "c.super", "/best", "lsp1", "clos/n", "ltp1", "res", "c.simpl", "c.super");
+        printf("%-28s %3d %7ld %9.0f | %10.0f %10.0f %5.3f | %10.0f %10.0f %5.3f %10.0f | %7.3f %7.3f %7.3f | "
+               "%8.4f %8.4f %8.4f %6.2f %6.2f | %8.5f %8.5f %8.5f %6.2f | %8.2e %6.4f %8.2e | %7.1e %7.1e %7.1e\n",
+               spec, nthr, (long)n, nnzK, l_amd, l_camd, l_amd / l_camd, l_nd, l_metis, l_nd / l_metis, l_auto, t_nd,
+               t_ana, t_cana_s, t_f, t_fs, t_fS, t_f / t_fs, t_f / t_fS, t_s, t_ss, t_sS, t_s / t_sbest, t_lsp,
+               clos_avg / (double)n, t_ltp, res, res_s, res_S);
         printf("  (times in s; orderings: amps_order; anaGIV = amps_analyze with the ND perm as AMPS_ORDER_GIVEN;"
-               " c.ana = cholmod_analyze_p with it (simplicial); factorizations on the ND perm, %.2f GFlop (CHOLMOD count),"
-               " ours %.2f GFlop/s; lsp1/ltp1 = amps_lsolve_sparse / amps_ltsolve_partial of one index, mean of %d,"
+               " c.ana = cholmod_analyze_p with it (simplicial); factorizations on the ND perm,"
+               " %.2f GFlop (CHOLMOD count), ours %.2f GFlop/s;"
+               " lsp1/ltp1 = amps_lsolve_sparse / amps_ltsolve_partial of one index, mean of %d,"
                " closure %.0f of %ld)\n",
                1e-9 * flops, 1e-9 * flops / t_f, NSPARSE, clos_avg, (long)n);
         fflush(stdout);
-        csv = fopen(out, "a");
-        if (!csv) die(out, "cannot open for appending");
-        fseek(csv, 0, SEEK_END);
-        if (ftell(csv) == 0)
-            fprintf(csv, "mesh,threads,n,nnzK,nnzL_amd,nnzL_cholmod_amd,ratio_amd,nnzL_nd,nnzL_cholmod_metis,ratio_nd,nnzL_auto,"
-                         "t_order_amd,t_order_nd,t_order_auto,t_cholmod_amd,t_cholmod_metis,t_analyze_given,t_cholmod_analyze_given_simpl,"
-                         "t_cholmod_analyze_given_super,flops,t_factor,t_factor_cholmod_simpl,t_factor_cholmod_super,ratio_factor_simpl,"
-                         "ratio_factor_super,t_solve,t_solve_cholmod_simpl,t_solve_cholmod_super,ratio_solve_best,t_lsolve_sparse1,"
-                         "closure1,closure1_frac,t_ltsolve_partial1,relres,relres_cholmod_simpl,relres_cholmod_super\n");
-        fprintf(csv, "%s,%d,%ld,%.0f,%.0f,%.0f,%.4f,%.0f,%.0f,%.4f,%.0f,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.4f,%.4f,"
-                     "%.6e,%.6e,%.6e,%.4f,%.6e,%.1f,%.6f,%.6e,%.3e,%.3e,%.3e\n",
-                spec, nthr, (long)n, nnzK, l_amd, l_camd, l_amd / l_camd, l_nd, l_metis, l_nd / l_metis, l_auto,
-                t_amd, t_nd, t_auto, t_camd, t_metis, t_ana, t_cana_s, t_cana_S, flops, t_f, t_fs, t_fS, t_f / t_fs, t_f / t_fS,
-                t_s, t_ss, t_sS, t_s / t_sbest, t_lsp, clos_avg, clos_avg / (double)n, t_ltp, res, res_s, res_S);
+        csv = bench_csv(out,
+                        "mesh,threads,n,nnzK,nnzL_amd,nnzL_cholmod_amd,ratio_amd,nnzL_nd,nnzL_cholmod_metis,"
+                        "ratio_nd,nnzL_auto,t_order_amd,t_order_nd,t_order_auto,t_cholmod_amd,t_cholmod_metis,"
+                        "t_analyze_given,t_cholmod_analyze_given_simpl,t_cholmod_analyze_given_super,flops,"
+                        "t_factor,t_factor_cholmod_simpl,t_factor_cholmod_super,ratio_factor_simpl,"
+                        "ratio_factor_super,t_solve,t_solve_cholmod_simpl,t_solve_cholmod_super,ratio_solve_best,"
+                        "t_lsolve_sparse1,"
+                        "closure1,closure1_frac,t_ltsolve_partial1,relres,relres_cholmod_simpl,relres_cholmod_super");
+        if (!csv) bench_die(out, "cannot open for appending");
+        fprintf(csv,
+                "%s,%d,%ld,%.0f,%.0f,%.0f,%.4f,%.0f,%.0f,%.4f,%.0f,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,"
+                "%.6e,%.6e,%.6e,%.4f,%.4f,%.6e,%.6e,%.6e,%.4f,%.6e,%.1f,%.6f,%.6e,%.3e,%.3e,%.3e\n",
+                spec, nthr, (long)n, nnzK, l_amd, l_camd, l_amd / l_camd, l_nd, l_metis, l_nd / l_metis, l_auto, t_amd,
+                t_nd, t_auto, t_camd, t_metis, t_ana, t_cana_s, t_cana_S, flops, t_f, t_fs, t_fS, t_f / t_fs,
+                t_f / t_fS, t_s, t_ss, t_sS, t_s / t_sbest, t_lsp, clos_avg, clos_avg / (double)n, t_ltp, res, res_s,
+                res_S);
         fclose(csv);
     }
-    free(p_nd); free(coords); free(b); free(x); free(w);
+    free(p_nd);
+    free(coords);
+    free(b);
+    free(x);
+    free(w);
     amps_csc_free(&ctx, K);
     return 0;
 }

@@ -12,7 +12,8 @@ command -v npm >/dev/null || need="$need npm"
 command -v tetgen >/dev/null || need="$need tetgen"
 if [ -n "$need" ]; then
   if [ "$(id -u)" = 0 ]; then
-    DEBIAN_FRONTEND=noninteractive apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $need >/dev/null
+    export DEBIAN_FRONTEND=noninteractive
+    apt-get update -qq && apt-get install -y -qq $need >/dev/null
   else
     echo "get_bunny: missing Debian packages:$need (sudo apt-get install -y$need)"; exit 1
   fi
@@ -38,5 +39,6 @@ for spec in 20k:0.015 50k:0.0027; do
     tetgen -pq1.5a"$a" -Q "$data/bunny$name.poly" >/dev/null
     rm -f "$data/bunny$name.1.face" "$data/bunny$name.1.edge" "$data/bunny$name.1.smesh"
   fi
-  echo "bunny$name: $(head -1 "$data/bunny$name.1.node" | awk '{print $1}') nodes, $(head -1 "$data/bunny$name.1.ele" | awk '{print $1}') tets"
+  nodes=$(head -1 "$data/bunny$name.1.node" | awk '{print $1}')
+  echo "bunny$name: $nodes nodes, $(head -1 "$data/bunny$name.1.ele" | awk '{print $1}') tets"
 done

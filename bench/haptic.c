@@ -15,7 +15,7 @@
    Prints a summary and appends one row to out.csv (header first if the file is new). */
 #define AMPS_IMPLEMENTATION
 #include "../amps.h"
-#include "bench_util.h"
+#include "bench.h"
 
 #define HAPTIC_PERIOD 400
 #define HAPTIC_CHECK 100
@@ -29,17 +29,20 @@ int main(int argc, char **argv) {
     int steps, ncuts, ndid = 0, npins = 20, up, ax3, nn, v, k, st, ndone = 0, nchk = 0, *pins;
     double lo[3], hi[3], amp = 0, t_prep, *t_step, *t_full, *r1, *r2, *force, relmax = 0, relsum = 0, fmax = 0;
     unsigned char *fixed;
-    bu_cut cp;
-    bu_model B;
+    bench_cut cp;
+    bench_model B;
     amps_update_stats us;
     FILE *csv;
-    if (argc < 5) { fprintf(stderr, "usage: haptic <beam:h|brick:R|file> <steps> <cuts> <out.csv> [npins]\n"); return 2; }
+    if (argc < 5) {
+        fprintf(stderr, "usage: haptic <beam:h|brick:R|file> <steps> <cuts> <out.csv> [npins]\n");
+        return 2;
+    }
     spec = argv[1]; steps = atoi(argv[2]); ncuts = atoi(argv[3]); out = argv[4];
     if (argc > 5) npins = atoi(argv[5]);
     if (steps < 1 || npins < 1) return 2;
-    bu_mesh_name(spec, name, sizeof(name));
+    bench_mesh_name(spec, name, sizeof(name));
     amps_ctx_init(&ctx);
-    if (bu_model_init(&ctx, spec, NULL, &B)) return 1;
+    bench_model_init(&ctx, spec, NULL, &B);
     m = B.m; S = B.S; fixed = B.fixed; force = B.force; nn = B.nn; up = B.up; cp = B.cp;
     memcpy(lo, B.lo, sizeof(lo)); memcpy(hi, B.hi, sizeof(hi));
     ax3 = up == 2 ? 1 : 2;
@@ -48,7 +51,7 @@ int main(int argc, char **argv) {
     t_prep = amps_now();
     if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "first solve: %s\n", ctx.msg); return 1; }
     t_prep = amps_now() - t_prep;
-    ndid = bu_cuts(&ctx, &B, ncuts);
+    ndid = bench_cuts(&ctx, &B, ncuts);
     /* the tool: the npins highest free, unloaded original nodes (selection by repeated maximum) */
     pins = (int *)malloc(sizeof(int) * (size_t)npins);
     {
@@ -108,17 +111,21 @@ int main(int argc, char **argv) {
         const amps_factor *F = amps_scene_factor(S);
         for (k = 0; k < ndone; k++) mean += t_step[k];
         mean /= ndone;
-        mx = bu_quantile(t_step, ndone, 1.0);
-        p99 = bu_quantile(t_step, ndone, 0.99);
-        med = bu_quantile(t_step, ndone, 0.5);
-        fmed = bu_median(t_full, nchk);
-        printf("%s: %d nodes, %ld equations, nnz(L) %.0f, prepare %.2f s; %d cuts, %d pins, |S u C| %ld, amplitude %.3g, max tool force %.3g\n",
+        mx = bench_quantile(t_step, ndone, 1.0);
+        p99 = bench_quantile(t_step, ndone, 0.99);
+        med = bench_quantile(t_step, ndone, 0.5);
+        fmed = bench_median(t_full, nchk);
+        printf("%s: %d nodes, %ld equations, nnz(L) %.0f, prepare %.2f s; %d cuts, %d pins, |S u C| %ld,"
+               " amplitude %.3g, max tool force %.3g\n",
                name, nn, (long)F->n, amps_factor_nnz(F), t_prep, ndid, npins, (long)us.nsys, amp, fmax);
-        printf("  haptic step (%d steps): mean %.3f ms, median %.3f ms, p99 %.3f ms, max %.3f ms -> %.0f Hz (mean), %.0f Hz (median)\n",
+        printf("  haptic step (%d steps): mean %.3f ms, median %.3f ms, p99 %.3f ms, max %.3f ms"
+               " -> %.0f Hz (mean), %.0f Hz (median)\n",
                ndone, 1e3 * mean, 1e3 * med, 1e3 * p99, 1e3 * mx, 1 / mean, 1 / med);
-        printf("  full solve (visual, %d samples): median %.2f ms (x%.0f the haptic step); reactions vs full solve: max rel diff %.2e, mean %.2e\n",
+        printf("  full solve (visual, %d samples): median %.2f ms (x%.0f the haptic step);"
+               " reactions vs full solve: max rel diff %.2e, mean %.2e\n",
                nchk, 1e3 * fmed, fmed / med, relmax, nchk ? relsum / nchk : 0.0);
-        csv = bu_csv(out, "mesh,nodes,equations,nnzL,cuts,pins,nsys,steps,mean_ms,median_ms,p99_ms,max_ms,rate_hz,full_solve_ms,reaction_reldiff_max,reaction_reldiff_mean");
+        csv = bench_csv(out, "mesh,nodes,equations,nnzL,cuts,pins,nsys,steps,mean_ms,median_ms,p99_ms,max_ms,rate_hz,"
+                             "full_solve_ms,reaction_reldiff_max,reaction_reldiff_mean");
         if (!csv) { fprintf(stderr, "cannot write %s\n", out); return 1; }
         fprintf(csv, "%s,%d,%ld,%.0f,%d,%d,%ld,%d,%.4f,%.4f,%.4f,%.4f,%.0f,%.3f,%.3e,%.3e\n", name, nn, (long)F->n, amps_factor_nnz(F), ndid,
                 npins, (long)us.nsys, ndone, 1e3 * mean, 1e3 * med, 1e3 * p99, 1e3 * mx, 1 / mean, 1e3 * fmed, relmax, nchk ? relsum / nchk : 0.0);

@@ -1,7 +1,7 @@
 /* bench/harness: every solver over the same step sequence, time against error, side by side.
 
    usage: harness <mesh> <cut|deform> <steps> <every> <out.csv>
-     mesh: beam:<h> | brick:<R> | TetGen .node / .msh / .mesh (see bench_common.h for the scenario)
+     mesh: beam:<h> | brick:<R> | TetGen .node / .msh / .mesh (see bench.h for the scenario)
      every: the sampled steps are 1, every k-th and the last; the reference solution, CHOLMOD
             refactorization, PCG and GMRES run at sampled steps only; amps.h and CHOLMOD
             update/downdate (stateful) run at every step.
@@ -28,16 +28,18 @@
                         for the DOFs cuts will add, then per step rank updates (cholmod_updown)
                         and row deletions (cholmod_rowdel); see updown_* below.
    cg_<none|jacobi>     our CG on K_FF x_F = b_F, warm-started from the previous step's solution.
-   gmres_<none|D|tri>   paper 001: unsymmetric augmented system, implicit Schur complement,
+   gmres_<none|D|tri>   [Interactive cutting] (Yeung, Crouch, Pothen, "Interactively cutting and
+                        constraining vertices in meshes using augmented matrices"):
+                        unsymmetric augmented system, implicit Schur complement,
                         restarted GMRES; see gm_* below.
    The iterative methods run once per step to the tightest tolerance; the time and iterate at
    which each looser tolerance is first met are recorded (a run stopped there would do exactly
    the same work). Reference: CHOLMOD's solution improved by 3 refinement steps (residual in
-   double). Errors and residuals are those of the reduced system (bench_common.h).
+   double). Errors and residuals are those of the reduced system (bench.h).
    Build: see bench/run.sh. */
 #define AMPS_IMPLEMENTATION
 #include "../amps.h"
-#include "bench_common.h"
+#include "bench.h"
 #include <cholmod.h>
 #include <umfpack.h>
 
@@ -60,11 +62,13 @@ static int envi(const char *name, int def) { const char *s = getenv(name); retur
 /* ======================= CHOLMOD on the explicit reduced system ======================= */
 
 /* reduced upper matrix K_FF and b_F; fmap[i] = position of equation i in F or -1 */
-static cholmod_sparse *reduced(const bsys *S, int *fmap, cholmod_dense **B, cholmod_common *c) {
+static cholmod_sparse *reduced(const bench_sys *S, int *fmap, cholmod_dense **B, cholmod_common *c) {
     int i, j, p, nf = 0, nz = 0;
     cholmod_sparse *A;
     for (i = 0; i < S->n; i++) fmap[i] = S->con[i] ? -1 : nf++;
-    for (j = 0; j < S->n; j++) if (fmap[j] >= 0) for (p = S->K->p[j]; p < S->K->p[j + 1]; p++) nz += fmap[S->K->i[p]] >= 0;
+    for (j = 0; j < S->n; j++)
+        if (fmap[j] >= 0)
+            for (p = S->K->p[j]; p < S->K->p[j + 1]; p++) nz += fmap[S->K->i[p]] >= 0;
     A = cholmod_allocate_sparse((size_t)nf, (size_t)nf, (size_t)nz, 1, 1, 1, CHOLMOD_REAL, c);
     *B = cholmod_zeros((size_t)nf, 1, CHOLMOD_REAL, c);
     nz = 0;
@@ -79,20 +83,21 @@ static cholmod_sparse *reduced(const bsys *S, int *fmap, cholmod_dense **B, chol
     return A;
 }
 
-static void expand(const bsys *S, const int *fmap, const double *xf, double *x) {
+static void expand(const bench_sys *S, const int *fmap, const double *xf, double *x) {
     int i;
     for (i = 0; i < S->n; i++) x[i] = fmap[i] >= 0 ? xf[fmap[i]] : S->g[i];
 }
 
 /* CHOLMOD refactor + solve (timed), a second solve (timed), then xref by 3 refinement steps;
    with simpl, also the simplicial LDL' refactor. Writes the rows of chol_refactor(_simpl), chol_solve. */
-static void reference(const bsys *S, double *xref, double *work, int simpl) {
+static void reference(const bench_sys *S, double *xref, double *work, int simpl) {
     cholmod_common c;
     cholmod_sparse *A;
     cholmod_dense *B, *X, *X2, *R;
     cholmod_factor *L;
     int *fmap = (int *)bench_alloc(sizeof(int) * (size_t)S->n), it;
-    double t0, t_ref, t_sol, one[2] = {1, 0}, mone[2] = {-1, 0}, *x0 = (double *)bench_alloc(sizeof(double) * (size_t)S->n);
+    double t0, t_ref, t_sol, one[2] = {1, 0}, mone[2] = {-1, 0},
+                             *x0 = (double *)bench_alloc(sizeof(double) * (size_t)S->n);
     cholmod_start(&c);
     c.supernodal = CHOLMOD_SUPERNODAL;
     A = reduced(S, fmap, &B, &c);
@@ -116,8 +121,8 @@ static void reference(const bsys *S, double *xref, double *work, int simpl) {
         cholmod_free_dense(&R, &c); cholmod_free_dense(&D, &c);
     }
     expand(S, fmap, (double *)X2->x, xref);
-    put("chol_refactor", 0, t_ref, 0, bsys_relres(S, x0, work), bsys_relerr(S, x0, xref), 1, S->n, 0, NULL);
-    put("chol_solve", 0, t_sol, 0, bsys_relres(S, x0, work), bsys_relerr(S, x0, xref), 1, S->n, 0, NULL);
+    put("chol_refactor", 0, t_ref, 0, bench_sys_relres(S, x0, work), bench_sys_relerr(S, x0, xref), 1, S->n, 0, NULL);
+    put("chol_solve", 0, t_sol, 0, bench_sys_relres(S, x0, work), bench_sys_relerr(S, x0, xref), 1, S->n, 0, NULL);
     cholmod_free_dense(&X, &c); cholmod_free_dense(&X2, &c); cholmod_free_factor(&L, &c);
     if (simpl) {
         c.supernodal = CHOLMOD_SIMPLICIAL; c.final_ll = 0;
@@ -127,7 +132,8 @@ static void reference(const bsys *S, double *xref, double *work, int simpl) {
         X = cholmod_solve(CHOLMOD_A, L, B, &c);
         t_ref = amps_now() - t0;
         expand(S, fmap, (double *)X->x, x0);
-        put("chol_refactor_simpl", 0, t_ref, 0, bsys_relres(S, x0, work), bsys_relerr(S, x0, xref), 1, S->n, 0, NULL);
+        put("chol_refactor_simpl", 0, t_ref, 0, bench_sys_relres(S, x0, work), bench_sys_relerr(S, x0, xref), 1, S->n,
+            0, NULL);
         cholmod_free_dense(&X, &c); cholmod_free_factor(&L, &c);
     }
     cholmod_free_dense(&B, &c); cholmod_free_sparse(&A, &c);
@@ -138,7 +144,7 @@ static void reference(const bsys *S, double *xref, double *work, int simpl) {
 /* ============================ CHOLMOD update / downdate ============================
    CHOLMOD cannot change the order of a factorization, so it factors once the padded matrix
        A = [K0 0; 0 I_r],  r = 3 * (steps + 1) reserved equations,
-   with the numbering of bsys (a cut's copy v' gets equations n0 + 3 j .. n0 + 3 j + 2, which
+   with the numbering of bench_sys (a cut's copy v' gets equations n0 + 3 j .. n0 + 3 j + 2, which
    are reserved rows until then; unused reserved rows keep x = 0). The analysis and the
    supernodal factorization with OpenBLAS are converted to a simplicial LDL' once (setup, not
    timed); every step then modifies that LDL' in place:
@@ -161,16 +167,21 @@ typedef struct updown {
     double t_setup, lnz0;
 } updown;
 
-static void updown_init(updown *u, const bsys *S0, int reserve) {
+static void updown_init(updown *u, const bench_sys *S0, int reserve) {
     cholmod_sparse *A;
     int j, p, nz = 0, n0 = S0->n;
     double t0 = amps_now();
     cholmod_start(&u->c);
     u->n0 = n0; u->N = n0 + reserve;
-    A = cholmod_allocate_sparse((size_t)u->N, (size_t)u->N, (size_t)(S0->K->p[n0] + reserve), 1, 1, 1, CHOLMOD_REAL, &u->c);
+    A = cholmod_allocate_sparse((size_t)u->N, (size_t)u->N, (size_t)(S0->K->p[n0] + reserve), 1, 1, 1, CHOLMOD_REAL,
+                                &u->c);
     for (j = 0; j < u->N; j++) {
         ((int *)A->p)[j] = nz;
-        if (j < n0) for (p = S0->K->p[j]; p < S0->K->p[j + 1]; p++) { ((int *)A->i)[nz] = S0->K->i[p]; ((double *)A->x)[nz++] = S0->K->x[p]; }
+        if (j < n0)
+            for (p = S0->K->p[j]; p < S0->K->p[j + 1]; p++) {
+                ((int *)A->i)[nz] = S0->K->i[p];
+                ((double *)A->x)[nz++] = S0->K->x[p];
+            }
         else { ((int *)A->i)[nz] = j; ((double *)A->x)[nz++] = 1.0; }
     }
     ((int *)A->p)[u->N] = nz;
@@ -218,9 +229,11 @@ static void tet_w(const amps_mesh *m, amps_int t, double W[72]) {
 
 /* C = [P W_t]_t with v' replaced by `as` in the tets' node lists, plus identity columns of v'
    when ident; rows permuted and sorted */
-static cholmod_sparse *updown_c(updown *u, const amps_mesh *M, const amps_int *ndof, const bstep *s, int as, int ident) {
+static cholmod_sparse *updown_c(updown *u, const amps_mesh *M, const amps_int *ndof, const bench_step *s, int as,
+                                int ident) {
     int ncol = 6 * s->nmoved + (ident ? 3 : 0), k, a, q, d, col = 0, nz = 0;
-    cholmod_sparse *C = cholmod_allocate_sparse((size_t)u->N, (size_t)ncol, (size_t)(12 * ncol), 1, 1, 0, CHOLMOD_REAL, &u->c);
+    cholmod_sparse *C =
+            cholmod_allocate_sparse((size_t)u->N, (size_t)ncol, (size_t)(12 * ncol), 1, 1, 0, CHOLMOD_REAL, &u->c);
     int *Cp = (int *)C->p, *Ci = (int *)C->i;
     double *Cx = (double *)C->x, W[72];
     for (k = 0; k < s->nmoved; k++) {
@@ -232,7 +245,11 @@ static cholmod_sparse *updown_c(updown *u, const amps_mesh *M, const amps_int *n
             for (a = 0; a < 4; a++) {
                 int v = (int)M->tet[4 * t + a];
                 if (v == s->vc) v = as;
-                for (d = 0; d < 3; d++) if (ndof[3 * v + d] >= 0) { Ci[nz] = u->iperm[ndof[3 * v + d]]; Cx[nz++] = W[6 * (3 * a + d) + q]; }
+                for (d = 0; d < 3; d++)
+                    if (ndof[3 * v + d] >= 0) {
+                        Ci[nz] = u->iperm[ndof[3 * v + d]];
+                        Cx[nz++] = W[6 * (3 * a + d) + q];
+                    }
             }
             for (i = start + 1; i < nz; i++)   /* insertion sort of the column */
                 for (j = i; j > start && Ci[j - 1] > Ci[j]; j--) {
@@ -247,8 +264,8 @@ static cholmod_sparse *updown_c(updown *u, const amps_mesh *M, const amps_int *n
 }
 
 /* one step; x (N) receives the solution. Kf0: the initial full K (pins only happen without cuts) */
-static double updown_step(updown *u, const amps_mesh *M, const amps_int *ndof, const bstep *s, const bscen *sc,
-                          const amps_csc *Kf0, unsigned char *con, double *x) {
+static double updown_step(updown *u, const amps_mesh *M, const amps_int *ndof, const bench_step *s,
+                          const bench_scen *sc, const amps_csc *Kf0, unsigned char *con, double *x) {
     double t0 = amps_now(), *b = (double *)u->B->x;
     cholmod_dense *X;
     int d;
@@ -280,11 +297,14 @@ static double updown_step(updown *u, const amps_mesh *M, const amps_int *ndof, c
    (recursive residual) or maxit. Records for each tolerance the time, iterations and iterate. */
 typedef struct snaps { double t[NTOL], *x[NTOL]; int it[NTOL], conv[NTOL]; } snaps;
 
-static void cg_run(const bsys *S, const double *x0, int jacobi, int maxit, snaps *sn) {
+static void cg_run(const bench_sys *S, const double *x0, int jacobi, int maxit, snaps *sn) {
     int n = S->n, i, it = 0, ti = 0;
-    double *x = (double *)bench_alloc(sizeof(double) * (size_t)n), *r = (double *)bench_alloc(sizeof(double) * (size_t)n);
-    double *z = (double *)bench_alloc(sizeof(double) * (size_t)n), *p = (double *)bench_alloc(sizeof(double) * (size_t)n);
-    double *q = (double *)bench_alloc(sizeof(double) * (size_t)n), *dinv = (double *)bench_alloc(sizeof(double) * (size_t)n);
+    double *x = (double *)bench_alloc(sizeof(double) * (size_t)n),
+           *r = (double *)bench_alloc(sizeof(double) * (size_t)n);
+    double *z = (double *)bench_alloc(sizeof(double) * (size_t)n),
+           *p = (double *)bench_alloc(sizeof(double) * (size_t)n);
+    double *q = (double *)bench_alloc(sizeof(double) * (size_t)n),
+           *dinv = (double *)bench_alloc(sizeof(double) * (size_t)n);
     double rz, rr, t0 = amps_now(), tpause = 0;
     for (i = 0; i < n; i++) {
         amps_int k;
@@ -313,16 +333,27 @@ static void cg_run(const bsys *S, const double *x0, int jacobi, int maxit, snaps
         for (i = 0; i < n; i++) { if (S->con[i]) q[i] = 0; pq += p[i] * q[i]; }
         alpha = rz / pq;
         rr = 0;
-        for (i = 0; i < n; i++) { x[i] += alpha * p[i]; r[i] -= alpha * q[i]; z[i] = dinv[i] * r[i]; rz1 += r[i] * z[i]; rr += r[i] * r[i]; }
+        for (i = 0; i < n; i++) {
+            x[i] += alpha * p[i];
+            r[i] -= alpha * q[i];
+            z[i] = dinv[i] * r[i];
+            rz1 += r[i] * z[i];
+            rr += r[i] * r[i];
+        }
         beta = rz1 / rz; rz = rz1;
         for (i = 0; i < n; i++) p[i] = z[i] + beta * p[i];
         it++;
     }
-    for (; ti < NTOL; ti++) { sn->t[ti] = amps_now() - t0 - tpause; sn->it[ti] = it; sn->conv[ti] = 0; memcpy(sn->x[ti], x, sizeof(double) * (size_t)n); }
+    for (; ti < NTOL; ti++) {
+        sn->t[ti] = amps_now() - t0 - tpause;
+        sn->it[ti] = it;
+        sn->conv[ti] = 0;
+        memcpy(sn->x[ti], x, sizeof(double) * (size_t)n);
+    }
     free(x); free(r); free(z); free(p); free(q); free(dinv);
 }
 
-/* ======================= paper 001: augmented system + GMRES =======================
+/* ================= [Interactive cutting]: augmented system + GMRES =================
    R = [K0 0; 0 I] (K0 = LDL^T, amps.h's factor of the initial system; padded identity for the
    equations cuts append), Lset = the equations whose column differs from R's (every DOF of a
    cut node, of its copy and of the moved tets' nodes, accumulated) and the constrained ones,
@@ -343,7 +374,8 @@ static void cg_run(const bsys *S, const double *x0, int jacobi, int maxit, snaps
 typedef struct gmres {
     const amps_factor *F;
     int n0, m, n, *pos;             /* pos[i] = position of equation i in Lset or -1 */
-    double *w, *z, *sa, *sd, *sc;   /* w: permuted work (n0), z: work (n); S = tridiag(sa sup, sd diag, sc sub) by columns */
+    double *w, *z, *sa, *sd,
+            *sc; /* w: permuted work (n0), z: work (n); S = tridiag(sa sup, sd diag, sc sub) by columns */
     amps_int *cl, *bi, *req, *tch;
     amps_marker mk;
     int nreq;
@@ -353,7 +385,7 @@ typedef struct gmres {
     void *num;                      /* UMFPACK factor of M */
 } gmres;
 
-static void gm_init(amps_ctx *ctx, gmres *G, const amps_factor *F, const bsys *S0, int ncap) {
+static void gm_init(amps_ctx *ctx, gmres *G, const amps_factor *F, const bench_sys *S0, int ncap) {
     int j, n0 = (int)F->n;
     memset(G, 0, sizeof(*G));
     G->F = F; G->n0 = n0;
@@ -397,7 +429,11 @@ static void gm_init(amps_ctx *ctx, gmres *G, const amps_factor *F, const bsys *S
                 rhs[b] -= l * rhs[a];
             }
         }
-        for (a = nc - 1; a >= 0; a--) { s[a] = rhs[a]; for (b = a + 1; b < nc; b++) s[a] -= Gm[3 * a + b] * s[b]; s[a] /= Gm[3 * a + a]; }
+        for (a = nc - 1; a >= 0; a--) {
+            s[a] = rhs[a];
+            for (b = a + 1; b < nc; b++) s[a] -= Gm[3 * a + b] * s[b];
+            s[a] /= Gm[3 * a + a];
+        }
         for (a = 0; a < nc; a++) {
             if (c[a] == j - 1) G->sa[j] = s[a];       /* S(j-1, j) */
             else if (c[a] == j) G->sd[j] = s[a];
@@ -416,7 +452,12 @@ static void gm_free(amps_ctx *ctx, gmres *G) {
 static void gm_hrinv(gmres *G, const int *Lset, int nt, double *out) {
     const amps_factor *F = G->F;
     int k, nb = 0, nc;
-    for (k = 0; k < nt; k++) if (G->tch[k] < G->n0) { amps_int pk = F->iperm[G->tch[k]]; G->w[pk] = G->z[G->tch[k]]; G->bi[nb++] = pk; }
+    for (k = 0; k < nt; k++)
+        if (G->tch[k] < G->n0) {
+            amps_int pk = F->iperm[G->tch[k]];
+            G->w[pk] = G->z[G->tch[k]];
+            G->bi[nb++] = pk;
+        }
     nc = (int)amps_lsolve_sparse(F, nb, G->bi, G->w, G->cl, &G->mk);
     for (k = 0; k < nc; k++) G->w[G->cl[k]] /= F->D[G->cl[k]];
     {
@@ -488,15 +529,20 @@ static void hess_solve(const double *H, int mr, const double *g, int j, double *
 }
 
 /* Runs the method for one step to the tightest tolerance; snapshots of the full solution. */
-static void gm_run(gmres *G, const bsys *S, const int *Lset, int m, const double *x0, int prec, int maxit, int restart,
-                   snaps *sn) {
+static void gm_run(gmres *G, const bench_sys *S, const int *Lset, int m, const double *x0, int prec, int maxit,
+                   int restart, snaps *sn) {
     int n = S->n, k, p, i, j, it = 0, ti = 0, mr = restart < m ? restart : m;
     double t0 = amps_now(), tpause = 0, nrhs, beta;
-    double *rhs = (double *)bench_alloc(sizeof(double) * (size_t)m), *a = (double *)bench_alloc(sizeof(double) * (size_t)m);
-    double *r = (double *)bench_alloc(sizeof(double) * (size_t)m), *tmp = (double *)bench_alloc(sizeof(double) * (size_t)m);
-    double *V = (double *)bench_alloc(sizeof(double) * (size_t)m * (size_t)(mr + 1)), *Z = (double *)bench_alloc(sizeof(double) * (size_t)m * (size_t)mr);
-    double *H = (double *)bench_alloc(sizeof(double) * (size_t)(mr + 1) * (size_t)mr), *cs = (double *)bench_alloc(sizeof(double) * (size_t)mr);
-    double *sn_ = (double *)bench_alloc(sizeof(double) * (size_t)mr), *g = (double *)bench_alloc(sizeof(double) * (size_t)(mr + 1));
+    double *rhs = (double *)bench_alloc(sizeof(double) * (size_t)m),
+           *a = (double *)bench_alloc(sizeof(double) * (size_t)m);
+    double *r = (double *)bench_alloc(sizeof(double) * (size_t)m),
+           *tmp = (double *)bench_alloc(sizeof(double) * (size_t)m);
+    double *V = (double *)bench_alloc(sizeof(double) * (size_t)m * (size_t)(mr + 1)),
+           *Z = (double *)bench_alloc(sizeof(double) * (size_t)m * (size_t)mr);
+    double *H = (double *)bench_alloc(sizeof(double) * (size_t)(mr + 1) * (size_t)mr),
+           *cs = (double *)bench_alloc(sizeof(double) * (size_t)mr);
+    double *sn_ = (double *)bench_alloc(sizeof(double) * (size_t)mr),
+           *g = (double *)bench_alloc(sizeof(double) * (size_t)(mr + 1));
     double *y = (double *)bench_alloc(sizeof(double) * (size_t)(mr + 1));
     double *a2s[NTOL], t_snap[NTOL];
     int *ti_ = NULL, *tj_ = NULL, *Mp = NULL, *Mi = NULL;
@@ -525,9 +571,16 @@ static void gm_run(gmres *G, const bsys *S, const int *Lset, int m, const double
         tx_ = (double *)bench_alloc(sizeof(double) * (size_t)cap);
         Mp = (int *)bench_alloc(sizeof(int) * ((size_t)m + 1)); Mi = (int *)bench_alloc(sizeof(int) * (size_t)cap);
         Mx = (double *)bench_alloc(sizeof(double) * (size_t)cap);
-        if (!gm_prec_build(G, prec, tx_, ti_, tj_, Mp, Mi, Mx)) { fprintf(stderr, "gmres: M singular, no preconditioner\n"); prec = 0; }
+        if (!gm_prec_build(G, prec, tx_, ti_, tj_, Mp, Mi, Mx)) {
+            fprintf(stderr, "gmres: M singular, no preconditioner\n");
+            prec = 0;
+        }
     }
-#define PREC(in, out) do { if (prec) umfpack_di_solve(UMFPACK_A, Mp, Mi, Mx, (out), (in), G->num, NULL, NULL); else memcpy((out), (in), sizeof(double) * (size_t)m); } while (0)
+#define PREC(in, out)                                                                       \
+    do {                                                                                    \
+        if (prec) umfpack_di_solve(UMFPACK_A, Mp, Mi, Mx, (out), (in), G->num, NULL, NULL); \
+        else memcpy((out), (in), sizeof(double) * (size_t)m);                               \
+    } while (0)
     /* step 1: rhs = H R^{-1} fhat, fhat = b */
     {
         int nt = 0;
@@ -543,7 +596,12 @@ static void gm_run(gmres *G, const bsys *S, const int *Lset, int m, const double
         gm_op(G, Lset, a, tmp);
         for (k = 0, beta = 0; k < m; k++) { r[k] = rhs[k] - tmp[k]; beta += r[k] * r[k]; }
         beta = sqrt(beta);
-        while (ti < NTOL && beta <= tols[ti] * nrhs) { memcpy(a2s[ti], a, sizeof(double) * (size_t)m); t_snap[ti] = amps_now() - t0 - tpause; sn->it[ti] = it; sn->conv[ti++] = 1; }
+        while (ti < NTOL && beta <= tols[ti] * nrhs) {
+            memcpy(a2s[ti], a, sizeof(double) * (size_t)m);
+            t_snap[ti] = amps_now() - t0 - tpause;
+            sn->it[ti] = it;
+            sn->conv[ti++] = 1;
+        }
         if (ti == NTOL || it >= maxit || beta == 0) break;
         for (k = 0; k < m; k++) V[k] = r[k] / beta;
         memset(g, 0, sizeof(double) * (size_t)(mr + 1));
@@ -585,7 +643,12 @@ static void gm_run(gmres *G, const bsys *S, const int *Lset, int m, const double
         hess_solve(H, mr, g, jj, y);
         for (i = 0; i < jj; i++) for (k = 0; k < m; k++) a[k] += y[i] * Z[(size_t)i * m + k];
         if (it >= maxit) {
-            for (; ti < NTOL; ti++) { memcpy(a2s[ti], a, sizeof(double) * (size_t)m); t_snap[ti] = amps_now() - t0 - tpause; sn->it[ti] = it; sn->conv[ti] = 0; }
+            for (; ti < NTOL; ti++) {
+                memcpy(a2s[ti], a, sizeof(double) * (size_t)m);
+                t_snap[ti] = amps_now() - t0 - tpause;
+                sn->it[ti] = it;
+                sn->conv[ti] = 0;
+            }
             break;
         }
     }
@@ -596,7 +659,12 @@ static void gm_run(gmres *G, const bsys *S, const int *Lset, int m, const double
         const amps_factor *F = G->F;
         int nt = gm_jmul(G, a2s[ti], -1.0), nb = 0;
         for (i = 0; i < n; i++) if (S->b[i] != 0) { if (G->z[i] == 0) G->tch[nt++] = i; G->z[i] += S->b[i]; }
-        for (k = 0; k < nt; k++) if (G->tch[k] < G->n0) { amps_int pk = F->iperm[G->tch[k]]; if (w[pk] == 0) G->bi[nb++] = pk; w[pk] = G->z[G->tch[k]]; }
+        for (k = 0; k < nt; k++)
+            if (G->tch[k] < G->n0) {
+                amps_int pk = F->iperm[G->tch[k]];
+                if (w[pk] == 0) G->bi[nb++] = pk;
+                w[pk] = G->z[G->tch[k]];
+            }
         amps_lsolve_sparse(F, nb, G->bi, w, G->cl, &G->mk);
         amps_dsolve(F, w);
         amps_ltsolve(F, w);
@@ -622,14 +690,15 @@ int main(int argc, char **argv) {
     const char *spec, *out;
     char conf[MAXCONF][16], metapath[1024];
     int steps, every, cut, nconf = 0, k, st, maxdeg = 0, v, ndofc, nL = 0, nsampled = 0;
-    int cg_maxit = envi("BENCH_CG_MAXIT", 2000), gm_maxit = envi("BENCH_GM_MAXIT", 600), gm_restart = envi("BENCH_GM_RESTART", 150);
+    int cg_maxit = envi("BENCH_CG_MAXIT", 2000), gm_maxit = envi("BENCH_GM_MAXIT", 600),
+        gm_restart = envi("BENCH_GM_RESTART", 150);
     int simpl_maxn = envi("BENCH_SIMPL_MAXN", 60000), iter = envi("BENCH_ITER", 1);
     double tmax = getenv("BENCH_TMAX") ? atof(getenv("BENCH_TMAX")) : 0, t_start = amps_now();
     amps_scene *S[MAXCONF];
     amps_mesh *M;
-    bscen sc;
-    bstep s;
-    bsys S0;
+    bench_scen sc;
+    bench_step s;
+    bench_sys S0;
     updown ud;
     gmres gm;
     amps_int *ndof;
@@ -638,7 +707,10 @@ int main(int argc, char **argv) {
     double *uprev, *xprev, *x, *xref, *work, *xud, t_amps_setup[MAXCONF];
     snaps sn;
     FILE *meta;
-    if (argc < 6) { fprintf(stderr, "usage: harness <beam:h|brick:R|file> <cut|deform> <steps> <every> <out.csv>\n"); return 2; }
+    if (argc < 6) {
+        fprintf(stderr, "usage: harness <beam:h|brick:R|file> <cut|deform> <steps> <every> <out.csv>\n");
+        return 2;
+    }
     spec = argv[1]; cut = !strcmp(argv[2], "cut"); steps = atoi(argv[3]); every = atoi(argv[4]); out = argv[5];
     if (every < 1) every = 1;
     amps_ctx_init(&ctx);
@@ -653,7 +725,7 @@ int main(int argc, char **argv) {
         }
     }
     M = bench_mesh(&ctx, spec);
-    bscen_init(&sc, M, spec, cut, steps);
+    bench_scen_init(&sc, M, spec, cut, steps);
     if (amps_mesh_reserve(&ctx, M, sc.cap) != AMPS_OK) bench_die("amps_mesh_reserve", ctx.msg);
     for (v = 0; v < sc.nn0; v++) if (amps_mesh_degree(M, v) > maxdeg) maxdeg = (int)amps_mesh_degree(M, v);
     s.moved = (amps_int *)bench_alloc(sizeof(amps_int) * (size_t)maxdeg);
@@ -667,15 +739,16 @@ int main(int argc, char **argv) {
         if (getenv("BENCH_GUARD")) so.update.guard_tol = atof(getenv("BENCH_GUARD"));
         /* background re-factorization off: its thread would run while the other methods are
            timed (bench/refactor measures it alone); BENCH_REFACTOR=auto turns it on */
-        so.update.refactor = getenv("BENCH_REFACTOR") && !strcmp(getenv("BENCH_REFACTOR"), "auto") ? AMPS_REFACTOR_AUTO : AMPS_REFACTOR_OFF;
-        S[k] = bscen_scene(&cctx[k], &sc, spec, &so);
+        so.update.refactor = getenv("BENCH_REFACTOR") && !strcmp(getenv("BENCH_REFACTOR"), "auto") ? AMPS_REFACTOR_AUTO
+                                                                                                   : AMPS_REFACTOR_OFF;
+        S[k] = bench_scen_scene(&cctx[k], &sc, spec, &so);
         t0 = amps_now();
         if (amps_scene_solve(&cctx[k], S[k]) != AMPS_OK) bench_die("first solve", cctx[k].msg);
         t_amps_setup[k] = amps_now() - t0;
     }
     if (nconf == 0) bench_die("BENCH_AMPS", "no configuration");
-    bsys_build(&ctx, &sc, M, &S0);
-    /* equations by node, kept current as cuts append copies (= bsys numbering) */
+    bench_sys_build(&ctx, &sc, M, &S0);
+    /* equations by node, kept current as cuts append copies (= bench_sys numbering) */
     ndof = (amps_int *)bench_alloc(sizeof(amps_int) * 3 * (size_t)sc.cap);
     memcpy(ndof, S0.dof, sizeof(amps_int) * 3 * (size_t)sc.nn0);
     ndofc = S0.n;
@@ -696,14 +769,16 @@ int main(int argc, char **argv) {
     }
     {
         const amps_factor *F = amps_scene_factor(S[0]);
-        printf("%s %s: %d nodes, %d equations, nnz(L) %.0f (CHOLMOD padded %.0f), path %d; setup: amps %.2f s, updown %.2f s\n",
-               spec, argv[2], sc.nn0, S0.n, amps_factor_nnz(F), ud.lnz0, sc.npath, t_amps_setup[0], ud.t_setup);
-        snprintf(metapath, sizeof(metapath), "%.*s_meta.csv", (int)(strlen(out) > 4 ? strlen(out) - 4 : strlen(out)), out);
+        printf("%s %s: %d nodes, %d equations, nnz(L) %.0f (CHOLMOD padded %.0f), path %d;"
+               " setup: amps %.2f s, updown %.2f s\n",
+               spec, argv[2], sc.nn0, S0.n, amps_factor_nnz(F), ud.lnz0, sc.cp.npath, t_amps_setup[0], ud.t_setup);
+        snprintf(metapath, sizeof(metapath), "%.*s_meta.csv", (int)(strlen(out) > 4 ? strlen(out) - 4 : strlen(out)),
+                 out);
         meta = fopen(metapath, "w");
         if (!meta) bench_die(metapath, "cannot write");
         fprintf(meta, "mesh,exp,nodes,n0,nnzL,nnzL_updown,height,t_setup_amps,t_setup_updown,path,steps,every\n");
-        fprintf(meta, "%s,%s,%d,%d,%.0f,%.0f,%ld,%.4f,%.4f,%d,%d,%d\n", spec, argv[2], sc.nn0, S0.n, amps_factor_nnz(F), ud.lnz0,
-                (long)F->height, t_amps_setup[0], ud.t_setup, sc.npath, steps, every);
+        fprintf(meta, "%s,%s,%d,%d,%.0f,%.0f,%ld,%.4f,%.4f,%d,%d,%d\n", spec, argv[2], sc.nn0, S0.n, amps_factor_nnz(F),
+                ud.lnz0, (long)F->height, t_amps_setup[0], ud.t_setup, sc.cp.npath, steps, every);
         fclose(meta);
     }
     csv = fopen(out, "w");
@@ -714,12 +789,15 @@ int main(int argc, char **argv) {
         amps_update_stats us[MAXCONF];
         int sampled, d, fail = 0;
         memcpy(uprev, amps_scene_displacements(S[0]), sizeof(double) * 3 * (size_t)M->nnode);
-        if (tmax > 0 && amps_now() - t_start > tmax) { printf("  stopped after step %d: BENCH_TMAX = %g s reached\n", st - 1, tmax); break; }
-        if (!bscen_next(&ctx, &sc, M, &s)) break;
+        if (tmax > 0 && amps_now() - t_start > tmax) {
+            printf("  stopped after step %d: BENCH_TMAX = %g s reached\n", st - 1, tmax);
+            break;
+        }
+        if (!bench_scen_next(&ctx, &sc, M, &s)) break;
         cur_step = st;
         for (k = 0; k < nconf; k++) {
             double t0 = amps_now();
-            amps_status rc = bscen_apply(&cctx[k], S[k], &sc, &s);
+            amps_status rc = bench_scen_apply(&cctx[k], S[k], &sc, &s);
             if (rc == AMPS_OK) rc = amps_scene_solve(&cctx[k], S[k]);
             t_conf[k] = amps_now() - t0;
             if (rc != AMPS_OK) {
@@ -731,53 +809,70 @@ int main(int argc, char **argv) {
             amps_update_get_stats(amps_scene_engine(S[k]), &us[k]);
             amps_scene_residual(&cctx[k], S[k], &res_conf[k]);
         }
-        if (fail) { bscen_undo(&ctx, &sc, M, &s); st--; continue; }
-        /* bookkeeping (not timed): new equations, the changed set of paper 001 */
+        if (fail) { bench_scen_undo(&ctx, &sc, M, &s); st--; continue; }
+        /* bookkeeping (not timed): new equations, the changed set of [Interactive cutting] */
         if (cut) {
             int q, a;
             for (d = 0; d < 3; d++) ndof[3 * s.vc + d] = ndof[3 * s.node + d] >= 0 ? ndofc++ : -1;
-            uprev[3 * s.vc] = uprev[3 * s.node]; uprev[3 * s.vc + 1] = uprev[3 * s.node + 1]; uprev[3 * s.vc + 2] = uprev[3 * s.node + 2];
+            uprev[3 * s.vc] = uprev[3 * s.node];
+            uprev[3 * s.vc + 1] = uprev[3 * s.node + 1];
+            uprev[3 * s.vc + 2] = uprev[3 * s.node + 2];
             for (q = -1; q < s.nmoved; q++)
                 for (a = 0; a < 4; a++) {
                     int w = q < 0 ? (a == 0 ? s.node : -1) : (int)M->tet[4 * s.moved[q] + a];
-                    if (w >= 0) for (d = 0; d < 3; d++) { int e = (int)ndof[3 * w + d]; if (e >= 0 && !inL[e]) { inL[e] = 1; Lset[nL++] = e; } }
+                    if (w >= 0)
+                        for (d = 0; d < 3; d++) {
+                            int e = (int)ndof[3 * w + d];
+                            if (e >= 0 && !inL[e]) {
+                                inL[e] = 1;
+                                Lset[nL++] = e;
+                            }
+                        }
                 }
         } else {
-            for (d = 0; d < 3; d++) { int e = (int)ndof[3 * s.node + d]; if (e >= 0 && !inL[e]) { inL[e] = 1; Lset[nL++] = e; } }
+            for (d = 0; d < 3; d++) {
+                int e = (int)ndof[3 * s.node + d];
+                if (e >= 0 && !inL[e]) {
+                    inL[e] = 1;
+                    Lset[nL++] = e;
+                }
+            }
             for (d = 0; d < 3; d++) uprev[3 * s.node + d] = s.u[d];
         }
         t_ud = updown_step(&ud, M, ndof, &s, &sc, S0.Kf, udcon, xud);
-        sampled = st == 1 || st % every == 0 || st == steps || sc.ip >= sc.npath;
+        sampled = st == 1 || st % every == 0 || st == steps || sc.cp.ip >= sc.cp.npath;
         if (!sampled) {
             for (k = 0; k < nconf; k++) put(conf[k], 0, t_conf[k], 0, res_conf[k], -1, 1, us[k].dim, us[k].nsys, us[k].t_step);
             put("chol_updown", 0, t_ud, 0, -1, -1, 1, ndofc, 0, NULL);
         } else {
-            bsys Sy;
+            bench_sys Sy;
             int ti, prec;
-            bsys_build(&ctx, &sc, M, &Sy);
+            bench_sys_build(&ctx, &sc, M, &Sy);
             if (Sy.n != ndofc) bench_die("numbering", "equation count differs from the bookkeeping");
             nsampled++;
             reference(&Sy, xref, work, Sy.n <= simpl_maxn && (nsampled == 1 || st == steps));
             for (k = 0; k < nconf; k++) {
-                bsys_from_disp(&Sy, amps_scene_displacements(S[k]), x);
-                put(conf[k], 0, t_conf[k], 0, bsys_relres(&Sy, x, work), bsys_relerr(&Sy, x, xref), 1, us[k].dim, us[k].nsys, us[k].t_step);
+                bench_sys_from_disp(&Sy, amps_scene_displacements(S[k]), x);
+                put(conf[k], 0, t_conf[k], 0, bench_sys_relres(&Sy, x, work), bench_sys_relerr(&Sy, x, xref), 1, us[k].dim, us[k].nsys, us[k].t_step);
             }
-            put("chol_updown", 0, t_ud, 0, bsys_relres(&Sy, xud, work), bsys_relerr(&Sy, xud, xref), 1, Sy.n, 0, NULL);
-            bsys_from_disp(&Sy, uprev, xprev);
+            put("chol_updown", 0, t_ud, 0, bench_sys_relres(&Sy, xud, work), bench_sys_relerr(&Sy, xud, xref), 1, Sy.n,
+                0, NULL);
+            bench_sys_from_disp(&Sy, uprev, xprev);
             for (prec = 0; prec < 2 * iter; prec++) {
                 cg_run(&Sy, xprev, prec, cg_maxit, &sn);
                 for (ti = 0; ti < NTOL; ti++)
-                    put(prec ? "cg_jacobi" : "cg_none", tols[ti], sn.t[ti], sn.it[ti], bsys_relres(&Sy, sn.x[ti], work),
-                        bsys_relerr(&Sy, sn.x[ti], xref), sn.conv[ti], Sy.n, 0, NULL);
+                    put(prec ? "cg_jacobi" : "cg_none", tols[ti], sn.t[ti], sn.it[ti],
+                        bench_sys_relres(&Sy, sn.x[ti], work), bench_sys_relerr(&Sy, sn.x[ti], xref), sn.conv[ti], Sy.n,
+                        0, NULL);
             }
             for (prec = 0; prec < 3 * iter; prec++) {
                 static const char *gname[3] = {"gmres_none", "gmres_D", "gmres_tri"};
                 gm_run(&gm, &Sy, Lset, nL, xprev, prec, gm_maxit, gm_restart, &sn);
                 for (ti = 0; ti < NTOL; ti++)
-                    put(gname[prec], tols[ti], sn.t[ti], sn.it[ti], bsys_relres(&Sy, sn.x[ti], work), bsys_relerr(&Sy, sn.x[ti], xref),
-                        sn.conv[ti], Sy.n, nL, NULL);
+                    put(gname[prec], tols[ti], sn.t[ti], sn.it[ti], bench_sys_relres(&Sy, sn.x[ti], work),
+                        bench_sys_relerr(&Sy, sn.x[ti], xref), sn.conv[ti], Sy.n, nL, NULL);
             }
-            bsys_free(&ctx, &Sy);
+            bench_sys_free(&ctx, &Sy);
             printf("  step %d: amps %.2f ms, updown %.2f ms, |Lset| %d\n", st, 1e3 * t_conf[0], 1e3 * t_ud, nL);
             fflush(stdout);
         }
@@ -793,9 +888,19 @@ int main(int argc, char **argv) {
     gm_free(&ctx, &gm);
     for (k = 0; k < nconf; k++) amps_scene_free(&cctx[k], S[k]);
     amps_mesh_free(&ctx, M);
-    bsys_free(&ctx, &S0);
-    bscen_free(&sc);
+    bench_sys_free(&ctx, &S0);
+    bench_scen_free(&sc);
     for (k = 0; k < NTOL; k++) free(sn.x[k]);
-    free(s.moved); free(ndof); free(Lset); free(inL); free(udcon); free(uprev); free(xprev); free(x); free(xref); free(work); free(xud);
+    free(s.moved);
+    free(ndof);
+    free(Lset);
+    free(inL);
+    free(udcon);
+    free(uprev);
+    free(xprev);
+    free(x);
+    free(xref);
+    free(work);
+    free(xud);
     return 0;
 }

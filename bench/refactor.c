@@ -17,16 +17,16 @@
    label appended to the CSV policy (on2, fresh2, ...) of repeated runs into one file. */
 #define AMPS_IMPLEMENTATION
 #include "../amps.h"
-#include "bench_util.h"
+#include "bench.h"
 
-/* One cut step: the next path node whose cut the scene accepts (bu_cut_next; cuts that would
+/* One cut step: the next path node whose cut the scene accepts (bench_cut_next; cuts that would
    detach a piece are undone by the scene and skipped, counted in *nsk), then a solve. Returns
    the step time, -1 on error. */
-static double cut_step(amps_ctx *ctx, amps_scene *S, bu_cut *cp, int *nsk, int st) {
+static double cut_step(amps_ctx *ctx, amps_scene *S, bench_cut *cp, int *nsk, int st) {
     amps_status s;
     int node;
     double t0 = amps_now();
-    while ((s = bu_cut_next(ctx, S, cp, &node)) == AMPS_ERR_SINGULAR_UPDATE) (*nsk)++;
+    while ((s = bench_cut_next(ctx, S, cp, &node)) == AMPS_ERR_SINGULAR_UPDATE) (*nsk)++;
     if (s != AMPS_OK) { fprintf(stderr, "step %d: cut at %d: %s\n", st, node, ctx->msg); return -1; }
     s = amps_scene_solve(ctx, S);
     if (s != AMPS_OK) { fprintf(stderr, "step %d: solve: %s\n", st, ctx->msg); return -1; }
@@ -37,7 +37,7 @@ int main(int argc, char **argv) {
     amps_ctx ctx;
     amps_scene *S;
     amps_scene_opts so;
-    bu_cut cp;
+    bench_cut cp;
     unsigned char *fixed;
     double *force, *t, first[11], last[100], worst_res = 0, fresh = 0;
     double tmax, t_run = 0;
@@ -45,7 +45,7 @@ int main(int argc, char **argv) {
     char name[256], pol[32], frl[32];
     const char *run = argc > 6 ? argv[6] : "";
     FILE *f;
-    bu_model B;
+    bench_model B;
     amps_update_stats uend;
     if (argc < 5) { fprintf(stderr, "usage: refactor <mesh> <steps> <on|off> <out.csv> [tmax] [run]\n"); return 2; }
     steps = atoi(argv[2]); on = strcmp(argv[3], "off") != 0;
@@ -53,16 +53,17 @@ int main(int argc, char **argv) {
     snprintf(pol, sizeof(pol), "%s%s", on ? "on" : "off", run);
     snprintf(frl, sizeof(frl), "fresh%s", run);
     amps_ctx_init(&ctx);
-    bu_mesh_name(argv[1], name, sizeof(name));
-    bu_scene_opts(&so);
+    bench_mesh_name(argv[1], name, sizeof(name));
+    bench_scene_opts(&so);
     so.update.refactor = on ? AMPS_REFACTOR_AUTO : AMPS_REFACTOR_OFF;
     if (getenv("AMPS_REFACTOR_RATIO")) so.update.refactor_ratio = atof(getenv("AMPS_REFACTOR_RATIO"));
-    if (getenv("AMPS_REFACTOR_ORDER")) so.update.refactor_order.method = !strcmp(getenv("AMPS_REFACTOR_ORDER"), "nd") ? AMPS_ORDER_ND : AMPS_ORDER_AMD;
-    if (bu_model_init(&ctx, argv[1], &so, &B)) return 1;
+    if (getenv("AMPS_REFACTOR_ORDER"))
+        so.update.refactor_order.method = !strcmp(getenv("AMPS_REFACTOR_ORDER"), "nd") ? AMPS_ORDER_ND : AMPS_ORDER_AMD;
+    bench_model_init(&ctx, argv[1], &so, &B);
     S = B.S; fixed = B.fixed; force = B.force; cp = B.cp; cp.wrap = 1;
     t = (double *)malloc(sizeof(double) * (size_t)steps);
     if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "first solve: %s\n", ctx.msg); return 1; }
-    f = bu_csv(argv[4], "mesh,policy,step,t_step,nsys,nrefactor,running,t_swap,t_refactor,relres,lu_cols");
+    f = bench_csv(argv[4], "mesh,policy,step,t_step,nsys,nrefactor,running,t_swap,t_refactor,relres,lu_cols");
     for (st = 0; st < steps; st++) {
         amps_update_stats us;
         int nref0;
@@ -97,7 +98,7 @@ int main(int argc, char **argv) {
             if (f) fprintf(f, "%s,%s,%d,%.6e,%d,%d,%d,0,0,-1,%d\n", name, frl, steps + k + 1, tf[k], (int)us.nsys, (int)us.nrefactor,
                            us.refactor_running, (int)us.lu_cols);
         }
-        fresh = bu_median(tf + 4, 11);
+        fresh = bench_median(tf + 4, 11);
     }
     if (f) fclose(f);
     {   /* rate at the end: median and mean of the last min(100, steps/5) steps against the
@@ -106,13 +107,16 @@ int main(int argc, char **argv) {
         double mean = 0, m0, m1;
         for (k = 4; k < 15 && k < steps; k++) first[nf++] = t[k];
         for (k = 0; k < nl; k++) { last[k] = t[steps - 1 - k]; mean += last[k] / nl; }
-        m0 = bu_median(first, nf); m1 = bu_median(last, nl);
-        printf("%-10s re-factorization %-3s  steps %d (skipped cuts %d)  step 5-15 median %.2f ms; last %d steps: median %.2f ms (x%.2f), "
+        m0 = bench_median(first, nf); m1 = bench_median(last, nl);
+        printf("%-10s re-factorization %-3s  steps %d (skipped cuts %d)  step 5-15 median %.2f ms;"
+               " last %d steps: median %.2f ms (x%.2f), "
                "mean %.2f ms (x%.2f)  |S u C| at the end %d  re-factorizations %d (failed %d)  worst residual %.1e\n",
-               name, pol, steps, nsk, 1e3 * m0, nl, 1e3 * m1, m1 / m0, 1e3 * mean, mean / m0,
-               (int)uend.nsys, (int)uend.nrefactor, (int)uend.refactor_failed, worst_res);
-        if (on) printf("%-10s fresh base after step %d: median %.2f ms (x%.2f of steps 5-15); the last %d steps are x%.2f of it\n",
-                       name, steps, 1e3 * fresh, fresh / m0, nl, m1 / fresh);
+               name, pol, steps, nsk, 1e3 * m0, nl, 1e3 * m1, m1 / m0, 1e3 * mean, mean / m0, (int)uend.nsys,
+               (int)uend.nrefactor, (int)uend.refactor_failed, worst_res);
+        if (on)
+            printf("%-10s fresh base after step %d: median %.2f ms (x%.2f of steps 5-15);"
+                   " the last %d steps are x%.2f of it\n",
+                   name, steps, 1e3 * fresh, fresh / m0, nl, m1 / fresh);
     }
     amps_scene_free(&ctx, S);
     free(fixed); free(force); free(t); free(cp.path);

@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
 # Benchmarks of amps.h against CHOLMOD (refactor, update/downdate), CG and the GMRES method of
-# paper 001: builds bench/*, fetches and meshes the bunny, runs the factorization benchmark and
-# the harness over every experiment, writes bench/out/*.csv, the plots (bench/out/*.png) and
-# bench/RESULTS.md (bench/summarize.sh).
-#   bench/run.sh          full run (budget: under 30 minutes on 2 cores)
-#   bench/run.sh quick    representative subset (under 3 minutes)
+# [Interactive cutting] (Yeung, Crouch, Pothen, "Interactively cutting and constraining vertices
+# in meshes using augmented matrices"): builds every bench/*.c into build/bench/, fetches and
+# meshes the bunny, runs the factorization benchmark and the harness over every experiment.
+#   bench/run.sh          full run (budget: under 30 minutes on 2 cores): the tracked results
+#                         bench/out/*.csv, the plots bench/out/*.png and bench/RESULTS.md
+#                         (bench/summarize.sh)
+#   bench/run.sh quick    representative subset (under 3 minutes), all of it in build/bench/quick/
 set -u
 cd "$(dirname "$0")/.."
 mode=${1:-full}
@@ -15,12 +17,21 @@ out=bench/out
 mkdir -p $out build/bench
 CC=${CC:-cc}
 FLAGS="-std=c99 -O2 -fopenmp -I. -I/usr/include/suitesparse"
-$CC $FLAGS -o build/bench/factor bench/factor.c -lcholmod -lm || exit 1
-$CC $FLAGS -o build/bench/harness bench/harness.c -lcholmod -lumfpack -lm || exit 1
+# build <program> [flags and libraries]: bench/<program>.c -> build/bench/<program>, warning-free
+build() {
+  local p=$1; shift
+  $CC $FLAGS -Wall -Wextra -pedantic -Werror -o "build/bench/$p" "bench/$p.c" "$@" -lm || exit 1
+}
+build factor -lcholmod
+build harness -lcholmod -lumfpack
+for b in haptic watch refactor; do build $b; done
+build order_metis -DAMPS_USE_METIS -lcholmod -lmetis
 log=$out/log_$mode.txt
 : > "$log"
 rm -f $out/factor.csv $out/h_*.csv $out/*.png $out/summary.csv
 run() { echo "+ $*" | tee -a "$log"; "$@" 2>&1 | tee -a "$log"; }
+# the METIS build of amps.h (AMPS_USE_METIS): its ordering against CHOLMOD's METIS
+run build/bench/order_metis 12
 B20=bench/data/bunny20k.1.node
 B50=bench/data/bunny50k.1.node
 # harness runs: mesh:experiment:steps:every:cg_maxit:tmax (every: the sampled steps for the
@@ -32,7 +43,9 @@ if [ "$mode" = quick ]; then
 else
   meshes_factor="beam:64 beam:256 beam:1024 brick:8 brick:14 brick:20 $B20 $B50"
   runs=""
-  for m in beam:4 beam:16 beam:64 brick:4 brick:8 brick:12; do runs="$runs $m:cut:50:5:2000:60 $m:deform:50:5:2000:60"; done
+  for m in beam:4 beam:16 beam:64 brick:4 brick:8 brick:12; do
+    runs="$runs $m:cut:50:5:2000:60 $m:deform:50:5:2000:60"
+  done
   for m in beam:256 brick:16; do runs="$runs $m:cut:50:10:2000:75 $m:deform:50:10:2000:75"; done
   for m in beam:1024 brick:20 $B20; do runs="$runs $m:cut:50:25:1000:120 $m:deform:50:25:1000:120"; done
   runs="$runs $B50:cut:50:25:500:150 $B50:deform:50:50:500:120 beam:128:cut:500:50:1000:120"
@@ -44,16 +57,17 @@ for r in $runs; do
   mesh=$(IFS=:; echo "${f[*]:0:n-5}"); kind=${f[n-5]}; steps=${f[n-4]}; every=${f[n-3]}; cgmax=${f[n-2]}; tmax=${f[n-1]}
   name=$(basename "$mesh" | sed 's/\.1\.node$//; s/:/_/')
   [ "$steps" -gt 50 ] && name="${name}_long"
-  BENCH_CG_MAXIT=$cgmax BENCH_TMAX=$tmax run build/bench/harness "$mesh" "$kind" "$steps" "$every" "$out/h_${kind}_${name}.csv"
+  BENCH_CG_MAXIT=$cgmax BENCH_TMAX=$tmax \
+    run build/bench/harness "$mesh" "$kind" "$steps" "$every" "$out/h_${kind}_${name}.csv"
 done
 if [ "$mode" = full ]; then
   # the accuracy guard (opt-in) on the worst-conditioned beam, amps.h only
-  BENCH_GUARD=1e-12 BENCH_AMPS=p2 BENCH_ITER=0 BENCH_TMAX=60 run build/bench/harness beam:1024 cut 50 25 $out/h_cut_beam_1024_guard.csv
+  BENCH_GUARD=1e-12 BENCH_AMPS=p2 BENCH_ITER=0 BENCH_TMAX=60 \
+    run build/bench/harness beam:1024 cut 50 25 $out/h_cut_beam_1024_guard.csv
   # the stress suite's cases under the engine variants (Eq. 3.20, refinement, guard)
   run bash bench/accuracy.sh $out/accuracy.csv
 fi
 # haptic step and watch sets (bench/haptic.c, bench/watch.c)
-for b in haptic watch; do $CC $FLAGS -o build/bench/$b bench/$b.c -lm || exit 1; done
 rm -f $out/haptic.csv $out/watch.csv
 if [ "$mode" = quick ]; then hmesh="brick:12 bench/data/bunny20k.1.node"; hsteps=500; wreps=5
 else hmesh="brick:14 bench/data/bunny20k.1.node bench/data/bunny50k.1.node"; hsteps=2000; wreps=7; fi
@@ -62,7 +76,6 @@ for m in $hmesh; do
   run build/bench/watch "$m" $wreps 10 $out/watch.csv
 done
 # background re-factorization: a long cut with and without (bench/refactor.c)
-$CC $FLAGS -o build/bench/refactor bench/refactor.c -lm || exit 1
 rm -f $out/refactor.csv
 if [ "$mode" = quick ]; then rmesh="beam:64"; rsteps=200
 else rmesh="beam:256 bench/data/bunny20k.1.node"; rsteps=1000; fi
@@ -80,14 +93,17 @@ if command -v gnuplot >/dev/null; then
     gnuplot -e "set term pngcairo size 900,600; set out '$out/refactor_$m.png'; set datafile separator ',';
       set multiplot layout 2,1 title '$m: advancing cut, background re-factorization on / off';
       set ylabel 'step time (ms)'; set logscale y; set key top left;
-      plot '< grep ^$m, $out/refactor.csv | grep ,on,' u 3:(1e3*\$4) w l t 'on', '< grep ^$m, $out/refactor.csv | grep ,off,' u 3:(1e3*\$4) w l t 'off';
+      plot '< grep ^$m, $out/refactor.csv | grep ,on,' u 3:(1e3*\$4) w l t 'on', \
+           '< grep ^$m, $out/refactor.csv | grep ,off,' u 3:(1e3*\$4) w l t 'off';
       unset logscale y; set ylabel '|S u C|'; set xlabel 'step';
-      plot '< grep ^$m, $out/refactor.csv | grep ,on,' u 3:5 w l t 'on', '< grep ^$m, $out/refactor.csv | grep ,off,' u 3:5 w l t 'off';
+      plot '< grep ^$m, $out/refactor.csv | grep ,on,' u 3:5 w l t 'on', \
+           '< grep ^$m, $out/refactor.csv | grep ,off,' u 3:5 w l t 'off';
       unset multiplot" 2>/dev/null || echo "gnuplot failed for $m"
   done
 fi
 {
-  echo "machine: $(uname -m), $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//'), $(free -g | awk '/Mem:/{print $2}') GiB"
+  cpu=$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//')
+  echo "machine: $(uname -m), $(nproc) cores, $cpu, $(free -g | awk '/Mem:/{print $2}') GiB"
   echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
   echo "blas: $(readlink -f /usr/lib/x86_64-linux-gnu/libblas.so.3 2>/dev/null)"
   echo "compiler: $($CC --version | head -1), flags: $FLAGS"

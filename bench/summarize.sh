@@ -92,7 +92,7 @@ fi
 cat <<'EOF'
 ## 2. The methods (`bench/harness`)
 
-All methods follow the same step sequence (`bench/bench_common.h`). **cut**: an advancing planar
+All methods follow the same step sequence (`bench/bench.h`). **cut**: an advancing planar
 cut through the middle of the model, one node per step, opposing forces pulling the cut faces
 apart. **deform**: one more node pinned with a nonzero displacement per step. Residuals are
 ||K^ x - f^|| / ||f^|| of the reduced system (fixed and pinned DOFs eliminated), errors
@@ -121,7 +121,8 @@ steps (residual in double), both 2-norms over the free DOFs.
   (tol = 1e-4, 1e-6, 1e-8, 1e-10; one run to the tightest, the time and iterate at which each
   looser tolerance is met are recorded), capped at 2000 iterations (1000 on the larger meshes
   and the 500-step run, 500 on bunny50k; see `bench/run.sh`); "nc" counts samples that hit the cap.
-- `gmres_none`, `gmres_D`, `gmres_tri`: paper 001 (Eq. 13-20): the augmented system
+- `gmres_none`, `gmres_D`, `gmres_tri`: [Interactive cutting] (Yeung, Crouch, Pothen, "Interactively
+  cutting and constraining vertices in meshes using augmented matrices", Eq. 13-20): the augmented system
   [R J; H 0][a1; a2] = [f^; 0] with R = [K0 0; 0 I] factored once by amps.h, J the current
   columns of the changed DOFs (unit columns for constrained ones), H the matching rows of I;
   step 1 y = H R^{-1} f^ (sparse forward solve, partial backward solve onto the changed DOFs),
@@ -253,11 +254,12 @@ if [ $plots = 1 ]; then
 cat <<EOF
 ## 5. Plots
 
-- Update rate against step (paper 000 Fig. 6-7): cut ![rate cut](${pre}rate_cut.png) deform ![rate deform](${pre}rate_deform.png)
+- Update rate against step ([AMPS]: Yeung, Pothen, Crouch, "AMPS: real-time mesh cutting with
+  augmented matrices for surgical simulations", Fig. 6-7): cut ![rate cut](${pre}rate_cut.png) deform ![rate deform](${pre}rate_deform.png)
 - Median time against median error, one point per direct method and one curve (tolerances) per
   iterative method: cut ![tradeoff cut](${pre}tradeoff_cut.png) deform ![tradeoff deform](${pre}tradeoff_deform.png)
-- Median step time against nnz(L), beam and brick series (paper 000 Fig. 5): ![scaling](${pre}scaling.png)
-- Steps 1-6 of the amps.h step (paper 000 Fig. 8): ![steps](${pre}steps.png)
+- Median step time against nnz(L), beam and brick series ([AMPS] Fig. 5): ![scaling](${pre}scaling.png)
+- Steps 1-6 of the amps.h step ([AMPS] Fig. 8): ![steps](${pre}steps.png)
 
 EOF
 else
@@ -295,12 +297,12 @@ awk -F, '
     if (itwin != "") printf "; it beats amps.h on:%s", itwin
     printf ".\n"
     printf "- Median errors of the iterative methods at tolerance 1e-8: %.0e to %.0e (per run and method); worst amps.h error per run: see below.\n", iemin, iemax
-    printf "- Worst amps.h error against the reference: %.1e (%s); paper 000 Table 3 reports 7e-11 (beam) and 3e-14 (brick).", emax, er
+    printf "- Worst amps.h error against the reference: %.1e (%s); [AMPS] Table 3 reports 7e-11 (beam) and 3e-14 (brick).", emax, er
     if (resw != "") printf " Runs whose worst amps.h residual exceeds 10x CHOLMOD refactor'"'"'s:%s.", resw
     printf "\n"
   }' summary.csv
 echo
-echo "Per-mesh worst errors next to paper 000 Table 3 (beam 7e-11, brick 3e-14):"
+echo "Per-mesh worst errors next to [AMPS] Table 3 (beam 7e-11, brick 3e-14):"
 echo
 echo "| run | amps p2 | amps d2 | CHOLMOD updown | CHOLMOD refactor (unrefined) |"
 echo "|---|---|---|---|---|"
@@ -316,7 +318,7 @@ The cases of the stress suite (`tests/test_stress.c`, short mode: random cuts, p
 and forces on each model, every solve compared with CHOLMOD plus two steps of iterative
 refinement on the explicitly assembled system) run under four engine variants: **default**
 (one local refinement step, x_S from the full solve), **eq320** (x_S taken from the small
-system, paper 000 Eq. 3.20), **norefine** (no refinement step), **guard** (accuracy guard at
+system, [AMPS] Eq. 3.20), **norefine** (no refinement step), **guard** (accuracy guard at
 1e-12: full residual, refinement with the same factors, synchronous re-factorization). Worst
 relative forward error over the checks, and the worst normwise backward error in units of eps;
 CHOLMOD's columns are its own unrefined solve of the same systems. "fails" counts checks over
@@ -486,7 +488,7 @@ Reading: without re-factorization the step time grows without bound (quadratical
 |S u C|: the dense LU extension eliminates the changed and new columns against all earlier
 ones, and Steps 1-2 and the refinement's partial solve grow with the closure of S u C).
 With it, |S u C| stays bounded, at the number of changes made while one background job runs
-(m' of paper 001) plus those made before the policy starts the next one: back-to-back cut steps
+(m' of [Interactive cutting]) plus those made before the policy starts the next one: back-to-back cut steps
 add 10-12 augmented columns each while the job (ordering, analysis and factorization on one
 core, the steps on the other) runs for the time in the table. Two things separate the end rate
 from the rate of step 10: the cut matrix itself (the fresh-base column: after 1,000 cuts a step
@@ -507,6 +509,6 @@ cat <<'EOF'
 `make bench` (full run, under 30 minutes on 2 cores; it installs the packages it needs when run
 as root, otherwise it names them), `make bench-quick` for a subset (under 3 minutes; results in
 `build/bench/quick/`). `bench/run.sh` is the driver, `bench/factor.c` and `bench/harness.c` the
-programs (`bench/bench_common.h` the scenario), `bench/summarize.sh` writes this file and the
+programs (`bench/bench.h` the scenario and shared helpers), `bench/summarize.sh` writes this file and the
 plots from the CSV files.
 EOF

@@ -17,7 +17,7 @@
    Prints a table and appends one row per set to out.csv (header first if the file is new). */
 #define AMPS_IMPLEMENTATION
 #include "../amps.h"
-#include "bench_util.h"
+#include "bench.h"
 
 int main(int argc, char **argv) {
     amps_ctx ctx;
@@ -31,16 +31,16 @@ int main(int argc, char **argv) {
     double *force, *tf, *tw, *xw;
     amps_int *dof0, *surf, *idx, *clo;
     unsigned char *fixed;
-    bu_cut cp;
-    bu_model B;
+    bench_cut cp;
+    bench_model B;
     amps_update_stats us;
     FILE *csv;
     if (argc < 5) { fprintf(stderr, "usage: watch <beam:h|brick:R|file> <reps> <cuts> <out.csv>\n"); return 2; }
     spec = argv[1]; reps = atoi(argv[2]); ncuts = atoi(argv[3]); out = argv[4];
     if (reps < 1) return 2;
-    bu_mesh_name(spec, name, sizeof(name));
+    bench_mesh_name(spec, name, sizeof(name));
     amps_ctx_init(&ctx);
-    if (bu_model_init(&ctx, spec, NULL, &B)) return 1;
+    bench_model_init(&ctx, spec, NULL, &B);
     m = B.m; S = B.S; fixed = B.fixed; force = B.force; nn0 = B.nn; up = B.up; cp = B.cp;
     /* the equations of the original nodes: the scene numbers them as amps_mesh_number_dofs does
        (checked below against the solution); cut copies get appended equations, outside L */
@@ -49,13 +49,16 @@ int main(int argc, char **argv) {
     amps_mesh_number_dofs(m, fixed, dof0);
     /* factor the uncut model, then cut */
     if (amps_scene_prepare(&ctx, S) != AMPS_OK) { fprintf(stderr, "prepare: %s\n", ctx.msg); return 1; }
-    ndid = bu_cuts(&ctx, &B, ncuts);
+    ndid = bench_cuts(&ctx, &B, ncuts);
     if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "solve: %s\n", ctx.msg); return 1; }
     F = amps_scene_factor(S);
     {
         const double *x = amps_update_solution(amps_scene_engine(S)), *u = amps_scene_displacements(S);
         for (k = 0; k < 3 * nn0; k++)
-            if (dof0[k] >= 0 && x[dof0[k]] != u[k]) { fprintf(stderr, "equation numbering differs from amps_mesh_number_dofs\n"); return 1; }
+            if (dof0[k] >= 0 && x[dof0[k]] != u[k]) {
+                fprintf(stderr, "equation numbering differs from amps_mesh_number_dofs\n");
+                return 1;
+            }
     }
     amps_update_get_stats(amps_scene_engine(S), &us);
     nn = (int)amps_scene_mesh(S)->nnode;
@@ -65,7 +68,7 @@ int main(int argc, char **argv) {
     xw = (double *)malloc(sizeof(double) * 3 * (size_t)nn);
     tf = (double *)malloc(sizeof(double) * (size_t)reps);
     tw = (double *)malloc(sizeof(double) * (size_t)reps);
-    nsurf = bu_surface_nodes(amps_scene_mesh(S), surf);
+    nsurf = bench_surface_nodes(amps_scene_mesh(S), surf);
     if (nsurf <= 0 || amps_marker_init(&ctx, &mk, F->n) != AMPS_OK) return 1;
     for (k = 0; k < nsurf; k++) {
         v = (int)surf[k];
@@ -73,9 +76,10 @@ int main(int argc, char **argv) {
     }
     printf("%s: %d nodes (%d surface), %ld equations, nnz(L) %.0f, %d cuts, |S u C| %ld\n", name, nn, nsurf, (long)F->n,
            amps_factor_nnz(F), ndid, (long)us.nsys);
-    printf("  %-10s %7s %9s %8s %8s %10s %10s %8s %10s %9s\n", "set", "nodes", "closure", "/n", "nnz(L)", "full ms", "watched ms",
-           "speed-up", "setup ms", "rel diff");
-    csv = bu_csv(out, "mesh,nodes,equations,nnzL,cuts,nsys,set,watched_nodes,closure,closure_frac,nnzL_frac,full_ms,watched_ms,speedup,setup_ms,rel_diff");
+    printf("  %-10s %7s %9s %8s %8s %10s %10s %8s %10s %9s\n", "set", "nodes", "closure", "/n", "nnz(L)", "full ms",
+           "watched ms", "speed-up", "setup ms", "rel diff");
+    csv = bench_csv(out, "mesh,nodes,equations,nnzL,cuts,nsys,set,watched_nodes,closure,closure_frac,nnzL_frac,full_ms,"
+                         "watched_ms,speedup,setup_ms,rel_diff");
     if (!csv) { fprintf(stderr, "cannot write %s\n", out); return 1; }
     for (set = 0; set < 3; set++) {
         static const char *names[3] = {"surface", "random100", "probe"};
@@ -99,7 +103,11 @@ int main(int argc, char **argv) {
         }
         /* closure_L of the watched equations of original nodes (permuted numbering) */
         for (k = 0; k < nw; k++)
-            if (w[k] < nn0) { int d; for (d = 0; d < 3; d++) if (dof0[3 * w[k] + d] >= 0) idx[ni++] = F->iperm[dof0[3 * w[k] + d]]; }
+            if (w[k] < nn0) {
+                int d;
+                for (d = 0; d < 3; d++)
+                    if (dof0[3 * w[k] + d] >= 0) idx[ni++] = F->iperm[dof0[3 * w[k] + d]];
+            }
         cnt = amps_closure(F, ni, idx, clo, &mk);
         for (k = 0; k < cnt; k++) lnz += (double)(F->Lp[clo[k] + 1] - F->Lp[clo[k]] + 1);
         /* full solves */
@@ -134,9 +142,10 @@ int main(int argc, char **argv) {
             if (d > dmax) dmax = d;
             if (fabs(u[3 * w[k / 3] + k % 3]) > umax) umax = fabs(u[3 * w[k / 3] + k % 3]);
         }
-        tfm = bu_median(tf, reps); twm = bu_median(tw, reps);
-        printf("  %-10s %7ld %9ld %8.4f %8.4f %10.3f %10.3f %8.1f %10.2f %9.1e\n", names[set], (long)nw, (long)cnt, (double)cnt / (double)F->n,
-               lnz / amps_factor_nnz(F), 1e3 * tfm, 1e3 * twm, tfm / twm, 1e3 * setup, umax > 0 ? dmax / umax : dmax);
+        tfm = bench_median(tf, reps); twm = bench_median(tw, reps);
+        printf("  %-10s %7ld %9ld %8.4f %8.4f %10.3f %10.3f %8.1f %10.2f %9.1e\n", names[set], (long)nw, (long)cnt,
+               (double)cnt / (double)F->n, lnz / amps_factor_nnz(F), 1e3 * tfm, 1e3 * twm, tfm / twm, 1e3 * setup,
+               umax > 0 ? dmax / umax : dmax);
         fprintf(csv, "%s,%d,%ld,%.0f,%d,%ld,%s,%ld,%ld,%.5f,%.5f,%.4f,%.4f,%.2f,%.3f,%.2e\n", name, nn, (long)F->n, amps_factor_nnz(F), ndid,
                 (long)us.nsys, names[set], (long)nw, (long)cnt, (double)cnt / (double)F->n, lnz / amps_factor_nnz(F), 1e3 * tfm, 1e3 * twm,
                 tfm / twm, 1e3 * setup, umax > 0 ? dmax / umax : dmax);
