@@ -317,14 +317,14 @@ cat <<'EOF'
 The cases of the stress suite (`tests/test_stress.c`, short mode: random cuts, pins, releases
 and forces on each model, every solve compared with CHOLMOD plus two steps of iterative
 refinement on the explicitly assembled system) run under four engine variants: **default**
-(one local refinement step, x_S from the full solve), **eq320** (x_S taken from the small
+(one local refinement step, x_S from the full solve), **xs_from_dense** (x_S taken from the small
 system, [AMPS] Eq. 3.20), **norefine** (no refinement step), **guard** (accuracy guard at
 1e-12: full residual, refinement with the same factors, synchronous re-factorization). Worst
 relative forward error over the checks, and the worst normwise backward error in units of eps;
 CHOLMOD's columns are its own unrefined solve of the same systems. "fails" counts checks over
 the suite's bounds.
 
-| case | equations | cond est. | CHOLMOD error | default | eq320 | norefine | guard | CHOLMOD be/eps | default be/eps | eq320 be/eps | norefine be/eps | guard be/eps | smallest pivot ratio (default) | fails (d/e/n/g) |
+| case | equations | cond est. | CHOLMOD error | default | xs_from_dense | norefine | guard | CHOLMOD be/eps | default be/eps | xs_from_dense be/eps | norefine be/eps | guard be/eps | smallest pivot ratio (default) | fails (d/e/n/g) |
 |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|
 EOF
 awk -F, '
@@ -334,13 +334,13 @@ awk -F, '
     E[k, $1] = $11; B[k, $1] = $9; F[k, $1] = $14; P[k, $1] = $13 }
   END { for (q = 1; q <= n; q++) { k = keys[q]
       printf "| %s | %d | %.1e | %s | %.1e | %.1e | %.1e | %.1e | %.1f | %.1f | %.1f | %.1f | %.1f | %.1e | %s/%s/%s/%s |\n", k, neq[k], cond[k],
-        (ech[k] > 0 ? sprintf("%.1e", ech[k]) : "failed"), E[k, "default"], E[k, "eq320"], E[k, "norefine"], E[k, "guard"], bch[k],
-        B[k, "default"], B[k, "eq320"], B[k, "norefine"], B[k, "guard"], P[k, "default"], F[k, "default"], F[k, "eq320"], F[k, "norefine"], F[k, "guard"] } }' accuracy.csv
+        (ech[k] > 0 ? sprintf("%.1e", ech[k]) : "failed"), E[k, "default"], E[k, "xs_from_dense"], E[k, "norefine"], E[k, "guard"], bch[k],
+        B[k, "default"], B[k, "xs_from_dense"], B[k, "norefine"], B[k, "guard"], P[k, "default"], F[k, "default"], F[k, "xs_from_dense"], F[k, "norefine"], F[k, "guard"] } }' accuracy.csv
 echo
 cat <<'EOF'
 Reading (compare the backward errors: forward errors follow the condition number for every
 variant):
-- **Eq. 3.20 is off by default** (`eq320 = 0`): taking x_S from the small system instead of the
+- **Eq. 3.20 is off by default** (`xs_from_dense = 0`): taking x_S from the small system instead of the
   full solve does not change the forward error but raises the backward error by 2-3 orders of
   magnitude on the ill-conditioned cases (the long beams, Poisson ratio 0.4999): the small
   system and the full solve round differently, and substituting one into the other leaves

@@ -7,7 +7,7 @@
 
    usage: test_stress [--long]      (or AMPS_STRESS=long; `make stress` runs the long mode)
    AMPS_STRESS_ONLY=<text> runs only the cases whose name contains text (no adversarial cases).
-   AMPS_STRESS_VARIANT=eq320|norefine|guard|norefactor changes the engine options of the cases, and
+   AMPS_STRESS_VARIANT=xs_from_dense|norefine|guard|norefactor changes the engine options of the cases, and
    AMPS_STRESS_TABLE=<file> appends the summary table to file as CSV (bench/accuracy.sh).
    Short mode (part of `make test`) takes well under a minute; long mode: beams up to 5x5x4096,
    10,000-step runs on a brick and on the bunny (bench/data/bunny20k.1.node or $AMPS_BUNNY, skipped
@@ -100,11 +100,11 @@ static double bbox_len(const amps_mesh *m, double lo[3], double hi[3]) {
 }
 
 /* AMPS_STRESS_VARIANT: the engine options of the run_case scenes (bench/accuracy.sh compares
-   them): default, eq320 (x_S from the small system, Eq. 3.20), norefine (no local refinement
+   them): default, xs_from_dense (x_S from the small system, Eq. 3.20), norefine (no local refinement
    step), guard (guard_tol = 1e-12), norefactor (no background re-factorization). */
 static const char *variant = "default";
 static void variant_opts(amps_update_opts *o) {
-    if (!strcmp(variant, "eq320")) o->xs_from_dense = 1;
+    if (!strcmp(variant, "xs_from_dense")) o->xs_from_dense = 1;
     else if (!strcmp(variant, "norefine")) o->refine = 0;
     else if (!strcmp(variant, "guard")) o->guard_tol = 1e-12;
     else if (!strcmp(variant, "norefactor")) o->refactor = AMPS_REFACTOR_OFF;
