@@ -2668,223 +2668,65 @@ typedef struct amps__fpriv {
 #ifndef AMPS_PIVOT_TOL
 #define AMPS_PIVOT_TOL 1e-12
 #endif
-/* Gather-update kernels: for p in [0,m): d_t[rel[Si[p]]] -= sum_k s_k[p] * W[4k+t], k < KC, t < TC. */
-static void amps__kern11(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0];
-    const double w00 = W[0];
+/* Fixed-width dense kernels (here and in Steps 1-2 of the update): each is one body written with
+   loops over compile-time widths, forced inline into one-line instantiations per width, where the
+   compiler unrolls the loops completely and keeps the accumulators in registers. */
+#if defined(__clang__)
+#define AMPS__KERNEL static inline __attribute__((always_inline))
+#define AMPS__UNROLL _Pragma("clang loop unroll(full)")
+#elif defined(__GNUC__)
+#define AMPS__KERNEL static inline __attribute__((always_inline))
+#define AMPS__UNROLL _Pragma("GCC unroll 16")
+#else
+#define AMPS__KERNEL static inline
+#define AMPS__UNROLL
+#endif
+/* Update kernel of a column block: for p in [0,m), with r = rel[Si[p]] (gather) or p (dense),
+   d_t[r] -= sum_k s_k[p] * W[4k+t] for t < TC, the sum over k < KC in ascending order. */
+AMPS__KERNEL void amps__kern_body(int KC, int TC, int gather, amps_int m, const amps_int *Si, const amps_int *rel,
+                                  const double *const *s, const double *W, double *const *d) {
+    const double *sk[4];
+    double *dt[4], w[4][4];
     amps_int p;
+    int k, t;
+    AMPS__UNROLL
+    for (k = 0; k < KC; k++) sk[k] = s[k];
+    AMPS__UNROLL
+    for (t = 0; t < TC; t++) dt[t] = d[t];
+    AMPS__UNROLL
+    for (k = 0; k < KC; k++) {
+        AMPS__UNROLL
+        for (t = 0; t < TC; t++) w[k][t] = W[4 * k + t];
+    }
     for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p];
-        d0[r] -= l0 * w00;
+        amps_int r = gather ? rel[Si[p]] : p;
+        double l[4];
+        AMPS__UNROLL
+        for (k = 0; k < KC; k++) l[k] = sk[k][p];
+        AMPS__UNROLL
+        for (t = 0; t < TC; t++) {
+            double a = l[0] * w[0][t];
+            AMPS__UNROLL
+            for (k = 1; k < KC; k++) a += l[k] * w[k][t];
+            dt[t][r] -= a;
+        }
     }
 }
-static void amps__kern12(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p];
-        d0[r] -= l0 * w00;
-        d1[r] -= l0 * w01;
+/* amps__kern{K}{T}: gather-update (rows of a finished group scattered into a target group);
+   amps__dkern{K}{T}: dense (rows of a group against its own columns). */
+#define AMPS__KERN(K, T)                                                                                           \
+    static void amps__kern##K##T(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s,     \
+                                 const double *W, double *const *d) {                                            \
+        amps__kern_body(K, T, 1, m, Si, rel, s, W, d);                                                           \
+    }                                                                                                            \
+    static void amps__dkern##K##T(amps_int m, const double *const *s, const double *W, double *const *d) {        \
+        amps__kern_body(K, T, 0, m, NULL, NULL, s, W, d);                                                        \
     }
-}
-static void amps__kern13(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p];
-        d0[r] -= l0 * w00;
-        d1[r] -= l0 * w01;
-        d2[r] -= l0 * w02;
-    }
-}
-static void amps__kern14(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p];
-        d0[r] -= l0 * w00;
-        d1[r] -= l0 * w01;
-        d2[r] -= l0 * w02;
-        d3[r] -= l0 * w03;
-    }
-}
-static void amps__kern21(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0];
-    const double w00 = W[0], w10 = W[4];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p];
-        d0[r] -= l0 * w00 + l1 * w10;
-    }
-}
-static void amps__kern22(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p];
-        d0[r] -= l0 * w00 + l1 * w10;
-        d1[r] -= l0 * w01 + l1 * w11;
-    }
-}
-static void amps__kern23(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p];
-        d0[r] -= l0 * w00 + l1 * w10;
-        d1[r] -= l0 * w01 + l1 * w11;
-        d2[r] -= l0 * w02 + l1 * w12;
-    }
-}
-static void amps__kern24(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p];
-        d0[r] -= l0 * w00 + l1 * w10;
-        d1[r] -= l0 * w01 + l1 * w11;
-        d2[r] -= l0 * w02 + l1 * w12;
-        d3[r] -= l0 * w03 + l1 * w13;
-    }
-}
-static void amps__kern31(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0];
-    const double w00 = W[0], w10 = W[4], w20 = W[8];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20;
-    }
-}
-static void amps__kern32(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5], w20 = W[8], w21 = W[9];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20;
-        d1[r] -= l0 * w01 + l1 * w11 + l2 * w21;
-    }
-}
-static void amps__kern33(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6], w20 = W[8], w21 = W[9], w22 = W[10];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20;
-        d1[r] -= l0 * w01 + l1 * w11 + l2 * w21;
-        d2[r] -= l0 * w02 + l1 * w12 + l2 * w22;
-    }
-}
-static void amps__kern34(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7], w20 = W[8], w21 = W[9], w22 = W[10], w23 = W[11];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20;
-        d1[r] -= l0 * w01 + l1 * w11 + l2 * w21;
-        d2[r] -= l0 * w02 + l1 * w12 + l2 * w22;
-        d3[r] -= l0 * w03 + l1 * w13 + l2 * w23;
-    }
-}
-static void amps__kern41(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0];
-    const double w00 = W[0], w10 = W[4], w20 = W[8], w30 = W[12];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-    }
-}
-static void amps__kern42(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5], w20 = W[8], w21 = W[9], w30 = W[12], w31 = W[13];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-        d1[r] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
-    }
-}
-static void amps__kern43(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6], w20 = W[8], w21 = W[9], w22 = W[10], w30 = W[12], w31 = W[13], w32 = W[14];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-        d1[r] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
-        d2[r] -= l0 * w02 + l1 * w12 + l2 * w22 + l3 * w32;
-    }
-}
-static void amps__kern44(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7], w20 = W[8], w21 = W[9], w22 = W[10], w23 = W[11], w30 = W[12], w31 = W[13], w32 = W[14], w33 = W[15];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-        d1[r] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
-        d2[r] -= l0 * w02 + l1 * w12 + l2 * w22 + l3 * w32;
-        d3[r] -= l0 * w03 + l1 * w13 + l2 * w23 + l3 * w33;
-    }
-}
+AMPS__KERN(1, 1) AMPS__KERN(1, 2) AMPS__KERN(1, 3) AMPS__KERN(1, 4)
+AMPS__KERN(2, 1) AMPS__KERN(2, 2) AMPS__KERN(2, 3) AMPS__KERN(2, 4)
+AMPS__KERN(3, 1) AMPS__KERN(3, 2) AMPS__KERN(3, 3) AMPS__KERN(3, 4)
+AMPS__KERN(4, 1) AMPS__KERN(4, 2) AMPS__KERN(4, 3) AMPS__KERN(4, 4)
+#undef AMPS__KERN
 typedef void (*amps__kern_fn)(amps_int, const amps_int *, const amps_int *, const double *const *, const double *,
                               double *const *);
 static const amps__kern_fn amps__kern[4][4] = {
@@ -2893,191 +2735,6 @@ static const amps__kern_fn amps__kern[4][4] = {
     {amps__kern31, amps__kern32, amps__kern33, amps__kern34},
     {amps__kern41, amps__kern42, amps__kern43, amps__kern44}
 };
-/* Dense variants: d_t[p] -= sum_k s_k[p] * W[4k+t] (rows of a group against its own columns). */
-static void amps__dkern11(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0];
-    const double w00 = W[0];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p];
-        d0[p] -= l0 * w00;
-    }
-}
-static void amps__dkern12(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p];
-        d0[p] -= l0 * w00;
-        d1[p] -= l0 * w01;
-    }
-}
-static void amps__dkern13(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p];
-        d0[p] -= l0 * w00;
-        d1[p] -= l0 * w01;
-        d2[p] -= l0 * w02;
-    }
-}
-static void amps__dkern14(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p];
-        d0[p] -= l0 * w00;
-        d1[p] -= l0 * w01;
-        d2[p] -= l0 * w02;
-        d3[p] -= l0 * w03;
-    }
-}
-static void amps__dkern21(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0];
-    const double w00 = W[0], w10 = W[4];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p];
-        d0[p] -= l0 * w00 + l1 * w10;
-    }
-}
-static void amps__dkern22(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p];
-        d0[p] -= l0 * w00 + l1 * w10;
-        d1[p] -= l0 * w01 + l1 * w11;
-    }
-}
-static void amps__dkern23(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p];
-        d0[p] -= l0 * w00 + l1 * w10;
-        d1[p] -= l0 * w01 + l1 * w11;
-        d2[p] -= l0 * w02 + l1 * w12;
-    }
-}
-static void amps__dkern24(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p];
-        d0[p] -= l0 * w00 + l1 * w10;
-        d1[p] -= l0 * w01 + l1 * w11;
-        d2[p] -= l0 * w02 + l1 * w12;
-        d3[p] -= l0 * w03 + l1 * w13;
-    }
-}
-static void amps__dkern31(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0];
-    const double w00 = W[0], w10 = W[4], w20 = W[8];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20;
-    }
-}
-static void amps__dkern32(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5], w20 = W[8], w21 = W[9];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20;
-        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21;
-    }
-}
-static void amps__dkern33(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6], w20 = W[8], w21 = W[9], w22 = W[10];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20;
-        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21;
-        d2[p] -= l0 * w02 + l1 * w12 + l2 * w22;
-    }
-}
-static void amps__dkern34(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7], w20 = W[8], w21 = W[9], w22 = W[10], w23 = W[11];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20;
-        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21;
-        d2[p] -= l0 * w02 + l1 * w12 + l2 * w22;
-        d3[p] -= l0 * w03 + l1 * w13 + l2 * w23;
-    }
-}
-static void amps__dkern41(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0];
-    const double w00 = W[0], w10 = W[4], w20 = W[8], w30 = W[12];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-    }
-}
-static void amps__dkern42(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5], w20 = W[8], w21 = W[9], w30 = W[12], w31 = W[13];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
-    }
-}
-static void amps__dkern43(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6], w20 = W[8], w21 = W[9], w22 = W[10], w30 = W[12], w31 = W[13], w32 = W[14];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
-        d2[p] -= l0 * w02 + l1 * w12 + l2 * w22 + l3 * w32;
-    }
-}
-static void amps__dkern44(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7], w20 = W[8], w21 = W[9], w22 = W[10], w23 = W[11], w30 = W[12], w31 = W[13], w32 = W[14], w33 = W[15];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
-        d2[p] -= l0 * w02 + l1 * w12 + l2 * w22 + l3 * w32;
-        d3[p] -= l0 * w03 + l1 * w13 + l2 * w23 + l3 * w33;
-    }
-}
 typedef void (*amps__dkern_fn)(amps_int, const double *const *, const double *, double *const *);
 static const amps__dkern_fn amps__dkern[4][4] = {
     {amps__dkern11, amps__dkern12, amps__dkern13, amps__dkern14},
@@ -4917,62 +4574,72 @@ static amps_int amps__width(amps_int m) { return m <= 4 ? 4 : (m <= 8 ? 8 : (m <
    X(r, :) -= sum_i L(r, o+i) X(o+i, :) for the rows r after the block, first those of the group
    (consecutive) then its shared rows S, so each row of X is loaded and stored once per block.
    The block's rows are copied to a local array (no aliasing: the row loop vectorizes). */
-#define AMPS__WSOLVE(W)                                                                        \
-    static void amps__wblock##W(const double *const *sl, amps_int b, amps_int ng, const amps_int *S, \
-                                amps_int ns, const amps_int *lmap, double *Xo, double *X) {    \
-        double a[4][W];                                                                        \
-        amps_int i, q, j;                                                                      \
-        for (i = 1; i < b; i++) {                        /* triangle: row o+i from o..o+i-1 */  \
-            amps_int k;                                                                        \
-            for (k = 0; k < i; k++) {                                                          \
-                double l = sl[k][i - b];                  /* L(o+i, o+k) */            \
-                for (j = 0; j < W; j++) Xo[(size_t)i * W + j] -= l * Xo[(size_t)k * W + j];     \
-            }                                                                                  \
-        }                                                                                      \
-        for (i = 0; i < b; i++) memcpy(a[i], Xo + (size_t)i * W, sizeof(a[i]));                 \
-        if (b == 4) {                                                                          \
-            const double *s0 = sl[0], *s1 = sl[1], *s2 = sl[2], *s3 = sl[3];                   \
-            for (q = 0; q < ng + ns; q++) {                                                    \
-                double l0 = s0[q], l1 = s1[q], l2 = s2[q], l3 = s3[q];                         \
-                double *xr = q < ng ? Xo + (size_t)(4 + q) * W : X + (size_t)lmap[S[q - ng]] * W; \
-                for (j = 0; j < W; j++) xr[j] -= (l0 * a[0][j] + l1 * a[1][j]) + (l2 * a[2][j] + l3 * a[3][j]); \
-            }                                                                                  \
-        } else if (b == 2) {                                                                   \
-            const double *s0 = sl[0], *s1 = sl[1];                                             \
-            for (q = 0; q < ng + ns; q++) {                                                    \
-                double l0 = s0[q], l1 = s1[q];                                                 \
-                double *xr = q < ng ? Xo + (size_t)(2 + q) * W : X + (size_t)lmap[S[q - ng]] * W; \
-                for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j] + l1 * a[1][j];                  \
-            }                                                                                  \
-        } else {                                                                               \
-            const double *s0 = sl[0];                                                          \
-            for (q = 0; q < ng + ns; q++) {                                                    \
-                double l0 = s0[q];                                                             \
-                double *xr = q < ng ? Xo + (size_t)(1 + q) * W : X + (size_t)lmap[S[q - ng]] * W; \
-                for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j];                                 \
-            }                                                                                  \
-        }                                                                                      \
-    }                                                                                          \
-    static void amps__wsolve##W(const amps_factor *F, const amps_int *clo, amps_int nc,         \
-                                const amps_int *lmap, double *X) {                             \
-        const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);                       \
-        const amps_int *Lp = F->Lp;                                                            \
-        amps_int t, c, ke, o, b, i;                                                            \
-        for (t = 0; t < nc; t += ke - c + 1) {                                                 \
-            const amps_int *S;                                                                 \
-            amps_int ns;                                                                       \
-            c = clo[t];                                                                        \
-            ke = P ? P->gs[P->cgrp[c] + 1] - 1 : c;                                            \
-            AMPS_ASSERT(t + ke - c < nc && clo[t + ke - c] == ke);                              \
-            S = F->Li + Lp[ke]; ns = Lp[ke + 1] - Lp[ke];                                      \
-            for (o = c; o <= ke; o += b) {                                                     \
-                const double *sl[4];                                                           \
-                b = ke + 1 - o >= 4 ? 4 : (ke + 1 - o >= 2 ? 2 : 1);                           \
-                /* column o+i: rows o+i+1..ke, then S; sl[i] starts at row o+b */               \
-                for (i = 0; i < b; i++) sl[i] = F->Lx + Lp[o + i] + (b - 1 - i);               \
-                amps__wblock##W(sl, b, ke + 1 - o - b, S, ns, lmap, X + (size_t)(t + o - c) * W, X); \
-            }                                                                                  \
-        }                                                                                      \
+AMPS__KERNEL void amps__wblock_body(int W, const double *const *sl, amps_int b, amps_int ng, const amps_int *S,
+                                    amps_int ns, const amps_int *lmap, double *Xo, double *X) {
+    double a[4][AMPS__VB];
+    amps_int i, q, j;
+    for (i = 1; i < b; i++) { /* triangle: row o+i from o..o+i-1 */
+        amps_int k;
+        for (k = 0; k < i; k++) {
+            double l = sl[k][i - b]; /* L(o+i, o+k) */
+            for (j = 0; j < W; j++) Xo[(size_t)i * W + j] -= l * Xo[(size_t)k * W + j];
+        }
+    }
+    for (i = 0; i < b; i++) memcpy(a[i], Xo + (size_t)i * W, sizeof(double) * (size_t)W);
+    if (b == 4) {
+        const double *s0 = sl[0], *s1 = sl[1], *s2 = sl[2], *s3 = sl[3];
+        for (q = 0; q < ng + ns; q++) {
+            double l0 = s0[q], l1 = s1[q], l2 = s2[q], l3 = s3[q];
+            double *xr = q < ng ? Xo + (size_t)(4 + q) * W : X + (size_t)lmap[S[q - ng]] * W;
+            for (j = 0; j < W; j++) xr[j] -= (l0 * a[0][j] + l1 * a[1][j]) + (l2 * a[2][j] + l3 * a[3][j]);
+        }
+    } else if (b == 2) {
+        const double *s0 = sl[0], *s1 = sl[1];
+        for (q = 0; q < ng + ns; q++) {
+            double l0 = s0[q], l1 = s1[q];
+            double *xr = q < ng ? Xo + (size_t)(2 + q) * W : X + (size_t)lmap[S[q - ng]] * W;
+            for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j] + l1 * a[1][j];
+        }
+    } else {
+        const double *s0 = sl[0];
+        for (q = 0; q < ng + ns; q++) {
+            double l0 = s0[q];
+            double *xr = q < ng ? Xo + (size_t)(1 + q) * W : X + (size_t)lmap[S[q - ng]] * W;
+            for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j];
+        }
+    }
+}
+typedef void (*amps__wblock_fn)(const double *const *, amps_int, amps_int, const amps_int *, amps_int,
+                                const amps_int *, double *, double *);
+AMPS__KERNEL void amps__wsolve_body(int W, amps__wblock_fn block, const amps_factor *F, const amps_int *clo,
+                                    amps_int nc, const amps_int *lmap, double *X) {
+    const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
+    const amps_int *Lp = F->Lp;
+    amps_int t, c, ke, o, b, i;
+    for (t = 0; t < nc; t += ke - c + 1) {
+        const amps_int *S;
+        amps_int ns;
+        c = clo[t];
+        ke = P ? P->gs[P->cgrp[c] + 1] - 1 : c;
+        AMPS_ASSERT(t + ke - c < nc && clo[t + ke - c] == ke);
+        S = F->Li + Lp[ke]; ns = Lp[ke + 1] - Lp[ke];
+        for (o = c; o <= ke; o += b) {
+            const double *sl[4];
+            b = ke + 1 - o >= 4 ? 4 : (ke + 1 - o >= 2 ? 2 : 1);
+            /* column o+i: rows o+i+1..ke, then S; sl[i] starts at row o+b */
+            for (i = 0; i < b; i++) sl[i] = F->Lx + Lp[o + i] + (b - 1 - i);
+            block(sl, b, ke + 1 - o - b, S, ns, lmap, X + (size_t)(t + o - c) * W, X);
+        }
+    }
+}
+#define AMPS__WSOLVE(W)                                                                                         \
+    static void amps__wblock##W(const double *const *sl, amps_int b, amps_int ng, const amps_int *S, amps_int ns, \
+                                const amps_int *lmap, double *Xo, double *X) {                                  \
+        amps__wblock_body(W, sl, b, ng, S, ns, lmap, Xo, X);                                                    \
+    }                                                                                                           \
+    static void amps__wsolve##W(const amps_factor *F, const amps_int *clo, amps_int nc, const amps_int *lmap,     \
+                                double *X) {                                                                    \
+        amps__wsolve_body(W, amps__wblock##W, F, clo, nc, lmap, X);                                             \
     }
 AMPS__WSOLVE(4)
 AMPS__WSOLVE(8)
@@ -5042,26 +4709,27 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
 /* acc(0:W) = sum over the common suffix of the root path (wi, wv, len) and the union mapped by
    lmap of wv[t] X(lmap[wi[t]], 0:W): the union is closed under parents, so the suffix starts
    below the last node (from the root down) inside it. Summed upwards, as the path is stored. */
-#define AMPS__GSCAN(W)                                                                         \
-    static void amps__gscan##W(const amps_int *wi, const double *wv, amps_int len,             \
-                               const amps_int *lmap, const double *X, double *acc) {          \
-        /* named accumulators stay in registers (a local array of 8 or 16 does not) */          \
-        double a0 = 0, a1 = 0, a2 = 0, a3 = 0, b0 = 0, b1 = 0, b2 = 0, b3 = 0;                  \
-        double c0 = 0, c1 = 0, c2 = 0, c3 = 0, d0 = 0, d1 = 0, d2 = 0, d3 = 0;                  \
-        amps_int t;                                                                            \
-        for (t = len; t > 0 && lmap[wi[t - 1]] >= 0; t--) {}                                   \
-        for (; t < len; t++) {                                                                 \
-            const double *xr = X + (size_t)lmap[wi[t]] * W;                                    \
-            double v = wv[t];                                                                  \
-            a0 += v * xr[0]; a1 += v * xr[1]; a2 += v * xr[2]; a3 += v * xr[3];                \
-            if (W > 4) { b0 += v * xr[4]; b1 += v * xr[5]; b2 += v * xr[6]; b3 += v * xr[7]; } \
-            if (W > 8) { c0 += v * xr[8]; c1 += v * xr[9]; c2 += v * xr[10]; c3 += v * xr[11]; } \
-            if (W > 12) { d0 += v * xr[12]; d1 += v * xr[13]; d2 += v * xr[14]; d3 += v * xr[15]; } \
-        }                                                                                      \
-        acc[0] = a0; acc[1] = a1; acc[2] = a2; acc[3] = a3;                                    \
-        if (W > 4) { acc[4] = b0; acc[5] = b1; acc[6] = b2; acc[7] = b3; }                     \
-        if (W > 8) { acc[8] = c0; acc[9] = c1; acc[10] = c2; acc[11] = c3; }                   \
-        if (W > 12) { acc[12] = d0; acc[13] = d1; acc[14] = d2; acc[15] = d3; }                \
+AMPS__KERNEL void amps__gscan_body(int W, const amps_int *wi, const double *wv, amps_int len, const amps_int *lmap,
+                                   const double *X, double *acc) {
+    double a[AMPS__VB]; /* fully unrolled: the accumulators live in registers */
+    amps_int t;
+    int j;
+    AMPS__UNROLL
+    for (j = 0; j < W; j++) a[j] = 0;
+    for (t = len; t > 0 && lmap[wi[t - 1]] >= 0; t--) {}
+    for (; t < len; t++) {
+        const double *xr = X + (size_t)lmap[wi[t]] * W;
+        double v = wv[t];
+        AMPS__UNROLL
+        for (j = 0; j < W; j++) a[j] += v * xr[j];
+    }
+    AMPS__UNROLL
+    for (j = 0; j < W; j++) acc[j] = a[j];
+}
+#define AMPS__GSCAN(W)                                                                                          \
+    static void amps__gscan##W(const amps_int *wi, const double *wv, amps_int len, const amps_int *lmap,         \
+                               const double *X, double *acc) {                                                  \
+        amps__gscan_body(W, wi, wv, len, lmap, X, acc);                                                         \
     }
 AMPS__GSCAN(4)
 AMPS__GSCAN(8)
