@@ -2375,6 +2375,39 @@ static amps_status amps__order_fail(amps_ctx *ctx, const char *fn, amps_status s
     return s;
 }
 
+/* AUTO: ord (ng) = the order of least fill (amps__nnzl) among AMD, ND (more than AMPS__ND_LEAF
+   nodes) and METIS (when built in) of the node graph (P, I, weights Qw, coordinates nx, may be
+   NULL). ord2 (ng) and wk (3 ng) are workspace. */
+static amps_status amps__order_auto(amps_ctx *ctx, amps_int ng, const amps_int *P, const amps_int *I, const amps_int *Qw,
+                                    const double *nx, amps_int *ord, amps_int *ord2, amps_int *wk) {
+    double best = -1, f;
+    amps_int *iord = wk, *par = wk + ng, *tmp = wk + 2 * ng, k;
+    amps_status s = AMPS_OK;
+    int c, nc = 1;
+    int cand[3];
+    cand[0] = AMPS_ORDER_AMD;
+    if (ng > AMPS__ND_LEAF) {
+        cand[nc++] = AMPS_ORDER_ND;
+#ifdef AMPS_USE_METIS
+        cand[nc++] = AMPS_ORDER_METIS;
+#endif
+    }
+    for (c = 0; c < nc && s == AMPS_OK; c++) {
+        if (cand[c] == AMPS_ORDER_AMD) s = amps__amd_core(ctx, ng, P, I, Qw, ng, 0, ord2);
+        else if (cand[c] == AMPS_ORDER_ND) s = amps__nd_core(ctx, ng, P, I, Qw, nx, ord2);
+#ifdef AMPS_USE_METIS
+        else s = amps__metis(ctx, ng, P, I, Qw, ord2);
+#endif
+        if (s != AMPS_OK) break;
+        if (nc == 1) { memcpy(ord, ord2, sizeof(amps_int) * (size_t)ng); break; }
+        for (k = 0; k < ng; k++) iord[ord2[k]] = k;
+        amps_etree(ng, P, I, ord2, iord, par, tmp);
+        f = amps__nnzl(ng, P, I, Qw, ord2, iord, par, tmp);
+        if (best < 0 || f < best) { best = f; memcpy(ord, ord2, sizeof(amps_int) * (size_t)ng); }
+    }
+    return s;
+}
+
 /* Orders graph G (n vertices, clean and symmetric) by method after compressing it into nodes
    (block b >= 1: b consecutive vertices; 0: runs of identical closed neighbourhoods) and expands
    the node order into perm (n). coords: 3 per node (b >= 1) or per vertex (b = 0), may be NULL.
@@ -2417,32 +2450,8 @@ static amps_status amps__order_graph(amps_ctx *ctx, amps_int n, const amps_int *
     } else if (method == AMPS_ORDER_METIS) {
         s = amps__metis(ctx, ng, P, I, Qw, ord);
 #endif
-    } else { /* AUTO: the candidate with the least fill */
-        double best, f;
-        amps_int *iord = wk, *par = wk + ng, *tmp = wk + 2 * ng;
-        int c, nc = 1;
-        int cand[3];
-        cand[0] = AMPS_ORDER_AMD;
-        if (ng > AMPS__ND_LEAF) {
-            cand[nc++] = AMPS_ORDER_ND;
-#ifdef AMPS_USE_METIS
-            cand[nc++] = AMPS_ORDER_METIS;
-#endif
-        }
-        best = -1;
-        for (c = 0; c < nc && s == AMPS_OK; c++) {
-            if (cand[c] == AMPS_ORDER_AMD) s = amps__amd_core(ctx, ng, P, I, Qw, ng, 0, ord2);
-            else if (cand[c] == AMPS_ORDER_ND) s = amps__nd_core(ctx, ng, P, I, Qw, nx, ord2);
-#ifdef AMPS_USE_METIS
-            else s = amps__metis(ctx, ng, P, I, Qw, ord2);
-#endif
-            if (s != AMPS_OK) break;
-            if (nc == 1) { memcpy(ord, ord2, sizeof(amps_int) * (size_t)ng); break; }
-            for (k = 0; k < ng; k++) iord[ord2[k]] = k;
-            amps_etree(ng, P, I, ord2, iord, par, tmp);
-            f = amps__nnzl(ng, P, I, Qw, ord2, iord, par, tmp);
-            if (best < 0 || f < best) { best = f; memcpy(ord, ord2, sizeof(amps_int) * (size_t)ng); }
-        }
+    } else {
+        s = amps__order_auto(ctx, ng, P, I, Qw, nx, ord, ord2, wk);
     }
     if (s != AMPS_OK) goto done;
     if (post) { /* ord := ord(postorder of its elimination tree): same fill */
