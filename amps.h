@@ -197,6 +197,28 @@ AMPS_API amps_status amps_nd(amps_ctx *ctx, amps_int n, const amps_int *Ap, cons
                              const double *xyz, amps_int *perm);
 
 /* ============================ symbolic analysis ============================ */
+
+/* Elimination tree of a symmetric n x n pattern eliminated in the order order[0..n-1] (order[k] =
+   vertex eliminated k-th; order and iorder = its inverse both NULL for the identity):
+   parent[k] = min { i > k : L(i, k) != 0 } in positions, -1 at roots.
+   Column v of (Ap, Ai) lists neighbours of v; only those eliminated before v are read, so the
+   pattern is either both triangles, or (identity order) the upper triangle. Diagonal entries and
+   duplicates are allowed. parent (n) is written; work (n) is workspace.
+   Cost O(nnz log n) (ancestor path compression). */
+AMPS_API void amps_etree(amps_int n, const amps_int *Ap, const amps_int *Ai, const amps_int *order,
+                         const amps_int *iorder, amps_int *parent, amps_int *work);
+/* Postorder of the forest parent[0..n-1] (parent[j] > j or -1): post[k] = k-th node of a depth-first
+   traversal that lists every node after its descendants, roots and children in ascending order, so
+   the nodes of each subtree are consecutive. post (n) is written; work (3n) is workspace. Cost O(n). */
+AMPS_API void amps_postorder(amps_int n, const amps_int *parent, amps_int *post, amps_int *work);
+/* Column counts of L for the lower triangle of a symmetric pattern C (positions, i.e. already
+   permuted): cc[j] = |struct L(:, j)| including the diagonal = number of row subtrees holding j.
+   Column j of (Cp, Ci) lists rows i of C(i, j) != 0; entries with i <= j are ignored. parent is the
+   elimination tree of C (amps_etree) and post a postorder of it (amps_postorder). cc (n) is written;
+   work (4n) is workspace. Cost O(nnz(C) log n) (least common ancestors by path compression). */
+AMPS_API void amps_colcounts(amps_int n, const amps_int *parent, const amps_int *post, const amps_int *Cp,
+                             const amps_int *Ci, amps_int *cc, amps_int *work);
+
 /* ============================= numeric LDL^T ============================== */
 
 /* K = P L D L^T P^T. Everything in permuted numbering unless said otherwise:
@@ -2414,24 +2436,7 @@ done:
     return s;
 }
 
-/* ------------------------- elimination tree, fill, postorder ------------------------- */
-
-/* Elimination tree of graph G eliminated in order (iord = inverse): parent[k] (positions, -1 at
-   roots). anc is workspace (n). */
-static void amps__etree(amps_int n, const amps_int *Gp, const amps_int *Gi, const amps_int *order, const amps_int *iord,
-                        amps_int *parent, amps_int *anc) {
-    amps_int k, p, r, t;
-    for (k = 0; k < n; k++) {
-        amps_int v = order[k];
-        parent[k] = -1; anc[k] = -1;
-        for (p = Gp[v]; p < Gp[v + 1]; p++) {
-            r = iord[Gi[p]];
-            if (r >= k) continue;
-            while (anc[r] >= 0 && anc[r] != k) { t = anc[r]; anc[r] = k; r = t; }
-            if (anc[r] < 0) { anc[r] = k; parent[r] = k; }
-        }
-    }
-}
+/* ------------------------------ fill count, METIS ------------------------------ */
 
 /* nnz(L) including the diagonal when G is eliminated in order, vertex v standing for a clique of
    vw[v] (NULL = 1) consecutive unknowns. Cost O(nnz(L of G)). mark is workspace (n). */
@@ -2453,26 +2458,6 @@ static double amps__nnzl(amps_int n, const amps_int *Gp, const amps_int *Gi, con
         nz += wk * s;
     }
     return nz;
-}
-
-/* Replaces order by a postorder of its elimination tree (an equivalent ordering: same fill).
-   parent as from amps__etree; w is workspace (4n). */
-static void amps__postorder(amps_int n, amps_int *order, const amps_int *parent, amps_int *w) {
-    amps_int *head = w, *nxt = w + n, *stack = w + 2 * n, *post = w + 3 * n, k, top, pos = 0;
-    for (k = 0; k < n; k++) head[k] = -1;
-    for (k = n - 1; k >= 0; k--)
-        if (parent[k] >= 0) { nxt[k] = head[parent[k]]; head[parent[k]] = k; }
-    for (k = 0; k < n; k++) {
-        if (parent[k] >= 0) continue;
-        top = 0; stack[top++] = k;
-        while (top > 0) {
-            amps_int j = stack[top - 1], c = head[j];
-            if (c >= 0) { head[j] = nxt[c]; stack[top++] = c; }
-            else { top--; post[pos++] = j; }
-        }
-    }
-    for (k = 0; k < n; k++) head[k] = order[post[k]];
-    memcpy(order, head, sizeof(amps_int) * (size_t)n);
 }
 
 #ifdef AMPS_USE_METIS
@@ -2520,6 +2505,39 @@ static amps_status amps__order_fail(amps_ctx *ctx, const char *fn, amps_status s
     return s;
 }
 
+/* AUTO: ord (ng) = the order of least fill (amps__nnzl) among AMD, ND (more than AMPS__ND_LEAF
+   nodes) and METIS (when built in) of the node graph (P, I, weights Qw, coordinates nx, may be
+   NULL). ord2 (ng) and wk (3 ng) are workspace. */
+static amps_status amps__order_auto(amps_ctx *ctx, amps_int ng, const amps_int *P, const amps_int *I, const amps_int *Qw,
+                                    const double *nx, amps_int *ord, amps_int *ord2, amps_int *wk) {
+    double best = -1, f;
+    amps_int *iord = wk, *par = wk + ng, *tmp = wk + 2 * ng, k;
+    amps_status s = AMPS_OK;
+    int c, nc = 1;
+    int cand[3];
+    cand[0] = AMPS_ORDER_AMD;
+    if (ng > AMPS__ND_LEAF) {
+        cand[nc++] = AMPS_ORDER_ND;
+#ifdef AMPS_USE_METIS
+        cand[nc++] = AMPS_ORDER_METIS;
+#endif
+    }
+    for (c = 0; c < nc && s == AMPS_OK; c++) {
+        if (cand[c] == AMPS_ORDER_AMD) s = amps__amd_core(ctx, ng, P, I, Qw, ng, 0, ord2);
+        else if (cand[c] == AMPS_ORDER_ND) s = amps__nd_core(ctx, ng, P, I, Qw, nx, ord2);
+#ifdef AMPS_USE_METIS
+        else s = amps__metis(ctx, ng, P, I, Qw, ord2);
+#endif
+        if (s != AMPS_OK) break;
+        if (nc == 1) { memcpy(ord, ord2, sizeof(amps_int) * (size_t)ng); break; }
+        for (k = 0; k < ng; k++) iord[ord2[k]] = k;
+        amps_etree(ng, P, I, ord2, iord, par, tmp);
+        f = amps__nnzl(ng, P, I, Qw, ord2, iord, par, tmp);
+        if (best < 0 || f < best) { best = f; memcpy(ord, ord2, sizeof(amps_int) * (size_t)ng); }
+    }
+    return s;
+}
+
 /* Orders graph G (n vertices, clean and symmetric) by method after compressing it into nodes
    (block b >= 1: b consecutive vertices; 0: runs of identical closed neighbourhoods) and expands
    the node order into perm (n). coords: 3 per node (b >= 1) or per vertex (b = 0), may be NULL.
@@ -2562,39 +2580,17 @@ static amps_status amps__order_graph(amps_ctx *ctx, amps_int n, const amps_int *
     } else if (method == AMPS_ORDER_METIS) {
         s = amps__metis(ctx, ng, P, I, Qw, ord);
 #endif
-    } else { /* AUTO: the candidate with the least fill */
-        double best, f;
-        amps_int *iord = wk, *par = wk + ng, *tmp = wk + 2 * ng;
-        int c, nc = 1;
-        int cand[3];
-        cand[0] = AMPS_ORDER_AMD;
-        if (ng > AMPS__ND_LEAF) {
-            cand[nc++] = AMPS_ORDER_ND;
-#ifdef AMPS_USE_METIS
-            cand[nc++] = AMPS_ORDER_METIS;
-#endif
-        }
-        best = -1;
-        for (c = 0; c < nc && s == AMPS_OK; c++) {
-            if (cand[c] == AMPS_ORDER_AMD) s = amps__amd_core(ctx, ng, P, I, Qw, ng, 0, ord2);
-            else if (cand[c] == AMPS_ORDER_ND) s = amps__nd_core(ctx, ng, P, I, Qw, nx, ord2);
-#ifdef AMPS_USE_METIS
-            else s = amps__metis(ctx, ng, P, I, Qw, ord2);
-#endif
-            if (s != AMPS_OK) break;
-            if (nc == 1) { memcpy(ord, ord2, sizeof(amps_int) * (size_t)ng); break; }
-            for (k = 0; k < ng; k++) iord[ord2[k]] = k;
-            amps__etree(ng, P, I, ord2, iord, par, tmp);
-            f = amps__nnzl(ng, P, I, Qw, ord2, iord, par, tmp);
-            if (best < 0 || f < best) { best = f; memcpy(ord, ord2, sizeof(amps_int) * (size_t)ng); }
-        }
+    } else {
+        s = amps__order_auto(ctx, ng, P, I, Qw, nx, ord, ord2, wk);
     }
     if (s != AMPS_OK) goto done;
-    if (post) {
-        amps_int *iord = wk, *par = wk + 4 * ng;
+    if (post) { /* ord := ord(postorder of its elimination tree): same fill */
+        amps_int *iord = wk, *par = wk + 4 * ng, *pst = wk;
         for (k = 0; k < ng; k++) iord[ord[k]] = k;
-        amps__etree(ng, P, I, ord, iord, par, wk + ng);
-        amps__postorder(ng, ord, par, wk);
+        amps_etree(ng, P, I, ord, iord, par, wk + ng);
+        amps_postorder(ng, par, pst, wk + ng);
+        for (k = 0; k < ng; k++) ord2[k] = ord[pst[k]];
+        memcpy(ord, ord2, sizeof(amps_int) * (size_t)ng);
     }
     for (q = 0, k = 0; k < ng; k++)
         for (j = gfirst[ord[k]]; j < gfirst[ord[k] + 1]; j++) perm[q++] = j;
@@ -2698,6 +2694,79 @@ AMPS_API amps_status amps_nd(amps_ctx *ctx, amps_int n, const amps_int *Ap, cons
     return s;
 }
 
+/* ------------------------------ symbolic analysis ------------------------------ */
+
+/* Row k of L: the pattern's neighbours i of vertex order[k] at positions r < k lie in the subtree of
+   k, so climbing from r to its current root (anc, compressed to k on the way) finds the child of k. */
+AMPS_API void amps_etree(amps_int n, const amps_int *Ap, const amps_int *Ai, const amps_int *order,
+                         const amps_int *iorder, amps_int *parent, amps_int *work) {
+    amps_int *anc = work, k, p, r, t;
+    for (k = 0; k < n; k++) {
+        amps_int v = order ? order[k] : k;
+        parent[k] = -1; anc[k] = -1;
+        for (p = Ap[v]; p < Ap[v + 1]; p++) {
+            r = iorder ? iorder[Ai[p]] : Ai[p];
+            if (r >= k) continue;
+            while (anc[r] >= 0 && anc[r] != k) { t = anc[r]; anc[r] = k; r = t; }
+            if (anc[r] < 0) { anc[r] = k; parent[r] = k; }
+        }
+    }
+}
+
+/* Depth-first from each root with an explicit stack; head/next are the child lists, built from
+   the highest node down so that they ascend. */
+AMPS_API void amps_postorder(amps_int n, const amps_int *parent, amps_int *post, amps_int *work) {
+    amps_int *head = work, *next = work + n, *stack = work + 2 * n, k, top, pos = 0;
+    for (k = 0; k < n; k++) head[k] = -1;
+    for (k = n - 1; k >= 0; k--)
+        if (parent[k] >= 0) { next[k] = head[parent[k]]; head[parent[k]] = k; }
+    for (k = 0; k < n; k++) {
+        if (parent[k] >= 0) continue;
+        top = 0; stack[top++] = k;
+        while (top > 0) {
+            amps_int j = stack[top - 1], c = head[j];
+            if (c >= 0) { head[j] = next[c]; stack[top++] = c; }
+            else { top--; post[pos++] = j; }
+        }
+    }
+}
+
+/* Row subtree i = {j : L(i, j) != 0}, a subtree of the tree with root i. cc[j] = the sum over the
+   subtree of j of delta, where each row subtree i puts +1 at each of its leaves, -1 at the least
+   common ancestor of consecutive leaves (in postorder) and -1 at parent[i]. The leaves of row
+   subtree i are the j with C(i, j) != 0 and first[j] > maxfirst[i] (first[j]: first postorder
+   position in the subtree of j; maxfirst[i]: largest first[] of i's previous leaf), and i itself
+   when i is a leaf of the tree. The ancestors form a disjoint-set forest over the finished nodes. */
+AMPS_API void amps_colcounts(amps_int n, const amps_int *parent, const amps_int *post, const amps_int *Cp,
+                             const amps_int *Ci, amps_int *cc, amps_int *work) {
+    amps_int *first = work, *maxfirst = work + n, *prevleaf = work + 2 * n, *anc = work + 3 * n;
+    amps_int j, k, q, r;
+    for (j = 0; j < n; j++) { first[j] = -1; maxfirst[j] = -1; prevleaf[j] = -1; anc[j] = j; }
+    for (k = 0; k < n; k++)
+        for (r = post[k]; r >= 0 && first[r] < 0; r = parent[r]) first[r] = k;
+    for (k = 0; k < n; k++) { j = post[k]; cc[j] = (first[j] == k) ? 1 : 0; }
+    for (k = 0; k < n; k++) {
+        j = post[k];
+        if (parent[j] >= 0) cc[parent[j]]--;
+        for (q = Cp[j]; q < Cp[j + 1]; q++) {
+            amps_int i = Ci[q], jprev;
+            if (i <= j || first[j] <= maxfirst[i]) continue; /* j is not a leaf of row subtree i */
+            maxfirst[i] = first[j];
+            jprev = prevleaf[i];
+            prevleaf[i] = j;
+            cc[j]++;
+            if (jprev >= 0) { /* least common ancestor of jprev and j: root of jprev's set */
+                amps_int root = jprev, s, t;
+                while (anc[root] != root) root = anc[root];
+                for (s = jprev; s != root; s = t) { t = anc[s]; anc[s] = root; }
+                cc[root]--;
+            }
+        }
+        if (parent[j] >= 0) anc[j] = parent[j];
+    }
+    for (k = 0; k < n; k++) { j = post[k]; if (parent[j] >= 0) cc[parent[j]] += cc[j]; }
+}
+
 /* ==================== symbolic + numeric LDL^T impl ==================== */
 /* @@SECTION factor: owned by core */
 
@@ -2738,223 +2807,65 @@ typedef struct amps__fpriv {
 #ifndef AMPS_PIVOT_TOL
 #define AMPS_PIVOT_TOL 1e-12
 #endif
-/* Gather-update kernels: for p in [0,m): d_t[rel[Si[p]]] -= sum_k s_k[p] * W[4k+t], k < KC, t < TC. */
-static void amps__kern11(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0];
-    const double w00 = W[0];
+/* Fixed-width dense kernels (here and in Steps 1-2 of the update): each is one body written with
+   loops over compile-time widths, forced inline into one-line instantiations per width, where the
+   compiler unrolls the loops completely and keeps the accumulators in registers. */
+#if defined(__clang__)
+#define AMPS__KERNEL static inline __attribute__((always_inline))
+#define AMPS__UNROLL _Pragma("clang loop unroll(full)")
+#elif defined(__GNUC__)
+#define AMPS__KERNEL static inline __attribute__((always_inline))
+#define AMPS__UNROLL _Pragma("GCC unroll 16")
+#else
+#define AMPS__KERNEL static inline
+#define AMPS__UNROLL
+#endif
+/* Update kernel of a column block: for p in [0,m), with r = rel[Si[p]] (gather) or p (dense),
+   d_t[r] -= sum_k s_k[p] * W[4k+t] for t < TC, the sum over k < KC in ascending order. */
+AMPS__KERNEL void amps__kern_body(int KC, int TC, int gather, amps_int m, const amps_int *Si, const amps_int *rel,
+                                  const double *const *s, const double *W, double *const *d) {
+    const double *sk[4];
+    double *dt[4], w[4][4];
     amps_int p;
+    int k, t;
+    AMPS__UNROLL
+    for (k = 0; k < KC; k++) sk[k] = s[k];
+    AMPS__UNROLL
+    for (t = 0; t < TC; t++) dt[t] = d[t];
+    AMPS__UNROLL
+    for (k = 0; k < KC; k++) {
+        AMPS__UNROLL
+        for (t = 0; t < TC; t++) w[k][t] = W[4 * k + t];
+    }
     for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p];
-        d0[r] -= l0 * w00;
+        amps_int r = gather ? rel[Si[p]] : p;
+        double l[4];
+        AMPS__UNROLL
+        for (k = 0; k < KC; k++) l[k] = sk[k][p];
+        AMPS__UNROLL
+        for (t = 0; t < TC; t++) {
+            double a = l[0] * w[0][t];
+            AMPS__UNROLL
+            for (k = 1; k < KC; k++) a += l[k] * w[k][t];
+            dt[t][r] -= a;
+        }
     }
 }
-static void amps__kern12(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p];
-        d0[r] -= l0 * w00;
-        d1[r] -= l0 * w01;
+/* amps__kern{K}{T}: gather-update (rows of a finished group scattered into a target group);
+   amps__dkern{K}{T}: dense (rows of a group against its own columns). */
+#define AMPS__KERN(K, T)                                                                                           \
+    static void amps__kern##K##T(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s,     \
+                                 const double *W, double *const *d) {                                            \
+        amps__kern_body(K, T, 1, m, Si, rel, s, W, d);                                                           \
+    }                                                                                                            \
+    static void amps__dkern##K##T(amps_int m, const double *const *s, const double *W, double *const *d) {        \
+        amps__kern_body(K, T, 0, m, NULL, NULL, s, W, d);                                                        \
     }
-}
-static void amps__kern13(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p];
-        d0[r] -= l0 * w00;
-        d1[r] -= l0 * w01;
-        d2[r] -= l0 * w02;
-    }
-}
-static void amps__kern14(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p];
-        d0[r] -= l0 * w00;
-        d1[r] -= l0 * w01;
-        d2[r] -= l0 * w02;
-        d3[r] -= l0 * w03;
-    }
-}
-static void amps__kern21(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0];
-    const double w00 = W[0], w10 = W[4];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p];
-        d0[r] -= l0 * w00 + l1 * w10;
-    }
-}
-static void amps__kern22(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p];
-        d0[r] -= l0 * w00 + l1 * w10;
-        d1[r] -= l0 * w01 + l1 * w11;
-    }
-}
-static void amps__kern23(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p];
-        d0[r] -= l0 * w00 + l1 * w10;
-        d1[r] -= l0 * w01 + l1 * w11;
-        d2[r] -= l0 * w02 + l1 * w12;
-    }
-}
-static void amps__kern24(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p];
-        d0[r] -= l0 * w00 + l1 * w10;
-        d1[r] -= l0 * w01 + l1 * w11;
-        d2[r] -= l0 * w02 + l1 * w12;
-        d3[r] -= l0 * w03 + l1 * w13;
-    }
-}
-static void amps__kern31(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0];
-    const double w00 = W[0], w10 = W[4], w20 = W[8];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20;
-    }
-}
-static void amps__kern32(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5], w20 = W[8], w21 = W[9];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20;
-        d1[r] -= l0 * w01 + l1 * w11 + l2 * w21;
-    }
-}
-static void amps__kern33(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6], w20 = W[8], w21 = W[9], w22 = W[10];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20;
-        d1[r] -= l0 * w01 + l1 * w11 + l2 * w21;
-        d2[r] -= l0 * w02 + l1 * w12 + l2 * w22;
-    }
-}
-static void amps__kern34(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7], w20 = W[8], w21 = W[9], w22 = W[10], w23 = W[11];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20;
-        d1[r] -= l0 * w01 + l1 * w11 + l2 * w21;
-        d2[r] -= l0 * w02 + l1 * w12 + l2 * w22;
-        d3[r] -= l0 * w03 + l1 * w13 + l2 * w23;
-    }
-}
-static void amps__kern41(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0];
-    const double w00 = W[0], w10 = W[4], w20 = W[8], w30 = W[12];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-    }
-}
-static void amps__kern42(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5], w20 = W[8], w21 = W[9], w30 = W[12], w31 = W[13];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-        d1[r] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
-    }
-}
-static void amps__kern43(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6], w20 = W[8], w21 = W[9], w22 = W[10], w30 = W[12], w31 = W[13], w32 = W[14];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-        d1[r] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
-        d2[r] -= l0 * w02 + l1 * w12 + l2 * w22 + l3 * w32;
-    }
-}
-static void amps__kern44(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, const double *W,
-                         double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7], w20 = W[8], w21 = W[9], w22 = W[10], w23 = W[11], w30 = W[12], w31 = W[13], w32 = W[14], w33 = W[15];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        amps_int r = rel[Si[p]];
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[r] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-        d1[r] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
-        d2[r] -= l0 * w02 + l1 * w12 + l2 * w22 + l3 * w32;
-        d3[r] -= l0 * w03 + l1 * w13 + l2 * w23 + l3 * w33;
-    }
-}
+AMPS__KERN(1, 1) AMPS__KERN(1, 2) AMPS__KERN(1, 3) AMPS__KERN(1, 4)
+AMPS__KERN(2, 1) AMPS__KERN(2, 2) AMPS__KERN(2, 3) AMPS__KERN(2, 4)
+AMPS__KERN(3, 1) AMPS__KERN(3, 2) AMPS__KERN(3, 3) AMPS__KERN(3, 4)
+AMPS__KERN(4, 1) AMPS__KERN(4, 2) AMPS__KERN(4, 3) AMPS__KERN(4, 4)
+#undef AMPS__KERN
 typedef void (*amps__kern_fn)(amps_int, const amps_int *, const amps_int *, const double *const *, const double *,
                               double *const *);
 static const amps__kern_fn amps__kern[4][4] = {
@@ -2963,191 +2874,6 @@ static const amps__kern_fn amps__kern[4][4] = {
     {amps__kern31, amps__kern32, amps__kern33, amps__kern34},
     {amps__kern41, amps__kern42, amps__kern43, amps__kern44}
 };
-/* Dense variants: d_t[p] -= sum_k s_k[p] * W[4k+t] (rows of a group against its own columns). */
-static void amps__dkern11(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0];
-    const double w00 = W[0];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p];
-        d0[p] -= l0 * w00;
-    }
-}
-static void amps__dkern12(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p];
-        d0[p] -= l0 * w00;
-        d1[p] -= l0 * w01;
-    }
-}
-static void amps__dkern13(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p];
-        d0[p] -= l0 * w00;
-        d1[p] -= l0 * w01;
-        d2[p] -= l0 * w02;
-    }
-}
-static void amps__dkern14(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p];
-        d0[p] -= l0 * w00;
-        d1[p] -= l0 * w01;
-        d2[p] -= l0 * w02;
-        d3[p] -= l0 * w03;
-    }
-}
-static void amps__dkern21(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0];
-    const double w00 = W[0], w10 = W[4];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p];
-        d0[p] -= l0 * w00 + l1 * w10;
-    }
-}
-static void amps__dkern22(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p];
-        d0[p] -= l0 * w00 + l1 * w10;
-        d1[p] -= l0 * w01 + l1 * w11;
-    }
-}
-static void amps__dkern23(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p];
-        d0[p] -= l0 * w00 + l1 * w10;
-        d1[p] -= l0 * w01 + l1 * w11;
-        d2[p] -= l0 * w02 + l1 * w12;
-    }
-}
-static void amps__dkern24(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p];
-        d0[p] -= l0 * w00 + l1 * w10;
-        d1[p] -= l0 * w01 + l1 * w11;
-        d2[p] -= l0 * w02 + l1 * w12;
-        d3[p] -= l0 * w03 + l1 * w13;
-    }
-}
-static void amps__dkern31(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0];
-    const double w00 = W[0], w10 = W[4], w20 = W[8];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20;
-    }
-}
-static void amps__dkern32(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5], w20 = W[8], w21 = W[9];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20;
-        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21;
-    }
-}
-static void amps__dkern33(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6], w20 = W[8], w21 = W[9], w22 = W[10];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20;
-        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21;
-        d2[p] -= l0 * w02 + l1 * w12 + l2 * w22;
-    }
-}
-static void amps__dkern34(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7], w20 = W[8], w21 = W[9], w22 = W[10], w23 = W[11];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20;
-        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21;
-        d2[p] -= l0 * w02 + l1 * w12 + l2 * w22;
-        d3[p] -= l0 * w03 + l1 * w13 + l2 * w23;
-    }
-}
-static void amps__dkern41(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0];
-    const double w00 = W[0], w10 = W[4], w20 = W[8], w30 = W[12];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-    }
-}
-static void amps__dkern42(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0]; double *d1 = d[1];
-    const double w00 = W[0], w01 = W[1], w10 = W[4], w11 = W[5], w20 = W[8], w21 = W[9], w30 = W[12], w31 = W[13];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
-    }
-}
-static void amps__dkern43(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w10 = W[4], w11 = W[5], w12 = W[6], w20 = W[8], w21 = W[9], w22 = W[10], w30 = W[12], w31 = W[13], w32 = W[14];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
-        d2[p] -= l0 * w02 + l1 * w12 + l2 * w22 + l3 * w32;
-    }
-}
-static void amps__dkern44(amps_int m, const double *const *s, const double *W, double *const *d) {
-    const double *s0 = s[0]; const double *s1 = s[1]; const double *s2 = s[2]; const double *s3 = s[3];
-    double *d0 = d[0]; double *d1 = d[1]; double *d2 = d[2]; double *d3 = d[3];
-    const double w00 = W[0], w01 = W[1], w02 = W[2], w03 = W[3], w10 = W[4], w11 = W[5], w12 = W[6], w13 = W[7], w20 = W[8], w21 = W[9], w22 = W[10], w23 = W[11], w30 = W[12], w31 = W[13], w32 = W[14], w33 = W[15];
-    amps_int p;
-    for (p = 0; p < m; p++) {
-        const double l0 = s0[p], l1 = s1[p], l2 = s2[p], l3 = s3[p];
-        d0[p] -= l0 * w00 + l1 * w10 + l2 * w20 + l3 * w30;
-        d1[p] -= l0 * w01 + l1 * w11 + l2 * w21 + l3 * w31;
-        d2[p] -= l0 * w02 + l1 * w12 + l2 * w22 + l3 * w32;
-        d3[p] -= l0 * w03 + l1 * w13 + l2 * w23 + l3 * w33;
-    }
-}
 typedef void (*amps__dkern_fn)(amps_int, const double *const *, const double *, double *const *);
 static const amps__dkern_fn amps__dkern[4][4] = {
     {amps__dkern11, amps__dkern12, amps__dkern13, amps__dkern14},
@@ -3210,55 +2936,6 @@ static int amps__nthreads(const amps_ctx *ctx, amps_int cap) {
     return t < 1 ? 1 : t;
 }
 
-/* Column counts of L (with diagonal) from the elimination tree and the lower pattern of C = P A P^T
-   (column j: rows Cr[Cp[j]..Cp[j+1]) > j): cc[j] = number of row subtrees containing j, accumulated
-   from +1 at the leaves of each row subtree and -1 at least common ancestors of consecutive leaves
-   (in postorder) and at the parent of each subtree root. w: 5n ints. */
-static void amps__colcounts(amps_int n, const amps_int *parent, const amps_int *Cp, const amps_int *Cr,
-                            amps_int *cc, amps_int *w) {
-    amps_int *post = w, *first = w + n, *maxfirst = w + 2 * n, *prevleaf = w + 3 * n, *anc = w + 4 * n;
-    amps_int *chead = maxfirst, *cnext = prevleaf, *stack = anc;
-    amps_int j, k, q, r, top;
-    /* postorder (children lists in ascending order, explicit stack) */
-    for (j = 0; j < n; j++) chead[j] = -1;
-    for (j = n - 1; j >= 0; j--)
-        if (parent[j] >= 0) { cnext[j] = chead[parent[j]]; chead[parent[j]] = j; }
-    for (j = 0, k = 0; j < n; j++) {
-        if (parent[j] >= 0) continue;
-        top = 0;
-        stack[top++] = j;
-        while (top > 0) {
-            amps_int v = stack[top - 1], ch = chead[v];
-            if (ch >= 0) { chead[v] = cnext[ch]; stack[top++] = ch; }
-            else { top--; post[k++] = v; }
-        }
-    }
-    for (j = 0; j < n; j++) { first[j] = -1; maxfirst[j] = -1; prevleaf[j] = -1; anc[j] = j; }
-    for (k = 0; k < n; k++)
-        for (r = post[k]; r >= 0 && first[r] < 0; r = parent[r]) first[r] = k;
-    for (k = 0; k < n; k++) { j = post[k]; cc[j] = (first[j] == k) ? 1 : 0; }
-    for (k = 0; k < n; k++) {
-        j = post[k];
-        if (parent[j] >= 0) cc[parent[j]]--;
-        for (q = Cp[j]; q < Cp[j + 1]; q++) {
-            amps_int i = Cr[q], jprev;
-            if (first[j] <= maxfirst[i]) continue; /* j is not a leaf of row subtree i */
-            maxfirst[i] = first[j];
-            jprev = prevleaf[i];
-            prevleaf[i] = j;
-            cc[j]++;
-            if (jprev >= 0) { /* least common ancestor of jprev and j: root of jprev's set */
-                amps_int root = jprev, s, t;
-                while (anc[root] != root) root = anc[root];
-                for (s = jprev; s != root; s = t) { t = anc[s]; anc[s] = root; }
-                cc[root]--;
-            }
-        }
-        if (parent[j] >= 0) anc[j] = parent[j];
-    }
-    for (k = 0; k < n; k++) { j = post[k]; if (parent[j] >= 0) cc[parent[j]] += cc[j]; }
-}
-
 #ifndef AMPS__SBLK
 #define AMPS__SBLK 64 /* superblock width (multiple of 4) in the parallel factorization of a group */
 #endif
@@ -3272,21 +2949,31 @@ static void amps__colcounts(amps_int n, const amps_int *parent, const amps_int *
 #define AMPS__NSUB 8 /* split the tree until no subtree has more than 1/AMPS__NSUB of the subtree work */
 #endif
 
-AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts) {
-    amps_factor *F = NULL;
-    amps__fpriv *P = NULL;
-    amps_int n, j, p, q, k, c, g, ng, nnzC = 0, nthr;
-    amps_int *Up = NULL, *Ui = NULL, *Cr = NULL, *tw = NULL, *cc = NULL, *gpar = NULL, *cand = NULL;
-    double *gw = NULL, total, lnz;
-    amps_status st;
-    if (amps_csc_check(ctx, A, stype) != AMPS_OK) return NULL;
-    n = A->ncol;
-    F = AMPS__CAST(amps_factor *, amps__calloc(ctx, 1, sizeof(amps_factor)));
-    if (!F) return NULL;
-    P = AMPS__CAST(amps__fpriv *, amps__calloc(ctx, 1, sizeof(amps__fpriv)));
+/* Temporaries of amps_analyze: C = P A P^T as its upper pattern (Up, Ui: column k holds the rows
+   <= k) and its strictly lower columns (P->Sp, Cr); column counts cc (n + 1), the tree of the
+   column groups gpar (ng), workspace tw (5n + 1). */
+typedef struct amps__ana {
+    amps_int *Up, *Ui, *Cr, *cc, *gpar, *tw;
+} amps__ana;
+
+static void amps__ana_free(amps_ctx *ctx, amps__ana *T) {
+    amps__free(ctx, T->Up); amps__free(ctx, T->Ui); amps__free(ctx, T->Cr); amps__free(ctx, T->cc);
+    amps__free(ctx, T->gpar); amps__free(ctx, T->tw);
+}
+
+static amps_status amps__analyze_oom(amps_ctx *ctx, amps_int n, amps_int nnzA) {
+    return amps__err(ctx, AMPS_ERR_OOM, "amps_analyze: out of memory (n %lld, nnz(A) %lld)", (long long)n,
+                     (long long)nnzA);
+}
+
+/* F->priv, F->n and the arrays of size n of F, its private part and T. */
+static amps_status amps__analyze_alloc(amps_ctx *ctx, const amps_csc *A, amps_stype stype, amps_factor *F,
+                                       amps__ana *T) {
+    amps_int n = A->ncol;
+    amps__fpriv *P = AMPS__CAST(amps__fpriv *, amps__calloc(ctx, 1, sizeof(amps__fpriv)));
     F->priv = P;
     F->n = n;
-    if (!P) goto oom;
+    if (!P) return amps__analyze_oom(ctx, n, A->p[n]);
     P->stype = stype;
     P->nnzA = A->p[n];
     F->perm = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n, sizeof(amps_int)));
@@ -3297,24 +2984,38 @@ AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype 
     P->cgrp = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n, sizeof(amps_int)));
     P->Sp = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)n + 1, sizeof(amps_int)));
     P->dsrc = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n, sizeof(amps_int)));
-    Up = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)n + 1, sizeof(amps_int)));
-    tw = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n * 5 + 1, sizeof(amps_int)));
-    cc = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int)));
-    if (!F->perm || !F->iperm || !F->parent || !F->Lp || !F->D || !P->cgrp || !P->Sp || !P->dsrc || !Up || !tw || !cc)
-        goto oom;
-    st = amps_order(ctx, A, stype, opts, F->perm);
-    if (st != AMPS_OK) goto fail;
+    T->Up = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)n + 1, sizeof(amps_int)));
+    T->tw = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n * 5 + 1, sizeof(amps_int)));
+    T->cc = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int)));
+    if (!F->perm || !F->iperm || !F->parent || !F->Lp || !F->D || !P->cgrp || !P->Sp || !P->dsrc || !T->Up || !T->tw ||
+        !T->cc)
+        return amps__analyze_oom(ctx, n, A->p[n]);
+    return AMPS_OK;
+}
+
+/* F->perm by amps_order, checked to be a permutation, and F->iperm. */
+static amps_status amps__analyze_order(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts,
+                                       amps_factor *F) {
+    amps_int k, n = F->n;
+    amps_status st = amps_order(ctx, A, stype, opts, F->perm);
+    if (st != AMPS_OK) return st;
     for (k = 0; k < n; k++) F->iperm[k] = -1;
     for (k = 0; k < n; k++) {
         amps_int i = F->perm[k];
-        if (i < 0 || i >= n || F->iperm[i] >= 0) {
-            amps__err(ctx, AMPS_ERR_ARG, "amps_analyze: ordering is not a permutation (perm[%lld] = %lld)",
-                      (long long)k, (long long)i);
-            goto fail;
-        }
+        if (i < 0 || i >= n || F->iperm[i] >= 0)
+            return amps__err(ctx, AMPS_ERR_ARG, "amps_analyze: ordering is not a permutation (perm[%lld] = %lld)",
+                             (long long)k, (long long)i);
         F->iperm[i] = k;
     }
-    /* C = P A P^T: upper pattern (Up, Ui) and strictly lower columns (Sp, Ssrc, Cr) with their sources in A */
+    return AMPS_OK;
+}
+
+/* C = P A P^T: upper pattern (T->Up, T->Ui) and strictly lower columns (P->Sp, T->Cr) with their
+   sources in A (P->Ssrc; P->dsrc for the diagonal); allocates P->Sdst for the scatter map. */
+static amps_status amps__analyze_permute(amps_ctx *ctx, const amps_csc *A, amps_stype stype, amps_factor *F,
+                                         amps__ana *T) {
+    amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
+    amps_int n = F->n, *Up = T->Up, j, p, q, k, nnzC = 0;
     for (k = 0; k < n; k++) P->dsrc[k] = -1;
     for (j = 0; j < n; j++)
         for (p = A->p[j]; p < A->p[j + 1]; p++) {
@@ -3332,54 +3033,52 @@ AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype 
     }
     Up[n] = p;
     P->Sp[n] = q;
-    Ui = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nnzC, sizeof(amps_int)));
-    Cr = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)q, sizeof(amps_int)));
+    T->Ui = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nnzC, sizeof(amps_int)));
+    T->Cr = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)q, sizeof(amps_int)));
     P->Ssrc = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)q, sizeof(amps_int)));
     P->Sdst = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)q, sizeof(amps_int)));
-    if (!Ui || !Cr || !P->Ssrc || !P->Sdst) goto oom;
+    if (!T->Ui || !T->Cr || !P->Ssrc || !P->Sdst) return amps__analyze_oom(ctx, n, A->p[n]);
     {
-        amps_int *wu = tw, *wl = tw + n;
+        amps_int *wu = T->tw, *wl = T->tw + n;
         for (k = 0; k < n; k++) { wu[k] = Up[k]; wl[k] = P->Sp[k]; }
         for (j = 0; j < n; j++)
             for (p = A->p[j]; p < A->p[j + 1]; p++) {
                 amps_int i = A->i[p], a = F->iperm[i], b = F->iperm[j];
                 if (stype == AMPS_FULL && i > j) continue;
                 if (a > b) { amps_int t = a; a = b; b = t; }
-                Ui[wu[b]++] = a;
-                if (a != b) { q = wl[a]++; Cr[q] = b; P->Ssrc[q] = p; }
+                T->Ui[wu[b]++] = a;
+                if (a != b) { q = wl[a]++; T->Cr[q] = b; P->Ssrc[q] = p; }
             }
     }
-    /* elimination tree (tw = ancestor with path compression) */
-    {
-        amps_int *parent = F->parent, *anc = tw;
-        for (k = 0; k < n; k++) {
-            parent[k] = -1;
-            anc[k] = -1;
-            for (p = Up[k]; p < Up[k + 1]; p++) {
-                amps_int i = Ui[p];
-                while (i >= 0 && i < k) {
-                    amps_int nx = anc[i];
-                    anc[i] = k;
-                    if (nx < 0) parent[i] = k;
-                    i = nx;
-                }
-            }
-        }
-    }
-    amps__colcounts(n, F->parent, P->Sp, Cr, cc, tw);
-    lnz = 0;
+    return AMPS_OK;
+}
+
+/* Elimination tree F->parent, column counts T->cc (with diagonal) and F->Lp of C. Fails with
+   AMPS_ERR_OOM when nnz(L) exceeds amps_int. */
+static amps_status amps__analyze_counts(amps_ctx *ctx, amps_factor *F, amps__ana *T) {
+    const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
+    amps_int n = F->n, k, *cc = T->cc;
+    double lnz = 0;
+    amps_etree(n, T->Up, T->Ui, NULL, NULL, F->parent, T->tw);
+    amps_postorder(n, F->parent, T->tw, T->tw + n);
+    amps_colcounts(n, F->parent, T->tw, P->Sp, T->Cr, cc, T->tw + n);
     F->Lp[0] = 0;
     for (k = 0; k < n; k++) {
         lnz += (double)cc[k] - 1.0;
-        if (lnz > (double)AMPS__IMAX) {
-            amps__err(ctx, AMPS_ERR_OOM, "amps_analyze: nnz(L) exceeds the index type at column %lld; use a wider AMPS_INT",
-                      (long long)k);
-            goto fail;
-        }
+        if (lnz > (double)AMPS__IMAX)
+            return amps__err(ctx, AMPS_ERR_OOM,
+                             "amps_analyze: nnz(L) exceeds the index type at column %lld; use a wider AMPS_INT",
+                             (long long)k);
         F->Lp[k + 1] = F->Lp[k] + cc[k] - 1;
     }
-    /* column groups: c joins the group of c-1 when parent(c-1) = c and the patterns nest */
-    ng = 0;
+    return AMPS_OK;
+}
+
+/* Column groups: c joins the group of c-1 when parent(c-1) = c and the patterns nest. Writes
+   P->ng, P->gs, P->cgrp and the group tree T->gpar; allocates the per-group arrays and L. */
+static amps_status amps__analyze_groups(amps_ctx *ctx, amps_factor *F, amps__ana *T) {
+    amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
+    amps_int n = F->n, c, g, ng = 0, *tw = T->tw, *cc = T->cc;
     for (c = 0; c < n; c++) {
         if (c == 0 || !(F->parent[c - 1] == c && cc[c - 1] == cc[c] + 1)) tw[ng++] = c;
         P->cgrp[c] = ng - 1;
@@ -3387,143 +3086,198 @@ AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype 
     tw[ng] = n;
     P->ng = ng;
     P->gs = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng + 1, sizeof(amps_int)));
-    gpar = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+    T->gpar = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
     P->head = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
     P->next = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
     P->gpos = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
     P->gsub = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
-    gw = AMPS__CAST(double *, amps__malloc(ctx, (size_t)ng * 2, sizeof(double)));
-    cand = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
     F->Li = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)F->Lp[n], sizeof(amps_int)));
     F->Lx = AMPS__CAST(double *, amps__malloc(ctx, (size_t)F->Lp[n], sizeof(double)));
-    if (!P->gs || !gpar || !P->head || !P->next || !P->gpos || !P->gsub || !gw || !cand || !F->Li || !F->Lx) goto oom;
+    if (!P->gs || !T->gpar || !P->head || !P->next || !P->gpos || !P->gsub || !F->Li || !F->Lx)
+        return amps__analyze_oom(ctx, n, P->nnzA);
     memcpy(P->gs, tw, sizeof(amps_int) * ((size_t)ng + 1));
     for (g = 0; g < ng; g++) {
         amps_int pe = F->parent[P->gs[g + 1] - 1];
-        gpar[g] = pe < 0 ? -1 : P->cgrp[pe];
+        T->gpar[g] = pe < 0 ? -1 : P->cgrp[pe];
     }
-    /* pattern: row i joins S_g for every group g strictly below group(i) on the paths from the
-       columns j < i of C(:, i); rows arrive in ascending order. tw: fill count, mark. */
-    {
-        amps_int *cnt = tw, *mark = tw + n;
-        amps_int *Lp = F->Lp, *Li = F->Li;
-        const amps_int *gs = P->gs, *cgrp = P->cgrp;
-        for (g = 0; g < ng; g++) { cnt[g] = 0; mark[g] = -1; }
-        for (k = 0; k < n; k++) {
-            amps_int gi = cgrp[k];
-            for (p = Up[k]; p < Up[k + 1]; p++) {
-                amps_int jj = Ui[p];
-                if (jj >= k) continue;
-                for (g = cgrp[jj]; g != gi && mark[g] != k; g = gpar[g]) {
-                    AMPS_ASSERT(g >= 0);
-                    mark[g] = k;
-                    Li[Lp[gs[g + 1] - 1] + cnt[g]++] = k;
-                }
+    return AMPS_OK;
+}
+
+/* Pattern Li: row i joins S_g for every group g strictly below group(i) on the paths from the
+   columns j < i of C(:, i); rows arrive in ascending order. Column c < ke of a group then stores
+   rows c+1..ke and S_g. tw: fill count, mark. */
+static void amps__analyze_lpattern(amps_factor *F, amps__ana *T) {
+    const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
+    amps_int n = F->n, ng = P->ng, *cnt = T->tw, *mark = T->tw + n, *Lp = F->Lp, *Li = F->Li, k, p, g, c;
+    const amps_int *gs = P->gs, *cgrp = P->cgrp, *gpar = T->gpar;
+    for (g = 0; g < ng; g++) { cnt[g] = 0; mark[g] = -1; }
+    for (k = 0; k < n; k++) {
+        amps_int gi = cgrp[k];
+        for (p = T->Up[k]; p < T->Up[k + 1]; p++) {
+            amps_int jj = T->Ui[p];
+            if (jj >= k) continue;
+            for (g = cgrp[jj]; g != gi && mark[g] != k; g = gpar[g]) {
+                AMPS_ASSERT(g >= 0);
+                mark[g] = k;
+                Li[Lp[gs[g + 1] - 1] + cnt[g]++] = k;
             }
         }
-        for (g = 0; g < ng; g++) {
-            amps_int ks = gs[g], ke = gs[g + 1] - 1, ns = Lp[ke + 1] - Lp[ke];
-            AMPS_ASSERT(cnt[g] == ns);
-            for (c = ks; c < ke; c++) {
-                amps_int *dst = Li + Lp[c], o;
-                for (o = 0; o < ke - c; o++) dst[o] = c + 1 + o;
-                memcpy(dst + (ke - c), Li + Lp[ke], sizeof(amps_int) * (size_t)ns);
-            }
-        }
-        /* scatter destinations (tw = position of a row in S_g) */
-        for (g = 0; g < ng; g++) {
-            amps_int ks = gs[g], ke = gs[g + 1] - 1, ns = Lp[ke + 1] - Lp[ke];
-            const amps_int *S = Li + Lp[ke];
-            for (p = 0; p < ns; p++) tw[S[p]] = p;
-            for (c = ks; c <= ke; c++)
-                for (q = P->Sp[c]; q < P->Sp[c + 1]; q++) {
-                    amps_int r = Cr[q];
-                    P->Sdst[q] = r <= ke ? Lp[c] + r - c - 1 : Lp[c] + (ke - c) + tw[r];
-                }
+    }
+    for (g = 0; g < ng; g++) {
+        amps_int ks = gs[g], ke = gs[g + 1] - 1, ns = Lp[ke + 1] - Lp[ke];
+        AMPS_ASSERT(cnt[g] == ns);
+        for (c = ks; c < ke; c++) {
+            amps_int *dst = Li + Lp[c], o;
+            for (o = 0; o < ke - c; o++) dst[o] = c + 1 + o;
+            memcpy(dst + (ke - c), Li + Lp[ke], sizeof(amps_int) * (size_t)ns);
         }
     }
-    /* height of the elimination tree */
+}
+
+/* Scatter map of A into L: Lx[Sdst[q]] receives C(Cr[q], c), q in Sp[c].. (tw = position of a row
+   in S_g). */
+static void amps__analyze_scatter(amps_factor *F, amps__ana *T) {
+    amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
+    const amps_int *Lp = F->Lp, *gs = P->gs;
+    amps_int *tw = T->tw, g, p, c, q;
+    for (g = 0; g < P->ng; g++) {
+        amps_int ks = gs[g], ke = gs[g + 1] - 1, ns = Lp[ke + 1] - Lp[ke];
+        const amps_int *S = F->Li + Lp[ke];
+        for (p = 0; p < ns; p++) tw[S[p]] = p;
+        for (c = ks; c <= ke; c++)
+            for (q = P->Sp[c]; q < P->Sp[c + 1]; q++) {
+                amps_int r = T->Cr[q];
+                P->Sdst[q] = r <= ke ? Lp[c] + r - c - 1 : Lp[c] + (ke - c) + tw[r];
+            }
+    }
+}
+
+/* F->height: nodes on the longest leaf-to-root path (depth, tw). */
+static void amps__analyze_height(amps_factor *F, amps_int *tw) {
+    amps_int k;
     F->height = 0;
-    for (k = n - 1; k >= 0; k--) {
+    for (k = F->n - 1; k >= 0; k--) {
         tw[k] = F->parent[k] < 0 ? 1 : tw[F->parent[k]] + 1;
         if (tw[k] > F->height) F->height = tw[k];
     }
-    /* subtree decomposition: repeatedly split the heaviest candidate subtree (its root goes to the top part) */
-    {
-        double *sw = gw + ng, subtot = 0;
-        amps_int ncand = 0, nsub = 0, ntop = 0, best, i, *chead = tw + 2 * n, *cnext = tw + 3 * n;
-        for (g = 0; g < ng; g++) {
-            double s = 0;
-            for (c = P->gs[g]; c < P->gs[g + 1]; c++) s += (double)cc[c] * (double)cc[c];
-            gw[g] = s;
-            sw[g] = 0;
-        }
-        for (g = 0; g < ng; g++) chead[g] = -1;
-        for (g = ng - 1; g >= 0; g--)
-            if (gpar[g] >= 0) { cnext[g] = chead[gpar[g]]; chead[gpar[g]] = g; }
-        total = 0;
-        for (g = 0; g < ng; g++) {
-            sw[g] += gw[g];
-            if (gpar[g] >= 0) sw[gpar[g]] += sw[g];
-            else { cand[ncand++] = g; subtot += sw[g]; }
-            P->gsub[g] = -2;
-            total += gw[g];
-        }
-        for (;;) {
-            best = -1;
-            for (i = 0; i < ncand; i++)
-                if (best < 0 || sw[cand[i]] > sw[cand[best]]) best = i;
-            if (best < 0 || sw[cand[best]] * AMPS__NSUB <= subtot || sw[cand[best]] <= gw[cand[best]]) break;
-            g = cand[best];
-            P->gsub[g] = -1;
-            ntop++;
-            subtot -= gw[g];
-            cand[best] = cand[--ncand];
-            for (k = chead[g]; k >= 0; k = cnext[k]) cand[ncand++] = k;
-            if (ncand > 16 * AMPS__NSUB) break;
-        }
-        P->work = total;
-        /* candidates become subtrees, heaviest first */
-        for (i = 1; i < ncand; i++) {
-            amps_int t = cand[i], m2 = i;
-            while (m2 > 0 && sw[cand[m2 - 1]] < sw[t]) { cand[m2] = cand[m2 - 1]; m2--; }
-            cand[m2] = t;
-        }
-        for (i = 0; i < ncand; i++) P->gsub[cand[i]] = i;
-        nsub = ncand;
-        for (g = ng - 1; g >= 0; g--)
-            if (P->gsub[g] == -2) P->gsub[g] = P->gsub[gpar[g]];
-        P->nsub = nsub;
-        P->ntop = ntop;
-        P->subp = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)nsub + 1, sizeof(amps_int)));
-        P->subg = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(ng - ntop), sizeof(amps_int)));
-        P->topg = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ntop, sizeof(amps_int)));
-        P->fail = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nsub + 1, sizeof(amps_int)));
-        if (!P->subp || !P->subg || !P->topg || !P->fail) goto oom;
-        for (g = 0; g < ng; g++)
-            if (P->gsub[g] >= 0) P->subp[P->gsub[g] + 1]++;
-        for (i = 0; i < nsub; i++) P->subp[i + 1] += P->subp[i];
-        for (i = 0; i < nsub; i++) tw[i] = P->subp[i];
-        for (g = 0, k = 0; g < ng; g++) {
-            if (P->gsub[g] >= 0) P->subg[tw[P->gsub[g]]++] = g;
-            else P->topg[k++] = g;
-        }
+}
+
+/* Subtree roots cand[0..ncand-1] for the threads: starting from the roots of the group tree,
+   repeatedly moves the heaviest candidate (subtree work sw, group work gw = sum of squared column
+   counts) to the top part (gsub = -1) and its children to the candidates, until no candidate
+   holds more than 1/AMPS__NSUB of the candidates' work. The candidates end heaviest first; *ntop
+   counts the top groups, P->gsub is -2 elsewhere, P->work = total work. chead, cnext: ng. */
+static amps_int amps__analyze_split(amps_factor *F, const amps__ana *T, double *gw, double *sw, amps_int *cand,
+                                    amps_int *chead, amps_int *cnext, amps_int *ntop) {
+    amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
+    amps_int ng = P->ng, ncand = 0, best, i, g, c, k;
+    const amps_int *gpar = T->gpar, *cc = T->cc;
+    double subtot = 0, total = 0;
+    *ntop = 0;
+    for (g = 0; g < ng; g++) {
+        double s = 0;
+        for (c = P->gs[g]; c < P->gs[g + 1]; c++) s += (double)cc[c] * (double)cc[c];
+        gw[g] = s;
+        sw[g] = 0;
     }
-    nthr = amps__nthreads(ctx, 1024);
+    for (g = 0; g < ng; g++) chead[g] = -1;
+    for (g = ng - 1; g >= 0; g--)
+        if (gpar[g] >= 0) { cnext[g] = chead[gpar[g]]; chead[gpar[g]] = g; }
+    for (g = 0; g < ng; g++) {
+        sw[g] += gw[g];
+        if (gpar[g] >= 0) sw[gpar[g]] += sw[g];
+        else { cand[ncand++] = g; subtot += sw[g]; }
+        P->gsub[g] = -2;
+        total += gw[g];
+    }
+    for (;;) {
+        best = -1;
+        for (i = 0; i < ncand; i++)
+            if (best < 0 || sw[cand[i]] > sw[cand[best]]) best = i;
+        if (best < 0 || sw[cand[best]] * AMPS__NSUB <= subtot || sw[cand[best]] <= gw[cand[best]]) break;
+        g = cand[best];
+        P->gsub[g] = -1;
+        (*ntop)++;
+        subtot -= gw[g];
+        cand[best] = cand[--ncand];
+        for (k = chead[g]; k >= 0; k = cnext[k]) cand[ncand++] = k;
+        if (ncand > 16 * AMPS__NSUB) break;
+    }
+    P->work = total;
+    for (i = 1; i < ncand; i++) {
+        amps_int t = cand[i], m2 = i;
+        while (m2 > 0 && sw[cand[m2 - 1]] < sw[t]) { cand[m2] = cand[m2 - 1]; m2--; }
+        cand[m2] = t;
+    }
+    return ncand;
+}
+
+/* Subtree decomposition: the candidates of amps__analyze_split become subtrees 0..nsub-1 (P->gsub:
+   subtree of each group, -1 for the top part), listed ascending in P->subp/subg and P->topg. */
+static amps_status amps__analyze_subtrees(amps_ctx *ctx, amps_factor *F, amps__ana *T) {
+    amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
+    amps_int ng = P->ng, n = F->n, nsub, ntop, i, g, k, *tw = T->tw;
+    double *gw = AMPS__CAST(double *, amps__malloc(ctx, (size_t)ng * 2, sizeof(double)));
+    amps_int *cand = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+    if (!gw || !cand) { amps__free(ctx, gw); amps__free(ctx, cand); return amps__analyze_oom(ctx, n, P->nnzA); }
+    nsub = amps__analyze_split(F, T, gw, gw + ng, cand, tw + 2 * n, tw + 3 * n, &ntop);
+    for (i = 0; i < nsub; i++) P->gsub[cand[i]] = i;
+    amps__free(ctx, gw); amps__free(ctx, cand);
+    for (g = ng - 1; g >= 0; g--)
+        if (P->gsub[g] == -2) P->gsub[g] = P->gsub[T->gpar[g]];
+    P->nsub = nsub;
+    P->ntop = ntop;
+    P->subp = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)nsub + 1, sizeof(amps_int)));
+    P->subg = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(ng - ntop), sizeof(amps_int)));
+    P->topg = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ntop, sizeof(amps_int)));
+    P->fail = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nsub + 1, sizeof(amps_int)));
+    if (!P->subp || !P->subg || !P->topg || !P->fail) return amps__analyze_oom(ctx, n, P->nnzA);
+    for (g = 0; g < ng; g++)
+        if (P->gsub[g] >= 0) P->subp[P->gsub[g] + 1]++;
+    for (i = 0; i < nsub; i++) P->subp[i + 1] += P->subp[i];
+    for (i = 0; i < nsub; i++) tw[i] = P->subp[i];
+    for (g = 0, k = 0; g < ng; g++) {
+        if (P->gsub[g] >= 0) P->subg[tw[P->gsub[g]]++] = g;
+        else P->topg[k++] = g;
+    }
+    return AMPS_OK;
+}
+
+/* Workspace of amps_factorize for ctx->nthreads threads, the pattern hash and the thresholds. */
+static amps_status amps__analyze_workspace(amps_ctx *ctx, const amps_csc *A, amps_factor *F) {
+    amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
+    amps_int nthr = amps__nthreads(ctx, 1024);
     P->nthr = nthr;
-    P->iwork = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nthr * 2, (size_t)n * sizeof(amps_int)));
-    if (!P->iwork) goto oom;
+    P->iwork = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nthr * 2, (size_t)F->n * sizeof(amps_int)));
+    if (!P->iwork) return amps__analyze_oom(ctx, F->n, P->nnzA);
     P->hash = amps__pattern_hash(A);
     P->pargroup = AMPS__PARGROUP;
     P->parmin = AMPS__PARMIN;
-    amps__free(ctx, Up); amps__free(ctx, Ui); amps__free(ctx, Cr); amps__free(ctx, tw); amps__free(ctx, cc);
-    amps__free(ctx, gpar); amps__free(ctx, gw); amps__free(ctx, cand);
-    return F;
-oom:
-    amps__err(ctx, AMPS_ERR_OOM, "amps_analyze: out of memory (n %lld, nnz(A) %lld)", (long long)n, (long long)A->p[n]);
-fail:
-    amps__free(ctx, Up); amps__free(ctx, Ui); amps__free(ctx, Cr); amps__free(ctx, tw); amps__free(ctx, cc);
-    amps__free(ctx, gpar); amps__free(ctx, gw); amps__free(ctx, cand);
+    return AMPS_OK;
+}
+
+AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts) {
+    amps_factor *F;
+    amps__ana T;
+    amps_status st;
+    if (amps_csc_check(ctx, A, stype) != AMPS_OK) return NULL;
+    F = AMPS__CAST(amps_factor *, amps__calloc(ctx, 1, sizeof(amps_factor)));
+    if (!F) return NULL;
+    memset(&T, 0, sizeof(T));
+    st = amps__analyze_alloc(ctx, A, stype, F, &T);
+    if (st == AMPS_OK) st = amps__analyze_order(ctx, A, stype, opts, F);  /* perm, iperm */
+    if (st == AMPS_OK) st = amps__analyze_permute(ctx, A, stype, F, &T);  /* pattern of P A P^T */
+    if (st == AMPS_OK) st = amps__analyze_counts(ctx, F, &T);             /* etree, column counts, Lp */
+    if (st == AMPS_OK) st = amps__analyze_groups(ctx, F, &T);             /* column groups, L allocated */
+    if (st == AMPS_OK) {
+        amps__analyze_lpattern(F, &T);                                     /* Li */
+        amps__analyze_scatter(F, &T);                                      /* map of A into L */
+        amps__analyze_height(F, T.tw);
+        st = amps__analyze_subtrees(ctx, F, &T);                           /* parallel split */
+    }
+    if (st == AMPS_OK) st = amps__analyze_workspace(ctx, A, F);
+    amps__ana_free(ctx, &T);
+    if (st == AMPS_OK) return F;
     amps_factor_free(ctx, F);
     return NULL;
 }
@@ -5062,62 +4816,72 @@ static amps_int amps__width(amps_int m) { return m <= 4 ? 4 : (m <= 8 ? 8 : (m <
    X(r, :) -= sum_i L(r, o+i) X(o+i, :) for the rows r after the block, first those of the group
    (consecutive) then its shared rows S, so each row of X is loaded and stored once per block.
    The block's rows are copied to a local array (no aliasing: the row loop vectorizes). */
-#define AMPS__WSOLVE(W)                                                                        \
-    static void amps__wblock##W(const double *const *sl, amps_int b, amps_int ng, const amps_int *S, \
-                                amps_int ns, const amps_int *lmap, double *Xo, double *X) {    \
-        double a[4][W];                                                                        \
-        amps_int i, q, j;                                                                      \
-        for (i = 1; i < b; i++) {                        /* triangle: row o+i from o..o+i-1 */  \
-            amps_int k;                                                                        \
-            for (k = 0; k < i; k++) {                                                          \
-                double l = sl[k][i - b];                  /* L(o+i, o+k) */            \
-                for (j = 0; j < W; j++) Xo[(size_t)i * W + j] -= l * Xo[(size_t)k * W + j];     \
-            }                                                                                  \
-        }                                                                                      \
-        for (i = 0; i < b; i++) memcpy(a[i], Xo + (size_t)i * W, sizeof(a[i]));                 \
-        if (b == 4) {                                                                          \
-            const double *s0 = sl[0], *s1 = sl[1], *s2 = sl[2], *s3 = sl[3];                   \
-            for (q = 0; q < ng + ns; q++) {                                                    \
-                double l0 = s0[q], l1 = s1[q], l2 = s2[q], l3 = s3[q];                         \
-                double *xr = q < ng ? Xo + (size_t)(4 + q) * W : X + (size_t)lmap[S[q - ng]] * W; \
-                for (j = 0; j < W; j++) xr[j] -= (l0 * a[0][j] + l1 * a[1][j]) + (l2 * a[2][j] + l3 * a[3][j]); \
-            }                                                                                  \
-        } else if (b == 2) {                                                                   \
-            const double *s0 = sl[0], *s1 = sl[1];                                             \
-            for (q = 0; q < ng + ns; q++) {                                                    \
-                double l0 = s0[q], l1 = s1[q];                                                 \
-                double *xr = q < ng ? Xo + (size_t)(2 + q) * W : X + (size_t)lmap[S[q - ng]] * W; \
-                for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j] + l1 * a[1][j];                  \
-            }                                                                                  \
-        } else {                                                                               \
-            const double *s0 = sl[0];                                                          \
-            for (q = 0; q < ng + ns; q++) {                                                    \
-                double l0 = s0[q];                                                             \
-                double *xr = q < ng ? Xo + (size_t)(1 + q) * W : X + (size_t)lmap[S[q - ng]] * W; \
-                for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j];                                 \
-            }                                                                                  \
-        }                                                                                      \
-    }                                                                                          \
-    static void amps__wsolve##W(const amps_factor *F, const amps_int *clo, amps_int nc,         \
-                                const amps_int *lmap, double *X) {                             \
-        const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);                       \
-        const amps_int *Lp = F->Lp;                                                            \
-        amps_int t, c, ke, o, b, i;                                                            \
-        for (t = 0; t < nc; t += ke - c + 1) {                                                 \
-            const amps_int *S;                                                                 \
-            amps_int ns;                                                                       \
-            c = clo[t];                                                                        \
-            ke = P ? P->gs[P->cgrp[c] + 1] - 1 : c;                                            \
-            AMPS_ASSERT(t + ke - c < nc && clo[t + ke - c] == ke);                              \
-            S = F->Li + Lp[ke]; ns = Lp[ke + 1] - Lp[ke];                                      \
-            for (o = c; o <= ke; o += b) {                                                     \
-                const double *sl[4];                                                           \
-                b = ke + 1 - o >= 4 ? 4 : (ke + 1 - o >= 2 ? 2 : 1);                           \
-                /* column o+i: rows o+i+1..ke, then S; sl[i] starts at row o+b */               \
-                for (i = 0; i < b; i++) sl[i] = F->Lx + Lp[o + i] + (b - 1 - i);               \
-                amps__wblock##W(sl, b, ke + 1 - o - b, S, ns, lmap, X + (size_t)(t + o - c) * W, X); \
-            }                                                                                  \
-        }                                                                                      \
+AMPS__KERNEL void amps__wblock_body(int W, const double *const *sl, amps_int b, amps_int ng, const amps_int *S,
+                                    amps_int ns, const amps_int *lmap, double *Xo, double *X) {
+    double a[4][AMPS__VB];
+    amps_int i, q, j;
+    for (i = 1; i < b; i++) { /* triangle: row o+i from o..o+i-1 */
+        amps_int k;
+        for (k = 0; k < i; k++) {
+            double l = sl[k][i - b]; /* L(o+i, o+k) */
+            for (j = 0; j < W; j++) Xo[(size_t)i * W + j] -= l * Xo[(size_t)k * W + j];
+        }
+    }
+    for (i = 0; i < b; i++) memcpy(a[i], Xo + (size_t)i * W, sizeof(double) * (size_t)W);
+    if (b == 4) {
+        const double *s0 = sl[0], *s1 = sl[1], *s2 = sl[2], *s3 = sl[3];
+        for (q = 0; q < ng + ns; q++) {
+            double l0 = s0[q], l1 = s1[q], l2 = s2[q], l3 = s3[q];
+            double *xr = q < ng ? Xo + (size_t)(4 + q) * W : X + (size_t)lmap[S[q - ng]] * W;
+            for (j = 0; j < W; j++) xr[j] -= (l0 * a[0][j] + l1 * a[1][j]) + (l2 * a[2][j] + l3 * a[3][j]);
+        }
+    } else if (b == 2) {
+        const double *s0 = sl[0], *s1 = sl[1];
+        for (q = 0; q < ng + ns; q++) {
+            double l0 = s0[q], l1 = s1[q];
+            double *xr = q < ng ? Xo + (size_t)(2 + q) * W : X + (size_t)lmap[S[q - ng]] * W;
+            for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j] + l1 * a[1][j];
+        }
+    } else {
+        const double *s0 = sl[0];
+        for (q = 0; q < ng + ns; q++) {
+            double l0 = s0[q];
+            double *xr = q < ng ? Xo + (size_t)(1 + q) * W : X + (size_t)lmap[S[q - ng]] * W;
+            for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j];
+        }
+    }
+}
+typedef void (*amps__wblock_fn)(const double *const *, amps_int, amps_int, const amps_int *, amps_int,
+                                const amps_int *, double *, double *);
+AMPS__KERNEL void amps__wsolve_body(int W, amps__wblock_fn block, const amps_factor *F, const amps_int *clo,
+                                    amps_int nc, const amps_int *lmap, double *X) {
+    const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
+    const amps_int *Lp = F->Lp;
+    amps_int t, c, ke, o, b, i;
+    for (t = 0; t < nc; t += ke - c + 1) {
+        const amps_int *S;
+        amps_int ns;
+        c = clo[t];
+        ke = P ? P->gs[P->cgrp[c] + 1] - 1 : c;
+        AMPS_ASSERT(t + ke - c < nc && clo[t + ke - c] == ke);
+        S = F->Li + Lp[ke]; ns = Lp[ke + 1] - Lp[ke];
+        for (o = c; o <= ke; o += b) {
+            const double *sl[4];
+            b = ke + 1 - o >= 4 ? 4 : (ke + 1 - o >= 2 ? 2 : 1);
+            /* column o+i: rows o+i+1..ke, then S; sl[i] starts at row o+b */
+            for (i = 0; i < b; i++) sl[i] = F->Lx + Lp[o + i] + (b - 1 - i);
+            block(sl, b, ke + 1 - o - b, S, ns, lmap, X + (size_t)(t + o - c) * W, X);
+        }
+    }
+}
+#define AMPS__WSOLVE(W)                                                                                         \
+    static void amps__wblock##W(const double *const *sl, amps_int b, amps_int ng, const amps_int *S, amps_int ns, \
+                                const amps_int *lmap, double *Xo, double *X) {                                  \
+        amps__wblock_body(W, sl, b, ng, S, ns, lmap, Xo, X);                                                    \
+    }                                                                                                           \
+    static void amps__wsolve##W(const amps_factor *F, const amps_int *clo, amps_int nc, const amps_int *lmap,     \
+                                double *X) {                                                                    \
+        amps__wsolve_body(W, amps__wblock##W, F, clo, nc, lmap, X);                                             \
     }
 AMPS__WSOLVE(4)
 AMPS__WSOLVE(8)
@@ -5188,26 +4952,27 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
 /* acc(0:W) = sum over the common suffix of the root path (wi, wv, len) and the union mapped by
    lmap of wv[t] X(lmap[wi[t]], 0:W): the union is closed under parents, so the suffix starts
    below the last node (from the root down) inside it. Summed upwards, as the path is stored. */
-#define AMPS__GSCAN(W)                                                                         \
-    static void amps__gscan##W(const amps_int *wi, const double *wv, amps_int len,             \
-                               const amps_int *lmap, const double *X, double *acc) {          \
-        /* named accumulators stay in registers (a local array of 8 or 16 does not) */          \
-        double a0 = 0, a1 = 0, a2 = 0, a3 = 0, b0 = 0, b1 = 0, b2 = 0, b3 = 0;                  \
-        double c0 = 0, c1 = 0, c2 = 0, c3 = 0, d0 = 0, d1 = 0, d2 = 0, d3 = 0;                  \
-        amps_int t;                                                                            \
-        for (t = len; t > 0 && lmap[wi[t - 1]] >= 0; t--) {}                                   \
-        for (; t < len; t++) {                                                                 \
-            const double *xr = X + (size_t)lmap[wi[t]] * W;                                    \
-            double v = wv[t];                                                                  \
-            a0 += v * xr[0]; a1 += v * xr[1]; a2 += v * xr[2]; a3 += v * xr[3];                \
-            if (W > 4) { b0 += v * xr[4]; b1 += v * xr[5]; b2 += v * xr[6]; b3 += v * xr[7]; } \
-            if (W > 8) { c0 += v * xr[8]; c1 += v * xr[9]; c2 += v * xr[10]; c3 += v * xr[11]; } \
-            if (W > 12) { d0 += v * xr[12]; d1 += v * xr[13]; d2 += v * xr[14]; d3 += v * xr[15]; } \
-        }                                                                                      \
-        acc[0] = a0; acc[1] = a1; acc[2] = a2; acc[3] = a3;                                    \
-        if (W > 4) { acc[4] = b0; acc[5] = b1; acc[6] = b2; acc[7] = b3; }                     \
-        if (W > 8) { acc[8] = c0; acc[9] = c1; acc[10] = c2; acc[11] = c3; }                   \
-        if (W > 12) { acc[12] = d0; acc[13] = d1; acc[14] = d2; acc[15] = d3; }                \
+AMPS__KERNEL void amps__gscan_body(int W, const amps_int *wi, const double *wv, amps_int len, const amps_int *lmap,
+                                   const double *X, double *acc) {
+    double a[AMPS__VB]; /* fully unrolled: the accumulators live in registers */
+    amps_int t;
+    int j;
+    AMPS__UNROLL
+    for (j = 0; j < W; j++) a[j] = 0;
+    for (t = len; t > 0 && lmap[wi[t - 1]] >= 0; t--) {}
+    for (; t < len; t++) {
+        const double *xr = X + (size_t)lmap[wi[t]] * W;
+        double v = wv[t];
+        AMPS__UNROLL
+        for (j = 0; j < W; j++) a[j] += v * xr[j];
+    }
+    AMPS__UNROLL
+    for (j = 0; j < W; j++) acc[j] = a[j];
+}
+#define AMPS__GSCAN(W)                                                                                          \
+    static void amps__gscan##W(const amps_int *wi, const double *wv, amps_int len, const amps_int *lmap,         \
+                               const double *X, double *acc) {                                                  \
+        amps__gscan_body(W, wi, wv, len, lmap, X, acc);                                                         \
     }
 AMPS__GSCAN(4)
 AMPS__GSCAN(8)

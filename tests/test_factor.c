@@ -138,12 +138,123 @@ static void check_not_spd(const char *name, const amps_csc *A, const int *perm) 
     amps_factor_free(&ctx, F);
 }
 
+/* amps_etree, amps_postorder and amps_colcounts of upper A under perm (NULL: identity) against
+   cholmod_etree, cholmod_postorder and cholmod_rowcolcounts of C = P A P^T; amps_etree also on the
+   full graph of A with the ordering given, and the counts against the factor's Lp. */
+static void check_symbolic(const char *name, const amps_csc *A, const int *perm) {
+    int n = A->ncol, nz = A->p[n], j, p, k, ok;
+    int *iperm = (int *)malloc(sizeof(int) * (n + 1)), *ord = (int *)malloc(sizeof(int) * (n + 1));
+    int *Cp = (int *)calloc((size_t)n + 1, sizeof(int)), *Ci = (int *)malloc(sizeof(int) * (nz + 1));
+    int *Lp = (int *)calloc((size_t)n + 1, sizeof(int)), *Li = (int *)malloc(sizeof(int) * (nz + 1));
+    int *Gp = (int *)calloc((size_t)n + 1, sizeof(int)), *Gi = (int *)malloc(sizeof(int) * (2 * nz + 1));
+    int *par = (int *)malloc(sizeof(int) * (n + 1)), *par2 = (int *)malloc(sizeof(int) * (n + 1));
+    int *post = (int *)malloc(sizeof(int) * (n + 1)), *cc = (int *)malloc(sizeof(int) * (n + 1));
+    int *w = (int *)malloc(sizeof(int) * (4 * n + 1)), *cpar = (int *)malloc(sizeof(int) * (n + 1));
+    int *cpost = (int *)malloc(sizeof(int) * (n + 1)), *rc = (int *)malloc(sizeof(int) * (n + 1));
+    int *ccc = (int *)malloc(sizeof(int) * (n + 1)), *first = (int *)malloc(sizeof(int) * (n + 1));
+    int *level = (int *)malloc(sizeof(int) * (n + 1));
+    cholmod_common c;
+    cholmod_sparse *S, *St;
+    for (k = 0; k < n; k++) { ord[k] = perm ? perm[k] : k; iperm[ord[k]] = k; }
+    /* C = P A P^T: upper columns (Cp, Ci), lower columns (Lp, Li); full graph of A (Gp, Gi) */
+    for (j = 0; j < n; j++)
+        for (p = A->p[j]; p < A->p[j + 1]; p++) {
+            int a = iperm[A->i[p]], b = iperm[j];
+            Cp[(a > b ? a : b) + 1]++; Lp[(a < b ? a : b) + 1]++;
+            Gp[j + 1]++; if (A->i[p] != j) Gp[A->i[p] + 1]++;
+        }
+    for (j = 0; j < n; j++) { Cp[j + 1] += Cp[j]; Lp[j + 1] += Lp[j]; Gp[j + 1] += Gp[j]; }
+    for (j = 0; j < n; j++)
+        for (p = A->p[j]; p < A->p[j + 1]; p++) {
+            int a = iperm[A->i[p]], b = iperm[j], lo = a < b ? a : b, hi = a < b ? b : a;
+            Ci[Cp[hi]++] = lo; Li[Lp[lo]++] = hi;
+            Gi[Gp[j]++] = A->i[p]; if (A->i[p] != j) Gi[Gp[A->i[p]]++] = j;
+        }
+    for (j = n; j > 0; j--) { Cp[j] = Cp[j - 1]; Lp[j] = Lp[j - 1]; Gp[j] = Gp[j - 1]; }
+    Cp[0] = Lp[0] = Gp[0] = 0;
+    amps_etree(n, Cp, Ci, NULL, NULL, par, w);
+    amps_etree(n, Gp, Gi, ord, iperm, par2, w);
+    CHECK(memcmp(par, par2, sizeof(int) * n) == 0, "%s: etree of the upper part of P A P^T and of A ordered differ", name);
+    amps_postorder(n, par, post, w);
+    amps_colcounts(n, par, post, Lp, Li, cc, w);
+    cholmod_start(&c);
+    S = cholmod_allocate_sparse(n, n, nz, 0, 1, 1, CHOLMOD_PATTERN, &c);
+    memcpy(S->p, Cp, sizeof(int) * (n + 1));
+    memcpy(S->i, Ci, sizeof(int) * (nz + 1 > 1 ? nz : 1));
+    St = cholmod_transpose(S, 0, &c);
+    ok = cholmod_etree(S, cpar, &c) && cholmod_postorder(cpar, n, NULL, cpost, &c) == n &&
+         cholmod_rowcolcounts(St, NULL, 0, cpar, cpost, rc, ccc, first, level, &c);
+    CHECK(ok && c.status == CHOLMOD_OK, "%s: cholmod symbolic failed (status %d)", name, c.status);
+    if (ok) {
+        CHECK(memcmp(par, cpar, sizeof(int) * n) == 0, "%s: etree differs from cholmod_etree", name);
+        CHECK(memcmp(post, cpost, sizeof(int) * n) == 0, "%s: postorder differs from cholmod_postorder", name);
+        CHECK(memcmp(cc, ccc, sizeof(int) * n) == 0, "%s: column counts differ from cholmod_rowcolcounts", name);
+    }
+    if (perm) {
+        amps_ctx ctx; amps_order_opts o; amps_factor *F;
+        amps_ctx_init(&ctx);
+        memset(&o, 0, sizeof(o));
+        o.method = AMPS_ORDER_GIVEN; o.perm = perm;
+        F = amps_analyze(&ctx, A, AMPS_UPPER, &o);
+        CHECK(F != NULL, "%s: analyze: %s", name, ctx.msg);
+        for (k = 0, ok = 1; F && k < n; k++) ok = ok && F->parent[k] == par[k] && F->Lp[k + 1] - F->Lp[k] == cc[k] - 1;
+        CHECK(F && ok, "%s: analyze's tree or Lp differ from amps_etree / amps_colcounts", name);
+        amps_factor_free(&ctx, F);
+    }
+    cholmod_free_sparse(&S, &c); cholmod_free_sparse(&St, &c); cholmod_finish(&c);
+    free(iperm); free(ord); free(Cp); free(Ci); free(Lp); free(Li); free(Gp); free(Gi); free(par); free(par2);
+    free(post); free(cc); free(w); free(cpar); free(cpost); free(rc); free(ccc); free(first); free(level);
+}
+
+/* Hand cases: n = 0, n = 1, a diagonal matrix (a forest of single nodes), two paths. */
+static void check_symbolic_small(void) {
+    int Ap[6] = {0}, Ai[8] = {0}, par[5], post[5], cc[5], w[20], k, ok;
+    /* n = 0 and n = 1 */
+    amps_etree(0, Ap, Ai, NULL, NULL, par, w);
+    amps_postorder(0, par, post, w);
+    amps_colcounts(0, par, post, Ap, Ai, cc, w);
+    Ap[1] = 1; Ai[0] = 0;
+    amps_etree(1, Ap, Ai, NULL, NULL, par, w);
+    amps_postorder(1, par, post, w);
+    amps_colcounts(1, par, post, Ap, Ai, cc, w);
+    CHECK(par[0] == -1 && post[0] == 0 && cc[0] == 1, "n = 1: parent %d post %d count %d", par[0], post[0], cc[0]);
+    /* diagonal 4 x 4: four roots */
+    for (k = 0; k <= 4; k++) Ap[k] = k;
+    for (k = 0; k < 4; k++) Ai[k] = k;
+    amps_etree(4, Ap, Ai, NULL, NULL, par, w);
+    amps_postorder(4, par, post, w);
+    amps_colcounts(4, par, post, Ap, Ai, cc, w);
+    for (k = 0, ok = 1; k < 4; k++) ok = ok && par[k] == -1 && post[k] == k && cc[k] == 1;
+    CHECK(ok, "diagonal: forest of single nodes");
+    {   /* upper pattern of the paths 0 - 2 - 4 and 1 - 3: roots 3 and 4, the tree of 3 first */
+        static const int up[6] = {0, 0, 0, 1, 2, 3}, ui[3] = {0, 1, 2};
+        static const int lp[6] = {0, 1, 2, 3, 3, 3}, li[3] = {2, 3, 4};
+        static const int epar[5] = {2, 3, 4, -1, -1}, epost[5] = {1, 3, 0, 2, 4}, ecc[5] = {2, 2, 2, 1, 1};
+        static const int order[5] = {1, 0, 2, 3, 4}, iorder[5] = {1, 0, 2, 3, 4};
+        static const int fp[6] = {0, 1, 2, 4, 5, 6}, fi[6] = {2, 3, 0, 4, 1, 2}; /* both triangles */
+        static const int rpar[5] = {3, 2, 4, -1, -1}; /* 0 and 1 swapped */
+        int d[5];
+        amps_etree(5, up, ui, NULL, NULL, par, w);
+        amps_postorder(5, par, post, w);
+        amps_colcounts(5, par, post, lp, li, cc, w);
+        for (k = 0, ok = 1; k < 5; k++) ok = ok && par[k] == epar[k] && post[k] == epost[k] && cc[k] == ecc[k];
+        CHECK(ok, "two paths: parent, postorder or counts");
+        amps_etree(5, fp, fi, NULL, NULL, d, w);
+        CHECK(memcmp(d, epar, sizeof(d)) == 0, "two paths: etree of the full pattern");
+        amps_etree(5, fp, fi, order, iorder, d, w);
+        CHECK(memcmp(d, rpar, sizeof(d)) == 0, "two paths, 0 and 1 swapped: %d %d %d %d %d", d[0], d[1], d[2], d[3], d[4]);
+        amps_colcounts(5, par, post, fp, fi, d, w); /* entries above the diagonal ignored */
+        CHECK(memcmp(d, ecc, sizeof(d)) == 0, "two paths: counts from the full pattern");
+    }
+}
+
 int main(void) {
     amps_ctx ctx;
     amps_csc *A;
     int *perm, k;
     char name[64];
     amps_ctx_init(&ctx);
+    check_symbolic_small();
     /* random matrices: diagonally dominant and B^T B + shift, several sizes and densities */
     {
         static const int sizes[] = {1, 2, 7, 60, 500, 1500}, degs[] = {1, 2, 4, 6, 5, 3};
@@ -153,12 +264,15 @@ int main(void) {
             perm = m_cholmod_perm(A, CHOLMOD_AMD);
             sprintf(name, "rand_dd n=%d", n);
             check_matrix(name, A, perm);
+            check_symbolic(name, A, perm);
+            check_symbolic(name, A, NULL);
             check_matrix(name, A, NULL);
             free(perm); amps_csc_free(&ctx, A);
             A = m_btb(&ctx, n, 2 * n, k < 3 ? 2 : 4, 1e-2, 200 + k);
             perm = m_cholmod_perm(A, CHOLMOD_AMD);
             sprintf(name, "btb n=%d", n);
             check_matrix(name, A, perm);
+            check_symbolic(name, A, perm);
             free(perm); amps_csc_free(&ctx, A);
         }
         A = m_rand(&ctx, 300, 40, 1.1, 0, 7);
@@ -175,10 +289,12 @@ int main(void) {
             A = m_fe(&ctx, meshes[k], 1);
             perm = m_cholmod_perm(A, CHOLMOD_AMD);
             check_matrix(names[k], A, perm);
+            check_symbolic(names[k], A, perm);
             free(perm);
             perm = m_cholmod_perm(A, CHOLMOD_METIS);
             sprintf(name, "%s metis", names[k]);
             check_matrix(name, A, perm);
+            check_symbolic(name, A, perm);
             free(perm);
             if (k < 3) { sprintf(name, "%s default", names[k]); check_matrix(name, A, NULL); }
             amps_csc_free(&ctx, A);

@@ -641,6 +641,40 @@ static void test_shapes(void) {
     }
 }
 
+/* The AMD, ND and AUTO orders are postorders of their elimination trees: amps_postorder of the
+   tree amps_etree finds under the ordering is the identity, and that tree is the factor's. */
+static void test_postordered(void) {
+    amps_ctx ctx;
+    int t, k, b;
+    amps_ordering meths[] = {AMPS_ORDER_AUTO, AMPS_ORDER_AMD, AMPS_ORDER_ND};
+    amps_ctx_init(&ctx);
+    for (t = 0; t < 3; t++) {
+        fe_mesh mesh = t == 0 ? fe_brick(4) : t == 1 ? fe_beam(8) : fe_brick(7);
+        tmat m = t_fe(&mesh);
+        int n = m.n, *perm = (int *)malloc(sizeof(int) * n), *iperm = (int *)malloc(sizeof(int) * n);
+        int *par = (int *)malloc(sizeof(int) * n), *post = (int *)malloc(sizeof(int) * n), *w = (int *)malloc(sizeof(int) * 3 * n);
+        amps_csc A = t_view(&m, AMPS_UPPER);
+        for (k = 0; k < 3; k++)
+            for (b = 1; b <= 3; b += 2) {
+                amps_order_opts o;
+                amps_factor *F;
+                int j, ok = 1;
+                CHECK(t_order(&ctx, &m, AMPS_UPPER, meths[k], b, b == 3 ? m.xyz : NULL, perm) == AMPS_OK, "%s: %s", mname(meths[k]), ctx.msg);
+                for (j = 0; j < n; j++) iperm[perm[j]] = j;
+                amps_etree(n, m.fp, m.fi, perm, iperm, par, w);
+                amps_postorder(n, par, post, w);
+                for (j = 0; j < n; j++) ok = ok && post[j] == j;
+                CHECK(ok, "mesh %d %s block %d: the ordering is not a postorder of its elimination tree", t, mname(meths[k]), b);
+                memset(&o, 0, sizeof o);
+                o.method = AMPS_ORDER_GIVEN; o.perm = perm;
+                F = amps_analyze(&ctx, &A, AMPS_UPPER, &o);
+                CHECK(F && !memcmp(F->parent, par, sizeof(int) * n), "mesh %d %s block %d: factor's tree differs", t, mname(meths[k]), b);
+                amps_factor_free(&ctx, F);
+            }
+        free(perm); free(iperm); free(par); free(post); free(w); t_free_mat(&m); fe_free(&mesh);
+    }
+}
+
 int main(void) {
     test_methods();
     test_given();
@@ -654,5 +688,6 @@ int main(void) {
     test_random();
     test_shapes();
     test_solve();
+    test_postordered();
     return amps_t_end("test_ordering");
 }
