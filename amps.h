@@ -69,7 +69,7 @@
      amps_ctx ctx; amps_ctx_init(&ctx);
      amps_csc *K = amps_csc_from_triplets(&ctx, n, nz, ti, tj, tx, AMPS_UPPER);
      amps_factor *F = amps_analyze(&ctx, K, AMPS_UPPER, NULL);
-     if (!F || amps_factorize(&ctx, F, K, AMPS_UPPER)) { puts(ctx.msg); ... }
+     if (!F || amps_factorize(&ctx, F, K)) { puts(ctx.msg); ... }
      amps_solve(&ctx, F, b, x, work);
 */
 #ifndef AMPS_H
@@ -242,12 +242,13 @@ typedef struct amps_factor {
    are read (A is taken as symmetric). Also builds the pattern Li and the scatter map of A into L, and
    the workspace of amps_factorize for ctx->nthreads threads (0: the OpenMP default). */
 AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts);
-/* Numeric LDL^T of A, which must have the pattern given to amps_analyze (values may differ).
+/* Numeric LDL^T of A, which must have the pattern given to amps_analyze, stored as the same
+   triangle (values may differ; AMPS_ERR_PATTERN otherwise).
    A pivot must be finite and exceed AMPS_PIVOT_TOL (default 1e-12) times the column's diagonal entry
    of A, else AMPS_ERR_NOT_SPD names the failing column in the original numbering; F is then not
    numeric. Uses ctx->nthreads OpenMP threads (at most the count at amps_analyze); the result does
    not depend on the thread count. Allocates nothing. */
-AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_csc *A, amps_stype stype);
+AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_csc *A);
 AMPS_API void amps_factor_free(amps_ctx *ctx, amps_factor *F);
 /* Number of entries of L, counting the unit diagonal. */
 AMPS_API double amps_factor_nnz(const amps_factor *F);
@@ -3523,7 +3524,7 @@ static amps_int amps__fgroup_par(amps_factor *F, amps__fpriv *P, const double *A
 }
 #endif
 
-AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_csc *A, amps_stype stype) {
+AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_csc *A) {
     amps__fpriv *P;
     amps_int n, k, g, i, bad = -1, nsub;
     const double *Ax;
@@ -3534,9 +3535,6 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
     if (A->nrow != n || A->ncol != n || !A->p || (A->p[n] > 0 && (!A->i || !A->x)))
         return amps__err(ctx, AMPS_ERR_ARG, "amps_factorize: matrix is %lld x %lld (values %s), factor is for n = %lld",
                          (long long)A->nrow, (long long)A->ncol, A->x ? "present" : "missing", (long long)n);
-    if (stype != P->stype)
-        return amps__err(ctx, AMPS_ERR_ARG, "amps_factorize: stype %d differs from the analyzed stype %d", (int)stype,
-                         (int)P->stype);
     if (A->p[n] != P->nnzA || amps__pattern_hash(A) != P->hash)
         return amps__err(ctx, AMPS_ERR_PATTERN, "amps_factorize: pattern differs from the analyzed one");
     Ax = A->x;
@@ -6481,7 +6479,7 @@ static amps_status amps__bg_factor(amps_ctx *c2, amps__bg *b) {
     if (!b->result.F) return c2->status;
     if (amps__bg_get(b, &b->cancel)) return AMPS_ERR_STATE;
     if (AMPS_TEST_BG_FAULT(2)) return amps__err(c2, AMPS_ERR_NOT_SPD, "injected failure in the factorization");
-    if ((s = amps_factorize(c2, b->result.F, b->result.K, AMPS_UPPER)) != AMPS_OK) return s;
+    if ((s = amps_factorize(c2, b->result.F, b->result.K)) != AMPS_OK) return s;
     if (amps__bg_get(b, &b->cancel)) return AMPS_ERR_STATE;
     return AMPS_OK;
 }
@@ -7788,7 +7786,7 @@ static amps_status amps__scene_factor(amps_ctx *ctx, amps_scene *S, amps_int n) 
     S->F = amps_analyze(ctx, S->K, AMPS_UPPER, &ord);
     amps__free(ctx, coords);
     if (!S->F) return AMPS_ERR_OOM;
-    if (amps_factorize(ctx, S->F, S->K, AMPS_UPPER) != AMPS_OK) {
+    if (amps_factorize(ctx, S->F, S->K) != AMPS_OK) {
         char msg[256];
         memcpy(msg, ctx ? ctx->msg : "", ctx ? sizeof(msg) : 1);
         return amps__err(ctx, AMPS_ERR_NOT_SPD,

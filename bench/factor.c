@@ -213,7 +213,7 @@ int main(int argc, char **argv) {
         fprintf(stderr, "factor: warning: nnz(L) of the ND perm: amps %.0f, CHOLMOD symbolic %.0f\n", l_nd_amps, l_nd);
     for (r = 0, nrep = 3; r < nrep; r++) {
         t0 = amps_now();
-        if (amps_factorize(&ctx, F, K, AMPS_UPPER) != AMPS_OK) bench_die("amps_factorize", ctx.msg);
+        if (amps_factorize(&ctx, F, K) != AMPS_OK) bench_die("amps_factorize", ctx.msg);
         t = amps_now() - t0;
         if (r == 0) nrep = NREP(t);
         if (t < t_f) t_f = t;

@@ -106,7 +106,7 @@ REF_UNUSED static double scene_reference(amps_ctx *ctx, const amps_mesh *m, cons
         if (want_cond && nf > 0) {
             amps_factor *F = amps_analyze(ctx, R, AMPS_UPPER, NULL);
             double c;
-            if (F && amps_factorize(ctx, F, R, AMPS_UPPER) == AMPS_OK && amps_condest(ctx, R, AMPS_UPPER, F, NULL, &c) == AMPS_OK) inf.cond = c;
+            if (F && amps_factorize(ctx, F, R) == AMPS_OK && amps_condest(ctx, R, AMPS_UPPER, F, NULL, &c) == AMPS_OK) inf.cond = c;
             amps_factor_free(ctx, F);
         }
     }

@@ -106,7 +106,7 @@ int main(void) {
         }
         for (k = 0; k < 3 * n; k++) b[k] = 1.0 + k % 7;
         arm(1);
-        CHECK(amps_factorize(&ctx, F, A, AMPS_UPPER) == AMPS_OK, "factorize: %s", ctx.msg);
+        CHECK(amps_factorize(&ctx, F, A) == AMPS_OK, "factorize: %s", ctx.msg);
         CHECK(amps_solve(&ctx, F, b, x, w) == AMPS_OK, "solve: %s", ctx.msg);
         ctx.nthreads = 1;
         CHECK(amps_solve_multi_work(&ctx, F, 3) <= (size_t)n * 8, "solve_multi work size");

@@ -29,7 +29,7 @@ static void check_matrix(const char *name, const amps_csc *A, const int *perm) {
     F = amps_analyze(&ctx, A, AMPS_UPPER, perm ? &o : NULL);
     CHECK(F != NULL, "%s: analyze: %s", name, ctx.msg);
     if (!F) return;
-    CHECK(amps_factorize(&ctx, F, A, AMPS_UPPER) == AMPS_OK && F->is_numeric, "%s: factorize: %s", name, ctx.msg);
+    CHECK(amps_factorize(&ctx, F, A) == AMPS_OK && F->is_numeric, "%s: factorize: %s", name, ctx.msg);
     CHECK(ref_ldl(n, A->p, A->i, A->x, F->perm, &Lp, &Li, &Lx, &D) == 0, "%s: cholmod failed", name);
     same = memcmp(Lp, F->Lp, sizeof(int) * (n + 1)) == 0 && memcmp(Li, F->Li, sizeof(int) * Lp[n]) == 0;
     CHECK(same, "%s: pattern of L differs from CHOLMOD (nnz %d vs %d)", name, (int)F->Lp[n], Lp[n]);
@@ -77,7 +77,7 @@ static void check_matrix(const char *name, const amps_csc *A, const int *perm) {
             amps_csc *B = m_convert(&ctx, A, st[s]);
             o.perm = F->perm; o.method = AMPS_ORDER_GIVEN;
             F2 = amps_analyze(&ctx, B, st[s], &o);
-            CHECK(F2 && amps_factorize(&ctx, F2, B, st[s]) == AMPS_OK, "%s: stype %d: %s", name, st[s], ctx.msg);
+            CHECK(F2 && amps_factorize(&ctx, F2, B) == AMPS_OK, "%s: stype %d: %s", name, st[s], ctx.msg);
             if (F2) CHECK(F2->Lp[n] == F->Lp[n] && relerr(F->Lp[n], F2->Lx, F->Lx) == 0 && relerr(n, F2->D, F->D) == 0,
                           "%s: stype %d gives a different factor", name, st[s]);
             amps_factor_free(&ctx, F2);
@@ -91,7 +91,7 @@ static void check_matrix(const char *name, const amps_csc *A, const int *perm) {
                 ((amps__fpriv *)F2->priv)->parmin = 0;
                 ((amps__fpriv *)F2->priv)->pargroup = 0;
             }
-            CHECK(F2 && amps_factorize(&ctx, F2, A, AMPS_UPPER) == AMPS_OK, "%s: threads %d: %s", name, k, ctx.msg);
+            CHECK(F2 && amps_factorize(&ctx, F2, A) == AMPS_OK, "%s: threads %d: %s", name, k, ctx.msg);
             if (F2) CHECK(relerr(F->Lp[n], F2->Lx, F->Lx) <= 1e-14 && relerr(n, F2->D, F->D) <= 1e-14,
                           "%s: thread variant %d differs", name, k);
             amps_factor_free(&ctx, F2);
@@ -107,7 +107,7 @@ static void check_matrix(const char *name, const amps_csc *A, const int *perm) {
         memcpy(D1, F->D, sizeof(double) * n);
         for (p = 0; p < A->p[n]; p++) x2[p] = 2 * x0[p];
         A2.x = x2;
-        CHECK(amps_factorize(&ctx, F, &A2, AMPS_UPPER) == AMPS_OK, "%s: refactorize: %s", name, ctx.msg);
+        CHECK(amps_factorize(&ctx, F, &A2) == AMPS_OK, "%s: refactorize: %s", name, ctx.msg);
         for (j = 0, h = 0; j < n; j++) h = fmax(h, fabs(F->D[j] - 2 * D1[j]));
         CHECK(h == 0 && relerr(F->Lp[n], F->Lx, L1) == 0, "%s: refactorization of 2A: %g", name, h);
         free(x2); free(L1); free(D1);
@@ -123,7 +123,7 @@ static void check_not_spd(const char *name, const amps_csc *A, const int *perm) 
     F = m_analyze(&ctx, A, perm);
     CHECK(F != NULL, "%s: analyze: %s", name, ctx.msg);
     if (!F) return;
-    s = amps_factorize(&ctx, F, A, AMPS_UPPER);
+    s = amps_factorize(&ctx, F, A);
     CHECK(s == AMPS_ERR_NOT_SPD && ctx.status == AMPS_ERR_NOT_SPD, "%s: status %d (%s)", name, (int)s, ctx.msg);
     CHECK(strstr(ctx.msg, "column") != NULL && F->is_numeric == 0, "%s: message '%s'", name, ctx.msg);
     {   /* the parallel paths report the same column */
@@ -132,7 +132,7 @@ static void check_not_spd(const char *name, const amps_csc *A, const int *perm) 
         ctx.nthreads = 2;
         ((amps__fpriv *)F->priv)->parmin = 0;
         ((amps__fpriv *)F->priv)->pargroup = 0;
-        s = amps_factorize(&ctx, F, A, AMPS_UPPER);
+        s = amps_factorize(&ctx, F, A);
         CHECK(s == AMPS_ERR_NOT_SPD && strcmp(msg, ctx.msg) == 0, "%s: 2 threads: '%s' vs '%s'", name, ctx.msg, msg);
     }
     amps_factor_free(&ctx, F);
@@ -306,7 +306,7 @@ int main(void) {
         double bx = 0, wx = 0;
         A = amps_csc_from_triplets(&ctx, 0, 0, NULL, NULL, NULL, AMPS_UPPER);
         F = amps_analyze(&ctx, A, AMPS_UPPER, NULL);
-        CHECK(F && F->n == 0 && amps_factorize(&ctx, F, A, AMPS_UPPER) == AMPS_OK && amps_factor_nnz(F) == 0 &&
+        CHECK(F && F->n == 0 && amps_factorize(&ctx, F, A) == AMPS_OK && amps_factor_nnz(F) == 0 &&
               amps_solve(&ctx, F, &bx, &bx, &wx) == AMPS_OK, "empty matrix: %s", ctx.msg);
         amps_factor_free(&ctx, F);
         amps_csc_free(&ctx, A);
@@ -352,11 +352,15 @@ int main(void) {
         B = m_rand(&ctx, 50, 4, 1.1, 0, 6);
         F = amps_analyze(&ctx, A, AMPS_UPPER, NULL);
         CHECK(F != NULL, "analyze: %s", ctx.msg);
-        CHECK(amps_factorize(&ctx, F, B, AMPS_UPPER) == AMPS_ERR_PATTERN, "other pattern accepted");
-        CHECK(amps_factorize(&ctx, F, A, AMPS_LOWER) == AMPS_ERR_ARG, "other stype accepted");
-        CHECK(amps_factorize(&ctx, F, A, AMPS_UPPER) == AMPS_OK, "factorize: %s", ctx.msg);
+        CHECK(amps_factorize(&ctx, F, B) == AMPS_ERR_PATTERN, "other pattern accepted");
+        {   /* the same matrix stored as its other triangle has another pattern */
+            amps_csc *AL = m_convert(&ctx, A, AMPS_LOWER);
+            CHECK(amps_factorize(&ctx, F, AL) == AMPS_ERR_PATTERN, "other stype accepted");
+            amps_csc_free(&ctx, AL);
+        }
+        CHECK(amps_factorize(&ctx, F, A) == AMPS_OK, "factorize: %s", ctx.msg);
         A->x[0] = NAN;
-        CHECK(amps_factorize(&ctx, F, A, AMPS_UPPER) == AMPS_ERR_VALUE && strstr(ctx.msg, "column 0"), "NaN: %s", ctx.msg);
+        CHECK(amps_factorize(&ctx, F, A) == AMPS_ERR_VALUE && strstr(ctx.msg, "column 0"), "NaN: %s", ctx.msg);
         A->x[0] = 1;
         amps_factor_free(&ctx, F);
         memset(&o, 0, sizeof(o));

@@ -40,7 +40,7 @@ static void check_solves(const char *name, const amps_csc *A, const int *perm) {
     if (!F) return;
     memset(b, 0, sizeof(double) * n);
     CHECK(amps_solve(&ctx, F, b, x, w) == AMPS_ERR_STATE, "%s: solve before factorize accepted", name);
-    CHECK(amps_factorize(&ctx, F, A, AMPS_UPPER) == AMPS_OK, "%s: factorize: %s", name, ctx.msg);
+    CHECK(amps_factorize(&ctx, F, A) == AMPS_OK, "%s: factorize: %s", name, ctx.msg);
     /* full solve vs CHOLMOD */
     t_seed(17);
     for (k = 0; k < n; k++) b[k] = t_unif() - 0.3;
@@ -172,7 +172,7 @@ static void check_condest(const char *name, const amps_csc *A) {
     amps_ctx_init(&ctx);
     L = m_convert(&ctx, A, AMPS_LOWER);
     F = m_analyze(&ctx, A, NULL);
-    CHECK(F && amps_factorize(&ctx, F, A, AMPS_UPPER) == AMPS_OK, "%s: factor", name);
+    CHECK(F && amps_factorize(&ctx, F, A) == AMPS_OK, "%s: factor", name);
     cs = (double *)calloc((size_t)n, sizeof(double));
     for (j = 0; j < n; j++) {
         double s = 0;

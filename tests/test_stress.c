@@ -708,7 +708,7 @@ static void adv_near_cancel(void) {
     amps_mesh_set_material(&ctx, m, 1000.0, 0.3);
     K = t_fixed_stiffness(&ctx, m, &fixed, &dof, &n);
     F = amps_analyze(&ctx, K, AMPS_UPPER, NULL);
-    CHECK(F && amps_factorize(&ctx, F, K, AMPS_UPPER) == AMPS_OK, "near cancel: factor: %s", ctx.msg);
+    CHECK(F && amps_factorize(&ctx, F, K) == AMPS_OK, "near cancel: factor: %s", ctx.msg);
     z = (double *)calloc(n, sizeof(double)); f = (double *)malloc(sizeof(double) * n); w = (double *)malloc(sizeof(double) * 3 * n);
     x = (double *)malloc(sizeof(double) * n); xr = (double *)malloc(sizeof(double) * n);
     amps_condest(&ctx, K, AMPS_UPPER, F, w, &condK);

@@ -126,7 +126,7 @@ static int model_init(model *m, int n, int nz, const int *ti, const int *tj, con
     m->K = amps_csc_from_triplets(&m->ctx, n, nz, ti, tj, tx, AMPS_UPPER);
     if (!m->K) return 1;
     m->F = amps_analyze(&m->ctx, m->K, AMPS_UPPER, NULL);
-    if (!m->F || amps_factorize(&m->ctx, m->F, m->K, AMPS_UPPER)) return 1;
+    if (!m->F || amps_factorize(&m->ctx, m->F, m->K)) return 1;
     m->U = amps_update_create(&m->ctx, m->K, AMPS_UPPER, m->F, o);
     if (!m->U) return 1;
     for (k = 0; k < nz; k++) trip_add(&m->T, ti[k], tj[k], tx[k]);

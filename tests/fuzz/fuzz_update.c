@@ -79,7 +79,7 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size) {
     free(ti); free(tj); free(tx);
     if (!K) abort();
     F = amps_analyze(&ctx, K, AMPS_UPPER, NULL);
-    if (!F || amps_factorize(&ctx, F, K, AMPS_UPPER) != AMPS_OK) abort();
+    if (!F || amps_factorize(&ctx, F, K) != AMPS_OK) abort();
     amps_update_opts_default(&o);
     {
         unsigned b0 = rb(&r), b1 = rb(&r), b2 = rb(&r), b3 = rb(&r), b4 = rb(&r), b5 = rb(&r);
