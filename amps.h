@@ -92,7 +92,7 @@ typedef AMPS_INT amps_int;
 extern "C" {
 #endif
 
-/* =============================== common types =============================== */
+/* ==== [amps:common] status codes, the context, the clock ====================================== */
 
 typedef enum amps_status {
     AMPS_OK = 0,
@@ -130,7 +130,7 @@ AMPS_API const char *amps_status_str(amps_status s);
    re-factorization's cost model then misreads in threaded builds. */
 AMPS_API double amps_now(void);
 
-/* =============================== sparse matrix =============================== */
+/* ==== [amps:sparse] sparse matrices =========================================================== */
 
 /* Which part of a symmetric matrix a CSC array holds. */
 typedef enum amps_stype { AMPS_LOWER = -1, AMPS_FULL = 0, AMPS_UPPER = 1 } amps_stype;
@@ -158,7 +158,7 @@ AMPS_API amps_csc *amps_csc_from_triplets(amps_ctx *ctx, amps_int n, amps_int nz
 /* y = A x for symmetric A stored as its stype part. */
 AMPS_API void amps_csc_symv(const amps_csc *A, amps_stype stype, const double *x, double *y);
 
-/* ================================= ordering ================================= */
+/* ==== [amps:ordering] fill-reducing orderings ================================================= */
 
 typedef enum amps_ordering {
     AMPS_ORDER_AUTO = 0,     /* least fill (symbolic count) of AMD, ND and METIS (when built in) */
@@ -196,7 +196,7 @@ AMPS_API amps_status amps_amd(amps_ctx *ctx, amps_int n, const amps_int *Ap, con
 AMPS_API amps_status amps_nd(amps_ctx *ctx, amps_int n, const amps_int *Ap, const amps_int *Ai,
                              const double *xyz, amps_int *perm);
 
-/* ============================ symbolic analysis ============================ */
+/* ==== [amps:symbolic] symbolic analysis ======================================================= */
 
 /* Elimination tree of a symmetric n x n pattern eliminated in the order order[0..n-1] (order[k] =
    vertex eliminated k-th; order and iorder = its inverse both NULL for the identity):
@@ -219,7 +219,7 @@ AMPS_API void amps_postorder(amps_int n, const amps_int *parent, amps_int *post,
 AMPS_API void amps_colcounts(amps_int n, const amps_int *parent, const amps_int *post, const amps_int *Cp,
                              const amps_int *Ci, amps_int *cc, amps_int *work);
 
-/* ============================= numeric LDL^T ============================== */
+/* ==== [amps:numeric] the LDL^T factor ========================================================= */
 
 /* K = P L D L^T P^T. Everything in permuted numbering unless said otherwise:
    pivot k is original index perm[k]; L is unit lower triangular, stored strictly below the
@@ -255,7 +255,7 @@ AMPS_API double amps_factor_nnz(const amps_factor *F);
 /* Counts of positive, negative and zero pivots in D. */
 AMPS_API void amps_factor_inertia(const amps_factor *F, amps_int *npos, amps_int *nneg, amps_int *nzero);
 
-/* ===================== triangular solves and closures ===================== */
+/* ==== [amps:solve] triangular solves and closures ============================================= */
 
 /* Reusable marker over 0..n-1: j is marked iff mark[j] == stamp; clearing is ++stamp. */
 typedef struct amps_marker {
@@ -320,8 +320,7 @@ AMPS_API double amps_touch_count(const amps_factor *F);
 AMPS_API void amps_touch_reset(const amps_factor *F);
 #endif
 
-/* ============================ augmented updates ============================ */
-/* @@API update: owned by engine */
+/* ==== [amps:update] augmented updates: the AMPS engine ======================================== */
 /* The update engine keeps the exact solution of K^ x = f^ while K^ changes from the factored
    base K (order n) by principal submatrix updates, appended degrees of freedom and Dirichlet
    constraints ([AMPS] Table 1, Steps 1-6). Indices are in the current numbering: 0..n-1 are
@@ -552,9 +551,8 @@ AMPS_API void amps_update_refactor_cancel(amps_ctx *ctx, amps_update *U);
    its old factors. */
 AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U);
 
-/* ================================ FEM scene ================================ */
+/* ==== [amps:fem] mesh and P1 elasticity ======================================================= */
 #ifndef AMPS_NO_FEM
-/* @@API fem: owned by fem */
 /* ---- tetrahedral mesh ---- */
 
 /* Tetrahedral mesh in the reference configuration, with the node copies made by cuts.
@@ -667,8 +665,11 @@ AMPS_API double amps_tet_stress(const double X[12], double E, double nu, const d
 /* Eigenvalues (descending) of the symmetric matrix [s0 s3 s5; s3 s1 s4; s5 s4 s2] (closed form). */
 AMPS_API void amps_sym3_eig(const double s[6], double lam[3]);
 
-/* @@API scene: owned by engine */
-/* ---- the scene: a mesh with fixed nodes, forces, pins and cuts, solved by the update engine ----
+#endif /* AMPS_NO_FEM */
+
+/* ==== [amps:scene] a mesh with fixed nodes, forces, pins and cuts ============================= */
+#ifndef AMPS_NO_FEM
+/* The scene: a mesh with fixed nodes, forces, pins and cuts, solved by the update engine.
    Node displacements are kept exact with one factorization of the initial stiffness matrix
    (fixed nodes eliminated); every cut, pin and release becomes an update of the engine:
    a cut changes the rows of v, its copy v' and the nodes of the tets that moved, computed from
@@ -749,9 +750,8 @@ AMPS_API amps_update *amps_scene_engine(const amps_scene *S);
 AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S);
 #endif /* AMPS_NO_FEM */
 
-/* =================================== I/O =================================== */
+/* ==== [amps:io] mesh readers and writers ====================================================== */
 #ifndef AMPS_NO_FEM
-/* @@API io: owned by fem */
 /* Mesh readers. Nodes are numbered in file order from 0; tets keep file order. Return NULL on
    failure, with AMPS_ERR_PARSE and "file:line: message" in ctx for malformed input (AMPS_ERR_IO
    if a file cannot be read, AMPS_ERR_MESH "file:line: ..." for a degenerate tet).
@@ -860,7 +860,7 @@ typedef char amps__check_int_signed[((amps_int)-1 < 0) ? 1 : -1];
 #define AMPS__CAST(T, x) ((T)(x))
 #endif
 
-/* =============================== common =============================== */
+/* ==== [amps:common impl] status codes, the context, the clock ================================= */
 
 AMPS_API void amps_ctx_init(amps_ctx *ctx) {
     if (!ctx) return;
@@ -1115,8 +1115,7 @@ static int amps__isfinite(double v) { return v - v == 0.0; }
 /* Largest value of amps_int. */
 #define AMPS__IMAX ((amps_int)((((unsigned long long)1) << (sizeof(amps_int) * 8 - 1)) - 1))
 
-/* ============================ sparse matrix impl ============================ */
-/* @@SECTION sparse: owned by core */
+/* ==== [amps:sparse impl] sparse matrices ====================================================== */
 
 /* Largest value of amps_int. */
 
@@ -1318,8 +1317,7 @@ AMPS_API void amps_csc_symv(const amps_csc *A, amps_stype stype, const double *x
     }
 }
 
-/* ============================== ordering impl ============================== */
-/* @@SECTION ordering: owned by ordering */
+/* ==== [amps:ordering impl] fill-reducing orderings ============================================ */
 
 #ifdef AMPS_USE_METIS
 #ifdef __cplusplus
@@ -2695,7 +2693,7 @@ AMPS_API amps_status amps_nd(amps_ctx *ctx, amps_int n, const amps_int *Ap, cons
     return s;
 }
 
-/* ------------------------------ symbolic analysis ------------------------------ */
+/* ==== [amps:symbolic impl] symbolic analysis ================================================== */
 
 /* Row k of L: the pattern's neighbours i of vertex order[k] at positions r < k lie in the subtree of
    k, so climbing from r to its current root (anc, compressed to k on the way) finds the child of k. */
@@ -2768,8 +2766,7 @@ AMPS_API void amps_colcounts(amps_int n, const amps_int *parent, const amps_int 
     for (k = 0; k < n; k++) { j = post[k]; if (parent[j] >= 0) cc[parent[j]] += cc[j]; }
 }
 
-/* ==================== symbolic + numeric LDL^T impl ==================== */
-/* @@SECTION factor: owned by core */
+/* ==== [amps:numeric impl] the LDL^T factor ==================================================== */
 
 /* Factor internals. Columns are grouped: group g = columns gs[g]..gs[g+1]-1 where column c+1 is the
    parent of c and struct L(:,c) = {c+1} u struct L(:,c+1) (e.g. the 3 DOFs of a node). With ke the
@@ -3597,8 +3594,7 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
     return AMPS_OK;
 }
 
-/* ================= triangular solves and closures impl ================= */
-/* @@SECTION solve: owned by core */
+/* ==== [amps:solve impl] triangular solves and closures ======================================== */
 
 AMPS_API amps_status amps_marker_init(amps_ctx *ctx, amps_marker *m, amps_int n) {
     amps_int *mark;
@@ -4107,8 +4103,7 @@ done:
     return s;
 }
 
-/* ============================ augmented updates impl ============================ */
-/* @@SECTION update: owned by engine */
+/* ==== [amps:update impl] augmented updates: the AMPS engine =================================== */
 /* References:
      [AMPS]  Yeung, Pothen, Crouch, "AMPS: real-time mesh cutting with augmented matrices for
              surgical simulations" (the algorithm: Eq. 3.x, Table 1 Steps 1-6);
@@ -6779,9 +6774,8 @@ AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U) {
     return amps_update_refactor_wait(ctx, U);
 }
 
-/* ================================ FEM scene impl ================================ */
+/* ==== [amps:fem impl] mesh and P1 elasticity ================================================== */
 #ifndef AMPS_NO_FEM
-/* @@SECTION fem: owned by fem */
 
 /* ---- P1 element ---- */
 
@@ -7621,7 +7615,10 @@ AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, am
     return AMPS_OK;
 }
 
-/* @@SECTION scene: owned by engine */
+#endif /* AMPS_NO_FEM */
+
+/* ==== [amps:scene impl] a mesh with fixed nodes, forces, pins and cuts ======================== */
+#ifndef AMPS_NO_FEM
 
 /* Per-node state (node.cap nodes allocated; vectors hold 3 entries per node). */
 typedef struct amps__scene_nodes {
@@ -8358,9 +8355,8 @@ AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, doubl
 }
 #endif /* AMPS_NO_FEM */
 
-/* ==================================== I/O impl ==================================== */
+/* ==== [amps:io impl] mesh readers and writers ================================================= */
 #ifndef AMPS_NO_FEM
-/* @@SECTION io: owned by fem */
 /* ---- tokenizer over a memory buffer, with line numbers ---- */
 
 typedef struct amps__lex {
