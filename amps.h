@@ -96,29 +96,29 @@ extern "C" {
 
 typedef enum amps_status {
     AMPS_OK = 0,
-    AMPS_ERR_ARG = -1,              /* invalid argument (NULL, negative count, wrong size)   */
-    AMPS_ERR_OOM = -2,              /* allocation failed                                     */
-    AMPS_ERR_INDEX = -3,            /* index out of range                                    */
-    AMPS_ERR_PATTERN = -4,          /* unsorted / duplicate / inconsistent sparsity pattern  */
-    AMPS_ERR_VALUE = -5,            /* NaN or Inf in input                                   */
-    AMPS_ERR_NOT_SPD = -6,          /* zero or negative pivot in LDL^T                       */
-    AMPS_ERR_SINGULAR_UPDATE = -7,  /* the updated system is singular                        */
-    AMPS_ERR_CAPACITY = -8,         /* reserved capacity exhausted and growth not allowed    */
-    AMPS_ERR_MESH = -9,             /* invalid mesh (degenerate or inverted element, ...)    */
-    AMPS_ERR_IO = -10,              /* file could not be opened / read / written             */
-    AMPS_ERR_PARSE = -11,           /* malformed file or scenario                            */
-    AMPS_ERR_STATE = -12,           /* call not valid in the object's current state          */
-    AMPS_ERR_UNSUPPORTED = -13,     /* feature compiled out (e.g. METIS)                     */
-    AMPS_WARN_NOOP = 1,             /* success, but nothing was done (e.g. a cut with one empty side) */
-    AMPS_WARN_INACCURATE = 2        /* solved, but the accuracy guard's tolerance was not reached */
+    AMPS_ERR_ARG = -1,             /* invalid argument (NULL, negative count, wrong size)   */
+    AMPS_ERR_OOM = -2,             /* allocation failed                                     */
+    AMPS_ERR_INDEX = -3,           /* index out of range                                    */
+    AMPS_ERR_PATTERN = -4,         /* unsorted / duplicate / inconsistent sparsity pattern  */
+    AMPS_ERR_VALUE = -5,           /* NaN or Inf in input                                   */
+    AMPS_ERR_NOT_SPD = -6,         /* zero or negative pivot in LDL^T                       */
+    AMPS_ERR_SINGULAR_UPDATE = -7, /* the updated system is singular                        */
+    AMPS_ERR_CAPACITY = -8,        /* reserved capacity exhausted and growth not allowed    */
+    AMPS_ERR_MESH = -9,            /* invalid mesh (degenerate or inverted element, ...)    */
+    AMPS_ERR_IO = -10,             /* file could not be opened / read / written             */
+    AMPS_ERR_PARSE = -11,          /* malformed file or scenario                            */
+    AMPS_ERR_STATE = -12,          /* call not valid in the object's current state          */
+    AMPS_ERR_UNSUPPORTED = -13,    /* feature compiled out (e.g. METIS)                     */
+    AMPS_WARN_NOOP = 1,            /* success, but nothing was done (e.g. a cut with one empty side) */
+    AMPS_WARN_INACCURATE = 2       /* solved, but the accuracy guard's tolerance was not reached */
 } amps_status;
 
 /* Caller-owned context: allocator user pointer, thread count, and the last error. */
 typedef struct amps_ctx {
-    void *alloc_user;     /* passed as u to AMPS_MALLOC/AMPS_REALLOC/AMPS_FREE */
-    int nthreads;         /* OpenMP threads used by amps kernels; 0 = OpenMP default */
-    amps_status status;   /* status of the last call that failed or warned */
-    char msg[256];        /* human-readable message for status */
+    void *alloc_user;   /* passed as u to AMPS_MALLOC/AMPS_REALLOC/AMPS_FREE */
+    int nthreads;       /* OpenMP threads used by amps kernels; 0 = OpenMP default */
+    amps_status status; /* status of the last call that failed or warned */
+    char msg[256];      /* human-readable message for status */
 } amps_ctx;
 
 AMPS_API void amps_ctx_init(amps_ctx *ctx);
@@ -138,9 +138,9 @@ typedef enum amps_stype { AMPS_LOWER = -1, AMPS_FULL = 0, AMPS_UPPER = 1 } amps_
 /* Compressed sparse column matrix. Column j holds rows i[p[j] .. p[j+1]-1]. */
 typedef struct amps_csc {
     amps_int nrow, ncol;
-    amps_int *p;          /* ncol+1 column pointers, p[0] = 0 */
-    amps_int *i;          /* p[ncol] row indices */
-    double *x;            /* p[ncol] values (may be NULL for a pattern) */
+    amps_int *p; /* ncol+1 column pointers, p[0] = 0 */
+    amps_int *i; /* p[ncol] row indices */
+    double *x;   /* p[ncol] values (may be NULL for a pattern) */
 } amps_csc;
 
 /* Allocates an nrow x ncol matrix with room for nzmax entries (values if with_values). */
@@ -161,20 +161,20 @@ AMPS_API void amps_csc_symv(const amps_csc *A, amps_stype stype, const double *x
 /* ==== [amps:ordering] fill-reducing orderings ================================================= */
 
 typedef enum amps_ordering {
-    AMPS_ORDER_AUTO = 0,     /* least fill (symbolic count) of AMD, ND and METIS (when built in) */
-    AMPS_ORDER_NATURAL,      /* identity */
-    AMPS_ORDER_GIVEN,        /* opts->perm */
-    AMPS_ORDER_AMD,          /* our approximate minimum degree */
-    AMPS_ORDER_ND,           /* our nested dissection (uses opts->coords when given) */
-    AMPS_ORDER_METIS         /* METIS_NodeND (needs AMPS_USE_METIS) */
+    AMPS_ORDER_AUTO = 0, /* least fill (symbolic count) of AMD, ND and METIS (when built in) */
+    AMPS_ORDER_NATURAL,  /* identity */
+    AMPS_ORDER_GIVEN,    /* opts->perm */
+    AMPS_ORDER_AMD,      /* our approximate minimum degree */
+    AMPS_ORDER_ND,       /* our nested dissection (uses opts->coords when given) */
+    AMPS_ORDER_METIS     /* METIS_NodeND (needs AMPS_USE_METIS) */
 } amps_ordering;
 
 typedef struct amps_order_opts {
     amps_ordering method;
-    const amps_int *perm;    /* GIVEN: perm[k] = original index eliminated k-th */
-    amps_int block;          /* DOFs per node (3 for 3D elasticity): order the compressed node graph
+    const amps_int *perm; /* GIVEN: perm[k] = original index eliminated k-th */
+    amps_int block;       /* DOFs per node (3 for 3D elasticity): order the compressed node graph
                                 and expand; 0 = detect identical consecutive columns, 1 = none */
-    const double *coords;    /* optional: 3 coordinates per node (per block) for ND; per unknown
+    const double *coords; /* optional: 3 coordinates per node (per block) for ND; per unknown
                                 when block = 0 (a detected node takes its first unknown's) */
 } amps_order_opts;
 
@@ -186,15 +186,15 @@ typedef struct amps_order_opts {
    or GIVEN entry out of range), AMPS_ERR_PATTERN (pointers, triangle), AMPS_ERR_VALUE (coords not
    finite), AMPS_ERR_UNSUPPORTED (METIS without AMPS_USE_METIS), AMPS_ERR_OOM. perm is written
    only on success. */
-AMPS_API amps_status amps_order(amps_ctx *ctx, const amps_csc *A, amps_stype stype,
-                                const amps_order_opts *opts, amps_int *perm);
+AMPS_API amps_status amps_order(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts,
+                                amps_int *perm);
 /* AMD on a symmetric graph given in CSC with both triangles (diagonal entries ignored; a pattern
    given as one triangle is symmetrized). */
 AMPS_API amps_status amps_amd(amps_ctx *ctx, amps_int n, const amps_int *Ap, const amps_int *Ai, amps_int *perm);
 /* Nested dissection on the same kind of graph; xyz (3n, may be NULL) guides the bisections.
    Vertices with identical closed neighbourhoods (consecutive) are ordered together. */
-AMPS_API amps_status amps_nd(amps_ctx *ctx, amps_int n, const amps_int *Ap, const amps_int *Ai,
-                             const double *xyz, amps_int *perm);
+AMPS_API amps_status amps_nd(amps_ctx *ctx, amps_int n, const amps_int *Ap, const amps_int *Ai, const double *xyz,
+                             amps_int *perm);
 
 /* ==== [amps:symbolic] symbolic analysis ======================================================= */
 
@@ -227,14 +227,14 @@ AMPS_API void amps_colcounts(amps_int n, const amps_int *parent, const amps_int 
    -1 at roots), so the ancestors of j are the path j -> root and ascending order is topological. */
 typedef struct amps_factor {
     amps_int n;
-    amps_int *perm, *iperm;   /* perm[k] = original index of pivot k; iperm[perm[k]] = k */
-    amps_int *parent;         /* elimination tree */
-    amps_int *Lp, *Li;        /* strictly lower part of L, CSC (n+1, Lp[n]) */
-    double *Lx;               /* values of L */
-    double *D;                /* n pivots */
-    amps_int height;          /* nodes on the longest leaf-to-root path of the elimination tree */
-    int is_numeric;           /* 1 after a successful amps_factorize */
-    void *priv;               /* implementation data (pattern maps, workspace) */
+    amps_int *perm, *iperm; /* perm[k] = original index of pivot k; iperm[perm[k]] = k */
+    amps_int *parent;       /* elimination tree */
+    amps_int *Lp, *Li;      /* strictly lower part of L, CSC (n+1, Lp[n]) */
+    double *Lx;             /* values of L */
+    double *D;              /* n pivots */
+    amps_int height;        /* nodes on the longest leaf-to-root path of the elimination tree */
+    int is_numeric;         /* 1 after a successful amps_factorize */
+    void *priv;             /* implementation data (pattern maps, workspace) */
 } amps_factor;
 
 /* Ordering + elimination tree + column counts + Lp for symmetric A (stype part); allocates L.
@@ -338,8 +338,9 @@ AMPS_API void amps_touch_reset(const amps_factor *F);
 typedef struct amps_update amps_update;
 
 typedef enum amps_formulation {
-    AMPS_FORM_PRIMAL = 0,   /* unknowns x_S ([AMPS] Eq. 3.8); with opts.xs_from_dense, x_S taken from the small system (Eq. 3.20) */
-    AMPS_FORM_DUAL = 1      /* unknowns the correction forces ([AMPS] Eq. 3.16-3.17) */
+    AMPS_FORM_PRIMAL =
+            0, /* unknowns x_S ([AMPS] Eq. 3.8); with opts.xs_from_dense, x_S taken from the small system (Eq. 3.20) */
+    AMPS_FORM_DUAL = 1 /* unknowns the correction forces ([AMPS] Eq. 3.16-3.17) */
 } amps_formulation;
 
 /* Re-factorization ([Interactive cutting] Sec. 3.6): the augmentation (S u C, the memoized
@@ -364,34 +365,34 @@ typedef enum amps_refactor_policy {
 /* Options; amps_update_opts_default gives the defaults. A capacity, refactor_threads or
    refactor_ratio that is 0 or negative means its default. */
 typedef struct amps_update_opts {
-    amps_int cap_mod;       /* capacity of |S u C| (order of the dense system); default 256 */
-    amps_int cap_new;       /* capacity of appended DOFs; default 3 * 256 */
-    double cap_vpool;       /* memoized L^{-1} columns, in entries; default cap_mod * tree height */
-    amps_int cap_delta;     /* stored entries of K^ - K-bar on S x S; default 96 * cap_mod */
-    amps_int cap_pending;   /* changes recorded between commits; default 4096 */
-    int grow;               /* 1: grow capacities on demand (may allocate in update calls) */
+    amps_int cap_mod;     /* capacity of |S u C| (order of the dense system); default 256 */
+    amps_int cap_new;     /* capacity of appended DOFs; default 3 * 256 */
+    double cap_vpool;     /* memoized L^{-1} columns, in entries; default cap_mod * tree height */
+    amps_int cap_delta;   /* stored entries of K^ - K-bar on S x S; default 96 * cap_mod */
+    amps_int cap_pending; /* changes recorded between commits; default 4096 */
+    int grow;             /* 1: grow capacities on demand (may allocate in update calls) */
     amps_formulation formulation;
-    double singular_tol;    /* pivot of the dense system below tol * column norm is singular; default 1e-15 */
-    int refine;             /* refinement steps on the residual of the modified rows inside the same
+    double singular_tol;            /* pivot of the dense system below tol * column norm is singular; default 1e-15 */
+    int refine;                     /* refinement steps on the residual of the modified rows inside the same
                                full solve (default 1; each adds a partial backward solve over
                                closure(S u C u neighbours) and O(|S u C|^2)); 0 = none */
-    int xs_from_dense;      /* 1: take x_S from the small dense system ([AMPS] Eq. 3.20) instead of the full
+    int xs_from_dense;              /* 1: take x_S from the small dense system ([AMPS] Eq. 3.20) instead of the full
                                solve; default 0 (see bench/RESULTS.md) */
-    double guard_tol;       /* accuracy guard: > 0 computes the relative residual of every solve (one
+    double guard_tol;               /* accuracy guard: > 0 computes the relative residual of every solve (one
                                product with K^) and, while it exceeds guard_tol, refines with the
                                same factors (each step one more forward and backward solve), at
                                most 3 steps; if still above, re-factors synchronously (unless
                                refactor is OFF) and solves again; stats.guard_result says which
                                happened; AMPS_WARN_INACCURATE if the tolerance was not reached.
                                0 (default) = off */
-    amps_refactor_policy refactor; /* re-factorization of the current matrix (see below); default AUTO */
-    amps_order_opts refactor_order;/* its ordering; default nested dissection with node blocks
+    amps_refactor_policy refactor;  /* re-factorization of the current matrix (see below); default AUTO */
+    amps_order_opts refactor_order; /* its ordering; default nested dissection with node blocks
                                       detected (block 0); with block > 0 (the scene sets 3) the
                                       couplings a change cancelled exactly leave the pattern too.
                                       AMD often has less fill but a tall elimination tree: long
                                       closures make Steps 1-2 slower */
-    int refactor_threads;   /* OpenMP threads of the background factorization; default 1 */
-    double refactor_ratio;  /* AUTO: start when the extra time the augmentation has cost since the
+    int refactor_threads;           /* OpenMP threads of the background factorization; default 1 */
+    double refactor_ratio;          /* AUTO: start when the extra time the augmentation has cost since the
                                last base reaches this times the (measured or estimated) time of a
                                re-factorization; default 0.25: it runs on another core, so the steps
                                lose less than its time (1 would be rent or buy; bench/RESULTS.md) */
@@ -399,12 +400,12 @@ typedef struct amps_update_opts {
 
 /* The steps of [AMPS] Table 1, indices of amps_update_stats.t_step. */
 typedef enum amps_update_step {
-    AMPS_STEP_WCOLS = 0,    /* Step 1: L^{-1} columns */
-    AMPS_STEP_GRAM = 1,     /* Step 2: inverse principal submatrix G */
-    AMPS_STEP_DCOLS = 2,    /* Step 3: dense columns */
-    AMPS_STEP_RHS = 3,      /* Step 4: right-hand side */
-    AMPS_STEP_DENSE = 4,    /* Step 5: dense factor and solve */
-    AMPS_STEP_SOLVE = 5,    /* Step 6: full solution */
+    AMPS_STEP_WCOLS = 0, /* Step 1: L^{-1} columns */
+    AMPS_STEP_GRAM = 1,  /* Step 2: inverse principal submatrix G */
+    AMPS_STEP_DCOLS = 2, /* Step 3: dense columns */
+    AMPS_STEP_RHS = 3,   /* Step 4: right-hand side */
+    AMPS_STEP_DENSE = 4, /* Step 5: dense factor and solve */
+    AMPS_STEP_SOLVE = 5, /* Step 6: full solution */
     AMPS_STEP_COUNT = 6
 } amps_update_step;
 
@@ -419,54 +420,56 @@ typedef enum amps_guard_result {
 /* Per-commit and per-solve measurements (seconds) and sizes. */
 typedef struct amps_update_stats {
     double t_step[AMPS_STEP_COUNT]; /* time of each step (amps_update_step) */
-    amps_int dim;           /* current order n + k */
-    amps_int nmod;          /* |S|: indices whose row differs from K-bar */
-    amps_int ncon;          /* |C|: constrained indices */
-    amps_int nsys;          /* |S u C|: order of the dense system */
-    amps_int lu_cols;       /* dense columns refactored by the last commit */
-    amps_int lu_full;       /* full dense refactorizations so far */
-    amps_int lu_drops;      /* commits that moved their changed dense columns to the end without
+    amps_int dim;                   /* current order n + k */
+    amps_int nmod;                  /* |S|: indices whose row differs from K-bar */
+    amps_int ncon;                  /* |C|: constrained indices */
+    amps_int nsys;                  /* |S u C|: order of the dense system */
+    amps_int lu_cols;               /* dense columns refactored by the last commit */
+    amps_int lu_full;               /* full dense refactorizations so far */
+    amps_int lu_drops;              /* commits that moved their changed dense columns to the end without
                                refactoring the unchanged columns after them (amps__lu_drop) */
-    amps_int lu_drop_fails; /* ... of which fell back to refactoring them (a multiplier, an entry of L
+    amps_int lu_drop_fails;         /* ... of which fell back to refactoring them (a multiplier, an entry of L
                                or a pivot out of bounds) */
-    double vpool_entries;   /* memoized entries of L^{-1} H */
+    double vpool_entries;           /* memoized entries of L^{-1} H */
     amps_int ncommit, nsolve;
-    amps_int guard_steps;   /* refinement steps the accuracy guard took in the last solve */
+    amps_int guard_steps;           /* refinement steps the accuracy guard took in the last solve */
     amps_guard_result guard_result; /* last solve (AMPS_GUARD_MET when the guard is off) */
-    double relres;          /* relative residual of the last solve when the guard is on, else -1 */
-    amps_int nrefactor;     /* re-factorizations swapped in */
-    amps_int refactor_failed; /* re-factorizations that failed (the engine kept its factors) */
-    int refactor_running;   /* 1 while one is in progress (started, not yet swapped) */
-    double t_refactor;      /* wall time of the last one, start to ready (background) */
-    double t_swap;          /* time of its swap (inside the call that did it) */
-    double refactor_nnzL;   /* nnz(L) of the current base */
+    double relres;                  /* relative residual of the last solve when the guard is on, else -1 */
+    amps_int nrefactor;             /* re-factorizations swapped in */
+    amps_int refactor_failed;       /* re-factorizations that failed (the engine kept its factors) */
+    int refactor_running;           /* 1 while one is in progress (started, not yet swapped) */
+    double t_refactor;              /* wall time of the last one, start to ready (background) */
+    double t_swap;                  /* time of its swap (inside the call that did it) */
+    double refactor_nnzL;           /* nnz(L) of the current base */
 } amps_update_stats;
 
 AMPS_API void amps_update_opts_default(amps_update_opts *opts);
 /* Engine for base matrix K (stype part, original numbering) and its numeric factor F, which
    must stay alive and unchanged until amps_update_free (after a re-factorization the engine
    works on its own factor, amps_update_factor). K is copied. Forces start at zero. */
-AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_stype stype,
-                                         const amps_factor *F, const amps_update_opts *opts);
+AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_stype stype, const amps_factor *F,
+                                         const amps_update_opts *opts);
 AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U);
 /* Current order n + k, counting DOFs added since the last commit. */
 AMPS_API amps_int amps_update_dim(const amps_update *U);
 /* Appends k DOFs with zero rows and zero force; *first receives the index of the first. */
 AMPS_API amps_status amps_update_add_dofs(amps_ctx *ctx, amps_update *U, amps_int k, amps_int *first);
 /* K^[r,c] += v and K^[c,r] += v for the nz entries (r[k], c[k], v[k]) (one entry per pair). */
-AMPS_API amps_status amps_update_add(amps_ctx *ctx, amps_update *U, amps_int nz, const amps_int *r,
-                                     const amps_int *c, const double *v);
+AMPS_API amps_status amps_update_add(amps_ctx *ctx, amps_update *U, amps_int nz, const amps_int *r, const amps_int *c,
+                                     const double *v);
 /* Replaces rows (and by symmetry columns) rows[0..nrow-1] of K^ with new values: row rows[k] has
    entries (ci[j], cx[j]) for j in cp[k]..cp[k+1]-1; entries not given become zero. Where two
    given rows meet, their values must agree (to 1e-12 relative). */
 AMPS_API amps_status amps_update_set_rows(amps_ctx *ctx, amps_update *U, amps_int nrow, const amps_int *rows,
                                           const amps_int *cp, const amps_int *ci, const double *cx);
 /* Constrains x[idx[k]] = val[k] (adds the constraint, or moves it). */
-AMPS_API amps_status amps_update_constrain(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx, const double *val);
+AMPS_API amps_status amps_update_constrain(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx,
+                                           const double *val);
 /* Removes constraints; indices that are not constrained are ignored. */
 AMPS_API amps_status amps_update_release(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx);
 /* Sets f^[idx[k]] = val[k]. */
-AMPS_API amps_status amps_update_set_force(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx, const double *val);
+AMPS_API amps_status amps_update_set_force(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx,
+                                           const double *val);
 /* Drops every change recorded since the last commit (forces stay). */
 AMPS_API void amps_update_discard(amps_update *U);
 /* Applies the recorded changes (Steps 1-5). On failure (AMPS_ERR_SINGULAR_UPDATE, AMPS_ERR_CAPACITY,
@@ -509,14 +512,15 @@ AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, do
    index gone: nothing changes), in the commit (see amps_update_commit), or after it with
    AMPS_ERR_CAPACITY (y too short): then the changes stay committed and no job is started. */
 typedef struct amps_update_job {
-    const amps_factor *F;         /* the factor the job reads */
-    amps_int nw, ncw;             /* watched entries, closure size */
-    const amps_int *widx, *wclo;  /* watched indices, their closure (engine-owned) */
-    const unsigned char *wovr;    /* 1: xw[k] was set by begin */
-    double *y, *xw;               /* caller-owned */
+    const amps_factor *F;        /* the factor the job reads */
+    amps_int nw, ncw;            /* watched entries, closure size */
+    const amps_int *widx, *wclo; /* watched indices, their closure (engine-owned) */
+    const unsigned char *wovr;   /* 1: xw[k] was set by begin */
+    double *y, *xw;              /* caller-owned */
 } amps_update_job;
 AMPS_API amps_int amps_update_base_order(const amps_update *U);
-AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, amps_update_job *job, double *y, amps_int ylen, double *xw);
+AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, amps_update_job *job, double *y,
+                                               amps_int ylen, double *xw);
 AMPS_API void amps_update_watched_run(amps_update_job *job);
 AMPS_API void amps_update_watched_end(amps_update *U, amps_update_job *job);
 /* Commits, then computes the reaction forces at the constrained indices from the dense system
@@ -565,23 +569,24 @@ AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U);
    slot of v into the slots of v and its copy, so incidence never needs more memory.
    Fields are read-only for callers: change a mesh only through amps_mesh_* functions. */
 typedef struct amps_mesh {
-    amps_int nnode;       /* nodes in use */
-    amps_int nfile;       /* nodes given at creation */
-    amps_int ntet;        /* tetrahedra */
-    amps_int node_cap;    /* allocated node capacity (>= nnode) */
-    double *xyz;          /* 3 * node_cap: reference coordinates of node v at xyz[3v .. 3v+2] */
-    amps_int *tet;        /* 4 * ntet node indices */
-    double *E, *nu;       /* ntet: Young's modulus and Poisson ratio */
-    amps_int *origin;     /* node_cap */
-    amps_int *inc_ptr;    /* node_cap */
-    amps_int *inc_len;    /* node_cap */
-    amps_int *inc;        /* 4 * ntet tet indices */
+    amps_int nnode;    /* nodes in use */
+    amps_int nfile;    /* nodes given at creation */
+    amps_int ntet;     /* tetrahedra */
+    amps_int node_cap; /* allocated node capacity (>= nnode) */
+    double *xyz;       /* 3 * node_cap: reference coordinates of node v at xyz[3v .. 3v+2] */
+    amps_int *tet;     /* 4 * ntet node indices */
+    double *E, *nu;    /* ntet: Young's modulus and Poisson ratio */
+    amps_int *origin;  /* node_cap */
+    amps_int *inc_ptr; /* node_cap */
+    amps_int *inc_len; /* node_cap */
+    amps_int *inc;     /* 4 * ntet tet indices */
 } amps_mesh;
 
 /* Mesh with nnode nodes (xyz: 3 per node) and ntet tets (tet: 4 node indices each), copied.
    Errors: AMPS_ERR_INDEX (node index out of range), AMPS_ERR_VALUE (non-finite coordinate),
    AMPS_ERR_MESH (no tets, or a degenerate tet: volume < 1e-12 L^3, L its longest edge). */
-AMPS_API amps_mesh *amps_mesh_create(amps_ctx *ctx, amps_int nnode, const double *xyz, amps_int ntet, const amps_int *tet);
+AMPS_API amps_mesh *amps_mesh_create(amps_ctx *ctx, amps_int nnode, const double *xyz, amps_int ntet,
+                                     const amps_int *tet);
 AMPS_API void amps_mesh_free(amps_ctx *ctx, amps_mesh *m);
 /* Sets the material of all tets / of tet t. Requires E > 0 finite and -1 < nu < 0.5. */
 AMPS_API amps_status amps_mesh_set_material(amps_ctx *ctx, amps_mesh *m, double E, double nu);
@@ -590,7 +595,8 @@ AMPS_API amps_status amps_mesh_set_tet_material(amps_ctx *ctx, amps_mesh *m, amp
    each grid cell split into 6 tets around its main diagonal (Kuhn split, conforming).
    amps_mesh_beam(h)  = grid 5 x 5 x h, spacing 1 (z along the beam, h >= 2).
    amps_mesh_brick(R) = 1 x 1 x 2 brick: grid (R+1) x (R+1) x (2R+1), spacing 1/R (R >= 1). */
-AMPS_API amps_mesh *amps_mesh_grid(amps_ctx *ctx, amps_int nx, amps_int ny, amps_int nz, double hx, double hy, double hz);
+AMPS_API amps_mesh *amps_mesh_grid(amps_ctx *ctx, amps_int nx, amps_int ny, amps_int nz, double hx, double hy,
+                                   double hz);
 AMPS_API amps_mesh *amps_mesh_beam(amps_ctx *ctx, amps_int h);
 AMPS_API amps_mesh *amps_mesh_brick(amps_ctx *ctx, amps_int R);
 /* Makes room for node_cap nodes so that cuts up to that many nodes allocate nothing. */
@@ -683,8 +689,8 @@ AMPS_API void amps_sym3_eig(const double s[6], double lam[3]);
 typedef struct amps_scene amps_scene;
 
 typedef struct amps_scene_opts {
-    amps_order_opts order;      /* ordering of K (default: ND guided by the node coordinates) */
-    amps_update_opts update;    /* engine options (default: amps_update_opts_default, grow = 1);
+    amps_order_opts order;   /* ordering of K (default: ND guided by the node coordinates) */
+    amps_update_opts update; /* engine options (default: amps_update_opts_default, grow = 1);
                                    update.refactor_order.block 0 becomes 3 (node triples) */
 } amps_scene_opts;
 
@@ -700,7 +706,8 @@ AMPS_API amps_status amps_scene_set_material(amps_ctx *ctx, amps_scene *S, doubl
 /* Fixes nodes (zero displacement, eliminated from the system); before the factorization only.
    amps_scene_fix_where fixes the nodes whose coordinate axis (0, 1, 2) is below / above value. */
 AMPS_API amps_status amps_scene_fix(amps_ctx *ctx, amps_scene *S, amps_int nv, const amps_int *v);
-AMPS_API amps_status amps_scene_fix_where(amps_ctx *ctx, amps_scene *S, int axis, amps_cmp cmp, double value, amps_int *count);
+AMPS_API amps_status amps_scene_fix_where(amps_ctx *ctx, amps_scene *S, int axis, amps_cmp cmp, double value,
+                                          amps_int *count);
 /* Assembles and factors K (ordering, symbolic, numeric) and creates the engine. */
 AMPS_API amps_status amps_scene_prepare(amps_ctx *ctx, amps_scene *S);
 /* Sets (replaces) the external force on node v; no effect on fixed nodes. */
@@ -736,13 +743,15 @@ AMPS_API amps_status amps_scene_solve_reactions(amps_ctx *ctx, amps_scene *S);
 AMPS_API const double *amps_scene_displacements(const amps_scene *S);
 /* Deformed positions (reference + displacement of the last solve) of nodes[0..n-1], or of all
    nodes when nodes is NULL (n ignored), 3 per node into out. */
-AMPS_API amps_status amps_scene_positions(amps_ctx *ctx, const amps_scene *S, amps_int n, const amps_int *nodes, double *out);
+AMPS_API amps_status amps_scene_positions(amps_ctx *ctx, const amps_scene *S, amps_int n, const amps_int *nodes,
+                                          double *out);
 /* Reaction force the pin of node v exerts (K^ x - f at its DOFs); zero if v is not pinned. */
 AMPS_API amps_status amps_scene_reaction(amps_ctx *ctx, const amps_scene *S, amps_int v, double r[3]);
 /* Relative residual of the reduced system (fixed and pinned DOFs eliminated) of the last solve. */
 AMPS_API amps_status amps_scene_residual(amps_ctx *ctx, amps_scene *S, double *relres);
 /* Per-tet stresses of the last solve (see amps_mesh_stress); outputs may be NULL. */
-AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, double *sigma, double *von_mises, double *principal);
+AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, double *sigma, double *von_mises,
+                                       double *principal);
 /* Equations of the current system (free DOFs of the initial mesh plus those of cut copies). */
 AMPS_API amps_int amps_scene_ndof(const amps_scene *S);
 /* The engine (for statistics) and its current base factor; NULL before the factorization. */
@@ -763,8 +772,9 @@ AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S);
    amps_mesh_read picks the reader by extension: .node (and the .ele of the same name), .ele
    (and the .node), .msh, .mesh. The *_mem variants parse a buffer of len bytes (no NUL needed);
    name is used in messages. With AMPS_NO_STDIO only the *_mem variants exist. */
-AMPS_API amps_mesh *amps_mesh_read_tetgen_mem(amps_ctx *ctx, const char *node_buf, size_t node_len, const char *node_name,
-                                              const char *ele_buf, size_t ele_len, const char *ele_name);
+AMPS_API amps_mesh *amps_mesh_read_tetgen_mem(amps_ctx *ctx, const char *node_buf, size_t node_len,
+                                              const char *node_name, const char *ele_buf, size_t ele_len,
+                                              const char *ele_name);
 AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size_t len, const char *name);
 AMPS_API amps_mesh *amps_mesh_read_medit_mem(amps_ctx *ctx, const char *buf, size_t len, const char *name);
 #ifndef AMPS_NO_STDIO
@@ -778,7 +788,7 @@ AMPS_API amps_mesh *amps_mesh_read_medit(amps_ctx *ctx, const char *path);
    3 per node, if given) and "origin". Cell data: "von_mises" (1 per tet, if given),
    "principal_stress" (3 per tet, if given) and "cut" (1 if the tet uses a cut copy node). */
 AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const amps_mesh *m, const double *disp,
-                                    const double *von_mises, const double *principal);
+                                         const double *von_mises, const double *principal);
 /* Writers of all nnode nodes and the tets (copies become ordinary nodes; materials are not
    written). TetGen: base.node and base.ele with numbering from first_index (0 or 1).
    Gmsh: version 2 (2.2) or 4 (4.1), ASCII. MEDIT: .mesh, version 2. */
@@ -805,7 +815,7 @@ AMPS_API amps_status amps_mesh_write_medit(amps_ctx *ctx, const char *path, cons
    which takes effect when the implementation is the first include of its file. Otherwise, and on
    systems without it, amps_now falls back as its declaration says. */
 #if !defined(_WIN32) && defined(__STRICT_ANSI__) && !defined(_POSIX_C_SOURCE) && !defined(_XOPEN_SOURCE) && \
-    !defined(_GNU_SOURCE) && !defined(_DEFAULT_SOURCE) && !defined(_BSD_SOURCE)
+        !defined(_GNU_SOURCE) && !defined(_DEFAULT_SOURCE) && !defined(_BSD_SOURCE)
 #define _POSIX_C_SOURCE 200112L
 #endif
 #include <stdlib.h>
@@ -917,7 +927,9 @@ AMPS_API double amps_now(void) {
    (%.3g); no flags or widths. Numbers carry at most 15 significant digits (later ones print as
    0); otherwise the output is printf's, correctly rounded (tests/test_fmt.c compares the two). */
 
-typedef struct amps__str { char *p, *end; } amps__str; /* cursor; end keeps room for the NUL */
+typedef struct amps__str {
+    char *p, *end;
+} amps__str; /* cursor; end keeps room for the NUL */
 
 static void amps__puts(amps__str *o, const char *s, size_t n) {
     while (n-- > 0 && o->p < o->end) *o->p++ = *s++;
@@ -931,7 +943,8 @@ static void amps__putc(amps__str *o, char c) {
 static int amps__udec(char *d, unsigned long long u) {
     char t[20];
     int n = 0, k;
-    do t[n++] = (char)('0' + (int)(u % 10)); while (u /= 10);
+    do t[n++] = (char)('0' + (int)(u % 10));
+    while (u /= 10);
     for (k = 0; k < n; k++) d[k] = t[n - 1 - k];
     return n;
 }
@@ -1047,7 +1060,9 @@ static void amps__vfmt(char *buf, size_t size, const char *fmt, va_list ap) {
             if (v < 0) amps__putc(&o, '-');
             amps__puts(&o, t, (size_t)amps__udec(t, v < 0 ? 0ULL - (unsigned long long)v : (unsigned long long)v));
         } else if (c == 'u') {
-            unsigned long long v = l == 0 ? va_arg(ap, unsigned) : l == 1 ? va_arg(ap, unsigned long) : va_arg(ap, unsigned long long);
+            unsigned long long v = l == 0   ? va_arg(ap, unsigned)
+                                   : l == 1 ? va_arg(ap, unsigned long)
+                                            : va_arg(ap, unsigned long long);
             amps__puts(&o, t, (size_t)amps__udec(t, v));
         } else if (c == 'f' || c == 'e' || c == 'g') {
             amps__putd(&o, va_arg(ap, double), c, p);
@@ -1083,7 +1098,10 @@ static amps_status amps__err(amps_ctx *ctx, amps_status s, const char *fmt, ...)
 static void *amps__malloc(amps_ctx *ctx, size_t n, size_t size) {
     void *p;
     if (n == 0) n = 1;
-    if (size && n > ((size_t)-1) / size) { amps__err(ctx, AMPS_ERR_OOM, "allocation size overflow"); return NULL; }
+    if (size && n > ((size_t)-1) / size) {
+        amps__err(ctx, AMPS_ERR_OOM, "allocation size overflow");
+        return NULL;
+    }
     p = AMPS_MALLOC(n * size, ctx ? ctx->alloc_user : NULL);
     if (!p) amps__err(ctx, AMPS_ERR_OOM, "out of memory allocating %lu bytes", (unsigned long)(n * size));
     return p;
@@ -1135,8 +1153,8 @@ AMPS_API amps_csc *amps_csc_alloc(amps_ctx *ctx, amps_int nrow, amps_int ncol, a
     A->x = (A->i && with_values) ? AMPS__CAST(double *, amps__malloc(ctx, (size_t)nzmax, sizeof(double))) : NULL;
     if (!A->p || !A->i || (with_values && !A->x)) {
         amps_csc_free(ctx, A);
-        amps__err(ctx, AMPS_ERR_OOM, "amps_csc_alloc: out of memory (%lld x %lld, nzmax %lld)",
-                  (long long)nrow, (long long)ncol, (long long)nzmax);
+        amps__err(ctx, AMPS_ERR_OOM, "amps_csc_alloc: out of memory (%lld x %lld, nzmax %lld)", (long long)nrow,
+                  (long long)ncol, (long long)nzmax);
         return NULL;
     }
     return A;
@@ -1163,11 +1181,13 @@ AMPS_API amps_status amps_csc_check(amps_ctx *ctx, const amps_csc *A, amps_stype
                          (long long)A->ncol);
     n = A->ncol;
     if (!A->p) return amps__err(ctx, AMPS_ERR_ARG, "amps_csc_check: column pointer array is NULL");
-    if (A->p[0] != 0) return amps__err(ctx, AMPS_ERR_PATTERN, "amps_csc_check: p[0] = %lld, must be 0", (long long)A->p[0]);
+    if (A->p[0] != 0)
+        return amps__err(ctx, AMPS_ERR_PATTERN, "amps_csc_check: p[0] = %lld, must be 0", (long long)A->p[0]);
     for (j = 0; j < n; j++)
         if (A->p[j + 1] < A->p[j])
             return amps__err(ctx, AMPS_ERR_PATTERN, "amps_csc_check: column %lld: p[%lld] = %lld < p[%lld] = %lld",
-                             (long long)j, (long long)(j + 1), (long long)A->p[j + 1], (long long)j, (long long)A->p[j]);
+                             (long long)j, (long long)(j + 1), (long long)A->p[j + 1], (long long)j,
+                             (long long)A->p[j]);
     if (A->p[n] > 0 && !A->i) return amps__err(ctx, AMPS_ERR_ARG, "amps_csc_check: row index array is NULL");
     for (j = 0; j < n; j++) {
         for (p = A->p[j]; p < A->p[j + 1]; p++) {
@@ -1180,8 +1200,9 @@ AMPS_API amps_status amps_csc_check(amps_ctx *ctx, const amps_csc *A, amps_stype
                                  (long long)j, (long long)i, i == A->i[p - 1] ? "duplicates" : "is not above previous",
                                  (long long)A->i[p - 1]);
             if ((stype == AMPS_UPPER && i > j) || (stype == AMPS_LOWER && i < j))
-                return amps__err(ctx, AMPS_ERR_PATTERN, "amps_csc_check: column %lld: row %lld is outside the %s triangle",
-                                 (long long)j, (long long)i, stype == AMPS_UPPER ? "upper" : "lower");
+                return amps__err(ctx, AMPS_ERR_PATTERN,
+                                 "amps_csc_check: column %lld: row %lld is outside the %s triangle", (long long)j,
+                                 (long long)i, stype == AMPS_UPPER ? "upper" : "lower");
             if (A->x && !amps__isfinite(A->x[p]))
                 return amps__err(ctx, AMPS_ERR_VALUE, "amps_csc_check: column %lld: row %lld: non-finite value",
                                  (long long)j, (long long)i);
@@ -1225,17 +1246,37 @@ static void amps__triplets_by_row(amps_int n, amps_int nz, const amps_int *ti, c
         amps_int a = ti[k], b = tj[k], lo = a < b ? a : b, hi = a < b ? b : a;
         if (stype == AMPS_UPPER) Tp[lo]++;
         else if (stype == AMPS_LOWER) Tp[hi]++;
-        else { Tp[a]++; if (a != b) Tp[b]++; }
+        else {
+            Tp[a]++;
+            if (a != b) Tp[b]++;
+        }
     }
-    for (r = 0, p = 0; r < n; r++) { q = Tp[r]; Tp[r] = p; w[r] = p; p += q; }
+    for (r = 0, p = 0; r < n; r++) {
+        q = Tp[r];
+        Tp[r] = p;
+        w[r] = p;
+        p += q;
+    }
     Tp[n] = p;
     for (k = 0; k < nz; k++) {
         amps_int a = ti[k], b = tj[k], lo = a < b ? a : b, hi = a < b ? b : a;
-        if (stype == AMPS_UPPER) { q = w[lo]++; Tj[q] = hi; Tx[q] = tx[k]; }
-        else if (stype == AMPS_LOWER) { q = w[hi]++; Tj[q] = lo; Tx[q] = tx[k]; }
-        else {
-            q = w[a]++; Tj[q] = b; Tx[q] = tx[k];
-            if (a != b) { q = w[b]++; Tj[q] = a; Tx[q] = tx[k]; }
+        if (stype == AMPS_UPPER) {
+            q = w[lo]++;
+            Tj[q] = hi;
+            Tx[q] = tx[k];
+        } else if (stype == AMPS_LOWER) {
+            q = w[hi]++;
+            Tj[q] = lo;
+            Tx[q] = tx[k];
+        } else {
+            q = w[a]++;
+            Tj[q] = b;
+            Tx[q] = tx[k];
+            if (a != b) {
+                q = w[b]++;
+                Tj[q] = a;
+                Tx[q] = tx[k];
+            }
         }
     }
 }
@@ -1248,7 +1289,11 @@ static amps_int amps__csc_sum_dups(amps_int n, amps_int *Cp, amps_int *Ci, doubl
         amps_int start = nnz;
         for (q = Cp[j]; q < Cp[j + 1]; q++) {
             if (nnz > start && Ci[nnz - 1] == Ci[q]) Cx[nnz - 1] += Cx[q];
-            else { Ci[nnz] = Ci[q]; Cx[nnz] = Cx[q]; nnz++; }
+            else {
+                Ci[nnz] = Ci[q];
+                Cx[nnz] = Cx[q];
+                nnz++;
+            }
         }
         Cp[j] = start;
     }
@@ -1272,15 +1317,25 @@ AMPS_API amps_csc *amps_csc_from_triplets(amps_ctx *ctx, amps_int n, amps_int nz
     Ci = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m, sizeof(amps_int)));
     Cx = AMPS__CAST(double *, amps__malloc(ctx, (size_t)m, sizeof(double)));
     if (!Tp || !Cp || !w || !Tj || !Tx || !Ci || !Cx) {
-        amps__err(ctx, AMPS_ERR_OOM, "amps_csc_from_triplets: out of memory (n %lld, nz %lld)", (long long)n, (long long)nz);
+        amps__err(ctx, AMPS_ERR_OOM, "amps_csc_from_triplets: out of memory (n %lld, nz %lld)", (long long)n,
+                  (long long)nz);
         goto done;
     }
     amps__triplets_by_row(n, nz, ti, tj, tx, stype, Tp, Tj, Tx, w);
     for (q = 0; q < m; q++) Cp[Tj[q]]++;
-    for (j = 0, p = 0; j < n; j++) { q = Cp[j]; Cp[j] = p; w[j] = p; p += q; }
+    for (j = 0, p = 0; j < n; j++) {
+        q = Cp[j];
+        Cp[j] = p;
+        w[j] = p;
+        p += q;
+    }
     Cp[n] = p;
     for (r = 0; r < n; r++)
-        for (q = Tp[r]; q < Tp[r + 1]; q++) { p = w[Tj[q]]++; Ci[p] = r; Cx[p] = Tx[q]; }
+        for (q = Tp[r]; q < Tp[r + 1]; q++) {
+            p = w[Tj[q]]++;
+            Ci[p] = r;
+            Cx[p] = Tx[q];
+        }
     nnz = amps__csc_sum_dups(n, Cp, Ci, Cx);
     /* hand the arrays over, shrunk to nnz */
     {
@@ -1293,12 +1348,19 @@ AMPS_API amps_csc *amps_csc_from_triplets(amps_ctx *ctx, amps_int n, amps_int nz
     A = AMPS__CAST(amps_csc *, amps__calloc(ctx, 1, sizeof(amps_csc)));
     if (!A) goto done;
     A->nrow = A->ncol = n;
-    A->p = Cp; A->i = Ci; A->x = Cx;
+    A->p = Cp;
+    A->i = Ci;
+    A->x = Cx;
     Cp = Ci = NULL;
     Cx = NULL;
 done:
-    amps__free(ctx, Tp); amps__free(ctx, Cp); amps__free(ctx, w); amps__free(ctx, Tj);
-    amps__free(ctx, Tx); amps__free(ctx, Ci); amps__free(ctx, Cx);
+    amps__free(ctx, Tp);
+    amps__free(ctx, Cp);
+    amps__free(ctx, w);
+    amps__free(ctx, Tj);
+    amps__free(ctx, Tx);
+    amps__free(ctx, Ci);
+    amps__free(ctx, Cx);
     return A;
 }
 
@@ -1338,7 +1400,10 @@ static amps_status amps__ialloc(amps_ctx *ctx, int k, amps_int **pp[], const siz
     for (a = 0; a < k; a++) {
         *pp[a] = (amps_int *)amps__malloc(ctx, len[a], sizeof(amps_int));
         if (!*pp[a]) {
-            while (a-- > 0) { amps__free(ctx, *pp[a]); *pp[a] = NULL; }
+            while (a-- > 0) {
+                amps__free(ctx, *pp[a]);
+                *pp[a] = NULL;
+            }
             return AMPS_ERR_OOM;
         }
     }
@@ -1356,7 +1421,8 @@ static amps_status amps__graph_sym(amps_ctx *ctx, const char *fn, amps_int n, co
     amps_status s;
     int sorted = 1;
     if (n > 0 && !Ap) return amps__err(ctx, AMPS_ERR_ARG, "%s: column pointer array is NULL", fn);
-    if (n > 0 && Ap[0] != 0) return amps__err(ctx, AMPS_ERR_PATTERN, "%s: column pointer p[0] = %ld, must be 0", fn, (long)Ap[0]);
+    if (n > 0 && Ap[0] != 0)
+        return amps__err(ctx, AMPS_ERR_PATTERN, "%s: column pointer p[0] = %ld, must be 0", fn, (long)Ap[0]);
     for (j = 0; j < n; j++)
         if (Ap[j + 1] < Ap[j])
             return amps__err(ctx, AMPS_ERR_PATTERN, "%s: column pointers decrease at column %ld", fn, (long)j);
@@ -1367,8 +1433,8 @@ static amps_status amps__graph_sym(amps_ctx *ctx, const char *fn, amps_int n, co
         for (p = Ap[j]; p < Ap[j + 1]; p++) {
             i = Ai[p];
             if (i < 0 || i >= n)
-                return amps__err(ctx, AMPS_ERR_INDEX, "%s: row index %ld out of range [0,%ld) in column %ld", fn, (long)i,
-                                 (long)n, (long)j);
+                return amps__err(ctx, AMPS_ERR_INDEX, "%s: row index %ld out of range [0,%ld) in column %ld", fn,
+                                 (long)i, (long)n, (long)j);
             if ((stype > 0 && i > j) || (stype < 0 && i < j))
                 return amps__err(ctx, AMPS_ERR_PATTERN, "%s: entry (%ld,%ld) is outside the %s triangle", fn, (long)i,
                                  (long)j, stype > 0 ? "upper" : "lower");
@@ -1379,49 +1445,101 @@ static amps_status amps__graph_sym(amps_ctx *ctx, const char *fn, amps_int n, co
            appends to every row in increasing order */
         Gp = (amps_int *)amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int));
         w = (amps_int *)amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int));
-        if (!Gp || !w) { amps__free(ctx, Gp); amps__free(ctx, w); return AMPS_ERR_OOM; }
+        if (!Gp || !w) {
+            amps__free(ctx, Gp);
+            amps__free(ctx, w);
+            return AMPS_ERR_OOM;
+        }
         for (j = 0; j <= n; j++) Gp[j] = 0;
         for (j = 0; j < n; j++)
             for (p = Ap[j]; p < Ap[j + 1]; p++)
-                if (Ai[p] != j) { Gp[Ai[p] + 1]++; Gp[j + 1]++; }
-        for (j = 0; j < n; j++) { Gp[j + 1] += Gp[j]; w[j] = Gp[j]; }
+                if (Ai[p] != j) {
+                    Gp[Ai[p] + 1]++;
+                    Gp[j + 1]++;
+                }
+        for (j = 0; j < n; j++) {
+            Gp[j + 1] += Gp[j];
+            w[j] = Gp[j];
+        }
         Gi = (amps_int *)amps__malloc(ctx, (size_t)Gp[n], sizeof(amps_int));
-        if (!Gi) { amps__free(ctx, Gp); amps__free(ctx, w); return AMPS_ERR_OOM; }
+        if (!Gi) {
+            amps__free(ctx, Gp);
+            amps__free(ctx, w);
+            return AMPS_ERR_OOM;
+        }
         for (j = 0; j < n; j++)
             for (p = Ap[j]; p < Ap[j + 1]; p++)
-                if ((i = Ai[p]) != j) { Gi[w[i]++] = j; Gi[w[j]++] = i; }
+                if ((i = Ai[p]) != j) {
+                    Gi[w[i]++] = j;
+                    Gi[w[j]++] = i;
+                }
         amps__free(ctx, w);
-        *Gp_out = Gp; *Gi_out = Gi;
+        *Gp_out = Gp;
+        *Gi_out = Gi;
         return AMPS_OK;
     }
-    pp[0] = &Cp; pp[1] = &Ci; pp[2] = &w; pp[3] = &mk; pp[4] = &Gp;
-    len[0] = (size_t)n + 1; len[1] = 2 * (size_t)nz; len[2] = (size_t)n + 1; len[3] = (size_t)n + 1; len[4] = (size_t)n + 1;
+    pp[0] = &Cp;
+    pp[1] = &Ci;
+    pp[2] = &w;
+    pp[3] = &mk;
+    pp[4] = &Gp;
+    len[0] = (size_t)n + 1;
+    len[1] = 2 * (size_t)nz;
+    len[2] = (size_t)n + 1;
+    len[3] = (size_t)n + 1;
+    len[4] = (size_t)n + 1;
     if ((s = amps__ialloc(ctx, 5, pp, len)) != AMPS_OK) return s;
     /* C: both directions of every off-diagonal entry (duplicates allowed) */
     for (j = 0; j <= n; j++) Cp[j] = 0;
     for (j = 0; j < n; j++)
         for (p = Ap[j]; p < Ap[j + 1]; p++)
-            if (Ai[p] != j) { Cp[Ai[p] + 1]++; Cp[j + 1]++; }
+            if (Ai[p] != j) {
+                Cp[Ai[p] + 1]++;
+                Cp[j + 1]++;
+            }
     for (j = 0; j < n; j++) Cp[j + 1] += Cp[j];
     for (j = 0; j < n; j++) w[j] = Cp[j];
     for (j = 0; j < n; j++)
         for (p = Ap[j]; p < Ap[j + 1]; p++)
-            if ((i = Ai[p]) != j) { Ci[w[i]++] = j; Ci[w[j]++] = i; }
+            if ((i = Ai[p]) != j) {
+                Ci[w[i]++] = j;
+                Ci[w[j]++] = i;
+            }
     /* G = C^T without duplicates; rows come out ascending */
     for (j = 0; j <= n; j++) Gp[j] = 0;
     for (j = 0; j < n; j++) mk[j] = -1;
     for (j = 0; j < n; j++)
         for (p = Cp[j]; p < Cp[j + 1]; p++)
-            if (mk[i = Ci[p]] != j) { mk[i] = j; Gp[i + 1]++; }
+            if (mk[i = Ci[p]] != j) {
+                mk[i] = j;
+                Gp[i + 1]++;
+            }
     for (j = 0; j < n; j++) Gp[j + 1] += Gp[j];
     Gi = (amps_int *)amps__malloc(ctx, (size_t)(n > 0 ? Gp[n] : 0), sizeof(amps_int));
-    if (!Gi) { amps__free(ctx, Cp); amps__free(ctx, Ci); amps__free(ctx, w); amps__free(ctx, mk); amps__free(ctx, Gp); return AMPS_ERR_OOM; }
-    for (j = 0; j < n; j++) { mk[j] = -1; w[j] = Gp[j]; }
+    if (!Gi) {
+        amps__free(ctx, Cp);
+        amps__free(ctx, Ci);
+        amps__free(ctx, w);
+        amps__free(ctx, mk);
+        amps__free(ctx, Gp);
+        return AMPS_ERR_OOM;
+    }
+    for (j = 0; j < n; j++) {
+        mk[j] = -1;
+        w[j] = Gp[j];
+    }
     for (j = 0; j < n; j++)
         for (p = Cp[j]; p < Cp[j + 1]; p++)
-            if (mk[i = Ci[p]] != j) { mk[i] = j; Gi[w[i]++] = j; }
-    amps__free(ctx, Cp); amps__free(ctx, Ci); amps__free(ctx, w); amps__free(ctx, mk);
-    *Gp_out = Gp; *Gi_out = Gi;
+            if (mk[i = Ci[p]] != j) {
+                mk[i] = j;
+                Gi[w[i]++] = j;
+            }
+    amps__free(ctx, Cp);
+    amps__free(ctx, Ci);
+    amps__free(ctx, w);
+    amps__free(ctx, mk);
+    *Gp_out = Gp;
+    *Gi_out = Gi;
     return AMPS_OK;
 }
 
@@ -1438,11 +1556,22 @@ static amps_int amps__graph_runs(amps_int n, const amps_int *Gp, const amps_int 
             int hit = 0;
             same = 1;
             while (same) {
-                if (p < pe && Gi[p] == b) { p++; hit = 1; continue; }
-                if (q < qe && Gi[q] == a) { q++; continue; }
-                if (p >= pe || q >= qe) { same = (p >= pe && q >= qe); break; }
+                if (p < pe && Gi[p] == b) {
+                    p++;
+                    hit = 1;
+                    continue;
+                }
+                if (q < qe && Gi[q] == a) {
+                    q++;
+                    continue;
+                }
+                if (p >= pe || q >= qe) {
+                    same = (p >= pe && q >= qe);
+                    break;
+                }
                 if (Gi[p] != Gi[q]) same = 0;
-                p++; q++;
+                p++;
+                q++;
             }
             same = same && hit;
         }
@@ -1462,8 +1591,14 @@ static amps_status amps__graph_quotient(amps_ctx *ctx, amps_int n, const amps_in
     amps_int **pp[4];
     size_t len[4];
     amps_status s;
-    pp[0] = &gid; pp[1] = &mk; pp[2] = &Qp; pp[3] = &Qw;
-    len[0] = (size_t)n + 1; len[1] = (size_t)ng + 1; len[2] = (size_t)ng + 1; len[3] = (size_t)ng + 1;
+    pp[0] = &gid;
+    pp[1] = &mk;
+    pp[2] = &Qp;
+    pp[3] = &Qw;
+    len[0] = (size_t)n + 1;
+    len[1] = (size_t)ng + 1;
+    len[2] = (size_t)ng + 1;
+    len[3] = (size_t)ng + 1;
     if ((s = amps__ialloc(ctx, 4, pp, len)) != AMPS_OK) return s;
     for (g = 0; g < ng; g++) {
         for (j = gfirst[g]; j < gfirst[g + 1]; j++) gid[j] = g;
@@ -1474,18 +1609,33 @@ static amps_status amps__graph_quotient(amps_ctx *ctx, amps_int n, const amps_in
         Qp[g] = nz;
         for (j = gfirst[g]; j < (same ? gfirst[g] + 1 : gfirst[g + 1]); j++)
             for (p = Gp[j]; p < Gp[j + 1]; p++)
-                if ((h = gid[Gi[p]]) != g && mk[h] != g) { mk[h] = g; nz++; }
+                if ((h = gid[Gi[p]]) != g && mk[h] != g) {
+                    mk[h] = g;
+                    nz++;
+                }
     }
     Qp[ng] = nz;
     Qi = (amps_int *)amps__malloc(ctx, (size_t)nz, sizeof(amps_int));
-    if (!Qi) { amps__free(ctx, gid); amps__free(ctx, mk); amps__free(ctx, Qp); amps__free(ctx, Qw); return AMPS_ERR_OOM; }
+    if (!Qi) {
+        amps__free(ctx, gid);
+        amps__free(ctx, mk);
+        amps__free(ctx, Qp);
+        amps__free(ctx, Qw);
+        return AMPS_ERR_OOM;
+    }
     for (g = 0; g < ng; g++) mk[g] = -1;
     for (nz = 0, g = 0; g < ng; g++)
         for (j = gfirst[g]; j < (same ? gfirst[g] + 1 : gfirst[g + 1]); j++)
             for (p = Gp[j]; p < Gp[j + 1]; p++)
-                if ((h = gid[Gi[p]]) != g && mk[h] != g) { mk[h] = g; Qi[nz++] = h; }
-    amps__free(ctx, gid); amps__free(ctx, mk);
-    *Qp_out = Qp; *Qi_out = Qi; *Qw_out = Qw;
+                if ((h = gid[Gi[p]]) != g && mk[h] != g) {
+                    mk[h] = g;
+                    Qi[nz++] = h;
+                }
+    amps__free(ctx, gid);
+    amps__free(ctx, mk);
+    *Qp_out = Qp;
+    *Qi_out = Qi;
+    *Qw_out = Qw;
     return AMPS_OK;
 }
 
@@ -1502,8 +1652,8 @@ static amps_int amps__amd_gc(amps_int n, amps_int *iw, amps_int pfree, amps_int 
     for (j = 0; j < n; j++)
         if ((kind[j] == AMPS__AMD_VAR || kind[j] == AMPS__AMD_ELEM) && len[j] > 0) {
             q = pe[j];
-            pe[j] = iw[q];       /* save the first entry, */
-            iw[q] = -(j + 1);    /* and mark the list head */
+            pe[j] = iw[q];    /* save the first entry, */
+            iw[q] = -(j + 1); /* and mark the list head */
         }
     for (src = 0, dst = 0; src < pfree;) {
         if (iw[src] < 0) {
@@ -1528,7 +1678,7 @@ static amps_int amps__amd_gc(amps_int n, amps_int *iw, amps_int pfree, amps_int 
 static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp, const amps_int *Gi, const amps_int *vw,
                                   amps_int nfree, double dense, amps_int *order) {
     amps_int *mem, *iw, *pe, *len, *elen, *nv, *deg, *wv, *head, *next, *last, *hhead, *hnext, *hkey, *mk, *rep, *lme,
-        *estep, *cnt;
+            *estep, *cnt;
     unsigned char *kind;
     amps_int i, j, k, p, q, e, me, nz, ntot, nleft, mindeg, pfree, iwlen, wbase, wmax, stamp, nsteps, ndense;
     size_t need;
@@ -1536,33 +1686,71 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
     if (n <= 0 || nfree <= 0) return AMPS_OK;
     ntot = 0;
     for (i = 0; i < n; i++) ntot += vw ? vw[i] : 1;
-    if ((double)nz + nz / 5 + 2.0 * n + 16 > (double)AMPS__IMAX) return amps__err(ctx, AMPS_ERR_OOM, "graph too large for AMD (%ld entries)", (long)nz);
+    if ((double)nz + nz / 5 + 2.0 * n + 16 > (double)AMPS__IMAX)
+        return amps__err(ctx, AMPS_ERR_OOM, "graph too large for AMD (%ld entries)", (long)nz);
     iwlen = nz + nz / 5 + 2 * n + 16;
     need = 17 * (size_t)n + (size_t)ntot + 8;
     mem = (amps_int *)amps__malloc(ctx, need, sizeof(amps_int));
     iw = (amps_int *)amps__malloc(ctx, (size_t)iwlen, sizeof(amps_int));
     kind = (unsigned char *)amps__calloc(ctx, (size_t)n, 1);
-    if (!mem || !iw || !kind) { amps__free(ctx, mem); amps__free(ctx, iw); amps__free(ctx, kind); return AMPS_ERR_OOM; }
-    pe = mem; len = pe + n; elen = len + n; nv = elen + n; deg = nv + n; wv = deg + n;
-    next = wv + n; last = next + n; hhead = last + n; hnext = hhead + n; hkey = hnext + n; mk = hkey + n;
-    rep = mk + n; lme = rep + n; estep = lme + n; cnt = estep + n; head = cnt + n + 1;
+    if (!mem || !iw || !kind) {
+        amps__free(ctx, mem);
+        amps__free(ctx, iw);
+        amps__free(ctx, kind);
+        return AMPS_ERR_OOM;
+    }
+    pe = mem;
+    len = pe + n;
+    elen = len + n;
+    nv = elen + n;
+    deg = nv + n;
+    wv = deg + n;
+    next = wv + n;
+    last = next + n;
+    hhead = last + n;
+    hnext = hhead + n;
+    hkey = hnext + n;
+    mk = hkey + n;
+    rep = mk + n;
+    lme = rep + n;
+    estep = lme + n;
+    cnt = estep + n;
+    head = cnt + n + 1;
 
     /* dense free vertices are set aside and ordered last */
-    if (dense <= 0) { dense = 10.0 * sqrt((double)ntot); if (dense < 16) dense = 16; }
+    if (dense <= 0) {
+        dense = 10.0 * sqrt((double)ntot);
+        if (dense < 16) dense = 16;
+    }
     for (i = 0; i < n; i++) {
         amps_int d = 0;
         for (p = Gp[i]; p < Gp[i + 1]; p++) d += vw ? vw[Gi[p]] : 1;
         kind[i] = (i < nfree && (double)d > dense) ? AMPS__AMD_DENSE : AMPS__AMD_VAR;
     }
     for (i = 0; i <= ntot; i++) head[i] = -1;
-    pfree = 0; nleft = 0; ndense = 0;
+    pfree = 0;
+    nleft = 0;
+    ndense = 0;
     for (i = 0; i < n; i++) {
         amps_int d = 0;
-        pe[i] = pfree; elen[i] = 0; rep[i] = -1; estep[i] = -1; wv[i] = 1; mk[i] = 0; hhead[i] = -1;
+        pe[i] = pfree;
+        elen[i] = 0;
+        rep[i] = -1;
+        estep[i] = -1;
+        wv[i] = 1;
+        mk[i] = 0;
+        hhead[i] = -1;
         nv[i] = vw ? vw[i] : 1;
-        if (kind[i] == AMPS__AMD_DENSE) { len[i] = 0; ndense++; continue; }
+        if (kind[i] == AMPS__AMD_DENSE) {
+            len[i] = 0;
+            ndense++;
+            continue;
+        }
         for (p = Gp[i]; p < Gp[i + 1]; p++)
-            if (kind[j = Gi[p]] != AMPS__AMD_DENSE) { iw[pfree++] = j; d += vw ? vw[j] : 1; }
+            if (kind[j = Gi[p]] != AMPS__AMD_DENSE) {
+                iw[pfree++] = j;
+                d += vw ? vw[j] : 1;
+            }
         len[i] = pfree - pe[i];
         deg[i] = d;
         if (i < nfree) nleft += nv[i];
@@ -1570,12 +1758,15 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
     mindeg = ntot;
     for (i = 0; i < nfree; i++) {
         if (kind[i] != AMPS__AMD_VAR) continue;
-        next[i] = head[deg[i]]; last[i] = -1;
+        next[i] = head[deg[i]];
+        last[i] = -1;
         if (head[deg[i]] >= 0) last[head[deg[i]]] = i;
         head[deg[i]] = i;
         if (deg[i] < mindeg) mindeg = deg[i];
     }
-    wbase = 2; stamp = 0; nsteps = 0;
+    wbase = 2;
+    stamp = 0;
+    nsteps = 0;
 
     while (nleft > 0) {
         amps_int nvpiv, degme, nl, pme;
@@ -1586,18 +1777,21 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
         if (next[me] >= 0) last[next[me]] = -1;
         nvpiv = nv[me];
         nv[me] = -nvpiv;
-        degme = 0; nl = 0;
+        degme = 0;
+        nl = 0;
 
         /* Lme = (union of the elements of me) + (variables of me), minus me */
         for (q = 0; q < len[me]; q++) {
             amps_int x = iw[pe[me] + q], pb, pend;
             if (q < elen[me]) {
                 if (kind[x] != AMPS__AMD_ELEM) continue;
-                pb = pe[x]; pend = pb + len[x];
+                pb = pe[x];
+                pend = pb + len[x];
                 kind[x] = AMPS__AMD_DEAD; /* absorbed into me */
                 wv[x] = 0;
             } else {
-                pb = pe[me] + q; pend = pb + 1;
+                pb = pe[me] + q;
+                pend = pb + 1;
             }
             for (p = pb; p < pend; p++) {
                 i = iw[p];
@@ -1606,18 +1800,22 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
                 nv[i] = -nv[i];
                 lme[nl++] = i;
                 if (i < nfree) { /* leave the degree lists */
-                    if (last[i] >= 0) next[last[i]] = next[i]; else head[deg[i]] = next[i];
+                    if (last[i] >= 0) next[last[i]] = next[i];
+                    else head[deg[i]] = next[i];
                     if (next[i] >= 0) last[next[i]] = last[i];
                 }
             }
         }
         kind[me] = AMPS__AMD_ELEM;
-        len[me] = 0; elen[me] = 0;
+        len[me] = 0;
+        elen[me] = 0;
         if (pfree + nl > iwlen) pfree = amps__amd_gc(n, iw, pfree, pe, len, kind);
         if (pfree + nl > iwlen) { /* not expected: the quotient graph never outgrows A */
             void *t = iw;
             if (amps__realloc(ctx, &t, (size_t)pfree + nl + n, sizeof(amps_int)) != AMPS_OK) {
-                amps__free(ctx, kind); amps__free(ctx, mem); amps__free(ctx, iw);
+                amps__free(ctx, kind);
+                amps__free(ctx, mem);
+                amps__free(ctx, iw);
                 return AMPS_ERR_OOM;
             }
             iw = (amps_int *)t;
@@ -1653,26 +1851,42 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
             unsigned long h = 0;
             i = iw[pme + q];
             nvi = -nv[i];
-            p1 = pe[i]; pn = p1; L = len[i];
+            p1 = pe[i];
+            pn = p1;
+            L = len[i];
             for (p = p1; p < p1 + elen[i]; p++) {
                 amps_int dext;
                 e = iw[p];
                 if (wv[e] == 0) continue;
                 dext = wv[e] - wbase;
-                if (dext > 0) { d += dext; iw[pn++] = e; h += (unsigned long)e; }
-                else { kind[e] = AMPS__AMD_DEAD; wv[e] = 0; } /* aggressive absorption: Le inside Lme */
+                if (dext > 0) {
+                    d += dext;
+                    iw[pn++] = e;
+                    h += (unsigned long)e;
+                } else {
+                    kind[e] = AMPS__AMD_DEAD;
+                    wv[e] = 0;
+                } /* aggressive absorption: Le inside Lme */
             }
             ce = pn - p1;
             for (p = p1 + elen[i]; p < p1 + L; p++) {
                 j = iw[p];
-                if (kind[j] == AMPS__AMD_VAR && nv[j] > 0) { d += nv[j]; iw[pn++] = j; h += (unsigned long)j; }
+                if (kind[j] == AMPS__AMD_VAR && nv[j] > 0) {
+                    d += nv[j];
+                    iw[pn++] = j;
+                    h += (unsigned long)j;
+                }
             }
             c = pn - p1;
             if (d == 0 && i < nfree) {
                 /* mass elimination: i is adjacent to Lme only */
-                kind[i] = AMPS__AMD_DEAD; rep[i] = me;
-                nvpiv += nvi; degme -= nvi;
-                nv[i] = 0; len[i] = 0; elen[i] = 0;
+                kind[i] = AMPS__AMD_DEAD;
+                rep[i] = me;
+                nvpiv += nvi;
+                degme -= nvi;
+                nv[i] = 0;
+                len[i] = 0;
+                elen[i] = 0;
                 continue;
             }
             AMPS_ASSERT(c < L);
@@ -1680,7 +1894,8 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
             if (c > ce) iw[p1 + c] = iw[p1 + ce];
             if (ce > 0) iw[p1 + ce] = iw[p1];
             iw[p1] = me;
-            len[i] = c + 1; elen[i] = ce + 1;
+            len[i] = c + 1;
+            elen[i] = ce + 1;
             if (d < deg[i]) deg[i] = d;
             h += (unsigned long)me;
             hkey[i] = (amps_int)(h % (unsigned long)n);
@@ -1697,7 +1912,10 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
             hhead[hkey[i]] = -1;
             for (a = b; a >= 0; a = hnext[a]) {
                 if (kind[a] != AMPS__AMD_VAR || hnext[a] < 0) continue;
-                if (stamp >= AMPS__IMAX - 2) { for (k = 0; k < n; k++) mk[k] = 0; stamp = 0; }
+                if (stamp >= AMPS__IMAX - 2) {
+                    for (k = 0; k < n; k++) mk[k] = 0;
+                    stamp = 0;
+                }
                 stamp++;
                 for (p = pe[a]; p < pe[a] + len[a]; p++) mk[iw[p]] = stamp;
                 prev = a;
@@ -1706,7 +1924,11 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
                     for (p = pe[j]; same && p < pe[j] + len[j]; p++) same = mk[iw[p]] == stamp;
                     if (same) {
                         nv[a] += nv[j]; /* both negative */
-                        nv[j] = 0; kind[j] = AMPS__AMD_DEAD; rep[j] = a; len[j] = 0; elen[j] = 0;
+                        nv[j] = 0;
+                        kind[j] = AMPS__AMD_DEAD;
+                        rep[j] = a;
+                        len[j] = 0;
+                        elen[j] = 0;
                         hnext[prev] = hnext[j];
                     } else {
                         prev = j;
@@ -1728,7 +1950,8 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
                 if (dd > nleft - nvi) dd = nleft - nvi;
                 if (dd < 0) dd = 0;
                 deg[i] = dd;
-                next[i] = head[dd]; last[i] = -1;
+                next[i] = head[dd];
+                last[i] = -1;
                 if (head[dd] >= 0) last[head[dd]] = i;
                 head[dd] = i;
                 if (dd < mindeg) mindeg = dd;
@@ -1742,7 +1965,8 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
         nv[me] = nvpiv;
         estep[me] = nsteps++;
         if (wmax >= AMPS__IMAX - ntot - 2) {
-            for (e = 0; e < n; e++) if (wv[e] != 0) wv[e] = 1;
+            for (e = 0; e < n; e++)
+                if (wv[e] != 0) wv[e] = 1;
             wbase = 2;
         } else {
             wbase = wmax + 1;
@@ -1756,7 +1980,11 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
         j = i;
         while (estep[j] < 0) j = rep[j];
         k = j;
-        for (j = i; estep[j] < 0;) { amps_int t = rep[j]; rep[j] = k; j = t; } /* path compression */
+        for (j = i; estep[j] < 0;) {
+            amps_int t = rep[j];
+            rep[j] = k;
+            j = t;
+        } /* path compression */
         cnt[estep[k] + 1]++;
     }
     for (k = 0; k < nsteps; k++) cnt[k + 1] += cnt[k];
@@ -1776,15 +2004,15 @@ static amps_status amps__amd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp,
 /* ------------------------------ nested dissection ------------------------------ */
 
 /* Tuning of the nested dissection (measured on FE meshes against METIS 5). */
-#define AMPS__ND_LEAF 100     /* parts of at most this many nodes are ordered by AMD */
-#define AMPS__ND_BAL 0.60     /* each side of a bisection holds at most this share of the weight */
-#define AMPS__ND_COARSE 120   /* size of the coarsest graph of a multilevel bisection */
-#define AMPS__ND_TRIES 6      /* greedy growings tried on the coarsest graph */
-#define AMPS__ND_MIDN 2000    /* graphs this large are bisected AMPS__ND_MID times at an */
-#define AMPS__ND_MID 5        /* intermediate level of at most AMPS__ND_MIDL coarsenings */
-#define AMPS__ND_MIDL 4       /* (about n/16 vertices), keeping the best */
-#define AMPS__ND_PASS 8       /* refinement passes per level */
-#define AMPS__ND_WIN 0.10     /* plane cuts: each side holds 1/2 -+ this share */
+#define AMPS__ND_LEAF 100   /* parts of at most this many nodes are ordered by AMD */
+#define AMPS__ND_BAL 0.60   /* each side of a bisection holds at most this share of the weight */
+#define AMPS__ND_COARSE 120 /* size of the coarsest graph of a multilevel bisection */
+#define AMPS__ND_TRIES 6    /* greedy growings tried on the coarsest graph */
+#define AMPS__ND_MIDN 2000  /* graphs this large are bisected AMPS__ND_MID times at an */
+#define AMPS__ND_MID 5      /* intermediate level of at most AMPS__ND_MIDL coarsenings */
+#define AMPS__ND_MIDL 4     /* (about n/16 vertices), keeping the best */
+#define AMPS__ND_PASS 8     /* refinement passes per level */
+#define AMPS__ND_WIN 0.10   /* plane cuts: each side holds 1/2 -+ this share */
 
 /* Weighted graph for nested dissection: CSR adjacency (symmetric, no self loops), vertex weights,
    optional edge weights (NULL = 1) and coordinates (3 per vertex, may be NULL). */
@@ -1792,32 +2020,43 @@ typedef struct amps__ndg {
     amps_int n;
     amps_int *p, *i, *vw, *ew;
     double *xyz;
-    amps_int *cmap;   /* vertex -> vertex of the next coarser graph */
+    amps_int *cmap; /* vertex -> vertex of the next coarser graph */
 } amps__ndg;
 
 static void amps__ndg_free(amps_ctx *ctx, amps__ndg *g) {
-    amps__free(ctx, g->p); amps__free(ctx, g->i); amps__free(ctx, g->vw); amps__free(ctx, g->ew);
-    amps__free(ctx, g->xyz); amps__free(ctx, g->cmap);
+    amps__free(ctx, g->p);
+    amps__free(ctx, g->i);
+    amps__free(ctx, g->vw);
+    amps__free(ctx, g->ew);
+    amps__free(ctx, g->xyz);
+    amps__free(ctx, g->cmap);
     memset(g, 0, sizeof(*g));
 }
 
 /* Deterministic xorshift64* stream. */
 static amps_int amps__rand(unsigned long long *s, amps_int m) {
-    *s ^= *s >> 12; *s ^= *s << 25; *s ^= *s >> 27;
+    *s ^= *s >> 12;
+    *s ^= *s << 25;
+    *s ^= *s >> 27;
     return m > 0 ? (amps_int)(((*s) * 2685821657736338717ULL >> 17) % (unsigned long long)m) : 0;
 }
 
 /* Indexed binary max-heap over vertices 0..n-1 with keys key[v]; pos[v] = -1 when absent. */
-typedef struct amps__heap { amps_int size, *h, *pos, *key; } amps__heap;
+typedef struct amps__heap {
+    amps_int size, *h, *pos, *key;
+} amps__heap;
 
 static void amps__heap_up(amps__heap *H, amps_int k) {
     amps_int v = H->h[k];
     while (k > 0) {
         amps_int par = (k - 1) / 2;
         if (H->key[H->h[par]] >= H->key[v]) break;
-        H->h[k] = H->h[par]; H->pos[H->h[k]] = k; k = par;
+        H->h[k] = H->h[par];
+        H->pos[H->h[k]] = k;
+        k = par;
     }
-    H->h[k] = v; H->pos[v] = k;
+    H->h[k] = v;
+    H->pos[v] = k;
 }
 static void amps__heap_down(amps__heap *H, amps_int k) {
     amps_int v = H->h[k];
@@ -1826,13 +2065,18 @@ static void amps__heap_down(amps__heap *H, amps_int k) {
         if (c >= H->size) break;
         if (c + 1 < H->size && H->key[H->h[c + 1]] > H->key[H->h[c]]) c++;
         if (H->key[H->h[c]] <= H->key[v]) break;
-        H->h[k] = H->h[c]; H->pos[H->h[k]] = k; k = c;
+        H->h[k] = H->h[c];
+        H->pos[H->h[k]] = k;
+        k = c;
     }
-    H->h[k] = v; H->pos[v] = k;
+    H->h[k] = v;
+    H->pos[v] = k;
 }
 static void amps__heap_push(amps__heap *H, amps_int v, amps_int key) {
     H->key[v] = key;
-    H->h[H->size] = v; H->pos[v] = H->size; H->size++;
+    H->h[H->size] = v;
+    H->pos[v] = H->size;
+    H->size++;
     amps__heap_up(H, H->size - 1);
 }
 static void amps__heap_del(amps__heap *H, amps_int v) {
@@ -1842,15 +2086,18 @@ static void amps__heap_del(amps__heap *H, amps_int v) {
     H->size--;
     if (k == H->size) return;
     u = H->h[H->size];
-    H->h[k] = u; H->pos[u] = k;
+    H->h[k] = u;
+    H->pos[u] = k;
     amps__heap_up(H, k);
     amps__heap_down(H, H->pos[u]);
 }
 static void amps__heap_set(amps__heap *H, amps_int v, amps_int key) {
     amps_int old;
     if (H->pos[v] < 0) return;
-    old = H->key[v]; H->key[v] = key;
-    if (key > old) amps__heap_up(H, H->pos[v]); else amps__heap_down(H, H->pos[v]);
+    old = H->key[v];
+    H->key[v] = key;
+    if (key > old) amps__heap_up(H, H->pos[v]);
+    else amps__heap_down(H, H->pos[v]);
 }
 
 /* Workspace of the separator refinement, sized for graphs of up to n vertices. */
@@ -1865,11 +2112,22 @@ static amps_status amps__fmws_init(amps_ctx *ctx, amps__fmws *W, amps_int n) {
     size_t n1 = (size_t)n + 1;
     m = (amps_int *)amps__malloc(ctx, 11 * n1, sizeof(amps_int));
     if (!m) return AMPS_ERR_OOM;
-    W->n = n; W->mem = m;
-    W->H.size = 0; W->H.h = m; W->H.pos = m + n1; W->H.key = m + 2 * n1;
-    W->ed = m + 3 * n1; W->lock = m + 4 * n1; W->sl = m + 5 * n1; W->sl2 = m + 6 * n1;
-    W->logv = m + 7 * n1; W->logw = m + 9 * n1;
-    for (k = 0; k < n; k++) { W->H.pos[k] = -1; W->lock[k] = 0; }
+    W->n = n;
+    W->mem = m;
+    W->H.size = 0;
+    W->H.h = m;
+    W->H.pos = m + n1;
+    W->H.key = m + 2 * n1;
+    W->ed = m + 3 * n1;
+    W->lock = m + 4 * n1;
+    W->sl = m + 5 * n1;
+    W->sl2 = m + 6 * n1;
+    W->logv = m + 7 * n1;
+    W->logw = m + 9 * n1;
+    for (k = 0; k < n; k++) {
+        W->H.pos[k] = -1;
+        W->lock[k] = 0;
+    }
     return AMPS_OK;
 }
 
@@ -1910,25 +2168,41 @@ static void amps__nd_fm(const amps__ndg *g, amps_int *where, amps_int *pw, amps_
                 if (where[g->i[p]] == b) ed[v] += vw[g->i[p]];
             amps__heap_push(H, v, vw[v] - ed[v]);
         }
-        nlog = 0; bestlog = 0; bs = pw[2]; b0 = pw[0]; b1 = pw[1]; nbad = 0; nlogmax = 0;
+        nlog = 0;
+        bestlog = 0;
+        bs = pw[2];
+        b0 = pw[0];
+        b1 = pw[1];
+        nbad = 0;
+        nlogmax = 0;
         while (H->size > 0) {
             v = H->h[0];
             if (pw[a] + vw[v] > maxpw) break;
             /* move v from the separator to side a */
             amps__heap_del(H, v);
-            W->logv[nlog] = v; W->logw[nlog++] = 2;
-            where[v] = a; pw[2] -= vw[v]; pw[a] += vw[v]; W->lock[v] = 1;
+            W->logv[nlog] = v;
+            W->logw[nlog++] = 2;
+            where[v] = a;
+            pw[2] -= vw[v];
+            pw[a] += vw[v];
+            W->lock[v] = 1;
             for (p = g->p[v]; p < g->p[v + 1]; p++) {
                 u = g->i[p];
                 if (where[u] != b) continue;
                 /* u joins the separator */
-                W->logv[nlog] = u; W->logw[nlog++] = b;
-                where[u] = 2; pw[b] -= vw[u]; pw[2] += vw[u];
+                W->logv[nlog] = u;
+                W->logw[nlog++] = b;
+                where[u] = 2;
+                pw[b] -= vw[u];
+                pw[2] += vw[u];
                 ed[u] = 0;
                 for (q = g->p[u]; q < g->p[u + 1]; q++) {
                     x = g->i[q];
                     if (where[x] == 2) {
-                        if (H->pos[x] >= 0) { ed[x] -= vw[u]; amps__heap_set(H, x, vw[x] - ed[x]); }
+                        if (H->pos[x] >= 0) {
+                            ed[x] -= vw[u];
+                            amps__heap_set(H, x, vw[x] - ed[x]);
+                        }
                     } else if (where[x] == b) {
                         ed[u] += vw[x];
                     }
@@ -1937,7 +2211,11 @@ static void amps__nd_fm(const amps__ndg *g, amps_int *where, amps_int *pw, amps_
             }
             if (nlog > nlogmax) nlogmax = nlog;
             if (amps__sep_better(pw[2], pw[0], pw[1], bs, b0, b1, maxpw)) {
-                bs = pw[2]; b0 = pw[0]; b1 = pw[1]; bestlog = nlog; nbad = 0;
+                bs = pw[2];
+                b0 = pw[0];
+                b1 = pw[1];
+                bestlog = nlog;
+                nbad = 0;
             } else if (++nbad > limit) {
                 break;
             }
@@ -1954,13 +2232,19 @@ static void amps__nd_fm(const amps__ndg *g, amps_int *where, amps_int *pw, amps_
         H->size = 0;
         /* separator list: old separator plus touched vertices still in it (lock marks duplicates) */
         for (k = 0; k < nlogmax; k++) W->lock[W->logv[k]] = 0;
-        t = W->sl2; q = 0;
+        t = W->sl2;
+        q = 0;
         for (k = 0; k < ns + nlogmax; k++) {
             v = k < ns ? W->sl[k] : W->logv[k - ns];
-            if (where[v] == 2 && !W->lock[v]) { W->lock[v] = 1; t[q++] = v; }
+            if (where[v] == 2 && !W->lock[v]) {
+                W->lock[v] = 1;
+                t[q++] = v;
+            }
         }
         for (k = 0; k < q; k++) W->lock[t[k]] = 0;
-        W->sl2 = W->sl; W->sl = t; ns = q;
+        W->sl2 = W->sl;
+        W->sl = t;
+        ns = q;
         if (!amps__sep_better(pw[2], pw[0], pw[1], s0, m0, m0, maxpw) || bestlog == 0) {
             if (++idle >= 2) break;
         } else {
@@ -1977,7 +2261,10 @@ static void amps__nd_sep_from_cut(const amps__ndg *g, amps_int *where, amps_int 
     for (v = 0; v < g->n; v++) {
         if (where[v] == 2) continue;
         for (p = g->p[v]; p < g->p[v + 1]; p++)
-            if (where[g->i[p]] == 1 - where[v]) { where[v] = 2; break; }
+            if (where[g->i[p]] == 1 - where[v]) {
+                where[v] = 2;
+                break;
+            }
     }
     pw[0] = pw[1] = pw[2] = 0;
     for (v = 0; v < g->n; v++) pw[where[v]] += g->vw[v];
@@ -1985,22 +2272,32 @@ static void amps__nd_sep_from_cut(const amps__ndg *g, amps_int *where, amps_int 
 
 /* Grows side 0 by breadth-first search from seed until it holds half the weight (where 0/1);
    queue has room for n. */
-static void amps__nd_grow(const amps__ndg *g, amps_int seed, amps_int *where, amps_int *queue, unsigned long long *rng) {
+static void amps__nd_grow(const amps__ndg *g, amps_int seed, amps_int *where, amps_int *queue,
+                          unsigned long long *rng) {
     amps_int n = g->n, v, p, k, head = 0, tail = 0, tot = 0, w0 = 0;
-    for (v = 0; v < n; v++) { where[v] = 1; tot += g->vw[v]; }
-    where[seed] = 4; queue[tail++] = seed;
+    for (v = 0; v < n; v++) {
+        where[v] = 1;
+        tot += g->vw[v];
+    }
+    where[seed] = 4;
+    queue[tail++] = seed;
     while (2 * w0 < tot) {
         if (head == tail) { /* disconnected: continue from another unvisited vertex */
             amps_int s0 = amps__rand(rng, n);
             for (k = 0; k < n && where[(s0 + k) % n] != 1; k++) {}
             if (k == n) break;
             v = (s0 + k) % n;
-            where[v] = 4; queue[tail++] = v;
+            where[v] = 4;
+            queue[tail++] = v;
         }
         v = queue[head++];
-        where[v] = 0; w0 += g->vw[v];
+        where[v] = 0;
+        w0 += g->vw[v];
         for (p = g->p[v]; p < g->p[v + 1]; p++)
-            if (where[g->i[p]] == 1) { where[g->i[p]] = 4; queue[tail++] = g->i[p]; }
+            if (where[g->i[p]] == 1) {
+                where[g->i[p]] = 4;
+                queue[tail++] = g->i[p];
+            }
     }
     while (head < tail) where[queue[head++]] = 1;
 }
@@ -2011,14 +2308,21 @@ static amps_int amps__nd_far(const amps__ndg *g, amps_int start, amps_int *dist,
     for (it = 0; it < 3; it++) {
         amps_int head = 0, tail = 0, last = start;
         for (v = 0; v < g->n; v++) dist[v] = -1;
-        dist[start] = 0; queue[tail++] = start;
+        dist[start] = 0;
+        queue[tail++] = start;
         while (head < tail) {
-            v = queue[head++]; last = v;
+            v = queue[head++];
+            last = v;
             for (p = g->p[v]; p < g->p[v + 1]; p++)
-                if (dist[g->i[p]] < 0) { dist[g->i[p]] = dist[v] + 1; queue[tail++] = g->i[p]; }
+                if (dist[g->i[p]] < 0) {
+                    dist[g->i[p]] = dist[v] + 1;
+                    queue[tail++] = g->i[p];
+                }
         }
         if (dist[last] <= ecc) break;
-        ecc = dist[last]; far = last; start = last;
+        ecc = dist[last];
+        far = last;
+        start = last;
     }
     return far;
 }
@@ -2029,13 +2333,25 @@ static amps_status amps__nd_coarsen(amps_ctx *ctx, amps__ndg *g, amps__ndg *c, u
     amps_int **pp[4];
     size_t len[4];
     memset(c, 0, sizeof(*c));
-    pp[0] = &match; pp[1] = &perm; pp[2] = &g->cmap; pp[3] = &mk;
+    pp[0] = &match;
+    pp[1] = &perm;
+    pp[2] = &g->cmap;
+    pp[3] = &mk;
     len[0] = len[1] = len[2] = len[3] = (size_t)n + 1;
     if (amps__ialloc(ctx, 4, pp, len) != AMPS_OK) return AMPS_ERR_OOM;
     cmap = g->cmap;
-    for (v = 0; v < n; v++) { match[v] = -1; perm[v] = v; tot += g->vw[v]; }
+    for (v = 0; v < n; v++) {
+        match[v] = -1;
+        perm[v] = v;
+        tot += g->vw[v];
+    }
     maxvw = (amps_int)(1.5 * (double)tot / 80.0) + 1;
-    for (v = n - 1; v > 0; v--) { k = amps__rand(rng, v + 1); u = perm[v]; perm[v] = perm[k]; perm[k] = u; }
+    for (v = n - 1; v > 0; v--) {
+        k = amps__rand(rng, v + 1);
+        u = perm[v];
+        perm[v] = perm[k];
+        perm[k] = u;
+    }
     for (k = 0; k < n; k++) {
         amps_int best = -1, bw = -1;
         v = perm[k];
@@ -2044,14 +2360,24 @@ static amps_status amps__nd_coarsen(amps_ctx *ctx, amps__ndg *g, amps__ndg *c, u
             amps_int w = g->ew ? g->ew[p] : 1;
             u = g->i[p];
             if (match[u] >= 0 || g->vw[u] + g->vw[v] > maxvw) continue;
-            if (w > bw || (w == bw && g->vw[u] < g->vw[best])) { bw = w; best = u; }
+            if (w > bw || (w == bw && g->vw[u] < g->vw[best])) {
+                bw = w;
+                best = u;
+            }
         }
         if (best < 0) match[v] = v;
-        else { match[v] = best; match[best] = v; }
+        else {
+            match[v] = best;
+            match[best] = v;
+        }
     }
     for (v = 0; v < n; v++) cmap[v] = -1;
     for (nc = 0, v = 0; v < n; v++)
-        if (cmap[v] < 0) { cmap[v] = nc; cmap[match[v]] = nc; perm[nc++] = v; }
+        if (cmap[v] < 0) {
+            cmap[v] = nc;
+            cmap[match[v]] = nc;
+            perm[nc++] = v;
+        }
     /* coarse graph */
     c->n = nc;
     c->p = (amps_int *)amps__malloc(ctx, (size_t)nc + 1, sizeof(amps_int));
@@ -2060,14 +2386,19 @@ static amps_status amps__nd_coarsen(amps_ctx *ctx, amps__ndg *g, amps__ndg *c, u
     c->ew = (amps_int *)amps__malloc(ctx, (size_t)(g->p[n] > 0 ? g->p[n] : 1), sizeof(amps_int));
     if (g->xyz) c->xyz = (double *)amps__malloc(ctx, 3 * (size_t)nc + 1, sizeof(double));
     if (!c->p || !c->vw || !c->i || !c->ew || (g->xyz && !c->xyz)) {
-        amps__ndg_free(ctx, c); amps__free(ctx, match); amps__free(ctx, perm); amps__free(ctx, mk);
-        amps__free(ctx, g->cmap); g->cmap = NULL;
+        amps__ndg_free(ctx, c);
+        amps__free(ctx, match);
+        amps__free(ctx, perm);
+        amps__free(ctx, mk);
+        amps__free(ctx, g->cmap);
+        g->cmap = NULL;
         return amps__err(ctx, AMPS_ERR_OOM, "out of memory coarsening a graph of %ld vertices", (long)n);
     }
     for (k = 0; k < nc; k++) mk[k] = -1;
     for (nz = 0, k = 0; k < nc; k++) {
         amps_int m[2], a, cnt, start = nz;
-        m[0] = perm[k]; m[1] = match[m[0]];
+        m[0] = perm[k];
+        m[1] = match[m[0]];
         cnt = m[1] != m[0] ? 2 : 1;
         c->p[k] = nz;
         c->vw[k] = 0;
@@ -2083,14 +2414,24 @@ static amps_status amps__nd_coarsen(amps_ctx *ctx, amps__ndg *g, amps__ndg *c, u
             for (p = g->p[v]; p < g->p[v + 1]; p++) {
                 amps_int cu = cmap[g->i[p]], w = g->ew ? g->ew[p] : 1;
                 if (cu == k) continue;
-                if (mk[cu] < start) { mk[cu] = nz; c->i[nz] = cu; c->ew[nz++] = w; }
-                else c->ew[mk[cu]] += w;
+                if (mk[cu] < start) {
+                    mk[cu] = nz;
+                    c->i[nz] = cu;
+                    c->ew[nz++] = w;
+                } else c->ew[mk[cu]] += w;
             }
         }
-        if (c->xyz) { double s = 1.0 / c->vw[k]; c->xyz[3 * k] *= s; c->xyz[3 * k + 1] *= s; c->xyz[3 * k + 2] *= s; }
+        if (c->xyz) {
+            double s = 1.0 / c->vw[k];
+            c->xyz[3 * k] *= s;
+            c->xyz[3 * k + 1] *= s;
+            c->xyz[3 * k + 2] *= s;
+        }
     }
     c->p[nc] = nz;
-    amps__free(ctx, match); amps__free(ctx, perm); amps__free(ctx, mk);
+    amps__free(ctx, match);
+    amps__free(ctx, perm);
+    amps__free(ctx, mk);
     return AMPS_OK;
 }
 
@@ -2108,24 +2449,31 @@ static void amps__eig3(double *a, double *V) {
                 if (apq == 0) continue;
                 th = (a[3 * q + q] - a[3 * p + p]) / (2 * apq);
                 t = (th >= 0 ? 1.0 : -1.0) / (fabs(th) + sqrt(th * th + 1));
-                c = 1 / sqrt(t * t + 1); s = t * c;
+                c = 1 / sqrt(t * t + 1);
+                s = t * c;
                 for (k = 0; k < 3; k++) { /* a := a J */
                     double akp = a[3 * k + p], akq = a[3 * k + q];
-                    a[3 * k + p] = c * akp - s * akq; a[3 * k + q] = s * akp + c * akq;
+                    a[3 * k + p] = c * akp - s * akq;
+                    a[3 * k + q] = s * akp + c * akq;
                 }
                 for (k = 0; k < 3; k++) { /* a := J^T a */
                     double apk = a[3 * p + k], aqk = a[3 * q + k];
-                    a[3 * p + k] = c * apk - s * aqk; a[3 * q + k] = s * apk + c * aqk;
+                    a[3 * p + k] = c * apk - s * aqk;
+                    a[3 * q + k] = s * apk + c * aqk;
                 }
                 for (k = 0; k < 3; k++) {
                     double vkp = V[3 * k + p], vkq = V[3 * k + q];
-                    V[3 * k + p] = c * vkp - s * vkq; V[3 * k + q] = s * vkp + c * vkq;
+                    V[3 * k + p] = c * vkp - s * vkq;
+                    V[3 * k + q] = s * vkp + c * vkq;
                 }
             }
     }
 }
 
-typedef struct amps__keyv { double k; amps_int v; } amps__keyv;
+typedef struct amps__keyv {
+    double k;
+    amps_int v;
+} amps__keyv;
 
 static int amps__keyv_cmp(const void *a, const void *b) {
     const amps__keyv *x = (const amps__keyv *)a, *y = (const amps__keyv *)b;
@@ -2154,11 +2502,15 @@ static void amps__nd_geo(const amps__ndg *g, amps_int *where, amps_int *pw, amps
         double x[3];
         int r, c;
         for (k = 0; k < 3; k++) x[k] = g->xyz[3 * v + k] - cen[k];
-        for (r = 0; r < 3; r++) for (c = 0; c < 3; c++) C[3 * r + c] += g->vw[v] * x[r] * x[c];
+        for (r = 0; r < 3; r++)
+            for (c = 0; c < 3; c++) C[3 * r + c] += g->vw[v] * x[r] * x[c];
     }
     amps__eig3(C, V);
     for (d = 0; d < 3; d++)
-        for (k = 0; k < 3; k++) { dir[d][k] = (d == k); dir[3 + d][k] = V[3 * k + d]; }
+        for (k = 0; k < 3; k++) {
+            dir[d][k] = (d == k);
+            dir[3 + d][k] = V[3 * k + d];
+        }
     for (d = 0; d < 6; d++) {
         amps_int wa = 0, bndA = 0, bndB = 0, bs = -1;
         double lo = tot * (0.5 - AMPS__ND_WIN), hi = tot * (0.5 + AMPS__ND_WIN), bgap = 0;
@@ -2167,7 +2519,10 @@ static void amps__nd_geo(const amps__ndg *g, amps_int *where, amps_int *pw, amps
             kv[v].v = v;
         }
         qsort(kv, (size_t)n, sizeof(amps__keyv), amps__keyv_cmp);
-        for (k = 0; k < n; k++) { rank[kv[k].v] = k; cnt[kv[k].v] = 0; }
+        for (k = 0; k < n; k++) {
+            rank[kv[k].v] = k;
+            cnt[kv[k].v] = 0;
+        }
         bk = -1;
         for (k = 0; k < n - 1; k++) {
             amps_int c = 0;
@@ -2175,8 +2530,12 @@ static void amps__nd_geo(const amps__ndg *g, amps_int *where, amps_int *pw, amps
             if (cnt[v] > 0) bndB -= g->vw[v];
             for (p = g->p[v]; p < g->p[v + 1]; p++) {
                 u = g->i[p];
-                if (rank[u] < k) { if (--cnt[u] == 0) bndA -= g->vw[u]; }
-                else { c++; if (++cnt[u] == 1) bndB += g->vw[u]; }
+                if (rank[u] < k) {
+                    if (--cnt[u] == 0) bndA -= g->vw[u];
+                } else {
+                    c++;
+                    if (++cnt[u] == 1) bndB += g->vw[u];
+                }
             }
             cnt[v] = c;
             if (c > 0) bndA += g->vw[v];
@@ -2184,11 +2543,16 @@ static void amps__nd_geo(const amps__ndg *g, amps_int *where, amps_int *pw, amps
             if (wa >= lo && wa <= hi) {
                 amps_int s = bndA < bndB ? bndA : bndB;
                 double gap = fabs(wa - 0.5 * tot);
-                if (bs < 0 || s < bs || (s == bs && gap < bgap)) { bs = s; bk = k; bgap = gap; }
+                if (bs < 0 || s < bs || (s == bs && gap < bgap)) {
+                    bs = s;
+                    bk = k;
+                    bgap = gap;
+                }
             }
         }
         if (bk < 0 || (haveb && bs >= best)) continue;
-        haveb = 1; best = bs;
+        haveb = 1;
+        best = bs;
         for (v = 0; v < n; v++) where[v] = rank[v] <= bk ? 0 : 1;
     }
     if (!haveb) /* no split in the window (cannot happen with positive weights): halve the index range */
@@ -2219,7 +2583,8 @@ static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amp
         if ((s = amps__nd_coarsen(ctx, &lev[nl - 1], &lev[nl], rng)) != AMPS_OK) break;
         if (lev[nl].n > 0.9 * lev[nl - 1].n) {
             amps__ndg_free(ctx, &lev[nl]);
-            amps__free(ctx, lev[nl - 1].cmap); lev[nl - 1].cmap = NULL;
+            amps__free(ctx, lev[nl - 1].cmap);
+            lev[nl - 1].cmap = NULL;
             break;
         }
         nl++;
@@ -2233,7 +2598,9 @@ static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amp
             amps_int lpw[3];
             if ((s = amps__nd_ml(ctx, c, cw2, lpw, maxpw, W, cw2 + c->n, wb, rng, 1)) != AMPS_OK) break;
             if (t == 0 || amps__sep_better(lpw[2], lpw[0], lpw[1], bestpw[2], bestpw[0], bestpw[1], maxpw)) {
-                bestpw[0] = lpw[0]; bestpw[1] = lpw[1]; bestpw[2] = lpw[2];
+                bestpw[0] = lpw[0];
+                bestpw[1] = lpw[1];
+                bestpw[2] = lpw[2];
                 memcpy(wa, cw2, sizeof(amps_int) * (size_t)c->n);
             }
         }
@@ -2250,7 +2617,8 @@ static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amp
                 amps__nd_geo(c, wa, bestpw, maxpw, W, kv, ws, ws + c->n);
                 t = 1;
             }
-            amps__free(ctx, kv); amps__free(ctx, ws);
+            amps__free(ctx, kv);
+            amps__free(ctx, ws);
             if (!t) s = AMPS_ERR_OOM;
         }
         for (; t < AMPS__ND_TRIES + (c->xyz != NULL) && s == AMPS_OK; t++) {
@@ -2260,7 +2628,9 @@ static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amp
             amps__nd_sep_from_cut(c, wb, lpw);
             amps__nd_fm(c, wb, lpw, maxpw, W, AMPS__ND_PASS);
             if (t == 0 || amps__sep_better(lpw[2], lpw[0], lpw[1], bestpw[2], bestpw[0], bestpw[1], maxpw)) {
-                bestpw[0] = lpw[0]; bestpw[1] = lpw[1]; bestpw[2] = lpw[2];
+                bestpw[0] = lpw[0];
+                bestpw[1] = lpw[1];
+                bestpw[2] = lpw[2];
                 memcpy(wa, wb, sizeof(amps_int) * (size_t)c->n);
             }
         }
@@ -2271,13 +2641,18 @@ static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amp
         g->cmap = NULL;
         return s;
     }
-    cw = wa; fw = wb;
-    pw[0] = bestpw[0]; pw[1] = bestpw[1]; pw[2] = bestpw[2];
+    cw = wa;
+    fw = wb;
+    pw[0] = bestpw[0];
+    pw[1] = bestpw[1];
+    pw[2] = bestpw[2];
     for (l = nl - 2; l >= 0; l--) {
         amps_int *tmp;
         for (v = 0; v < lev[l].n; v++) fw[v] = cw[lev[l].cmap[v]];
         amps__nd_fm(&lev[l], fw, pw, maxpw, W, AMPS__ND_PASS);
-        tmp = cw; cw = fw; fw = tmp;
+        tmp = cw;
+        cw = fw;
+        fw = tmp;
     }
     memcpy(where, cw, sizeof(amps_int) * (size_t)g->n);
     for (l = 1; l < nl; l++) amps__ndg_free(ctx, &lev[l]);
@@ -2289,8 +2664,8 @@ static amps_status amps__nd_ml(amps_ctx *ctx, amps__ndg *g, amps_int *where, amp
 /* AMD ordering of the part vs[0..m-1] of graph G (weights vw, NULL = 1) with its halo: the
    outside neighbours (vertices of enclosing separators, eliminated later) count in the degrees
    but are not ordered. Reorders vs in place. loc (n, all -1) is restored; lord has room for m. */
-static amps_status amps__nd_leaf(amps_ctx *ctx, const amps_int *Gp, const amps_int *Gi, const amps_int *vw, amps_int *vs,
-                                 amps_int m, amps_int *loc, amps_int *lord) {
+static amps_status amps__nd_leaf(amps_ctx *ctx, const amps_int *Gp, const amps_int *Gi, const amps_int *vw,
+                                 amps_int *vs, amps_int m, amps_int *loc, amps_int *lord) {
     amps_int k, p, v, u, h = 0, dsum = 0, *lp = NULL, *li = NULL, *lw = NULL, *hv = NULL;
     amps_status s = AMPS_OK;
     for (k = 0; k < m; k++) dsum += Gp[vs[k] + 1] - Gp[vs[k]];
@@ -2299,11 +2674,17 @@ static amps_status amps__nd_leaf(amps_ctx *ctx, const amps_int *Gp, const amps_i
     for (k = 0; k < m; k++) loc[vs[k]] = k;
     for (k = 0; k < m; k++)
         for (v = vs[k], p = Gp[v]; p < Gp[v + 1]; p++)
-            if (loc[u = Gi[p]] < 0) { loc[u] = m + h; hv[h++] = u; }
+            if (loc[u = Gi[p]] < 0) {
+                loc[u] = m + h;
+                hv[h++] = u;
+            }
     lp = (amps_int *)amps__malloc(ctx, (size_t)(m + h) + 1, sizeof(amps_int));
     li = (amps_int *)amps__malloc(ctx, 2 * (size_t)dsum + 1, sizeof(amps_int));
     lw = (amps_int *)amps__malloc(ctx, (size_t)(m + h) + 1, sizeof(amps_int));
-    if (!lp || !li || !lw) { s = AMPS_ERR_OOM; goto done; }
+    if (!lp || !li || !lw) {
+        s = AMPS_ERR_OOM;
+        goto done;
+    }
     /* part vertices keep all their edges; halo vertices get their edges into the part */
     for (k = 0; k <= m + h; k++) lp[k] = 0;
     for (k = 0; k < m; k++)
@@ -2329,7 +2710,10 @@ static amps_status amps__nd_leaf(amps_ctx *ctx, const amps_int *Gp, const amps_i
 done:
     for (k = 0; k < m; k++) loc[vs[k]] = -1;
     for (k = 0; k < h; k++) loc[hv[k]] = -1;
-    amps__free(ctx, lp); amps__free(ctx, li); amps__free(ctx, lw); amps__free(ctx, hv);
+    amps__free(ctx, lp);
+    amps__free(ctx, li);
+    amps__free(ctx, lw);
+    amps__free(ctx, hv);
     return s;
 }
 
@@ -2349,13 +2733,27 @@ static amps_status amps__nd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp, 
     if (n <= 0) return AMPS_OK;
     memset(&sub, 0, sizeof(sub));
     W.mem = NULL;
-    pp[0] = &loc; pp[1] = &stk; pp[2] = &where; pp[3] = &wa; pp[4] = &wb; pp[5] = &tmpv; pp[6] = &lord; pp[7] = &cnt;
+    pp[0] = &loc;
+    pp[1] = &stk;
+    pp[2] = &where;
+    pp[3] = &wa;
+    pp[4] = &wb;
+    pp[5] = &tmpv;
+    pp[6] = &lord;
+    pp[7] = &cnt;
     for (k = 0; k < 8; k++) len[k] = (size_t)n + 1;
     len[1] = 2 * ((size_t)n + 1);
     if ((s = amps__ialloc(ctx, 8, pp, len)) != AMPS_OK) return s;
-    if (amps__fmws_init(ctx, &W, n) != AMPS_OK) { s = AMPS_ERR_OOM; goto done; }
-    for (k = 0; k < n; k++) { order[k] = k; loc[k] = -1; }
-    stk[nstk++] = 0; stk[nstk++] = n;
+    if (amps__fmws_init(ctx, &W, n) != AMPS_OK) {
+        s = AMPS_ERR_OOM;
+        goto done;
+    }
+    for (k = 0; k < n; k++) {
+        order[k] = k;
+        loc[k] = -1;
+    }
+    stk[nstk++] = 0;
+    stk[nstk++] = n;
     while (nstk > 0) {
         amps_int hi = stk[--nstk], lo = stk[--nstk], m = hi - lo, nz = 0, ncomp, pw[3], maxpw, tot = 0;
         if (m <= 1) continue;
@@ -2372,13 +2770,20 @@ static amps_status amps__nd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp, 
         sub.i = (amps_int *)amps__malloc(ctx, (size_t)nz, sizeof(amps_int));
         sub.vw = (amps_int *)amps__malloc(ctx, (size_t)m, sizeof(amps_int));
         if (xyz) sub.xyz = (double *)amps__malloc(ctx, 3 * (size_t)m, sizeof(double));
-        if (!sub.p || !sub.i || !sub.vw || (xyz && !sub.xyz)) { s = AMPS_ERR_OOM; goto done; }
+        if (!sub.p || !sub.i || !sub.vw || (xyz && !sub.xyz)) {
+            s = AMPS_ERR_OOM;
+            goto done;
+        }
         for (nz = 0, k = 0; k < m; k++) {
             v = order[lo + k];
             sub.p[k] = nz;
             sub.vw[k] = vw ? vw[v] : 1;
             tot += sub.vw[k];
-            if (xyz) { sub.xyz[3 * k] = xyz[3 * v]; sub.xyz[3 * k + 1] = xyz[3 * v + 1]; sub.xyz[3 * k + 2] = xyz[3 * v + 2]; }
+            if (xyz) {
+                sub.xyz[3 * k] = xyz[3 * v];
+                sub.xyz[3 * k + 1] = xyz[3 * v + 1];
+                sub.xyz[3 * k + 2] = xyz[3 * v + 2];
+            }
             for (p = Gp[v]; p < Gp[v + 1]; p++)
                 if (loc[Gi[p]] >= 0) sub.i[nz++] = loc[Gi[p]];
         }
@@ -2389,11 +2794,15 @@ static amps_status amps__nd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp, 
         for (ncomp = 0, k = 0; k < m; k++) {
             amps_int head = 0, tail = 0;
             if (where[k] >= 0) continue;
-            where[k] = ncomp; wa[tail++] = k;
+            where[k] = ncomp;
+            wa[tail++] = k;
             while (head < tail) {
                 v = wa[head++];
                 for (p = sub.p[v]; p < sub.p[v + 1]; p++)
-                    if (where[sub.i[p]] < 0) { where[sub.i[p]] = ncomp; wa[tail++] = sub.i[p]; }
+                    if (where[sub.i[p]] < 0) {
+                        where[sub.i[p]] = ncomp;
+                        wa[tail++] = sub.i[p];
+                    }
             }
             ncomp++;
         }
@@ -2403,7 +2812,10 @@ static amps_status amps__nd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp, 
             for (k = 0; k < m; k++) cnt[where[k] + 1]++;
             for (c = 0; c < ncomp; c++) cnt[c + 1] += cnt[c];
             for (c = 0; c < ncomp; c++)
-                if (cnt[c + 1] - cnt[c] > 1) { stk[nstk++] = lo + cnt[c]; stk[nstk++] = lo + cnt[c + 1]; }
+                if (cnt[c + 1] - cnt[c] > 1) {
+                    stk[nstk++] = lo + cnt[c];
+                    stk[nstk++] = lo + cnt[c + 1];
+                }
             for (k = 0; k < m; k++) tmpv[cnt[where[k]]++] = order[lo + k];
             memcpy(order + lo, tmpv, sizeof(amps_int) * (size_t)m);
             amps__ndg_free(ctx, &sub);
@@ -2420,9 +2832,17 @@ static amps_status amps__nd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp, 
             amps_int c[3];
             c[0] = c[1] = c[2] = 0;
             for (k = 0; k < m; k++) c[where[k]]++;
-            c[2] = c[0] + c[1]; c[1] = c[0]; c[0] = 0; /* start of each part: 0, 1, separator */
-            if (c[1] > 1) { stk[nstk++] = lo; stk[nstk++] = lo + c[1]; }
-            if (c[2] - c[1] > 1) { stk[nstk++] = lo + c[1]; stk[nstk++] = lo + c[2]; }
+            c[2] = c[0] + c[1];
+            c[1] = c[0];
+            c[0] = 0; /* start of each part: 0, 1, separator */
+            if (c[1] > 1) {
+                stk[nstk++] = lo;
+                stk[nstk++] = lo + c[1];
+            }
+            if (c[2] - c[1] > 1) {
+                stk[nstk++] = lo + c[1];
+                stk[nstk++] = lo + c[2];
+            }
             for (k = 0; k < m; k++) tmpv[c[where[k]]++] = order[lo + k];
         }
         memcpy(order + lo, tmpv, sizeof(amps_int) * (size_t)m);
@@ -2430,8 +2850,14 @@ static amps_status amps__nd_core(amps_ctx *ctx, amps_int n, const amps_int *Gp, 
 done:
     amps__ndg_free(ctx, &sub);
     amps__free(ctx, W.mem);
-    amps__free(ctx, loc); amps__free(ctx, stk); amps__free(ctx, where); amps__free(ctx, wa); amps__free(ctx, wb);
-    amps__free(ctx, tmpv); amps__free(ctx, lord); amps__free(ctx, cnt);
+    amps__free(ctx, loc);
+    amps__free(ctx, stk);
+    amps__free(ctx, where);
+    amps__free(ctx, wa);
+    amps__free(ctx, wb);
+    amps__free(ctx, tmpv);
+    amps__free(ctx, lord);
+    amps__free(ctx, cnt);
     return s;
 }
 
@@ -2474,7 +2900,11 @@ static amps_status amps__metis(amps_ctx *ctx, amps_int n, const amps_int *Gp, co
     mp = (idx_t *)amps__malloc(ctx, (size_t)n, sizeof(idx_t));
     ip = (idx_t *)amps__malloc(ctx, (size_t)n, sizeof(idx_t));
     if (!xadj || !adj || !w || !mp || !ip) {
-        amps__free(ctx, xadj); amps__free(ctx, adj); amps__free(ctx, w); amps__free(ctx, mp); amps__free(ctx, ip);
+        amps__free(ctx, xadj);
+        amps__free(ctx, adj);
+        amps__free(ctx, w);
+        amps__free(ctx, mp);
+        amps__free(ctx, ip);
         return amps__err(ctx, AMPS_ERR_OOM, "out of memory for METIS");
     }
     for (k = 0; k <= n; k++) xadj[k] = (idx_t)Gp[k];
@@ -2485,9 +2915,14 @@ static amps_status amps__metis(amps_ctx *ctx, amps_int n, const amps_int *Gp, co
     r = METIS_NodeND(&nv, xadj, adj, w, options, mp, ip);
     if (r == METIS_OK)
         for (k = 0; k < n; k++) order[k] = (amps_int)mp[k];
-    amps__free(ctx, xadj); amps__free(ctx, adj); amps__free(ctx, w); amps__free(ctx, mp); amps__free(ctx, ip);
-    if (r != METIS_OK) return amps__err(ctx, r == METIS_ERROR_MEMORY ? AMPS_ERR_OOM : AMPS_ERR_ARG,
-                                        "METIS_NodeND failed (status %d)", r);
+    amps__free(ctx, xadj);
+    amps__free(ctx, adj);
+    amps__free(ctx, w);
+    amps__free(ctx, mp);
+    amps__free(ctx, ip);
+    if (r != METIS_OK)
+        return amps__err(ctx, r == METIS_ERROR_MEMORY ? AMPS_ERR_OOM : AMPS_ERR_ARG, "METIS_NodeND failed (status %d)",
+                         r);
     return AMPS_OK;
 }
 #endif
@@ -2507,8 +2942,8 @@ static amps_status amps__order_fail(amps_ctx *ctx, const char *fn, amps_status s
 /* AUTO: ord (ng) = the order of least fill (amps__nnzl) among AMD, ND (more than AMPS__ND_LEAF
    nodes) and METIS (when built in) of the node graph (P, I, weights Qw, coordinates nx, may be
    NULL). ord2 (ng) and wk (3 ng) are workspace. */
-static amps_status amps__order_auto(amps_ctx *ctx, amps_int ng, const amps_int *P, const amps_int *I, const amps_int *Qw,
-                                    const double *nx, amps_int *ord, amps_int *ord2, amps_int *wk) {
+static amps_status amps__order_auto(amps_ctx *ctx, amps_int ng, const amps_int *P, const amps_int *I,
+                                    const amps_int *Qw, const double *nx, amps_int *ord, amps_int *ord2, amps_int *wk) {
     double best = -1, f;
     amps_int *iord = wk, *par = wk + ng, *tmp = wk + 2 * ng, k;
     amps_status s = AMPS_OK;
@@ -2528,11 +2963,17 @@ static amps_status amps__order_auto(amps_ctx *ctx, amps_int ng, const amps_int *
         else s = amps__metis(ctx, ng, P, I, Qw, ord2);
 #endif
         if (s != AMPS_OK) break;
-        if (nc == 1) { memcpy(ord, ord2, sizeof(amps_int) * (size_t)ng); break; }
+        if (nc == 1) {
+            memcpy(ord, ord2, sizeof(amps_int) * (size_t)ng);
+            break;
+        }
         for (k = 0; k < ng; k++) iord[ord2[k]] = k;
         amps_etree(ng, P, I, ord2, iord, par, tmp);
         f = amps__nnzl(ng, P, I, Qw, ord2, iord, par, tmp);
-        if (best < 0 || f < best) { best = f; memcpy(ord, ord2, sizeof(amps_int) * (size_t)ng); }
+        if (best < 0 || f < best) {
+            best = f;
+            memcpy(ord, ord2, sizeof(amps_int) * (size_t)ng);
+        }
     }
     return s;
 }
@@ -2552,17 +2993,26 @@ static amps_status amps__order_graph(amps_ctx *ctx, amps_int n, const amps_int *
     gfirst = (amps_int *)amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int));
     if (!gfirst) return AMPS_ERR_OOM;
     if (block == 0) ng = amps__graph_runs(n, Gp, Gi, gfirst);
-    else { ng = n / block; for (k = 0; k <= ng; k++) gfirst[k] = k * block; }
+    else {
+        ng = n / block;
+        for (k = 0; k <= ng; k++) gfirst[k] = k * block;
+    }
     if (ng < n) {
         if ((s = amps__graph_quotient(ctx, n, Gp, Gi, ng, gfirst, block == 0, &Qp, &Qi, &Qw)) != AMPS_OK) goto done;
-        P = Qp; I = Qi;
+        P = Qp;
+        I = Qi;
     } else {
-        P = Gp; I = Gi;
+        P = Gp;
+        I = Gi;
     }
     if (coords && block == 0 && ng < n) {
         xyz = (double *)amps__malloc(ctx, 3 * (size_t)ng, sizeof(double));
-        if (!xyz) { s = AMPS_ERR_OOM; goto done; }
-        for (k = 0; k < ng; k++) for (j = 0; j < 3; j++) xyz[3 * k + j] = coords[3 * gfirst[k] + j];
+        if (!xyz) {
+            s = AMPS_ERR_OOM;
+            goto done;
+        }
+        for (k = 0; k < ng; k++)
+            for (j = 0; j < 3; j++) xyz[3 * k + j] = coords[3 * gfirst[k] + j];
         nx = xyz;
     } else {
         nx = coords;
@@ -2570,7 +3020,10 @@ static amps_status amps__order_graph(amps_ctx *ctx, amps_int n, const amps_int *
     ord = (amps_int *)amps__malloc(ctx, (size_t)ng, sizeof(amps_int));
     ord2 = (amps_int *)amps__malloc(ctx, (size_t)ng, sizeof(amps_int));
     wk = (amps_int *)amps__malloc(ctx, 5 * (size_t)ng, sizeof(amps_int));
-    if (!ord || !ord2 || !wk) { s = AMPS_ERR_OOM; goto done; }
+    if (!ord || !ord2 || !wk) {
+        s = AMPS_ERR_OOM;
+        goto done;
+    }
     if (method == AMPS_ORDER_AMD) {
         s = amps__amd_core(ctx, ng, P, I, Qw, ng, 0, ord);
     } else if (method == AMPS_ORDER_ND) {
@@ -2594,8 +3047,14 @@ static amps_status amps__order_graph(amps_ctx *ctx, amps_int n, const amps_int *
     for (q = 0, k = 0; k < ng; k++)
         for (j = gfirst[ord[k]]; j < gfirst[ord[k] + 1]; j++) perm[q++] = j;
 done:
-    amps__free(ctx, gfirst); amps__free(ctx, Qp); amps__free(ctx, Qi); amps__free(ctx, Qw);
-    amps__free(ctx, xyz); amps__free(ctx, ord); amps__free(ctx, ord2); amps__free(ctx, wk);
+    amps__free(ctx, gfirst);
+    amps__free(ctx, Qp);
+    amps__free(ctx, Qi);
+    amps__free(ctx, Qw);
+    amps__free(ctx, xyz);
+    amps__free(ctx, ord);
+    amps__free(ctx, ord2);
+    amps__free(ctx, wk);
     return s;
 }
 
@@ -2614,13 +3073,15 @@ AMPS_API amps_status amps_order(amps_ctx *ctx, const amps_csc *A, amps_stype sty
         return amps__err(ctx, AMPS_ERR_ARG, "%s: invalid ordering method %d", fn, (int)method);
     n = A->ncol;
     if (n < 0 || A->nrow != A->ncol)
-        return amps__err(ctx, AMPS_ERR_ARG, "%s: matrix is %ld x %ld, must be square", fn, (long)A->nrow, (long)A->ncol);
+        return amps__err(ctx, AMPS_ERR_ARG, "%s: matrix is %ld x %ld, must be square", fn, (long)A->nrow,
+                         (long)A->ncol);
     if (block < 0) return amps__err(ctx, AMPS_ERR_ARG, "%s: block = %ld is negative", fn, (long)block);
     if (block > 1 && n % block != 0)
         return amps__err(ctx, AMPS_ERR_ARG, "%s: n = %ld is not a multiple of block = %ld", fn, (long)n, (long)block);
 #ifndef AMPS_USE_METIS
     if (method == AMPS_ORDER_METIS)
-        return amps__err(ctx, AMPS_ERR_UNSUPPORTED, "%s: AMPS_ORDER_METIS needs amps.h built with AMPS_USE_METIS (and -lmetis)", fn);
+        return amps__err(ctx, AMPS_ERR_UNSUPPORTED,
+                         "%s: AMPS_ORDER_METIS needs amps.h built with AMPS_USE_METIS (and -lmetis)", fn);
 #endif
     if (method == AMPS_ORDER_GIVEN && !opts->perm)
         return amps__err(ctx, AMPS_ERR_ARG, "%s: AMPS_ORDER_GIVEN with opts->perm NULL", fn);
@@ -2631,9 +3092,14 @@ AMPS_API amps_status amps_order(amps_ctx *ctx, const amps_csc *A, amps_stype sty
                 return amps__err(ctx, AMPS_ERR_VALUE, "%s: coordinate %ld of node %ld is not finite", fn, (long)(k % 3),
                                  (long)(k / 3));
     }
-    if ((s = amps__graph_sym(ctx, fn, n, A->p, A->i, (int)stype, &Gp, &Gi)) != AMPS_OK) return amps__order_fail(ctx, fn, s);
+    if ((s = amps__graph_sym(ctx, fn, n, A->p, A->i, (int)stype, &Gp, &Gi)) != AMPS_OK)
+        return amps__order_fail(ctx, fn, s);
     out = (amps_int *)amps__malloc(ctx, (size_t)n, sizeof(amps_int));
-    if (!out) { amps__free(ctx, Gp); amps__free(ctx, Gi); return amps__order_fail(ctx, fn, AMPS_ERR_OOM); }
+    if (!out) {
+        amps__free(ctx, Gp);
+        amps__free(ctx, Gi);
+        return amps__order_fail(ctx, fn, AMPS_ERR_OOM);
+    }
     if (method == AMPS_ORDER_NATURAL) {
         for (k = 0; k < n; k++) out[k] = k;
     } else if (method == AMPS_ORDER_GIVEN) {
@@ -2646,15 +3112,16 @@ AMPS_API amps_status amps_order(amps_ctx *ctx, const amps_csc *A, amps_stype sty
             else if (out[g[k]] >= 0)
                 s = amps__err(ctx, AMPS_ERR_ARG, "%s: given perm is not a permutation: perm[%ld] = perm[%ld] = %ld", fn,
                               (long)out[g[k]], (long)k, (long)g[k]);
-            else
-                out[g[k]] = k;
+            else out[g[k]] = k;
         }
         if (s == AMPS_OK) memcpy(out, g, sizeof(amps_int) * (size_t)n);
     } else if (n > 0) {
         s = amps__order_fail(ctx, fn, amps__order_graph(ctx, n, Gp, Gi, (int)method, block, coords, 1, out));
     }
     if (s == AMPS_OK && n > 0) memcpy(perm, out, sizeof(amps_int) * (size_t)n);
-    amps__free(ctx, Gp); amps__free(ctx, Gi); amps__free(ctx, out);
+    amps__free(ctx, Gp);
+    amps__free(ctx, Gi);
+    amps__free(ctx, out);
     return s;
 }
 
@@ -2663,12 +3130,16 @@ AMPS_API amps_status amps_amd(amps_ctx *ctx, amps_int n, const amps_int *Ap, con
     amps_status s;
     if (n < 0) return amps__err(ctx, AMPS_ERR_ARG, "amps_amd: n = %ld is negative", (long)n);
     if (n > 0 && !perm) return amps__err(ctx, AMPS_ERR_ARG, "amps_amd: output perm is NULL");
-    if ((s = amps__graph_sym(ctx, "amps_amd", n, Ap, Ai, 0, &Gp, &Gi)) != AMPS_OK) return amps__order_fail(ctx, "amps_amd", s);
+    if ((s = amps__graph_sym(ctx, "amps_amd", n, Ap, Ai, 0, &Gp, &Gi)) != AMPS_OK)
+        return amps__order_fail(ctx, "amps_amd", s);
     out = (amps_int *)amps__malloc(ctx, (size_t)n, sizeof(amps_int));
     if (!out) s = AMPS_ERR_OOM;
-    else if ((s = amps__amd_core(ctx, n, Gp, Gi, NULL, n, 0, out)) == AMPS_OK && n > 0) memcpy(perm, out, sizeof(amps_int) * (size_t)n);
+    else if ((s = amps__amd_core(ctx, n, Gp, Gi, NULL, n, 0, out)) == AMPS_OK && n > 0)
+        memcpy(perm, out, sizeof(amps_int) * (size_t)n);
     amps__order_fail(ctx, "amps_amd", s);
-    amps__free(ctx, Gp); amps__free(ctx, Gi); amps__free(ctx, out);
+    amps__free(ctx, Gp);
+    amps__free(ctx, Gi);
+    amps__free(ctx, out);
     return s;
 }
 
@@ -2681,15 +3152,18 @@ AMPS_API amps_status amps_nd(amps_ctx *ctx, amps_int n, const amps_int *Ap, cons
     if (xyz)
         for (k = 0; k < 3 * n; k++)
             if (!amps__isfinite(xyz[k]))
-                return amps__err(ctx, AMPS_ERR_VALUE, "amps_nd: coordinate %ld of vertex %ld is not finite", (long)(k % 3),
-                                 (long)(k / 3));
-    if ((s = amps__graph_sym(ctx, "amps_nd", n, Ap, Ai, 0, &Gp, &Gi)) != AMPS_OK) return amps__order_fail(ctx, "amps_nd", s);
+                return amps__err(ctx, AMPS_ERR_VALUE, "amps_nd: coordinate %ld of vertex %ld is not finite",
+                                 (long)(k % 3), (long)(k / 3));
+    if ((s = amps__graph_sym(ctx, "amps_nd", n, Ap, Ai, 0, &Gp, &Gi)) != AMPS_OK)
+        return amps__order_fail(ctx, "amps_nd", s);
     out = (amps_int *)amps__malloc(ctx, (size_t)n, sizeof(amps_int));
     if (!out) s = AMPS_ERR_OOM;
     else if (n > 0 && (s = amps__order_graph(ctx, n, Gp, Gi, AMPS_ORDER_ND, 0, xyz, 1, out)) == AMPS_OK)
         memcpy(perm, out, sizeof(amps_int) * (size_t)n);
     amps__order_fail(ctx, "amps_nd", s);
-    amps__free(ctx, Gp); amps__free(ctx, Gi); amps__free(ctx, out);
+    amps__free(ctx, Gp);
+    amps__free(ctx, Gi);
+    amps__free(ctx, out);
     return s;
 }
 
@@ -2702,12 +3176,20 @@ AMPS_API void amps_etree(amps_int n, const amps_int *Ap, const amps_int *Ai, con
     amps_int *anc = work, k, p, r, t;
     for (k = 0; k < n; k++) {
         amps_int v = order ? order[k] : k;
-        parent[k] = -1; anc[k] = -1;
+        parent[k] = -1;
+        anc[k] = -1;
         for (p = Ap[v]; p < Ap[v + 1]; p++) {
             r = iorder ? iorder[Ai[p]] : Ai[p];
             if (r >= k) continue;
-            while (anc[r] >= 0 && anc[r] != k) { t = anc[r]; anc[r] = k; r = t; }
-            if (anc[r] < 0) { anc[r] = k; parent[r] = k; }
+            while (anc[r] >= 0 && anc[r] != k) {
+                t = anc[r];
+                anc[r] = k;
+                r = t;
+            }
+            if (anc[r] < 0) {
+                anc[r] = k;
+                parent[r] = k;
+            }
         }
     }
 }
@@ -2718,14 +3200,23 @@ AMPS_API void amps_postorder(amps_int n, const amps_int *parent, amps_int *post,
     amps_int *head = work, *next = work + n, *stack = work + 2 * n, k, top, pos = 0;
     for (k = 0; k < n; k++) head[k] = -1;
     for (k = n - 1; k >= 0; k--)
-        if (parent[k] >= 0) { next[k] = head[parent[k]]; head[parent[k]] = k; }
+        if (parent[k] >= 0) {
+            next[k] = head[parent[k]];
+            head[parent[k]] = k;
+        }
     for (k = 0; k < n; k++) {
         if (parent[k] >= 0) continue;
-        top = 0; stack[top++] = k;
+        top = 0;
+        stack[top++] = k;
         while (top > 0) {
             amps_int j = stack[top - 1], c = head[j];
-            if (c >= 0) { head[j] = next[c]; stack[top++] = c; }
-            else { top--; post[pos++] = j; }
+            if (c >= 0) {
+                head[j] = next[c];
+                stack[top++] = c;
+            } else {
+                top--;
+                post[pos++] = j;
+            }
         }
     }
 }
@@ -2740,10 +3231,18 @@ AMPS_API void amps_colcounts(amps_int n, const amps_int *parent, const amps_int 
                              const amps_int *Ci, amps_int *cc, amps_int *work) {
     amps_int *first = work, *maxfirst = work + n, *prevleaf = work + 2 * n, *anc = work + 3 * n;
     amps_int j, k, q, r;
-    for (j = 0; j < n; j++) { first[j] = -1; maxfirst[j] = -1; prevleaf[j] = -1; anc[j] = j; }
+    for (j = 0; j < n; j++) {
+        first[j] = -1;
+        maxfirst[j] = -1;
+        prevleaf[j] = -1;
+        anc[j] = j;
+    }
     for (k = 0; k < n; k++)
         for (r = post[k]; r >= 0 && first[r] < 0; r = parent[r]) first[r] = k;
-    for (k = 0; k < n; k++) { j = post[k]; cc[j] = (first[j] == k) ? 1 : 0; }
+    for (k = 0; k < n; k++) {
+        j = post[k];
+        cc[j] = (first[j] == k) ? 1 : 0;
+    }
     for (k = 0; k < n; k++) {
         j = post[k];
         if (parent[j] >= 0) cc[parent[j]]--;
@@ -2757,13 +3256,19 @@ AMPS_API void amps_colcounts(amps_int n, const amps_int *parent, const amps_int 
             if (jprev >= 0) { /* least common ancestor of jprev and j: root of jprev's set */
                 amps_int root = jprev, s, t;
                 while (anc[root] != root) root = anc[root];
-                for (s = jprev; s != root; s = t) { t = anc[s]; anc[s] = root; }
+                for (s = jprev; s != root; s = t) {
+                    t = anc[s];
+                    anc[s] = root;
+                }
                 cc[root]--;
             }
         }
         if (parent[j] >= 0) anc[j] = parent[j];
     }
-    for (k = 0; k < n; k++) { j = post[k]; if (parent[j] >= 0) cc[parent[j]] += cc[j]; }
+    for (k = 0; k < n; k++) {
+        j = post[k];
+        if (parent[j] >= 0) cc[parent[j]] += cc[j];
+    }
 }
 
 /* ==== [amps:numeric impl] the LDL^T factor ==================================================== */
@@ -2851,14 +3356,15 @@ AMPS__KERNEL void amps__kern_body(int KC, int TC, int gather, amps_int m, const 
 }
 /* amps__kern{K}{T}: gather-update (rows of a finished group scattered into a target group);
    amps__dkern{K}{T}: dense (rows of a group against its own columns). */
-#define AMPS__KERN(K, T)                                                                                           \
-    static void amps__kern##K##T(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s,     \
-                                 const double *W, double *const *d) {                                            \
-        amps__kern_body(K, T, 1, m, Si, rel, s, W, d);                                                           \
-    }                                                                                                            \
-    static void amps__dkern##K##T(amps_int m, const double *const *s, const double *W, double *const *d) {        \
-        amps__kern_body(K, T, 0, m, NULL, NULL, s, W, d);                                                        \
+#define AMPS__KERN(K, T)                                                                                      \
+    static void amps__kern##K##T(amps_int m, const amps_int *Si, const amps_int *rel, const double *const *s, \
+                                 const double *W, double *const *d) {                                         \
+        amps__kern_body(K, T, 1, m, Si, rel, s, W, d);                                                        \
+    }                                                                                                         \
+    static void amps__dkern##K##T(amps_int m, const double *const *s, const double *W, double *const *d) {    \
+        amps__kern_body(K, T, 0, m, NULL, NULL, s, W, d);                                                     \
     }
+/* clang-format off */
 AMPS__KERN(1, 1) AMPS__KERN(1, 2) AMPS__KERN(1, 3) AMPS__KERN(1, 4)
 AMPS__KERN(2, 1) AMPS__KERN(2, 2) AMPS__KERN(2, 3) AMPS__KERN(2, 4)
 AMPS__KERN(3, 1) AMPS__KERN(3, 2) AMPS__KERN(3, 3) AMPS__KERN(3, 4)
@@ -2879,6 +3385,7 @@ static const amps__dkern_fn amps__dkern[4][4] = {
     {amps__dkern31, amps__dkern32, amps__dkern33, amps__dkern34},
     {amps__dkern41, amps__dkern42, amps__dkern43, amps__dkern44}
 };
+/* clang-format on */
 
 /* FNV-1a style hash of the pattern (p, i) of A. */
 static unsigned long long amps__pattern_hash(const amps_csc *A) {
@@ -2891,24 +3398,38 @@ static unsigned long long amps__pattern_hash(const amps_csc *A) {
 
 static void amps__fpriv_free(amps_ctx *ctx, amps__fpriv *P) {
     if (!P) return;
-    amps__free(ctx, P->gs); amps__free(ctx, P->cgrp); amps__free(ctx, P->Sp); amps__free(ctx, P->Ssrc);
-    amps__free(ctx, P->Sdst); amps__free(ctx, P->dsrc); amps__free(ctx, P->head); amps__free(ctx, P->next);
-    amps__free(ctx, P->gpos); amps__free(ctx, P->gsub); amps__free(ctx, P->subp); amps__free(ctx, P->subg);
-    amps__free(ctx, P->topg); amps__free(ctx, P->iwork); amps__free(ctx, P->fail);
+    amps__free(ctx, P->gs);
+    amps__free(ctx, P->cgrp);
+    amps__free(ctx, P->Sp);
+    amps__free(ctx, P->Ssrc);
+    amps__free(ctx, P->Sdst);
+    amps__free(ctx, P->dsrc);
+    amps__free(ctx, P->head);
+    amps__free(ctx, P->next);
+    amps__free(ctx, P->gpos);
+    amps__free(ctx, P->gsub);
+    amps__free(ctx, P->subp);
+    amps__free(ctx, P->subg);
+    amps__free(ctx, P->topg);
+    amps__free(ctx, P->iwork);
+    amps__free(ctx, P->fail);
     amps__free(ctx, P);
 }
 
 AMPS_API void amps_factor_free(amps_ctx *ctx, amps_factor *F) {
     if (!F) return;
     amps__fpriv_free(ctx, AMPS__CAST(amps__fpriv *, F->priv));
-    amps__free(ctx, F->perm); amps__free(ctx, F->iperm); amps__free(ctx, F->parent); amps__free(ctx, F->Lp);
-    amps__free(ctx, F->Li); amps__free(ctx, F->Lx); amps__free(ctx, F->D);
+    amps__free(ctx, F->perm);
+    amps__free(ctx, F->iperm);
+    amps__free(ctx, F->parent);
+    amps__free(ctx, F->Lp);
+    amps__free(ctx, F->Li);
+    amps__free(ctx, F->Lx);
+    amps__free(ctx, F->D);
     amps__free(ctx, F);
 }
 
-AMPS_API double amps_factor_nnz(const amps_factor *F) {
-    return F && F->Lp ? (double)F->Lp[F->n] + (double)F->n : 0.0;
-}
+AMPS_API double amps_factor_nnz(const amps_factor *F) { return F && F->Lp ? (double)F->Lp[F->n] + (double)F->n : 0.0; }
 
 AMPS_API void amps_factor_inertia(const amps_factor *F, amps_int *npos, amps_int *nneg, amps_int *nzero) {
     amps_int k, a = 0, b = 0, z = 0;
@@ -2941,7 +3462,8 @@ static int amps__nthreads(const amps_ctx *ctx, amps_int cap) {
 #define AMPS__PARGROUP 2e6 /* top groups with (entries of their columns) x (width) >= this use all threads */
 #endif
 #ifndef AMPS__PARMIN
-#define AMPS__PARMIN 1e9 /* factorizations with a smaller flop estimate (sum of squared column counts) run on one thread */
+#define AMPS__PARMIN \
+    1e9 /* factorizations with a smaller flop estimate (sum of squared column counts) run on one thread */
 #endif
 #ifndef AMPS__NSUB
 #define AMPS__NSUB 8 /* split the tree until no subtree has more than 1/AMPS__NSUB of the subtree work */
@@ -2955,8 +3477,12 @@ typedef struct amps__ana {
 } amps__ana;
 
 static void amps__ana_free(amps_ctx *ctx, amps__ana *T) {
-    amps__free(ctx, T->Up); amps__free(ctx, T->Ui); amps__free(ctx, T->Cr); amps__free(ctx, T->cc);
-    amps__free(ctx, T->gpar); amps__free(ctx, T->tw);
+    amps__free(ctx, T->Up);
+    amps__free(ctx, T->Ui);
+    amps__free(ctx, T->Cr);
+    amps__free(ctx, T->cc);
+    amps__free(ctx, T->gpar);
+    amps__free(ctx, T->tw);
 }
 
 static amps_status amps__analyze_oom(amps_ctx *ctx, amps_int n, amps_int nnzA) {
@@ -3019,15 +3545,23 @@ static amps_status amps__analyze_permute(amps_ctx *ctx, const amps_csc *A, amps_
         for (p = A->p[j]; p < A->p[j + 1]; p++) {
             amps_int i = A->i[p], a = F->iperm[i], b = F->iperm[j];
             if (stype == AMPS_FULL && i > j) continue;
-            if (a > b) { amps_int t = a; a = b; b = t; }
+            if (a > b) {
+                amps_int t = a;
+                a = b;
+                b = t;
+            }
             Up[b]++;
             nnzC++;
             if (a == b) P->dsrc[a] = p;
             else P->Sp[a]++;
         }
     for (k = 0, p = 0, q = 0; k < n; k++) {
-        amps_int t = Up[k]; Up[k] = p; p += t;
-        t = P->Sp[k]; P->Sp[k] = q; q += t;
+        amps_int t = Up[k];
+        Up[k] = p;
+        p += t;
+        t = P->Sp[k];
+        P->Sp[k] = q;
+        q += t;
     }
     Up[n] = p;
     P->Sp[n] = q;
@@ -3038,14 +3572,25 @@ static amps_status amps__analyze_permute(amps_ctx *ctx, const amps_csc *A, amps_
     if (!T->Ui || !T->Cr || !P->Ssrc || !P->Sdst) return amps__analyze_oom(ctx, n, A->p[n]);
     {
         amps_int *wu = T->tw, *wl = T->tw + n;
-        for (k = 0; k < n; k++) { wu[k] = Up[k]; wl[k] = P->Sp[k]; }
+        for (k = 0; k < n; k++) {
+            wu[k] = Up[k];
+            wl[k] = P->Sp[k];
+        }
         for (j = 0; j < n; j++)
             for (p = A->p[j]; p < A->p[j + 1]; p++) {
                 amps_int i = A->i[p], a = F->iperm[i], b = F->iperm[j];
                 if (stype == AMPS_FULL && i > j) continue;
-                if (a > b) { amps_int t = a; a = b; b = t; }
+                if (a > b) {
+                    amps_int t = a;
+                    a = b;
+                    b = t;
+                }
                 T->Ui[wu[b]++] = a;
-                if (a != b) { q = wl[a]++; T->Cr[q] = b; P->Ssrc[q] = p; }
+                if (a != b) {
+                    q = wl[a]++;
+                    T->Cr[q] = b;
+                    P->Ssrc[q] = p;
+                }
             }
     }
     return AMPS_OK;
@@ -3108,7 +3653,10 @@ static void amps__analyze_lpattern(amps_factor *F, amps__ana *T) {
     const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
     amps_int n = F->n, ng = P->ng, *cnt = T->tw, *mark = T->tw + n, *Lp = F->Lp, *Li = F->Li, k, p, g, c;
     const amps_int *gs = P->gs, *cgrp = P->cgrp, *gpar = T->gpar;
-    for (g = 0; g < ng; g++) { cnt[g] = 0; mark[g] = -1; }
+    for (g = 0; g < ng; g++) {
+        cnt[g] = 0;
+        mark[g] = -1;
+    }
     for (k = 0; k < n; k++) {
         amps_int gi = cgrp[k];
         for (p = T->Up[k]; p < T->Up[k + 1]; p++) {
@@ -3180,11 +3728,17 @@ static amps_int amps__analyze_split(amps_factor *F, const amps__ana *T, double *
     }
     for (g = 0; g < ng; g++) chead[g] = -1;
     for (g = ng - 1; g >= 0; g--)
-        if (gpar[g] >= 0) { cnext[g] = chead[gpar[g]]; chead[gpar[g]] = g; }
+        if (gpar[g] >= 0) {
+            cnext[g] = chead[gpar[g]];
+            chead[gpar[g]] = g;
+        }
     for (g = 0; g < ng; g++) {
         sw[g] += gw[g];
         if (gpar[g] >= 0) sw[gpar[g]] += sw[g];
-        else { cand[ncand++] = g; subtot += sw[g]; }
+        else {
+            cand[ncand++] = g;
+            subtot += sw[g];
+        }
         P->gsub[g] = -2;
         total += gw[g];
     }
@@ -3204,7 +3758,10 @@ static amps_int amps__analyze_split(amps_factor *F, const amps__ana *T, double *
     P->work = total;
     for (i = 1; i < ncand; i++) {
         amps_int t = cand[i], m2 = i;
-        while (m2 > 0 && sw[cand[m2 - 1]] < sw[t]) { cand[m2] = cand[m2 - 1]; m2--; }
+        while (m2 > 0 && sw[cand[m2 - 1]] < sw[t]) {
+            cand[m2] = cand[m2 - 1];
+            m2--;
+        }
         cand[m2] = t;
     }
     return ncand;
@@ -3217,10 +3774,15 @@ static amps_status amps__analyze_subtrees(amps_ctx *ctx, amps_factor *F, amps__a
     amps_int ng = P->ng, n = F->n, nsub, ntop, i, g, k, *tw = T->tw;
     double *gw = AMPS__CAST(double *, amps__malloc(ctx, (size_t)ng * 2, sizeof(double)));
     amps_int *cand = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
-    if (!gw || !cand) { amps__free(ctx, gw); amps__free(ctx, cand); return amps__analyze_oom(ctx, n, P->nnzA); }
+    if (!gw || !cand) {
+        amps__free(ctx, gw);
+        amps__free(ctx, cand);
+        return amps__analyze_oom(ctx, n, P->nnzA);
+    }
     nsub = amps__analyze_split(F, T, gw, gw + ng, cand, tw + 2 * n, tw + 3 * n, &ntop);
     for (i = 0; i < nsub; i++) P->gsub[cand[i]] = i;
-    amps__free(ctx, gw); amps__free(ctx, cand);
+    amps__free(ctx, gw);
+    amps__free(ctx, cand);
     for (g = ng - 1; g >= 0; g--)
         if (P->gsub[g] == -2) P->gsub[g] = P->gsub[T->gpar[g]];
     P->nsub = nsub;
@@ -3263,15 +3825,15 @@ AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype 
     if (!F) return NULL;
     memset(&T, 0, sizeof(T));
     st = amps__analyze_alloc(ctx, A, stype, F, &T);
-    if (st == AMPS_OK) st = amps__analyze_order(ctx, A, stype, opts, F);  /* perm, iperm */
-    if (st == AMPS_OK) st = amps__analyze_permute(ctx, A, stype, F, &T);  /* pattern of P A P^T */
-    if (st == AMPS_OK) st = amps__analyze_counts(ctx, F, &T);             /* etree, column counts, Lp */
-    if (st == AMPS_OK) st = amps__analyze_groups(ctx, F, &T);             /* column groups, L allocated */
+    if (st == AMPS_OK) st = amps__analyze_order(ctx, A, stype, opts, F); /* perm, iperm */
+    if (st == AMPS_OK) st = amps__analyze_permute(ctx, A, stype, F, &T); /* pattern of P A P^T */
+    if (st == AMPS_OK) st = amps__analyze_counts(ctx, F, &T);            /* etree, column counts, Lp */
+    if (st == AMPS_OK) st = amps__analyze_groups(ctx, F, &T);            /* column groups, L allocated */
     if (st == AMPS_OK) {
-        amps__analyze_lpattern(F, &T);                                     /* Li */
-        amps__analyze_scatter(F, &T);                                      /* map of A into L */
+        amps__analyze_lpattern(F, &T); /* Li */
+        amps__analyze_scatter(F, &T);  /* map of A into L */
         amps__analyze_height(F, T.tw);
-        st = amps__analyze_subtrees(ctx, F, &T);                           /* parallel split */
+        st = amps__analyze_subtrees(ctx, F, &T); /* parallel split */
     }
     if (st == AMPS_OK) st = amps__analyze_workspace(ctx, A, F);
     amps__ana_free(ctx, &T);
@@ -3559,7 +4121,10 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
 #endif
         for (q = P->subp[i]; q < P->subp[i + 1]; q++) {
             amps_int col = amps__fgroup(F, P, Ax, P->subg[q], iw, i);
-            if (col >= 0) { P->fail[i] = col; break; }
+            if (col >= 0) {
+                P->fail[i] = col;
+                break;
+            }
         }
     }
     for (i = 0; i < nsub; i++)
@@ -3577,7 +4142,8 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
                 continue;
             }
 #endif
-            (void)s; (void)e;
+            (void)s;
+            (void)e;
             bad = amps__fgroup(F, P, Ax, J, P->iwork, -1);
         }
     }
@@ -3588,7 +4154,8 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
             if (A->i[p] == F->perm[bad]) acc = Ax[p];
         return amps__err(ctx, AMPS_ERR_NOT_SPD,
                          "amps_factorize: matrix not positive definite: pivot %.3g at column %lld (original numbering; "
-                         "diagonal %.3g)", F->D[bad], (long long)F->perm[bad], acc);
+                         "diagonal %.3g)",
+                         F->D[bad], (long long)F->perm[bad], acc);
     }
     F->is_numeric = 1;
     return AMPS_OK;
@@ -3642,19 +4209,26 @@ static void amps__isort(amps_int *a, amps_int n) {
         for (k = i; (c = 2 * k + 1) < n; k = c) {
             if (c + 1 < n && a[c + 1] > a[c]) c++;
             if (a[k] >= a[c]) break;
-            t = a[k]; a[k] = a[c]; a[c] = t;
+            t = a[k];
+            a[k] = a[c];
+            a[c] = t;
         }
     for (end = n - 1; end > 0; end--) {
-        t = a[0]; a[0] = a[end]; a[end] = t;
+        t = a[0];
+        a[0] = a[end];
+        a[end] = t;
         for (k = 0; (c = 2 * k + 1) < end; k = c) {
             if (c + 1 < end && a[c + 1] > a[c]) c++;
             if (a[k] >= a[c]) break;
-            t = a[k]; a[k] = a[c]; a[c] = t;
+            t = a[k];
+            a[k] = a[c];
+            a[c] = t;
         }
     }
 }
 
-AMPS_API amps_int amps_closure(const amps_factor *F, amps_int nidx, const amps_int *idx, amps_int *out, amps_marker *m) {
+AMPS_API amps_int amps_closure(const amps_factor *F, amps_int nidx, const amps_int *idx, amps_int *out,
+                               amps_marker *m) {
     amps_int k, cnt = 0, j, lg = 0;
     amps_int *mark = m->mark;
     amps_marker_next(m);
@@ -3741,11 +4315,23 @@ static void amps__bwd_rows(const amps_factor *F, amps_int c0, amps_int cl, amps_
             double t0 = 0, t1 = 0, t2 = 0, t3 = 0, t4 = 0, t5 = 0, t6 = 0, t7 = 0;
             for (p = 0; p < ns; p++) {
                 double xs = x[S[p]];
-                t0 += s0[p] * xs; t1 += s1[p] * xs; t2 += s2[p] * xs; t3 += s3[p] * xs;
-                t4 += s4[p] * xs; t5 += s5[p] * xs; t6 += s6[p] * xs; t7 += s7[p] * xs;
+                t0 += s0[p] * xs;
+                t1 += s1[p] * xs;
+                t2 += s2[p] * xs;
+                t3 += s3[p] * xs;
+                t4 += s4[p] * xs;
+                t5 += s5[p] * xs;
+                t6 += s6[p] * xs;
+                t7 += s7[p] * xs;
             }
-            x[c] -= t0; x[c + 1] -= t1; x[c + 2] -= t2; x[c + 3] -= t3;
-            x[c + 4] -= t4; x[c + 5] -= t5; x[c + 6] -= t6; x[c + 7] -= t7;
+            x[c] -= t0;
+            x[c + 1] -= t1;
+            x[c + 2] -= t2;
+            x[c + 3] -= t3;
+            x[c + 4] -= t4;
+            x[c + 5] -= t5;
+            x[c + 6] -= t6;
+            x[c + 7] -= t7;
             c += 8;
         } else if (kc >= 4) {
             const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1);
@@ -3753,27 +4339,40 @@ static void amps__bwd_rows(const amps_factor *F, amps_int c0, amps_int cl, amps_
             double t0 = 0, t1 = 0, t2 = 0, t3 = 0;
             for (p = 0; p < ns; p++) {
                 double xs = x[S[p]];
-                t0 += s0[p] * xs; t1 += s1[p] * xs; t2 += s2[p] * xs; t3 += s3[p] * xs;
+                t0 += s0[p] * xs;
+                t1 += s1[p] * xs;
+                t2 += s2[p] * xs;
+                t3 += s3[p] * xs;
             }
-            x[c] -= t0; x[c + 1] -= t1; x[c + 2] -= t2; x[c + 3] -= t3;
+            x[c] -= t0;
+            x[c + 1] -= t1;
+            x[c + 2] -= t2;
+            x[c + 3] -= t3;
             c += 4;
         } else if (kc == 3) {
-            const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1), *s2 = Lx + Lp[c + 2] + (ke - c - 2);
+            const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1),
+                         *s2 = Lx + Lp[c + 2] + (ke - c - 2);
             double t0 = 0, t1 = 0, t2 = 0;
             for (p = 0; p < ns; p++) {
                 double xs = x[S[p]];
-                t0 += s0[p] * xs; t1 += s1[p] * xs; t2 += s2[p] * xs;
+                t0 += s0[p] * xs;
+                t1 += s1[p] * xs;
+                t2 += s2[p] * xs;
             }
-            x[c] -= t0; x[c + 1] -= t1; x[c + 2] -= t2;
+            x[c] -= t0;
+            x[c + 1] -= t1;
+            x[c + 2] -= t2;
             c += 3;
         } else if (kc == 2) {
             const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1);
             double t0 = 0, t1 = 0;
             for (p = 0; p < ns; p++) {
                 double xs = x[S[p]];
-                t0 += s0[p] * xs; t1 += s1[p] * xs;
+                t0 += s0[p] * xs;
+                t1 += s1[p] * xs;
             }
-            x[c] -= t0; x[c + 1] -= t1;
+            x[c] -= t0;
+            x[c + 1] -= t1;
             c += 2;
         } else {
             const double *s0 = Lx + Lp[c] + (ke - c);
@@ -3807,8 +4406,10 @@ static void amps__bwd(const amps_factor *F, amps_int c0, amps_int ke, double *x)
 AMPS_API void amps_lsolve(const amps_factor *F, double *x) {
     const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
     amps_int g, c;
-    if (P) for (g = 0; g < P->ng; g++) amps__fwd(F, P->gs[g], P->gs[g + 1] - 1, x);
-    else for (c = 0; c < F->n; c++) amps__fwd(F, c, c, x);
+    if (P)
+        for (g = 0; g < P->ng; g++) amps__fwd(F, P->gs[g], P->gs[g + 1] - 1, x);
+    else
+        for (c = 0; c < F->n; c++) amps__fwd(F, c, c, x);
 }
 
 AMPS_API void amps_dsolve(const amps_factor *F, double *x) {
@@ -3819,16 +4420,21 @@ AMPS_API void amps_dsolve(const amps_factor *F, double *x) {
 AMPS_API void amps_ltsolve(const amps_factor *F, double *x) {
     const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
     amps_int g, c;
-    if (P) for (g = P->ng - 1; g >= 0; g--) amps__bwd(F, P->gs[g], P->gs[g + 1] - 1, x);
-    else for (c = F->n - 1; c >= 0; c--) amps__bwd(F, c, c, x);
+    if (P)
+        for (g = P->ng - 1; g >= 0; g--) amps__bwd(F, P->gs[g], P->gs[g + 1] - 1, x);
+    else
+        for (c = F->n - 1; c >= 0; c--) amps__bwd(F, c, c, x);
 }
 
 /* amps__bwd of columns c0..ke of a group on nthr threads when it is large: x(c) -= L(S, c)^T x(S)
    is independent per column, so blocks of 8 columns go to the threads; then the triangle. */
 static void amps__bwd_par(const amps_factor *F, amps_int c0, amps_int ke, double *x, int nthr) {
     amps_int nb = (ke + 1 - c0) / 8, b;
-    if (nb < 2 || (double)(F->Lp[ke + 1] - F->Lp[c0]) < 1e5) { amps__bwd(F, c0, ke, x); return; }
-    (void)nthr;                                      /* used by the pragma only */
+    if (nb < 2 || (double)(F->Lp[ke + 1] - F->Lp[c0]) < 1e5) {
+        amps__bwd(F, c0, ke, x);
+        return;
+    }
+    (void)nthr; /* used by the pragma only */
 #ifdef _OPENMP
 #pragma omp parallel for schedule(static) num_threads(nthr)
 #endif
@@ -3850,7 +4456,10 @@ static int amps__par_bwd(const amps_factor *F, int nthr) {
 static void amps__ltsolve_par(const amps_factor *F, double *x, int nthr) {
     const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
     amps_int i;
-    if (!amps__par_bwd(F, nthr)) { amps_ltsolve(F, x); return; }
+    if (!amps__par_bwd(F, nthr)) {
+        amps_ltsolve(F, x);
+        return;
+    }
     for (i = P->ntop - 1; i >= 0; i--) amps__bwd_par(F, P->gs[P->topg[i]], P->gs[P->topg[i] + 1] - 1, x, nthr);
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) num_threads(nthr)
@@ -3881,7 +4490,10 @@ static void amps__ltsolve_closure_par(const amps_factor *F, amps_int cnt, const 
                                       amps_int *iw) {
     amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
     amps_int k, j, nr = 0, i;
-    if (!amps__par_bwd(F, nthr)) { amps_ltsolve_closure(F, cnt, closure, y); return; }
+    if (!amps__par_bwd(F, nthr)) {
+        amps_ltsolve_closure(F, cnt, closure, y);
+        return;
+    }
     for (k = cnt - 1; k >= 0; k = j - 1) {
         amps_int ke = closure[k];
         j = amps__run_start(F, closure, k);
@@ -3984,21 +4596,33 @@ static void amps__solve4(const amps_factor *F, double *w) {
         const double x0 = w[4 * c], x1 = w[4 * c + 1], x2 = w[4 * c + 2], x3 = w[4 * c + 3];
         for (p = Lp[c]; p < Lp[c + 1]; p++) {
             double l = Lx[p], *y = w + 4 * (size_t)Li[p];
-            y[0] -= l * x0; y[1] -= l * x1; y[2] -= l * x2; y[3] -= l * x3;
+            y[0] -= l * x0;
+            y[1] -= l * x1;
+            y[2] -= l * x2;
+            y[3] -= l * x3;
         }
     }
     for (c = 0; c < n; c++) {
         double d = F->D[c];
-        w[4 * c] /= d; w[4 * c + 1] /= d; w[4 * c + 2] /= d; w[4 * c + 3] /= d;
+        w[4 * c] /= d;
+        w[4 * c + 1] /= d;
+        w[4 * c + 2] /= d;
+        w[4 * c + 3] /= d;
     }
     for (c = n - 1; c >= 0; c--) {
         double t0 = 0, t1 = 0, t2 = 0, t3 = 0;
         for (p = Lp[c]; p < Lp[c + 1]; p++) {
             double l = Lx[p];
             const double *y = w + 4 * (size_t)Li[p];
-            t0 += l * y[0]; t1 += l * y[1]; t2 += l * y[2]; t3 += l * y[3];
+            t0 += l * y[0];
+            t1 += l * y[1];
+            t2 += l * y[2];
+            t3 += l * y[3];
         }
-        w[4 * c] -= t0; w[4 * c + 1] -= t1; w[4 * c + 2] -= t2; w[4 * c + 3] -= t3;
+        w[4 * c] -= t0;
+        w[4 * c + 1] -= t1;
+        w[4 * c + 2] -= t2;
+        w[4 * c + 3] -= t3;
     }
 }
 
@@ -4054,14 +4678,19 @@ AMPS_API amps_status amps_condest(amps_ctx *ctx, const amps_csc *K, amps_stype s
     if (!K || !F || !cond || !K->p || (K->p[K->ncol] > 0 && !K->i) || !K->x)
         return amps__err(ctx, AMPS_ERR_ARG, "amps_condest: NULL argument");
     if (K->nrow != K->ncol || K->ncol != F->n)
-        return amps__err(ctx, AMPS_ERR_ARG, "amps_condest: K is %lld x %lld, the factor has order %lld", (long long)K->nrow,
-                         (long long)K->ncol, (long long)F->n);
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_condest: K is %lld x %lld, the factor has order %lld",
+                         (long long)K->nrow, (long long)K->ncol, (long long)F->n);
     if (!F->is_numeric) return amps__err(ctx, AMPS_ERR_STATE, "amps_condest: factor has no numeric values");
     n = F->n;
-    if (n == 0) { *cond = 0; return AMPS_OK; }
+    if (n == 0) {
+        *cond = 0;
+        return AMPS_OK;
+    }
     w = work ? work : AMPS__CAST(double *, amps__malloc(ctx, 3 * (size_t)n, sizeof(double)));
     if (!w) return AMPS_ERR_OOM;
-    x = w; y = w + n; sw = w + 2 * (size_t)n;
+    x = w;
+    y = w + n;
+    sw = w + 2 * (size_t)n;
     /* ||K||_1: largest absolute column sum of the symmetric matrix (the other triangle mirrored) */
     for (j = 0; j < n; j++) y[j] = 0;
     for (j = 0; j < n; j++)
@@ -4071,7 +4700,8 @@ AMPS_API amps_status amps_condest(amps_ctx *ctx, const amps_csc *K, amps_stype s
             y[j] += a;
             if (i != j && stype != AMPS_FULL) y[i] += a;
         }
-    for (j = 0; j < n; j++) if (y[j] > knorm) knorm = y[j];
+    for (j = 0; j < n; j++)
+        if (y[j] > knorm) knorm = y[j];
     /* Hager: maximize ||K^{-1} x||_1 over ||x||_1 = 1 (K^{-1} symmetric, so K^{-T} = K^{-1}) */
     for (j = 0; j < n; j++) x[j] = 1.0 / (double)n;
     for (it = 0; it < 5; it++) {
@@ -4081,10 +4711,15 @@ AMPS_API amps_status amps_condest(amps_ctx *ctx, const amps_csc *K, amps_stype s
         if (it > 0 && ny <= est) break;
         est = ny;
         for (j = 0; j < n; j++) y[j] = y[j] >= 0 ? 1.0 : -1.0;
-        if ((s = amps_solve(ctx, F, y, y, sw)) != AMPS_OK) goto done;   /* z = K^{-1} sign(K^{-1} x) */
+        if ((s = amps_solve(ctx, F, y, y, sw)) != AMPS_OK) goto done; /* z = K^{-1} sign(K^{-1} x) */
         for (j = 0; j < n; j++) zx += y[j] * x[j];
-        jmax = 0; zmax = fabs(y[0]);
-        for (j = 1; j < n; j++) if (fabs(y[j]) > zmax) { zmax = fabs(y[j]); jmax = j; }
+        jmax = 0;
+        zmax = fabs(y[0]);
+        for (j = 1; j < n; j++)
+            if (fabs(y[j]) > zmax) {
+                zmax = fabs(y[j]);
+                jmax = j;
+            }
         if (it > 0 && (zmax <= zx || jmax == jlast)) break;
         jlast = jmax;
         for (j = 0; j < n; j++) x[j] = 0;
@@ -4096,7 +4731,10 @@ AMPS_API amps_status amps_condest(amps_ctx *ctx, const amps_csc *K, amps_stype s
     for (j = 0; j < n; j++) alt += fabs(y[j]);
     alt = 2.0 * alt / (3.0 * (double)n);
     if (alt > est) est = alt;
-    if (!amps__isfinite(est * knorm)) { s = amps__err(ctx, AMPS_ERR_VALUE, "amps_condest: estimate not finite"); goto done; }
+    if (!amps__isfinite(est * knorm)) {
+        s = amps__err(ctx, AMPS_ERR_VALUE, "amps_condest: estimate not finite");
+        goto done;
+    }
     *cond = est * knorm;
 done:
     if (!work) amps__free(ctx, w);
@@ -4137,127 +4775,150 @@ done:
    ones: O(|U|^2 (r + k)) for r changed and k new columns. Where a transform exceeds its bounds
    (AMPS__DMULT, AMPS__DLMAX, the pivot test) the commit refactors from that column on. */
 
-#define AMPS__UMOD 1u  /* index in S */
-#define AMPS__UCON 2u  /* index in C */
-#define AMPS__NB 32    /* dense panel width */
-#define AMPS__TB 64    /* diagonal block of the panel's triangular solve */
-#define AMPS__DMAX 48      /* most changed dense columns amps__lu_drop moves in one commit */
-#define AMPS__DMULT 8.0    /* largest multiplier amps__lu_drop accepts */
-#define AMPS__DLMAX 64.0   /* largest entry of L it may create */
-#define AMPS__VB 16    /* right-hand sides per chunk of Step 1 */
+#define AMPS__UMOD 1u    /* index in S */
+#define AMPS__UCON 2u    /* index in C */
+#define AMPS__NB 32      /* dense panel width */
+#define AMPS__TB 64      /* diagonal block of the panel's triangular solve */
+#define AMPS__DMAX 48    /* most changed dense columns amps__lu_drop moves in one commit */
+#define AMPS__DMULT 8.0  /* largest multiplier amps__lu_drop accepts */
+#define AMPS__DLMAX 64.0 /* largest entry of L it may create */
+#define AMPS__VB 16      /* right-hand sides per chunk of Step 1 */
 
 /* A recorded change K^[r, c] += v (and K^[c, r] += v). */
-typedef struct amps__pdelta { amps_int r, c; double v; } amps__pdelta;
+typedef struct amps__pdelta {
+    amps_int r, c;
+    double v;
+} amps__pdelta;
 /* A recorded constraint change: x_i = v, or its release. */
-typedef struct amps__pcon { amps_int i; int release; double v; } amps__pcon;
+typedef struct amps__pcon {
+    amps_int i;
+    int release;
+    double v;
+} amps__pcon;
 /* Delta row header of position pos before the commit. */
-typedef struct amps__djour { amps_int pos, start, len, cap; } amps__djour;
+typedef struct amps__djour {
+    amps_int pos, start, len, cap;
+} amps__djour;
 /* Kind and prescribed value of position pos before the commit. */
-typedef struct amps__kjour { amps_int pos; unsigned char kind; double g; } amps__kjour;
+typedef struct amps__kjour {
+    amps_int pos;
+    unsigned char kind;
+    double g;
+} amps__kjour;
 
 struct amps_update {
-    const amps_factor *F;                  /* base factor: the one given, or refac.F_own */
+    const amps_factor *F; /* base factor: the one given, or refac.F_own */
     amps_formulation form;
-    double singular_tol;                   /* pivot test of the dense LU (opts.singular_tol) */
-    double sigma;                          /* K-bar's diagonal on appended DOFs */
-    int grow;                              /* capacities grow on demand (opts.grow) */
-    int refine;                            /* refinement steps of a full solve (opts.refine) */
-    int xs_from_dense;                     /* x_U from the dense system (opts.xs_from_dense) */
-    int nthr;                              /* threads of the kernels */
-    int nbuf;                              /* threads the per-thread buffers are sized for (>= nthr) */
-    amps_int n, N, cap_N;                  /* base order, committed order n + k, capacity of N */
-    struct {                               /* the base matrix */
-        amps_int *Kp, *Ki; double *Kx;     /* K, both triangles, original numbering */
-        double *inv_sqrt_d;                /* n: D^{-1/2} */
+    double singular_tol;  /* pivot test of the dense LU (opts.singular_tol) */
+    double sigma;         /* K-bar's diagonal on appended DOFs */
+    int grow;             /* capacities grow on demand (opts.grow) */
+    int refine;           /* refinement steps of a full solve (opts.refine) */
+    int xs_from_dense;    /* x_U from the dense system (opts.xs_from_dense) */
+    int nthr;             /* threads of the kernels */
+    int nbuf;             /* threads the per-thread buffers are sized for (>= nthr) */
+    amps_int n, N, cap_N; /* base order, committed order n + k, capacity of N */
+    struct {              /* the base matrix */
+        amps_int *Kp, *Ki;
+        double *Kx;         /* K, both triangles, original numbering */
+        double *inv_sqrt_d; /* n: D^{-1/2} */
     } base;
-    struct {                               /* forces and ct = D^{-1/2} L^{-1} P^T f_ct */
-        double *f;                         /* cap_N: f^ */
-        double *ct;                        /* n, permuted */
-        double *f_ct;                      /* n: the base forces ct was computed from */
-        amps_int *changed, n_changed;      /* n: base forces changed since ct was updated */
-        int changed_all;                   /* the list overflowed: recompute ct in full */
-        amps_int n_increments;             /* sparse updates of ct since its last full solve */
+    struct {                          /* forces and ct = D^{-1/2} L^{-1} P^T f_ct */
+        double *f;                    /* cap_N: f^ */
+        double *ct;                   /* n, permuted */
+        double *f_ct;                 /* n: the base forces ct was computed from */
+        amps_int *changed, n_changed; /* n: base forces changed since ct was updated */
+        int changed_all;              /* the list overflowed: recompute ct in full */
+        amps_int n_increments;        /* sparse updates of ct since its last full solve */
     } force;
-    struct {                               /* changes recorded since the last commit */
-        amps__pdelta *delta; amps_int n_delta, cap_delta;   /* K^ entries */
-        amps__pcon *con; amps_int n_con, cap_con;           /* constraints */
-        amps_int n_dofs;                   /* appended DOFs */
+    struct { /* changes recorded since the last commit */
+        amps__pdelta *delta;
+        amps_int n_delta, cap_delta; /* K^ entries */
+        amps__pcon *con;
+        amps_int n_con, cap_con; /* constraints */
+        amps_int n_dofs;         /* appended DOFs */
     } pending;
-    struct {                               /* the index set U = S u C */
-        amps_int size, cap;                /* |U| and capacity */
-        amps_int *idx;                     /* U position -> index */
-        amps_int *pos;                     /* cap_N: index -> U position or -1 */
-        unsigned char *kind;               /* AMPS__UMOD | AMPS__UCON per position */
-        double *g;                         /* prescribed values (constrained positions) */
+    struct {                 /* the index set U = S u C */
+        amps_int size, cap;  /* |U| and capacity */
+        amps_int *idx;       /* U position -> index */
+        amps_int *pos;       /* cap_N: index -> U position or -1 */
+        unsigned char *kind; /* AMPS__UMOD | AMPS__UCON per position */
+        double *g;           /* prescribed values (constrained positions) */
     } aug;
-    struct {                               /* memoized W columns (base positions) in a pool */
-        size_t *off; amps_int *len;        /* per position: start in the pool, length (root path) */
-        double *val; amps_int *idx;        /* the pool: values and rows (permuted numbering) */
-        size_t used, cap;                  /* pool entries used, capacity */
+    struct { /* memoized W columns (base positions) in a pool */
+        size_t *off;
+        amps_int *len; /* per position: start in the pool, length (root path) */
+        double *val;
+        amps_int *idx;    /* the pool: values and rows (permuted numbering) */
+        size_t used, cap; /* pool entries used, capacity */
     } memo;
-    struct {                               /* Delta rows (U positions) in a pool */
-        amps_int *row_start, *row_len, *row_cap;  /* per position */
-        amps_int *col; double *val;        /* the pool: columns (U positions) and values */
-        amps_int used, cap;                /* pool entries used, capacity */
-        amps_marker touched;               /* aug.cap: rows the commit changes */
-        amps_int *n_add;                   /* aug.cap: entries the commit adds to each */
+    struct {                                     /* Delta rows (U positions) in a pool */
+        amps_int *row_start, *row_len, *row_cap; /* per position */
+        amps_int *col;
+        double *val;         /* the pool: columns (U positions) and values */
+        amps_int used, cap;  /* pool entries used, capacity */
+        amps_marker touched; /* aug.cap: rows the commit changes */
+        amps_int *n_add;     /* aug.cap: entries the commit adds to each */
     } delta;
-    struct {                               /* the dense system A = I~ + G Delta~ and P A Q = L U */
-        double *G, *LU;                    /* aug.cap x aug.cap, column major */
-        double *col_norm;                  /* column norms of A (pivot test) */
-        amps_int *row_perm;                /* P: factor row -> U position */
-        amps_int *col_order, *col_pos;     /* Q: factor column -> U position, and inverse */
-        amps_marker changed;               /* aug.cap: columns the commit changes */
-        double *panel;                     /* max(nbuf, 4) * aug.cap column buffers */
-        double *transforms;                /* 3 AMPS__DMAX aug.cap: row transforms of amps__lu_drop */
+    struct {                           /* the dense system A = I~ + G Delta~ and P A Q = L U */
+        double *G, *LU;                /* aug.cap x aug.cap, column major */
+        double *col_norm;              /* column norms of A (pivot test) */
+        amps_int *row_perm;            /* P: factor row -> U position */
+        amps_int *col_order, *col_pos; /* Q: factor column -> U position, and inverse */
+        amps_marker changed;           /* aug.cap: columns the commit changes */
+        double *panel;                 /* max(nbuf, 4) * aug.cap column buffers */
+        double *transforms;            /* 3 AMPS__DMAX aug.cap: row transforms of amps__lu_drop */
     } lu;
-    struct {                               /* state before the commit, for its rollback */
-        amps__djour *rows; amps_int n_rows;   /* aug.cap: Delta row headers */
-        amps__kjour *kinds; amps_int n_kinds; /* pending.cap_con: kinds and prescribed values */
+    struct { /* state before the commit, for its rollback */
+        amps__djour *rows;
+        amps_int n_rows; /* aug.cap: Delta row headers */
+        amps__kjour *kinds;
+        amps_int n_kinds; /* pending.cap_con: kinds and prescribed values */
     } journal;
-    struct {                               /* dense vectors (U positions) */
-        double *z, *rhs, *tmp;             /* Step 5 unknowns, Step 4 r, scratch */
-        double *y, *w;                     /* y = x_U, the forces w of the augmentation */
-        double *b;                         /* Step 5 right-hand side */
-        double *r_corr, *y_corr, *w_corr, *rho;  /* the refinement step's r, y, w and residual */
+    struct {                                    /* dense vectors (U positions) */
+        double *z, *rhs, *tmp;                  /* Step 5 unknowns, Step 4 r, scratch */
+        double *y, *w;                          /* y = x_U, the forces w of the augmentation */
+        double *b;                              /* Step 5 right-hand side */
+        double *r_corr, *y_corr, *w_corr, *rho; /* the refinement step's r, y, w and residual */
     } dense;
-    struct {                               /* workspace */
-        double *vec;                       /* nthr * n, zero between uses */
-        double *vec2;                      /* n: copy for the partial backward solve */
-        double *chunk; amps_int chunk_rows;   /* Step 1 chunks: nthr * chunk_rows * AMPS__VB */
-        amps_int *row_map, *closure;       /* Step 1: nthr * n each (row_map -1 between uses) */
-        amps_int *idx;                     /* n + cap_N */
-        double *resid;                     /* 2 * cap_N residual vectors */
-        amps_marker mark_n, mark_N;        /* over base nodes (n) and indices (cap_N) */
+    struct {          /* workspace */
+        double *vec;  /* nthr * n, zero between uses */
+        double *vec2; /* n: copy for the partial backward solve */
+        double *chunk;
+        amps_int chunk_rows;         /* Step 1 chunks: nthr * chunk_rows * AMPS__VB */
+        amps_int *row_map, *closure; /* Step 1: nthr * n each (row_map -1 between uses) */
+        amps_int *idx;               /* n + cap_N */
+        double *resid;               /* 2 * cap_N residual vectors */
+        amps_marker mark_n, mark_N;  /* over base nodes (n) and indices (cap_N) */
     } work;
-    struct {                               /* the solution */
-        double *x;                         /* cap_N */
-        double *react;                     /* aug.cap: reactions (K^ x - f^) at U positions */
-        int x_stale, has_x;                /* x is stale / x was computed at least once */
-        int react_stale, has_react;        /* reactions stale / computed */
-        int watched_stale;                 /* watched entries of x stale */
-        amps_int x_dim;                    /* order of the last solve */
-        amps_int n_rhs;                    /* dense.rhs[0..n_rhs-1] = W^T ct is current on base positions */
-        int commit_unsolved;               /* a commit since the last solve (its step times count) */
+    struct {                        /* the solution */
+        double *x;                  /* cap_N */
+        double *react;              /* aug.cap: reactions (K^ x - f^) at U positions */
+        int x_stale, has_x;         /* x is stale / x was computed at least once */
+        int react_stale, has_react; /* reactions stale / computed */
+        int watched_stale;          /* watched entries of x stale */
+        amps_int x_dim;             /* order of the last solve */
+        amps_int n_rhs;             /* dense.rhs[0..n_rhs-1] = W^T ct is current on base positions */
+        int commit_unsolved;        /* a commit since the last solve (its step times count) */
     } sol;
-    struct {                               /* accuracy guard */
-        double tol;                        /* 0: off */
-        double *ct;                        /* n: forward solve of the residual */
-        double *scratch;                   /* 2 * cap_N */
+    struct {             /* accuracy guard */
+        double tol;      /* 0: off */
+        double *ct;      /* n: forward solve of the residual */
+        double *scratch; /* 2 * cap_N */
     } guard;
-    struct {                               /* re-factorization */
-        amps_update_opts opts;             /* as created (for the engine of a new base) */
-        amps_factor *F_own; amps_csc *K_own;  /* base factor and matrix owned by the engine (after a swap) */
-        struct amps__bg *job;              /* the one in progress, or NULL */
-        double t_factor;                   /* measured (or estimated) factorization time */
-        double t_step_base, t_extra;       /* step time after the last swap, extra time since */
-        amps_int size_base;                /* |U| after the last swap */
+    struct {                   /* re-factorization */
+        amps_update_opts opts; /* as created (for the engine of a new base) */
+        amps_factor *F_own;
+        amps_csc *K_own;             /* base factor and matrix owned by the engine (after a swap) */
+        struct amps__bg *job;        /* the one in progress, or NULL */
+        double t_factor;             /* measured (or estimated) factorization time */
+        double t_step_base, t_extra; /* step time after the last swap, extra time since */
+        amps_int size_base;          /* |U| after the last swap */
     } refac;
-    struct {                               /* watch set */
-        amps_int n, n_closure, cap;        /* size, |closure_L of its base indices|, capacity */
+    struct {                        /* watch set */
+        amps_int n, n_closure, cap; /* size, |closure_L of its base indices|, capacity */
         amps_int *idx, *closure;
-        unsigned char *from_dense;         /* watched entry given by the dense system */
-        double *job_y, *job_xw;            /* the two-phase job in progress (NULL: none) */
+        unsigned char *from_dense; /* watched entry given by the dense system */
+        double *job_y, *job_xw;    /* the two-phase job in progress (NULL: none) */
     } watch;
     amps_update_stats stats;
 };
@@ -4293,13 +4954,15 @@ static amps_status amps__grow_u(amps_ctx *ctx, amps_update *U, amps_int cap) {
     G = AMPS__CAST(double *, amps__malloc(ctx, c * c, sizeof(double)));
     LU = AMPS__CAST(double *, amps__malloc(ctx, c * c, sizeof(double)));
     if (!G || !LU || amps_marker_init(ctx, &changed, cap) || amps_marker_init(ctx, &touched, cap)) {
-        amps__free(ctx, G); amps__free(ctx, LU); amps_marker_free(ctx, &changed); amps_marker_free(ctx, &touched);
+        amps__free(ctx, G);
+        amps__free(ctx, LU);
+        amps_marker_free(ctx, &changed);
+        amps_marker_free(ctx, &touched);
         return amps__err(ctx, AMPS_ERR_OOM, "amps_update: out of memory growing the dense system to %ld", (long)cap);
     }
     /* vector arrays: a failure leaves earlier ones larger, which is harmless */
     if (amps__realloc(ctx, (void **)&U->aug.idx, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->aug.kind, c, 1) ||
-        amps__realloc(ctx, (void **)&U->aug.g, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->aug.kind, c, 1) || amps__realloc(ctx, (void **)&U->aug.g, c, sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->memo.off, c, sizeof(size_t)) ||
         amps__realloc(ctx, (void **)&U->memo.len, c, sizeof(amps_int)) ||
         amps__realloc(ctx, (void **)&U->delta.row_start, c, sizeof(amps_int)) ||
@@ -4324,7 +4987,10 @@ static amps_status amps__grow_u(amps_ctx *ctx, amps_update *U, amps_int cap) {
         amps__realloc(ctx, (void **)&U->dense.w_corr, c, sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->dense.y_corr, c, sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->dense.rho, c, sizeof(double))) {
-        amps__free(ctx, G); amps__free(ctx, LU); amps_marker_free(ctx, &changed); amps_marker_free(ctx, &touched);
+        amps__free(ctx, G);
+        amps__free(ctx, LU);
+        amps_marker_free(ctx, &changed);
+        amps_marker_free(ctx, &touched);
         return amps__err(ctx, AMPS_ERR_OOM, "amps_update: out of memory growing to %ld modified indices", (long)cap);
     }
     {
@@ -4334,9 +5000,15 @@ static amps_status amps__grow_u(amps_ctx *ctx, amps_update *U, amps_int cap) {
             memcpy(LU + (size_t)j * c, U->lu.LU + (size_t)j * (size_t)old, sizeof(double) * (size_t)u);
         }
     }
-    amps__free(ctx, U->lu.G); amps__free(ctx, U->lu.LU);
-    amps_marker_free(ctx, &U->lu.changed); amps_marker_free(ctx, &U->delta.touched);
-    U->lu.G = G; U->lu.LU = LU; U->lu.changed = changed; U->delta.touched = touched; U->aug.cap = cap;
+    amps__free(ctx, U->lu.G);
+    amps__free(ctx, U->lu.LU);
+    amps_marker_free(ctx, &U->lu.changed);
+    amps_marker_free(ctx, &U->delta.touched);
+    U->lu.G = G;
+    U->lu.LU = LU;
+    U->lu.changed = changed;
+    U->delta.touched = touched;
+    U->aug.cap = cap;
     return AMPS_OK;
 }
 
@@ -4345,7 +5017,8 @@ static amps_status amps__need_u(amps_ctx *ctx, amps_update *U, amps_int need) {
     amps_int cap = U->aug.cap;
     if (U->aug.size + need <= cap) return AMPS_OK;
     if (!U->grow)
-        return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: %ld modified/constrained indices exceed cap_mod = %ld (raise it or set grow)",
+        return amps__err(ctx, AMPS_ERR_CAPACITY,
+                         "amps_update: %ld modified/constrained indices exceed cap_mod = %ld (raise it or set grow)",
                          (long)(U->aug.size + need), (long)cap);
     while (cap < U->aug.size + need) cap = cap * 2 + 16;
     return amps__grow_u(ctx, U, cap);
@@ -4355,7 +5028,8 @@ static amps_status amps__need_N(amps_ctx *ctx, amps_update *U, amps_int need) {
     amps_int cap = U->cap_N, old = U->cap_N, i;
     if (U->N + U->pending.n_dofs + need <= cap) return AMPS_OK;
     if (!U->grow)
-        return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: %ld appended DOFs exceed cap_new = %ld (raise it or set grow)",
+        return amps__err(ctx, AMPS_ERR_CAPACITY,
+                         "amps_update: %ld appended DOFs exceed cap_new = %ld (raise it or set grow)",
                          (long)(U->N + U->pending.n_dofs + need - U->n), (long)(cap - U->n));
     while (cap < U->N + U->pending.n_dofs + need) cap = cap + cap / 2 + 16;
     if (amps__realloc(ctx, (void **)&U->force.f, (size_t)cap, sizeof(double)) ||
@@ -4371,7 +5045,11 @@ static amps_status amps__need_N(amps_ctx *ctx, amps_update *U, amps_int need) {
         amps_marker_free(ctx, &U->work.mark_N);
         U->work.mark_N = m2;
     }
-    for (i = old; i < cap; i++) { U->force.f[i] = 0; U->sol.x[i] = 0; U->aug.pos[i] = -1; }
+    for (i = old; i < cap; i++) {
+        U->force.f[i] = 0;
+        U->sol.x[i] = 0;
+        U->aug.pos[i] = -1;
+    }
     U->cap_N = cap;
     return AMPS_OK;
 }
@@ -4379,17 +5057,23 @@ static amps_status amps__need_N(amps_ctx *ctx, amps_update *U, amps_int need) {
 static amps_status amps__need_pending(amps_ctx *ctx, amps_update *U, amps_int nd, amps_int nc) {
     if (U->pending.n_delta + nd > U->pending.cap_delta) {
         amps_int cap = U->pending.cap_delta;
-        if (!U->grow) return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: more than cap_pending = %ld changes recorded before a commit", (long)cap);
+        if (!U->grow)
+            return amps__err(ctx, AMPS_ERR_CAPACITY,
+                             "amps_update: more than cap_pending = %ld changes recorded before a commit", (long)cap);
         while (cap < U->pending.n_delta + nd) cap = cap * 2 + 64;
         if (amps__realloc(ctx, (void **)&U->pending.delta, (size_t)cap, sizeof(amps__pdelta))) return AMPS_ERR_OOM;
         U->pending.cap_delta = cap;
     }
     if (U->pending.n_con + nc > U->pending.cap_con) {
         amps_int cap = U->pending.cap_con;
-        if (!U->grow) return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: more than cap_pending = %ld constraint changes recorded before a commit", (long)cap);
+        if (!U->grow)
+            return amps__err(ctx, AMPS_ERR_CAPACITY,
+                             "amps_update: more than cap_pending = %ld constraint changes recorded before a commit",
+                             (long)cap);
         while (cap < U->pending.n_con + nc) cap = cap * 2 + 64;
         if (amps__realloc(ctx, (void **)&U->pending.con, (size_t)cap, sizeof(amps__pcon)) ||
-            amps__realloc(ctx, (void **)&U->journal.kinds, (size_t)cap, sizeof(amps__kjour))) return AMPS_ERR_OOM;
+            amps__realloc(ctx, (void **)&U->journal.kinds, (size_t)cap, sizeof(amps__kjour)))
+            return AMPS_ERR_OOM;
         U->pending.cap_con = cap;
     }
     return AMPS_OK;
@@ -4403,37 +5087,81 @@ static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t);
 AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     if (!U) return;
     amps__bg_discard(ctx, U);
-    amps_factor_free(ctx, U->refac.F_own); amps_csc_free(ctx, U->refac.K_own);
-    amps__free(ctx, U->base.Kp); amps__free(ctx, U->base.Ki); amps__free(ctx, U->base.Kx); amps__free(ctx, U->base.inv_sqrt_d);
-    amps__free(ctx, U->force.f); amps__free(ctx, U->force.ct); amps__free(ctx, U->force.f_ct); amps__free(ctx, U->force.changed);
-    amps__free(ctx, U->pending.delta); amps__free(ctx, U->pending.con);
-    amps__free(ctx, U->aug.idx); amps__free(ctx, U->aug.pos); amps__free(ctx, U->aug.kind); amps__free(ctx, U->aug.g);
-    amps__free(ctx, U->memo.off); amps__free(ctx, U->memo.len); amps__free(ctx, U->memo.val); amps__free(ctx, U->memo.idx);
-    amps__free(ctx, U->delta.row_start); amps__free(ctx, U->delta.row_len); amps__free(ctx, U->delta.row_cap);
-    amps__free(ctx, U->delta.col); amps__free(ctx, U->delta.val); amps__free(ctx, U->delta.n_add);
+    amps_factor_free(ctx, U->refac.F_own);
+    amps_csc_free(ctx, U->refac.K_own);
+    amps__free(ctx, U->base.Kp);
+    amps__free(ctx, U->base.Ki);
+    amps__free(ctx, U->base.Kx);
+    amps__free(ctx, U->base.inv_sqrt_d);
+    amps__free(ctx, U->force.f);
+    amps__free(ctx, U->force.ct);
+    amps__free(ctx, U->force.f_ct);
+    amps__free(ctx, U->force.changed);
+    amps__free(ctx, U->pending.delta);
+    amps__free(ctx, U->pending.con);
+    amps__free(ctx, U->aug.idx);
+    amps__free(ctx, U->aug.pos);
+    amps__free(ctx, U->aug.kind);
+    amps__free(ctx, U->aug.g);
+    amps__free(ctx, U->memo.off);
+    amps__free(ctx, U->memo.len);
+    amps__free(ctx, U->memo.val);
+    amps__free(ctx, U->memo.idx);
+    amps__free(ctx, U->delta.row_start);
+    amps__free(ctx, U->delta.row_len);
+    amps__free(ctx, U->delta.row_cap);
+    amps__free(ctx, U->delta.col);
+    amps__free(ctx, U->delta.val);
+    amps__free(ctx, U->delta.n_add);
     amps_marker_free(ctx, &U->delta.touched);
-    amps__free(ctx, U->lu.G); amps__free(ctx, U->lu.LU); amps__free(ctx, U->lu.col_norm);
-    amps__free(ctx, U->lu.row_perm); amps__free(ctx, U->lu.col_order); amps__free(ctx, U->lu.col_pos);
-    amps__free(ctx, U->lu.panel); amps__free(ctx, U->lu.transforms); amps_marker_free(ctx, &U->lu.changed);
-    amps__free(ctx, U->journal.rows); amps__free(ctx, U->journal.kinds);
-    amps__free(ctx, U->dense.z); amps__free(ctx, U->dense.rhs); amps__free(ctx, U->dense.tmp);
-    amps__free(ctx, U->dense.y); amps__free(ctx, U->dense.w); amps__free(ctx, U->dense.b);
-    amps__free(ctx, U->dense.r_corr); amps__free(ctx, U->dense.y_corr); amps__free(ctx, U->dense.w_corr); amps__free(ctx, U->dense.rho);
-    amps__free(ctx, U->work.vec); amps__free(ctx, U->work.vec2); amps__free(ctx, U->work.chunk);
-    amps__free(ctx, U->work.row_map); amps__free(ctx, U->work.closure); amps__free(ctx, U->work.idx); amps__free(ctx, U->work.resid);
-    amps_marker_free(ctx, &U->work.mark_n); amps_marker_free(ctx, &U->work.mark_N);
-    amps__free(ctx, U->sol.x); amps__free(ctx, U->sol.react);
-    amps__free(ctx, U->guard.ct); amps__free(ctx, U->guard.scratch);
-    amps__free(ctx, U->watch.idx); amps__free(ctx, U->watch.closure); amps__free(ctx, U->watch.from_dense);
+    amps__free(ctx, U->lu.G);
+    amps__free(ctx, U->lu.LU);
+    amps__free(ctx, U->lu.col_norm);
+    amps__free(ctx, U->lu.row_perm);
+    amps__free(ctx, U->lu.col_order);
+    amps__free(ctx, U->lu.col_pos);
+    amps__free(ctx, U->lu.panel);
+    amps__free(ctx, U->lu.transforms);
+    amps_marker_free(ctx, &U->lu.changed);
+    amps__free(ctx, U->journal.rows);
+    amps__free(ctx, U->journal.kinds);
+    amps__free(ctx, U->dense.z);
+    amps__free(ctx, U->dense.rhs);
+    amps__free(ctx, U->dense.tmp);
+    amps__free(ctx, U->dense.y);
+    amps__free(ctx, U->dense.w);
+    amps__free(ctx, U->dense.b);
+    amps__free(ctx, U->dense.r_corr);
+    amps__free(ctx, U->dense.y_corr);
+    amps__free(ctx, U->dense.w_corr);
+    amps__free(ctx, U->dense.rho);
+    amps__free(ctx, U->work.vec);
+    amps__free(ctx, U->work.vec2);
+    amps__free(ctx, U->work.chunk);
+    amps__free(ctx, U->work.row_map);
+    amps__free(ctx, U->work.closure);
+    amps__free(ctx, U->work.idx);
+    amps__free(ctx, U->work.resid);
+    amps_marker_free(ctx, &U->work.mark_n);
+    amps_marker_free(ctx, &U->work.mark_N);
+    amps__free(ctx, U->sol.x);
+    amps__free(ctx, U->sol.react);
+    amps__free(ctx, U->guard.ct);
+    amps__free(ctx, U->guard.scratch);
+    amps__free(ctx, U->watch.idx);
+    amps__free(ctx, U->watch.closure);
+    amps__free(ctx, U->watch.from_dense);
     amps__free(ctx, U);
 }
 
 /* Full symmetric copy (both triangles, sorted columns) of K given as its stype part. */
-static amps_status amps__sym_full(amps_ctx *ctx, const amps_csc *A, amps_stype stype, amps_int **Cp, amps_int **Ci, double **Cx) {
+static amps_status amps__sym_full(amps_ctx *ctx, const amps_csc *A, amps_stype stype, amps_int **Cp, amps_int **Ci,
+                                  double **Cx) {
     amps_int n = A->ncol, j, p, *cnt;
     *Cp = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)n + 1, sizeof(amps_int)));
     cnt = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)n + 1, sizeof(amps_int)));
-    *Ci = NULL; *Cx = NULL;
+    *Ci = NULL;
+    *Cx = NULL;
     if (!*Cp || !cnt) goto oom;
     for (j = 0; j < n; j++)
         for (p = A->p[j]; p < A->p[j + 1]; p++) {
@@ -4451,14 +5179,23 @@ static amps_status amps__sym_full(amps_ctx *ctx, const amps_csc *A, amps_stype s
         for (p = A->p[j]; p < A->p[j + 1]; p++) {
             amps_int i = A->i[p];
             double v = A->x ? A->x[p] : 0.0;
-            (*Ci)[cnt[i]] = j; (*Cx)[cnt[i]++] = v;       /* entry (j, i) stored in column i */
-            if (i != j && stype != AMPS_FULL) { (*Ci)[cnt[j]] = i; (*Cx)[cnt[j]++] = v; }
+            (*Ci)[cnt[i]] = j;
+            (*Cx)[cnt[i]++] = v; /* entry (j, i) stored in column i */
+            if (i != j && stype != AMPS_FULL) {
+                (*Ci)[cnt[j]] = i;
+                (*Cx)[cnt[j]++] = v;
+            }
         }
     amps__free(ctx, cnt);
     return AMPS_OK;
 oom:
-    amps__free(ctx, cnt); amps__free(ctx, *Cp); amps__free(ctx, *Ci); amps__free(ctx, *Cx);
-    *Cp = NULL; *Ci = NULL; *Cx = NULL;
+    amps__free(ctx, cnt);
+    amps__free(ctx, *Cp);
+    amps__free(ctx, *Ci);
+    amps__free(ctx, *Cx);
+    *Cp = NULL;
+    *Ci = NULL;
+    *Cx = NULL;
     return AMPS_ERR_OOM;
 }
 
@@ -4471,11 +5208,14 @@ static amps_status amps__create_opts(amps_ctx *ctx, const amps_update_opts *opts
     if (o->cap_mod <= 0) o->cap_mod = d.cap_mod;
     if (o->cap_new < 0) o->cap_new = 0;
     if (o->cap_pending <= 0) o->cap_pending = d.cap_pending;
-    if (!(o->singular_tol >= 0) || o->singular_tol >= 1) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_create: singular_tol must be in [0, 1)");
+    if (!(o->singular_tol >= 0) || o->singular_tol >= 1)
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_update_create: singular_tol must be in [0, 1)");
     if (!(o->refactor_ratio > 0)) o->refactor_ratio = d.refactor_ratio;
     if (o->refactor_threads <= 0) o->refactor_threads = d.refactor_threads;
-    if (o->refactor_order.method == AMPS_ORDER_GIVEN) o->refactor_order.method = d.refactor_order.method;  /* a given perm has the old order */
-    o->refactor_order.perm = NULL; o->refactor_order.coords = NULL;
+    if (o->refactor_order.method == AMPS_ORDER_GIVEN)
+        o->refactor_order.method = d.refactor_order.method; /* a given perm has the old order */
+    o->refactor_order.perm = NULL;
+    o->refactor_order.coords = NULL;
     return AMPS_OK;
 }
 
@@ -4497,7 +5237,8 @@ static amps_status amps__create_alloc(amps_ctx *ctx, amps_update *U, amps_int ca
     U->work.chunk = AMPS__CAST(double *, amps__malloc(ctx, nt * (size_t)U->work.chunk_rows * AMPS__VB, sizeof(double)));
     U->work.row_map = AMPS__CAST(amps_int *, amps__malloc(ctx, nt * (size_t)n, sizeof(amps_int)));
     U->work.closure = AMPS__CAST(amps_int *, amps__malloc(ctx, nt * (size_t)n, sizeof(amps_int)));
-    U->pending.delta = AMPS__CAST(amps__pdelta *, amps__malloc(ctx, (size_t)U->pending.cap_delta, sizeof(amps__pdelta)));
+    U->pending.delta =
+            AMPS__CAST(amps__pdelta *, amps__malloc(ctx, (size_t)U->pending.cap_delta, sizeof(amps__pdelta)));
     U->pending.con = AMPS__CAST(amps__pcon *, amps__malloc(ctx, (size_t)U->pending.cap_con, sizeof(amps__pcon)));
     U->memo.val = AMPS__CAST(double *, amps__malloc(ctx, U->memo.cap, sizeof(double)));
     U->memo.idx = AMPS__CAST(amps_int *, amps__malloc(ctx, U->memo.cap, sizeof(amps_int)));
@@ -4507,12 +5248,14 @@ static amps_status amps__create_alloc(amps_ctx *ctx, amps_update *U, amps_int ca
     U->work.resid = AMPS__CAST(double *, amps__malloc(ctx, 2 * (size_t)capN, sizeof(double)));
     U->guard.scratch = AMPS__CAST(double *, amps__malloc(ctx, 2 * (size_t)capN, sizeof(double)));
     U->guard.ct = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
-    if (!U->force.f || !U->sol.x || !U->aug.pos || !U->work.idx || !U->force.ct || !U->force.f_ct || !U->base.inv_sqrt_d ||
-        !U->force.changed || !U->work.vec || !U->work.vec2 || !U->work.chunk || !U->work.row_map || !U->work.closure ||
-        !U->pending.delta || !U->pending.con || !U->memo.val || !U->memo.idx || !U->delta.col || !U->delta.val ||
-        !U->journal.kinds || !U->work.resid || !U->guard.scratch || !U->guard.ct)
+    if (!U->force.f || !U->sol.x || !U->aug.pos || !U->work.idx || !U->force.ct || !U->force.f_ct ||
+        !U->base.inv_sqrt_d || !U->force.changed || !U->work.vec || !U->work.vec2 || !U->work.chunk ||
+        !U->work.row_map || !U->work.closure || !U->pending.delta || !U->pending.con || !U->memo.val || !U->memo.idx ||
+        !U->delta.col || !U->delta.val || !U->journal.kinds || !U->work.resid || !U->guard.scratch || !U->guard.ct)
         return AMPS_ERR_OOM;
-    if (amps_marker_init(ctx, &U->work.mark_n, n > 0 ? n : 1) || amps_marker_init(ctx, &U->work.mark_N, capN > 0 ? capN : 1)) return AMPS_ERR_OOM;
+    if (amps_marker_init(ctx, &U->work.mark_n, n > 0 ? n : 1) ||
+        amps_marker_init(ctx, &U->work.mark_N, capN > 0 ? capN : 1))
+        return AMPS_ERR_OOM;
     U->lu.G = AMPS__CAST(double *, amps__malloc(ctx, 1, sizeof(double)));
     U->lu.LU = AMPS__CAST(double *, amps__malloc(ctx, 1, sizeof(double)));
     if (!U->lu.G || !U->lu.LU) return AMPS_ERR_OOM;
@@ -4522,24 +5265,41 @@ static amps_status amps__create_alloc(amps_ctx *ctx, amps_update *U, amps_int ca
     return AMPS_OK;
 }
 
-AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_stype stype,
-                                         const amps_factor *F, const amps_update_opts *opts) {
+AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_stype stype, const amps_factor *F,
+                                         const amps_update_opts *opts) {
     amps_update_opts o;
     amps_update *U;
     amps_int n, j, p;
     double s = 0;
-    if (!K || !F) { amps__err(ctx, AMPS_ERR_ARG, "amps_update_create: NULL matrix or factor"); return NULL; }
-    if (!F->is_numeric) { amps__err(ctx, AMPS_ERR_STATE, "amps_update_create: the factor has no numeric values (call amps_factorize)"); return NULL; }
-    if (K->ncol != F->n || K->nrow != F->n) { amps__err(ctx, AMPS_ERR_ARG, "amps_update_create: K is %ldx%ld but the factor has order %ld", (long)K->nrow, (long)K->ncol, (long)F->n); return NULL; }
+    if (!K || !F) {
+        amps__err(ctx, AMPS_ERR_ARG, "amps_update_create: NULL matrix or factor");
+        return NULL;
+    }
+    if (!F->is_numeric) {
+        amps__err(ctx, AMPS_ERR_STATE, "amps_update_create: the factor has no numeric values (call amps_factorize)");
+        return NULL;
+    }
+    if (K->ncol != F->n || K->nrow != F->n) {
+        amps__err(ctx, AMPS_ERR_ARG, "amps_update_create: K is %ldx%ld but the factor has order %ld", (long)K->nrow,
+                  (long)K->ncol, (long)F->n);
+        return NULL;
+    }
     if (amps_csc_check(ctx, K, stype) != AMPS_OK) return NULL;
     if (amps__create_opts(ctx, opts, &o) != AMPS_OK) return NULL;
     n = F->n;
     U = AMPS__CAST(amps_update *, amps__calloc(ctx, 1, sizeof(amps_update)));
     if (!U) return NULL;
-    U->F = F; U->form = o.formulation; U->singular_tol = o.singular_tol; U->grow = o.grow;
-    U->refine = o.refine; U->xs_from_dense = o.xs_from_dense; U->guard.tol = o.guard_tol;
+    U->F = F;
+    U->form = o.formulation;
+    U->singular_tol = o.singular_tol;
+    U->grow = o.grow;
+    U->refine = o.refine;
+    U->xs_from_dense = o.xs_from_dense;
+    U->guard.tol = o.guard_tol;
     U->refac.opts = o;
-    U->n = n; U->N = n; U->cap_N = n + o.cap_new;
+    U->n = n;
+    U->N = n;
+    U->cap_N = n + o.cap_new;
 #ifdef _OPENMP
     U->nthr = ctx && ctx->nthreads > 0 ? ctx->nthreads : omp_get_max_threads();
 #else
@@ -4550,7 +5310,8 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     if (amps__sym_full(ctx, K, stype, &U->base.Kp, &U->base.Ki, &U->base.Kx)) goto fail;
     U->memo.cap = o.cap_vpool > 0 ? (size_t)o.cap_vpool : (size_t)o.cap_mod * (size_t)(F->height > 0 ? F->height : 1);
     U->delta.cap = o.cap_delta > 0 ? o.cap_delta : 96 * o.cap_mod;
-    U->pending.cap_delta = o.cap_pending; U->pending.cap_con = o.cap_pending;
+    U->pending.cap_delta = o.cap_pending;
+    U->pending.cap_con = o.cap_pending;
     U->work.chunk_rows = F->height > 0 && (double)F->height * AMPS__VB < (double)n ? F->height * AMPS__VB : n;
     if (amps__create_alloc(ctx, U, o.cap_mod) != AMPS_OK) goto fail;
     for (j = 0; j < n; j++) U->base.inv_sqrt_d[j] = 1.0 / sqrt(F->D[j]);
@@ -4572,17 +5333,22 @@ AMPS_API amps_int amps_update_dim(const amps_update *U) { return U ? U->N + U->p
 
 /* ---- recording changes ---- */
 
-static amps_status amps__chk_idx(amps_ctx *ctx, const amps_update *U, const char *fn, amps_int m,
-                                 const amps_int *idx, const double *val, int nodup, amps_marker *mk) {
+static amps_status amps__chk_idx(amps_ctx *ctx, const amps_update *U, const char *fn, amps_int m, const amps_int *idx,
+                                 const double *val, int nodup, amps_marker *mk) {
     amps_int k, N = U->N + U->pending.n_dofs;
     if (m < 0) return amps__err(ctx, AMPS_ERR_ARG, "%s: negative count %ld", fn, (long)m);
     if (m > 0 && !idx) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL index array", fn);
     if (nodup) amps_marker_next(mk);
     for (k = 0; k < m; k++) {
-        if (idx[k] < 0 || idx[k] >= N) return amps__err(ctx, AMPS_ERR_INDEX, "%s: index %ld (entry %ld) out of range [0, %ld)", fn, (long)idx[k], (long)k, (long)N);
-        if (val && !amps__isfinite(val[k])) return amps__err(ctx, AMPS_ERR_VALUE, "%s: value of entry %ld (index %ld) is not finite", fn, (long)k, (long)idx[k]);
+        if (idx[k] < 0 || idx[k] >= N)
+            return amps__err(ctx, AMPS_ERR_INDEX, "%s: index %ld (entry %ld) out of range [0, %ld)", fn, (long)idx[k],
+                             (long)k, (long)N);
+        if (val && !amps__isfinite(val[k]))
+            return amps__err(ctx, AMPS_ERR_VALUE, "%s: value of entry %ld (index %ld) is not finite", fn, (long)k,
+                             (long)idx[k]);
         if (nodup) {
-            if (mk->mark[idx[k]] == mk->stamp) return amps__err(ctx, AMPS_ERR_ARG, "%s: index %ld given twice", fn, (long)idx[k]);
+            if (mk->mark[idx[k]] == mk->stamp)
+                return amps__err(ctx, AMPS_ERR_ARG, "%s: index %ld given twice", fn, (long)idx[k]);
             mk->mark[idx[k]] = mk->stamp;
         }
     }
@@ -4592,13 +5358,17 @@ static amps_status amps__chk_idx(amps_ctx *ctx, const amps_update *U, const char
 AMPS_API amps_status amps_update_add_dofs(amps_ctx *ctx, amps_update *U, amps_int k, amps_int *first) {
     amps_int i, base;
     amps_status s;
-    if (!U || k < 0) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add_dofs: %s", U ? "negative count" : "NULL engine");
+    if (!U || k < 0)
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add_dofs: %s", U ? "negative count" : "NULL engine");
     if ((s = amps__need_N(ctx, U, k)) != AMPS_OK) return s;
     if ((s = amps__need_pending(ctx, U, k, 0)) != AMPS_OK) return s;
     base = U->N + U->pending.n_dofs;
     for (i = 0; i < k; i++) {
         /* K-bar has sigma on the new diagonal; the recorded -sigma makes the new row zero */
-        U->pending.delta[U->pending.n_delta].r = base + i; U->pending.delta[U->pending.n_delta].c = base + i; U->pending.delta[U->pending.n_delta].v = -U->sigma; U->pending.n_delta++;
+        U->pending.delta[U->pending.n_delta].r = base + i;
+        U->pending.delta[U->pending.n_delta].c = base + i;
+        U->pending.delta[U->pending.n_delta].v = -U->sigma;
+        U->pending.n_delta++;
         U->force.f[base + i] = 0;
     }
     U->pending.n_dofs += k;
@@ -4620,25 +5390,34 @@ static int amps__pd_cmp(const void *a, const void *b) {
     return 0;
 }
 
-AMPS_API amps_status amps_update_add(amps_ctx *ctx, amps_update *U, amps_int nz, const amps_int *r,
-                                     const amps_int *c, const double *v) {
+AMPS_API amps_status amps_update_add(amps_ctx *ctx, amps_update *U, amps_int nz, const amps_int *r, const amps_int *c,
+                                     const double *v) {
     amps_int k, N, start;
     amps_status s;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: NULL engine");
-    if (nz < 0 || (nz > 0 && (!r || !c || !v))) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: bad count or NULL array");
+    if (nz < 0 || (nz > 0 && (!r || !c || !v)))
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: bad count or NULL array");
     N = U->N + U->pending.n_dofs;
     for (k = 0; k < nz; k++) {
         if (r[k] < 0 || r[k] >= N || c[k] < 0 || c[k] >= N)
-            return amps__err(ctx, AMPS_ERR_INDEX, "amps_update_add: entry %ld (%ld, %ld) out of range [0, %ld)", (long)k, (long)r[k], (long)c[k], (long)N);
-        if (!amps__isfinite(v[k])) return amps__err(ctx, AMPS_ERR_VALUE, "amps_update_add: value of entry %ld (%ld, %ld) is not finite", (long)k, (long)r[k], (long)c[k]);
+            return amps__err(ctx, AMPS_ERR_INDEX, "amps_update_add: entry %ld (%ld, %ld) out of range [0, %ld)",
+                             (long)k, (long)r[k], (long)c[k], (long)N);
+        if (!amps__isfinite(v[k]))
+            return amps__err(ctx, AMPS_ERR_VALUE, "amps_update_add: value of entry %ld (%ld, %ld) is not finite",
+                             (long)k, (long)r[k], (long)c[k]);
     }
     if ((s = amps__need_pending(ctx, U, nz, 0)) != AMPS_OK) return s;
     start = U->pending.n_delta;
-    for (k = 0; k < nz; k++) { U->pending.delta[start + k].r = r[k]; U->pending.delta[start + k].c = c[k]; U->pending.delta[start + k].v = v[k]; }
+    for (k = 0; k < nz; k++) {
+        U->pending.delta[start + k].r = r[k];
+        U->pending.delta[start + k].c = c[k];
+        U->pending.delta[start + k].v = v[k];
+    }
     qsort(U->pending.delta + start, (size_t)nz, sizeof(amps__pdelta), amps__pd_cmp);
     for (k = start + 1; k < start + nz; k++)
         if (amps__pd_cmp(U->pending.delta + k - 1, U->pending.delta + k) == 0)
-            return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: entry (%ld, %ld) given twice", (long)U->pending.delta[k].r, (long)U->pending.delta[k].c);
+            return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: entry (%ld, %ld) given twice",
+                             (long)U->pending.delta[k].r, (long)U->pending.delta[k].c);
     U->pending.n_delta = start + nz;
     return AMPS_OK;
 }
@@ -4648,15 +5427,25 @@ static double amps__cur_entry(const amps_update *U, amps_int r, amps_int c) {
     double v = 0;
     amps_int p, k, a;
     if (r < U->n && c < U->n) {
-        for (p = U->base.Kp[c]; p < U->base.Kp[c + 1]; p++) if (U->base.Ki[p] == r) { v = U->base.Kx[p]; break; }
+        for (p = U->base.Kp[c]; p < U->base.Kp[c + 1]; p++)
+            if (U->base.Ki[p] == r) {
+                v = U->base.Kx[p];
+                break;
+            }
     } else if (r == c) v = U->sigma;
     a = r < U->N ? U->aug.pos[r] : -1;
     if (a >= 0 && (c < U->N ? U->aug.pos[c] : -1) >= 0) {
         amps_int b = U->aug.pos[c];
-        for (k = 0; k < U->delta.row_len[a]; k++) if (U->delta.col[U->delta.row_start[a] + k] == b) { v += U->delta.val[U->delta.row_start[a] + k]; break; }
+        for (k = 0; k < U->delta.row_len[a]; k++)
+            if (U->delta.col[U->delta.row_start[a] + k] == b) {
+                v += U->delta.val[U->delta.row_start[a] + k];
+                break;
+            }
     }
     for (k = 0; k < U->pending.n_delta; k++)
-        if ((U->pending.delta[k].r == r && U->pending.delta[k].c == c) || (U->pending.delta[k].r == c && U->pending.delta[k].c == r)) v += U->pending.delta[k].v;
+        if ((U->pending.delta[k].r == r && U->pending.delta[k].c == c) ||
+            (U->pending.delta[k].r == c && U->pending.delta[k].c == r))
+            v += U->pending.delta[k].v;
     return v;
 }
 
@@ -4667,17 +5456,25 @@ static amps_status amps__set_rows_check(amps_ctx *ctx, amps_update *U, amps_int 
     const amps_marker *mk = &U->work.mark_N;
     amps_int k, j, q, N;
     amps_status s;
-    if (nrow < 0 || (nrow > 0 && (!rows || !cp))) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: bad count or NULL array");
+    if (nrow < 0 || (nrow > 0 && (!rows || !cp)))
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: bad count or NULL array");
     if ((s = amps__chk_idx(ctx, U, "amps_update_set_rows", nrow, rows, NULL, 1, &U->work.mark_N)) != AMPS_OK) return s;
     N = U->N + U->pending.n_dofs;
     if (cp[0] != 0) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: cp[0] must be 0");
     for (k = 0; k < nrow; k++) {
-        if (cp[k + 1] < cp[k]) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: cp decreases at row %ld", (long)k);
+        if (cp[k + 1] < cp[k])
+            return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: cp decreases at row %ld", (long)k);
         for (j = cp[k]; j < cp[k + 1]; j++) {
-            if (ci[j] < 0 || ci[j] >= N) return amps__err(ctx, AMPS_ERR_INDEX, "amps_update_set_rows: row %ld, column %ld out of range [0, %ld)", (long)rows[k], (long)ci[j], (long)N);
-            if (!amps__isfinite(cx[j])) return amps__err(ctx, AMPS_ERR_VALUE, "amps_update_set_rows: row %ld, column %ld: value not finite", (long)rows[k], (long)ci[j]);
+            if (ci[j] < 0 || ci[j] >= N)
+                return amps__err(ctx, AMPS_ERR_INDEX, "amps_update_set_rows: row %ld, column %ld out of range [0, %ld)",
+                                 (long)rows[k], (long)ci[j], (long)N);
+            if (!amps__isfinite(cx[j]))
+                return amps__err(ctx, AMPS_ERR_VALUE, "amps_update_set_rows: row %ld, column %ld: value not finite",
+                                 (long)rows[k], (long)ci[j]);
             for (q = cp[k]; q < j; q++)
-                if (ci[q] == ci[j]) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: row %ld lists column %ld twice", (long)rows[k], (long)ci[j]);
+                if (ci[q] == ci[j])
+                    return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: row %ld lists column %ld twice",
+                                     (long)rows[k], (long)ci[j]);
         }
     }
     /* symmetry where two given rows meet: row a's entry at b must equal row b's entry at a */
@@ -4687,9 +5484,15 @@ static amps_status amps__set_rows_check(amps_ctx *ctx, amps_update *U, amps_int 
                 amps_int kk, b = ci[j];
                 double vb = 0;
                 for (kk = 0; kk < nrow && rows[kk] != b; kk++) {}
-                for (q = cp[kk]; q < cp[kk + 1]; q++) if (ci[q] == rows[k]) { vb = cx[q]; break; }
+                for (q = cp[kk]; q < cp[kk + 1]; q++)
+                    if (ci[q] == rows[k]) {
+                        vb = cx[q];
+                        break;
+                    }
                 if (fabs(vb - cx[j]) > 1e-12 * (fabs(vb) + fabs(cx[j])))
-                    return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: rows %ld and %ld disagree at their crossing (%g vs %g)", (long)rows[k], (long)b, cx[j], vb);
+                    return amps__err(ctx, AMPS_ERR_ARG,
+                                     "amps_update_set_rows: rows %ld and %ld disagree at their crossing (%g vs %g)",
+                                     (long)rows[k], (long)b, cx[j], vb);
             }
     return AMPS_OK;
 }
@@ -4697,18 +5500,22 @@ static amps_status amps__set_rows_check(amps_ctx *ctx, amps_update *U, amps_int 
 /* Columns of row r of the current K^ (base pattern, Delta row, the changes recorded before
    pending entry `start`) and the new columns ci[0..nc-1], ascending without repeats, into iw;
    returns their count. a: r's U position or -1. */
-static amps_int amps__row_columns(const amps_update *U, amps_int r, amps_int a, amps_int start, const amps_int *ci, amps_int nc, amps_int *iw) {
+static amps_int amps__row_columns(const amps_update *U, amps_int r, amps_int a, amps_int start, const amps_int *ci,
+                                  amps_int nc, amps_int *iw) {
     amps_int q, cnt = 0, m = 0;
-    if (r < U->n) for (q = U->base.Kp[r]; q < U->base.Kp[r + 1]; q++) iw[cnt++] = U->base.Ki[q];
+    if (r < U->n)
+        for (q = U->base.Kp[r]; q < U->base.Kp[r + 1]; q++) iw[cnt++] = U->base.Ki[q];
     else iw[cnt++] = r;
-    if (a >= 0) for (q = 0; q < U->delta.row_len[a]; q++) iw[cnt++] = U->aug.idx[U->delta.col[U->delta.row_start[a] + q]];
+    if (a >= 0)
+        for (q = 0; q < U->delta.row_len[a]; q++) iw[cnt++] = U->aug.idx[U->delta.col[U->delta.row_start[a] + q]];
     for (q = 0; q < start; q++) {
         if (U->pending.delta[q].r == r) iw[cnt++] = U->pending.delta[q].c;
         else if (U->pending.delta[q].c == r) iw[cnt++] = U->pending.delta[q].r;
     }
     for (q = 0; q < nc; q++) iw[cnt++] = ci[q];
     qsort(iw, (size_t)cnt, sizeof(amps_int), amps__int_cmp);
-    for (q = 0; q < cnt; q++) if (m == 0 || iw[m - 1] != iw[q]) iw[m++] = iw[q];
+    for (q = 0; q < cnt; q++)
+        if (m == 0 || iw[m - 1] != iw[q]) iw[m++] = iw[q];
     return m;
 }
 
@@ -4727,22 +5534,33 @@ AMPS_API amps_status amps_update_set_rows(amps_ctx *ctx, amps_update *U, amps_in
     for (k = 0; k < nrow; k++) {
         amps_int r = rows[k], a, cnt;
         a = r < U->N ? U->aug.pos[r] : -1;
-        if ((r < U->n ? U->base.Kp[r + 1] - U->base.Kp[r] : 1) + (a >= 0 ? U->delta.row_len[a] : 0) + U->pending.n_delta + (cp[k + 1] - cp[k]) > U->n + U->cap_N) {
+        if ((r < U->n ? U->base.Kp[r + 1] - U->base.Kp[r] : 1) + (a >= 0 ? U->delta.row_len[a] : 0) +
+                    U->pending.n_delta + (cp[k + 1] - cp[k]) >
+            U->n + U->cap_N) {
             U->pending.n_delta = start;
             return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update_set_rows: too many changes recorded; commit first");
         }
         cnt = amps__row_columns(U, r, a, start, ci + cp[k], cp[k + 1] - cp[k], iw);
-        if ((s = amps__need_pending(ctx, U, cnt, 0)) != AMPS_OK) { U->pending.n_delta = start; return s; }
+        if ((s = amps__need_pending(ctx, U, cnt, 0)) != AMPS_OK) {
+            U->pending.n_delta = start;
+            return s;
+        }
         for (q = 0; q < cnt; q++) {
             amps_int c = iw[q];
             double nv = 0, d;
             amps__pdelta *e;
-            if (mk->mark[c] == mk->stamp && c < r) continue;   /* recorded from row c */
-            for (j = cp[k]; j < cp[k + 1]; j++) if (ci[j] == c) { nv = cx[j]; break; }
+            if (mk->mark[c] == mk->stamp && c < r) continue; /* recorded from row c */
+            for (j = cp[k]; j < cp[k + 1]; j++)
+                if (ci[j] == c) {
+                    nv = cx[j];
+                    break;
+                }
             d = nv - amps__cur_entry(U, r, c);
             if (d == 0) continue;
             e = U->pending.delta + U->pending.n_delta++;
-            e->r = r; e->c = c; e->v = d;
+            e->r = r;
+            e->c = c;
+            e->v = d;
         }
     }
     return AMPS_OK;
@@ -4766,7 +5584,8 @@ static amps_status amps__record_con(amps_ctx *ctx, amps_update *U, const char *f
     return AMPS_OK;
 }
 
-AMPS_API amps_status amps_update_constrain(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx, const double *val) {
+AMPS_API amps_status amps_update_constrain(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx,
+                                           const double *val) {
     return amps__record_con(ctx, U, "amps_update_constrain", m, idx, val, 0);
 }
 
@@ -4774,7 +5593,8 @@ AMPS_API amps_status amps_update_release(amps_ctx *ctx, amps_update *U, amps_int
     return amps__record_con(ctx, U, "amps_update_release", m, idx, NULL, 1);
 }
 
-AMPS_API amps_status amps_update_set_force(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx, const double *val) {
+AMPS_API amps_status amps_update_set_force(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx,
+                                           const double *val) {
     amps_int k;
     amps_status s;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_force: NULL engine");
@@ -4784,7 +5604,10 @@ AMPS_API amps_status amps_update_set_force(amps_ctx *ctx, amps_update *U, amps_i
         amps_int i = idx[k];
         if (U->force.f[i] == val[k]) continue;
         /* base forces reach ct at the next solve, from the difference f - f_ct */
-        if (i < U->n) { if (U->force.n_changed < U->n) U->force.changed[U->force.n_changed++] = i; else U->force.changed_all = 1; }
+        if (i < U->n) {
+            if (U->force.n_changed < U->n) U->force.changed[U->force.n_changed++] = i;
+            else U->force.changed_all = 1;
+        }
         U->force.f[i] = val[k];
     }
     if (m > 0) U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
@@ -4844,8 +5667,8 @@ AMPS__KERNEL void amps__wblock_body(int W, const double *const *sl, amps_int b, 
         }
     }
 }
-typedef void (*amps__wblock_fn)(const double *const *, amps_int, amps_int, const amps_int *, amps_int,
-                                const amps_int *, double *, double *);
+typedef void (*amps__wblock_fn)(const double *const *, amps_int, amps_int, const amps_int *, amps_int, const amps_int *,
+                                double *, double *);
 AMPS__KERNEL void amps__wsolve_body(int W, amps__wblock_fn block, const amps_factor *F, const amps_int *clo,
                                     amps_int nc, const amps_int *lmap, double *X) {
     const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
@@ -4857,7 +5680,8 @@ AMPS__KERNEL void amps__wsolve_body(int W, amps__wblock_fn block, const amps_fac
         c = clo[t];
         ke = P ? P->gs[P->cgrp[c] + 1] - 1 : c;
         AMPS_ASSERT(t + ke - c < nc && clo[t + ke - c] == ke);
-        S = F->Li + Lp[ke]; ns = Lp[ke + 1] - Lp[ke];
+        S = F->Li + Lp[ke];
+        ns = Lp[ke + 1] - Lp[ke];
         for (o = c; o <= ke; o += b) {
             const double *sl[4];
             b = ke + 1 - o >= 4 ? 4 : (ke + 1 - o >= 2 ? 2 : 1);
@@ -4867,14 +5691,14 @@ AMPS__KERNEL void amps__wsolve_body(int W, amps__wblock_fn block, const amps_fac
         }
     }
 }
-#define AMPS__WSOLVE(W)                                                                                         \
+#define AMPS__WSOLVE(W)                                                                                           \
     static void amps__wblock##W(const double *const *sl, amps_int b, amps_int ng, const amps_int *S, amps_int ns, \
-                                const amps_int *lmap, double *Xo, double *X) {                                  \
-        amps__wblock_body(W, sl, b, ng, S, ns, lmap, Xo, X);                                                    \
-    }                                                                                                           \
+                                const amps_int *lmap, double *Xo, double *X) {                                    \
+        amps__wblock_body(W, sl, b, ng, S, ns, lmap, Xo, X);                                                      \
+    }                                                                                                             \
     static void amps__wsolve##W(const amps_factor *F, const amps_int *clo, amps_int nc, const amps_int *lmap,     \
-                                double *X) {                                                                    \
-        amps__wsolve_body(W, amps__wblock##W, F, clo, nc, lmap, X);                                             \
+                                double *X) {                                                                      \
+        amps__wsolve_body(W, amps__wblock##W, F, clo, nc, lmap, X);                                               \
     }
 AMPS__WSOLVE(4)
 AMPS__WSOLVE(8)
@@ -4893,7 +5717,7 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
     const amps_factor *F = U->F;
     amps_int nchunk, csize, ch;
     if (nb <= 0) return;
-    {   /* threads only when the work (entries of L on one path, times nb) is worth a fork */
+    { /* threads only when the work (entries of L on one path, times nb) is worth a fork */
         double work = 0;
         amps_int k;
         for (k = F->iperm[U->aug.idx[list[0]]]; k != -1; k = F->parent[k]) work += (double)(F->Lp[k + 1] - F->Lp[k]);
@@ -4912,11 +5736,15 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
         int th = 0;
 #endif
         double *X = U->work.chunk + (size_t)th * (size_t)U->work.chunk_rows * AMPS__VB;
-        amps_int *lmap = U->work.row_map + (size_t)th * (size_t)U->n, *clo = U->work.closure + (size_t)th * (size_t)U->n;
+        amps_int *lmap = U->work.row_map + (size_t)th * (size_t)U->n,
+                 *clo = U->work.closure + (size_t)th * (size_t)U->n;
         amps_int j0 = ch * csize, m = nb - j0 < csize ? nb - j0 : csize, nc = 0, j, t, k, mw;
         /* union of the root paths, ascending */
         for (j = 0; j < m; j++)
-            for (k = F->iperm[U->aug.idx[list[j0 + j]]]; k != -1 && lmap[k] < 0; k = F->parent[k]) { lmap[k] = 0; clo[nc++] = k; }
+            for (k = F->iperm[U->aug.idx[list[j0 + j]]]; k != -1 && lmap[k] < 0; k = F->parent[k]) {
+                lmap[k] = 0;
+                clo[nc++] = k;
+            }
         qsort(clo, (size_t)nc, sizeof(amps_int), amps__int_cmp);
         for (t = 0; t < nc; t++) lmap[clo[t]] = t;
         mw = amps__width(m);
@@ -4962,10 +5790,10 @@ AMPS__KERNEL void amps__gscan_body(int W, const amps_int *wi, const double *wv, 
     AMPS__UNROLL
     for (j = 0; j < W; j++) acc[j] = a[j];
 }
-#define AMPS__GSCAN(W)                                                                                          \
-    static void amps__gscan##W(const amps_int *wi, const double *wv, amps_int len, const amps_int *lmap,         \
-                               const double *X, double *acc) {                                                  \
-        amps__gscan_body(W, wi, wv, len, lmap, X, acc);                                                         \
+#define AMPS__GSCAN(W)                                                                                   \
+    static void amps__gscan##W(const amps_int *wi, const double *wv, amps_int len, const amps_int *lmap, \
+                               const double *X, double *acc) {                                           \
+        amps__gscan_body(W, wi, wv, len, lmap, X, acc);                                                  \
     }
 AMPS__GSCAN(4)
 AMPS__GSCAN(8)
@@ -4980,14 +5808,18 @@ AMPS__GSCAN(16)
 static void amps__gcols(amps_update *U, amps_int u_old) {
     amps_int u = U->aug.size, n = U->n, a0;
     size_t ld = (size_t)U->aug.cap;
-    double *X = U->work.chunk;                                   /* thread 0's Step 1 workspace */
+    double *X = U->work.chunk; /* thread 0's Step 1 workspace */
     amps_int *lmap = U->work.row_map, *clo = U->work.closure;
     for (a0 = u_old; a0 < u; a0 += AMPS__VB) {
         amps_int m = u - a0 < AMPS__VB ? u - a0 : AMPS__VB, mw = amps__width(m), nc = 0, j, t, b;
         for (j = 0; j < m; j++) {
             const amps_int *wi = U->memo.idx + U->memo.off[a0 + j];
             if (U->aug.idx[a0 + j] >= n) continue;
-            for (t = 0; t < U->memo.len[a0 + j]; t++) if (lmap[wi[t]] < 0) { lmap[wi[t]] = nc; clo[nc++] = wi[t]; }
+            for (t = 0; t < U->memo.len[a0 + j]; t++)
+                if (lmap[wi[t]] < 0) {
+                    lmap[wi[t]] = nc;
+                    clo[nc++] = wi[t];
+                }
         }
         memset(X, 0, sizeof(double) * (size_t)nc * (size_t)mw);
         for (j = 0; j < m; j++) {
@@ -5013,7 +5845,7 @@ static void amps__gcols(amps_update *U, amps_int u_old) {
             for (jj = 0; jj < m; jj++) {
                 amps_int a = a0 + jj;
                 double gv;
-                if (b >= u_old && b > a) continue;       /* the chunk of b writes it */
+                if (b >= u_old && b > a) continue; /* the chunk of b writes it */
                 gv = (U->aug.idx[a] >= n || U->aug.idx[b] >= n) ? (a == b ? 1.0 / U->sigma : 0.0) : acc[jj];
                 U->lu.G[(size_t)b * ld + (size_t)a] = gv;
                 U->lu.G[(size_t)a * ld + (size_t)b] = gv;
@@ -5029,15 +5861,18 @@ static void amps__gcols(amps_update *U, amps_int u_old) {
 static void amps__acol(const amps_update *U, amps_int j, double *out) {
     amps_int u = U->aug.size, i, k;
     size_t ld = (size_t)U->aug.cap;
-    if (U->aug.kind[j] & AMPS__UCON) { memcpy(out, U->lu.G + (size_t)j * ld, sizeof(double) * (size_t)u); return; }
+    if (U->aug.kind[j] & AMPS__UCON) {
+        memcpy(out, U->lu.G + (size_t)j * ld, sizeof(double) * (size_t)u);
+        return;
+    }
     memset(out, 0, sizeof(double) * (size_t)u);
     out[j] = 1.0;
     for (k = 0; k < U->delta.row_len[j]; k++) {
         amps_int b = U->delta.col[U->delta.row_start[j] + k];
         double v = U->delta.val[U->delta.row_start[j] + k];
         const double *gb;
-        if (U->aug.kind[b] & AMPS__UCON) continue;      /* rows of Delta in C are dropped */
-        gb = U->lu.G + (size_t)b * ld;                  /* G symmetric: G(:, b) */
+        if (U->aug.kind[b] & AMPS__UCON) continue; /* rows of Delta in C are dropped */
+        gb = U->lu.G + (size_t)b * ld;             /* G symmetric: G(:, b) */
         for (i = 0; i < u; i++) out[i] += gb[i] * v;
     }
 }
@@ -5047,7 +5882,7 @@ static double amps__aentry(const amps_update *U, amps_int i, amps_int j) {
     size_t ld = (size_t)U->aug.cap;
     double s;
     amps_int k;
-    const double *gi = U->lu.G + (size_t)i * ld;       /* G(i, :) = G(:, i): contiguous */
+    const double *gi = U->lu.G + (size_t)i * ld; /* G(i, :) = G(:, i): contiguous */
     if (U->aug.kind[j] & AMPS__UCON) return gi[j];
     s = (i == j) ? 1.0 : 0.0;
     for (k = 0; k < U->delta.row_len[j]; k++) {
@@ -5063,7 +5898,9 @@ static double amps__aentry(const amps_update *U, amps_int i, amps_int j) {
    for unconstrained columns at least the identity part (so that a column cancelled to rounding
    level, a row with no stiffness, is caught). */
 static int amps__pivot_ok(const amps_update *U, amps_int j, double apiv) {
-    return apiv > U->singular_tol * ((U->aug.kind[j] & AMPS__UCON) || U->lu.col_norm[j] > 1.0 ? U->lu.col_norm[j] : 1.0) && apiv != 0.0;
+    return apiv > U->singular_tol *
+                           ((U->aug.kind[j] & AMPS__UCON) || U->lu.col_norm[j] > 1.0 ? U->lu.col_norm[j] : 1.0) &&
+           apiv != 0.0;
 }
 
 /* C(r0:r1, 0:w) -= A(r0:r1, k0:k1) B(k0:k1, 0:w), column major, by tiles of 4 columns and
@@ -5078,7 +5915,13 @@ typedef double amps__vd __attribute__((vector_size(32)));
 typedef double amps__vd __attribute__((vector_size(16)));
 #endif
 #define AMPS__VLD(v, p) memcpy(&(v), (p), sizeof(amps__vd))
-#define AMPS__VSUB(p, s) do { amps__vd t_; memcpy(&t_, (p), sizeof(t_)); t_ -= (s); memcpy((p), &t_, sizeof(t_)); } while (0)
+#define AMPS__VSUB(p, s)              \
+    do {                              \
+        amps__vd t_;                  \
+        memcpy(&t_, (p), sizeof(t_)); \
+        t_ -= (s);                    \
+        memcpy((p), &t_, sizeof(t_)); \
+    } while (0)
 #else
 #define AMPS__VL 1
 #endif
@@ -5094,25 +5937,44 @@ static void amps__gemm_tile(amps_int r0, amps_int r1, amps_int w, amps_int k0, a
             amps__vd z = {0}, s00 = z, s10 = z, s01 = z, s11 = z, s02 = z, s12 = z, s03 = z, s13 = z, a0, a1, v;
             const double *a = A + (size_t)k0 * lda + (size_t)r;
             for (k = k0; k < k1; k++, a += lda) {
-                AMPS__VLD(a0, a); AMPS__VLD(a1, a + AMPS__VL);
-                v = z + b0[k]; s00 += a0 * v; s10 += a1 * v;
-                v = z + b1[k]; s01 += a0 * v; s11 += a1 * v;
-                v = z + b2[k]; s02 += a0 * v; s12 += a1 * v;
-                v = z + b3[k]; s03 += a0 * v; s13 += a1 * v;
+                AMPS__VLD(a0, a);
+                AMPS__VLD(a1, a + AMPS__VL);
+                v = z + b0[k];
+                s00 += a0 * v;
+                s10 += a1 * v;
+                v = z + b1[k];
+                s01 += a0 * v;
+                s11 += a1 * v;
+                v = z + b2[k];
+                s02 += a0 * v;
+                s12 += a1 * v;
+                v = z + b3[k];
+                s03 += a0 * v;
+                s13 += a1 * v;
             }
-            AMPS__VSUB(c0 + r, s00); AMPS__VSUB(c0 + r + AMPS__VL, s10);
-            AMPS__VSUB(c1 + r, s01); AMPS__VSUB(c1 + r + AMPS__VL, s11);
-            AMPS__VSUB(c2 + r, s02); AMPS__VSUB(c2 + r + AMPS__VL, s12);
-            AMPS__VSUB(c3 + r, s03); AMPS__VSUB(c3 + r + AMPS__VL, s13);
+            AMPS__VSUB(c0 + r, s00);
+            AMPS__VSUB(c0 + r + AMPS__VL, s10);
+            AMPS__VSUB(c1 + r, s01);
+            AMPS__VSUB(c1 + r + AMPS__VL, s11);
+            AMPS__VSUB(c2 + r, s02);
+            AMPS__VSUB(c2 + r + AMPS__VL, s12);
+            AMPS__VSUB(c3 + r, s03);
+            AMPS__VSUB(c3 + r + AMPS__VL, s13);
         }
 #endif
         for (; r < r1; r++) {
             double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
             for (k = k0; k < k1; k++) {
                 double av = A[(size_t)k * lda + (size_t)r];
-                s0 += av * b0[k]; s1 += av * b1[k]; s2 += av * b2[k]; s3 += av * b3[k];
+                s0 += av * b0[k];
+                s1 += av * b1[k];
+                s2 += av * b2[k];
+                s3 += av * b3[k];
             }
-            c0[r] -= s0; c1[r] -= s1; c2[r] -= s2; c3[r] -= s3;
+            c0[r] -= s0;
+            c1[r] -= s1;
+            c2[r] -= s2;
+            c3[r] -= s3;
         }
     }
     for (; c < w; c++) {
@@ -5121,7 +5983,8 @@ static void amps__gemm_tile(amps_int r0, amps_int r1, amps_int w, amps_int k0, a
         for (k = k0; k < k1; k++) {
             const double *a = A + (size_t)k * lda;
             double bv = b[k];
-            if (bv != 0.0) for (r = r0; r < r1; r++) cc[r] -= a[r] * bv;
+            if (bv != 0.0)
+                for (r = r0; r < r1; r++) cc[r] -= a[r] * bv;
         }
     }
 }
@@ -5137,22 +6000,39 @@ static void amps__dot4(const double *a, size_t lda, amps_int nr, const double *b
         int l;
         for (; k + AMPS__VL <= n; k += AMPS__VL) {
             AMPS__VLD(y, b + k);
-            AMPS__VLD(x, a0 + k); s0 += x * y;
-            AMPS__VLD(x, a1 + k); s1 += x * y;
-            AMPS__VLD(x, a2 + k); s2 += x * y;
-            AMPS__VLD(x, a3 + k); s3 += x * y;
+            AMPS__VLD(x, a0 + k);
+            s0 += x * y;
+            AMPS__VLD(x, a1 + k);
+            s1 += x * y;
+            AMPS__VLD(x, a2 + k);
+            s2 += x * y;
+            AMPS__VLD(x, a3 + k);
+            s3 += x * y;
         }
-        for (l = 0; l < AMPS__VL; l++) { t0 += s0[l]; t1 += s1[l]; t2 += s2[l]; t3 += s3[l]; }
+        for (l = 0; l < AMPS__VL; l++) {
+            t0 += s0[l];
+            t1 += s1[l];
+            t2 += s2[l];
+            t3 += s3[l];
+        }
     }
 #endif
-    for (; k < n; k++) { t0 += a0[k] * b[k]; t1 += a1[k] * b[k]; t2 += a2[k] * b[k]; t3 += a3[k] * b[k]; }
-    s[0] = t0; s[1] = t1; s[2] = t2; s[3] = t3;
+    for (; k < n; k++) {
+        t0 += a0[k] * b[k];
+        t1 += a1[k] * b[k];
+        t2 += a2[k] * b[k];
+        t3 += a3[k] * b[k];
+    }
+    s[0] = t0;
+    s[1] = t1;
+    s[2] = t2;
+    s[3] = t3;
 }
 
 /* C(0:m, 0:w) -= A(0:m, 0:kk) B(0:kk, 0:w), column major; one parallel region over row blocks
    of 128, each swept in k blocks of 256 (the block of A stays in cache for all of C's columns). */
-static void amps__gemm_sub(amps_int m, amps_int w, amps_int kk, const double *A, size_t lda,
-                           const double *B, size_t ldb, double *C, size_t ldc, int nthr) {
+static void amps__gemm_sub(amps_int m, amps_int w, amps_int kk, const double *A, size_t lda, const double *B,
+                           size_t ldb, double *C, size_t ldc, int nthr) {
     amps_int rb, nrb = (m + 127) / 128;
     (void)nthr;
     if (m <= 0 || w <= 0 || kk <= 0) return;
@@ -5212,7 +6092,10 @@ static void amps__lu_panel_load(amps_update *U, amps_int qp, amps_int w) {
         amps_int j = U->lu.col_order[qp + c], rr;
         double nrm = 0, *col = P + (size_t)c * ld;
         amps__acol(U, j, buf);
-        for (rr = 0; rr < u; rr++) { col[rr] = buf[U->lu.row_perm[rr]]; if (fabs(buf[rr]) > nrm) nrm = fabs(buf[rr]); }
+        for (rr = 0; rr < u; rr++) {
+            col[rr] = buf[U->lu.row_perm[rr]];
+            if (fabs(buf[rr]) > nrm) nrm = fabs(buf[rr]);
+        }
         U->lu.col_norm[j] = nrm;
     }
 }
@@ -5228,19 +6111,21 @@ static void amps__lu_panel_apply(amps_update *U, amps_int qp, amps_int w) {
     for (kb = 0; kb < qp; kb += AMPS__TB) {
         amps_int k1 = kb + AMPS__TB < qp ? kb + AMPS__TB : qp, kk;
         amps_int ib;
-        for (ib = kb; ib < k1; ib += 8) {            /* the diagonal block by blocks of 8 */
+        for (ib = kb; ib < k1; ib += 8) { /* the diagonal block by blocks of 8 */
             amps_int i1 = ib + 8 < k1 ? ib + 8 : k1;
             for (c = 0; c < w; c++) {
                 double *col = P + (size_t)c * ld;
                 for (kk = ib; kk < i1; kk++) {
                     const double *lk = LU + (size_t)kk * ld;
                     double x = col[kk];
-                    if (x != 0.0) for (r = kk + 1; r < i1; r++) col[r] -= lk[r] * x;
+                    if (x != 0.0)
+                        for (r = kk + 1; r < i1; r++) col[r] -= lk[r] * x;
                 }
             }
             amps__gemm_tile(i1, k1, w, ib, i1, LU, ld, P, ld, P, ld);
         }
-        amps__gemm_sub(qp - k1, w, k1 - kb, LU + (size_t)kb * ld + (size_t)k1, ld, P + (size_t)kb, ld, P + (size_t)k1, ld, U->nthr);
+        amps__gemm_sub(qp - k1, w, k1 - kb, LU + (size_t)kb * ld + (size_t)k1, ld, P + (size_t)kb, ld, P + (size_t)k1,
+                       ld, U->nthr);
     }
     amps__gemm_sub(u - qp, w, qp, LU + (size_t)qp, ld, P, ld, P + (size_t)qp, ld, U->nthr);
 }
@@ -5254,17 +6139,23 @@ static amps_status amps__lu_panel_factor(amps_update *U, amps_int qp, amps_int w
     for (c = 0; c < w; c++) {
         amps_int qq = qp + c, pr = qq, j = U->lu.col_order[qq], cc;
         double *col = LU + (size_t)qq * ld, pmax = fabs(col[qq]), piv;
-        for (r = qq + 1; r < u; r++) if (fabs(col[r]) > pmax) { pmax = fabs(col[r]); pr = r; }
+        for (r = qq + 1; r < u; r++)
+            if (fabs(col[r]) > pmax) {
+                pmax = fabs(col[r]);
+                pr = r;
+            }
         if (!amps__pivot_ok(U, j, pmax)) {
             *bad = j;
             return AMPS_ERR_SINGULAR_UPDATE;
         }
         if (pr != qq) {
             amps_int t = U->lu.row_perm[pr];
-            U->lu.row_perm[pr] = U->lu.row_perm[qq]; U->lu.row_perm[qq] = t;
+            U->lu.row_perm[pr] = U->lu.row_perm[qq];
+            U->lu.row_perm[qq] = t;
             for (cc = 0; cc < qp + w; cc++) {
                 double *cl = LU + (size_t)cc * ld, tv = cl[pr];
-                cl[pr] = cl[qq]; cl[qq] = tv;
+                cl[pr] = cl[qq];
+                cl[qq] = tv;
             }
         }
         piv = col[qq];
@@ -5300,7 +6191,11 @@ static amps_status amps__lu_extend(amps_update *U, amps_int nf, amps_int u_old, 
 /* x(r-1:r) <- T x(r-1:r) for a row transform h = {m, l, swap} of amps__lu_drop: without swap
    x_r -= m x_{r-1}; with swap the rows exchange, x_{r-1} += l x_r, then x_r -= m x_{r-1}. */
 static void amps__pair(double *x, amps_int r, const double *h) {
-    if (h[2] != 0.0) { double t = x[r - 1]; x[r - 1] = x[r] + h[1] * t; x[r] = t; }
+    if (h[2] != 0.0) {
+        double t = x[r - 1];
+        x[r - 1] = x[r] + h[1] * t;
+        x[r] = t;
+    }
     x[r] -= h[0] * x[r - 1];
 }
 
@@ -5315,18 +6210,23 @@ static double amps__lpair(amps_update *U, amps_int q0, amps_int u_old, amps_int 
     amps_int i, c;
     if (h[2] != 0.0) {
         amps_int t = U->lu.row_perm[r - 1];
-        U->lu.row_perm[r - 1] = U->lu.row_perm[r]; U->lu.row_perm[r] = t;
-        t = perm[r - 1 - q0]; perm[r - 1 - q0] = perm[r - q0]; perm[r - q0] = t;
+        U->lu.row_perm[r - 1] = U->lu.row_perm[r];
+        U->lu.row_perm[r] = t;
+        t = perm[r - 1 - q0];
+        perm[r - 1 - q0] = perm[r - q0];
+        perm[r - q0] = t;
         for (c = q0; c < r - 1; c++) {
             double *lc = U->lu.LU + (size_t)c * ld, tv = lc[r - 1];
-            lc[r - 1] = lc[r]; lc[r] = tv;
+            lc[r - 1] = lc[r];
+            lc[r] = tv;
         }
         for (i = r + 1; i < u_old; i++) {
             double a0 = L0[i], a1 = L1[i];
-            L0[i] = a1; L1[i] = a0 - l * a1;
+            L0[i] = a1;
+            L1[i] = a0 - l * a1;
             if (fabs(L1[i]) > g) g = fabs(L1[i]);
         }
-        L0[r] = 0.0;                           /* (Pi L Pi)(r, r-1) = L(r-1, r) = 0 */
+        L0[r] = 0.0; /* (Pi L Pi)(r, r-1) = L(r-1, r) = 0 */
     }
     L0[r] += m;
     g = fabs(L0[r]) > g ? fabs(L0[r]) : g;
@@ -5370,13 +6270,27 @@ static amps_int amps__lu_drop(amps_update *U, amps_int q0, amps_int nk, amps_int
         /* its own subdiagonals, bottom-up: the pair (r-1, r) zeroes x_r */
         for (r = op; r > p; r--, h += 3) {
             double a = x[r - 1], b = x[r], l = LU[(size_t)(r - 1) * ld + (size_t)r];
-            double ma = a != 0.0 ? b / a : (b == 0.0 ? 0.0 : HUGE_VAL), pb = b + l * a, mb = pb != 0.0 ? a / pb : HUGE_VAL;
-            if (fabs(ma) <= 1.0 || fabs(ma) <= fabs(mb)) { h[0] = ma; h[1] = 0.0; h[2] = 0.0; }
-            else { h[0] = mb; h[1] = l; h[2] = 1.0; }
-            if (!(fabs(h[0]) <= AMPS__DMULT)) { fail = 1; break; }
+            double ma = a != 0.0 ? b / a : (b == 0.0 ? 0.0 : HUGE_VAL), pb = b + l * a,
+                   mb = pb != 0.0 ? a / pb : HUGE_VAL;
+            if (fabs(ma) <= 1.0 || fabs(ma) <= fabs(mb)) {
+                h[0] = ma;
+                h[1] = 0.0;
+                h[2] = 0.0;
+            } else {
+                h[0] = mb;
+                h[1] = l;
+                h[2] = 1.0;
+            }
+            if (!(fabs(h[0]) <= AMPS__DMULT)) {
+                fail = 1;
+                break;
+            }
             amps__pair(x, r, h);
             x[r] = 0.0;
-            if (!(amps__lpair(U, q0, u_old, r, h, perm) <= AMPS__DLMAX)) { fail = 1; break; }
+            if (!(amps__lpair(U, q0, u_old, r, h, perm) <= AMPS__DLMAX)) {
+                fail = 1;
+                break;
+            }
         }
         if (fail) break;
         if (!amps__pivot_ok(U, j, fabs(x[p]))) break;
@@ -5401,13 +6315,15 @@ static void amps__lu_solve(const amps_update *U, const double *b, double *z, dou
     for (q = 0; q < u; q++) {
         const double *l = U->lu.LU + (size_t)q * ld;
         double x = t[q];
-        if (x != 0.0) for (r = q + 1; r < u; r++) t[r] -= l[r] * x;
+        if (x != 0.0)
+            for (r = q + 1; r < u; r++) t[r] -= l[r] * x;
     }
     for (q = u - 1; q >= 0; q--) {
         const double *col = U->lu.LU + (size_t)q * ld;
         double x = t[q] / col[q];
         t[q] = x;
-        if (x != 0.0) for (r = 0; r < q; r++) t[r] -= col[r] * x;
+        if (x != 0.0)
+            for (r = 0; r < q; r++) t[r] -= col[r] * x;
     }
     for (q = 0; q < u; q++) z[U->lu.col_order[q]] = t[q];
 }
@@ -5417,13 +6333,13 @@ static void amps__lu_solve_t(const amps_update *U, const double *b, double *z, d
     amps_int u = U->aug.size, q, r;
     size_t ld = (size_t)U->aug.cap;
     for (q = 0; q < u; q++) t[q] = b[U->lu.col_order[q]];
-    for (q = 0; q < u; q++) {                 /* U^T v = t */
+    for (q = 0; q < u; q++) { /* U^T v = t */
         const double *col = U->lu.LU + (size_t)q * ld;
         double s = t[q];
         for (r = 0; r < q; r++) s -= col[r] * t[r];
         t[q] = s / col[q];
     }
-    for (q = u - 1; q >= 0; q--) {            /* L^T */
+    for (q = u - 1; q >= 0; q--) { /* L^T */
         const double *l = U->lu.LU + (size_t)q * ld;
         double s = t[q];
         for (r = q + 1; r < u; r++) s -= l[r] * t[r];
@@ -5435,7 +6351,10 @@ static void amps__lu_solve_t(const amps_update *U, const double *b, double *z, d
 /* Full refactorization of A in position order. */
 static amps_status amps__lu_full(amps_update *U, amps_int *bad) {
     amps_int q;
-    for (q = 0; q < U->aug.size; q++) { U->lu.col_order[q] = q; U->lu.row_perm[q] = q; }
+    for (q = 0; q < U->aug.size; q++) {
+        U->lu.col_order[q] = q;
+        U->lu.row_perm[q] = q;
+    }
     U->stats.lu_full++;
     U->stats.lu_cols = U->aug.size;
     return amps__lu_extend(U, 0, 0, bad);
@@ -5450,14 +6369,19 @@ static void amps__delta_compact(amps_update *U) {
     for (a = 0; a < U->aug.size; a++) order[a] = a;
     for (a = 1; a < U->aug.size; a++) {
         amps_int v = order[a], b = a - 1;
-        while (b >= 0 && U->delta.row_start[order[b]] > U->delta.row_start[v]) { order[b + 1] = order[b]; b--; }
+        while (b >= 0 && U->delta.row_start[order[b]] > U->delta.row_start[v]) {
+            order[b + 1] = order[b];
+            b--;
+        }
         order[b + 1] = v;
     }
     for (k = 0; k < U->aug.size; k++) {
         a = order[k];
         if (U->delta.row_cap[a] == 0) continue;
-        memmove(U->delta.col + used, U->delta.col + U->delta.row_start[a], sizeof(amps_int) * (size_t)U->delta.row_len[a]);
-        memmove(U->delta.val + used, U->delta.val + U->delta.row_start[a], sizeof(double) * (size_t)U->delta.row_len[a]);
+        memmove(U->delta.col + used, U->delta.col + U->delta.row_start[a],
+                sizeof(amps_int) * (size_t)U->delta.row_len[a]);
+        memmove(U->delta.val + used, U->delta.val + U->delta.row_start[a],
+                sizeof(double) * (size_t)U->delta.row_len[a]);
         U->delta.row_start[a] = used;
         U->delta.row_cap[a] = U->delta.row_len[a];
         used += U->delta.row_len[a];
@@ -5468,9 +6392,15 @@ static void amps__delta_compact(amps_update *U) {
 /* Delta(a, b) += v; row a has been relocated with room for its additions this commit. */
 static void amps__delta_add(amps_update *U, amps_int a, amps_int b, double v) {
     amps_int k, st = U->delta.row_start[a];
-    for (k = 0; k < U->delta.row_len[a]; k++) if (U->delta.col[st + k] == b) { U->delta.val[st + k] += v; return; }
+    for (k = 0; k < U->delta.row_len[a]; k++)
+        if (U->delta.col[st + k] == b) {
+            U->delta.val[st + k] += v;
+            return;
+        }
     AMPS_ASSERT(U->delta.row_len[a] < U->delta.row_cap[a]);
-    U->delta.col[st + U->delta.row_len[a]] = b; U->delta.val[st + U->delta.row_len[a]] = v; U->delta.row_len[a]++;
+    U->delta.col[st + U->delta.row_len[a]] = b;
+    U->delta.val[st + U->delta.row_len[a]] = v;
+    U->delta.row_len[a]++;
 }
 
 /* Rollback of a failed commit: drops the new positions, restores the Delta row headers, kinds
@@ -5481,15 +6411,25 @@ static void amps__rollback(amps_update *U, amps_int u_old, size_t vused_old, amp
     for (a = u_old; a < U->aug.size; a++) U->aug.pos[U->aug.idx[a]] = -1;
     for (k = U->journal.n_rows - 1; k >= 0; k--) {
         const amps__djour *d = U->journal.rows + k;
-        if (d->pos < u_old) { U->delta.row_start[d->pos] = d->start; U->delta.row_len[d->pos] = d->len; U->delta.row_cap[d->pos] = d->cap; }
+        if (d->pos < u_old) {
+            U->delta.row_start[d->pos] = d->start;
+            U->delta.row_len[d->pos] = d->len;
+            U->delta.row_cap[d->pos] = d->cap;
+        }
     }
     for (k = U->journal.n_kinds - 1; k >= 0; k--) {
         const amps__kjour *j = U->journal.kinds + k;
-        if (j->pos < u_old) { U->aug.kind[j->pos] = j->kind; U->aug.g[j->pos] = j->g; }
+        if (j->pos < u_old) {
+            U->aug.kind[j->pos] = j->kind;
+            U->aug.g[j->pos] = j->g;
+        }
     }
-    U->aug.size = u_old; U->memo.used = vused_old; U->delta.used = dused_old;
+    U->aug.size = u_old;
+    U->memo.used = vused_old;
+    U->delta.used = dused_old;
     if (U->sol.n_rhs > u_old) U->sol.n_rhs = u_old;
-    U->journal.n_rows = 0; U->journal.n_kinds = 0;
+    U->journal.n_rows = 0;
+    U->journal.n_kinds = 0;
     amps_update_discard(U);
     /* refactor the old system from scratch. It was accepted, but a fresh elimination order can
        meet a pivot below tol; the singularity test must not stop this factorization halfway
@@ -5505,7 +6445,9 @@ static void amps__rollback(amps_update *U, amps_int u_old, size_t vused_old, amp
 
 AMPS_API void amps_update_discard(amps_update *U) {
     if (!U) return;
-    U->pending.n_delta = 0; U->pending.n_con = 0; U->pending.n_dofs = 0;
+    U->pending.n_delta = 0;
+    U->pending.n_con = 0;
+    U->pending.n_dofs = 0;
 }
 
 /* ---- the steps of a commit ---- */
@@ -5517,15 +6459,22 @@ static amps_int amps__count_new(amps_update *U) {
     amps_marker_next(mk);
     for (k = 0; k < U->pending.n_delta; k++) {
         amps_int e[2];
-        e[0] = U->pending.delta[k].r; e[1] = U->pending.delta[k].c;
+        e[0] = U->pending.delta[k].r;
+        e[1] = U->pending.delta[k].c;
         for (t = 0; t < 2; t++) {
             amps_int i = e[t];
-            if ((i >= U->N || U->aug.pos[i] < 0) && mk->mark[i] != mk->stamp) { mk->mark[i] = mk->stamp; nnew++; }
+            if ((i >= U->N || U->aug.pos[i] < 0) && mk->mark[i] != mk->stamp) {
+                mk->mark[i] = mk->stamp;
+                nnew++;
+            }
         }
     }
     for (k = 0; k < U->pending.n_con; k++) {
         amps_int i = U->pending.con[k].i;
-        if (!U->pending.con[k].release && (i >= U->N || U->aug.pos[i] < 0) && mk->mark[i] != mk->stamp) { mk->mark[i] = mk->stamp; nnew++; }
+        if (!U->pending.con[k].release && (i >= U->N || U->aug.pos[i] < 0) && mk->mark[i] != mk->stamp) {
+            mk->mark[i] = mk->stamp;
+            nnew++;
+        }
     }
     return nnew;
 }
@@ -5538,14 +6487,27 @@ static size_t amps__grow_aug(amps_update *U) {
     size_t vneed = 0;
     for (k = 0; k < nd + U->pending.n_con; k++) {
         amps_int e[2], ne;
-        if (k < nd) { e[0] = U->pending.delta[k].r; e[1] = U->pending.delta[k].c; ne = 2; }
-        else { if (U->pending.con[k - nd].release) continue; e[0] = U->pending.con[k - nd].i; ne = 1; }
+        if (k < nd) {
+            e[0] = U->pending.delta[k].r;
+            e[1] = U->pending.delta[k].c;
+            ne = 2;
+        } else {
+            if (U->pending.con[k - nd].release) continue;
+            e[0] = U->pending.con[k - nd].i;
+            ne = 1;
+        }
         for (t = 0; t < ne; t++) {
             amps_int i = e[t];
             if (U->aug.pos[i] >= 0 && U->aug.pos[i] < U->aug.size && U->aug.idx[U->aug.pos[i]] == i) continue;
             a = U->aug.size++;
-            U->aug.pos[i] = a; U->aug.idx[a] = i; U->aug.kind[a] = 0; U->aug.g[a] = 0;
-            U->delta.row_start[a] = 0; U->delta.row_len[a] = 0; U->delta.row_cap[a] = 0; U->memo.off[a] = 0;
+            U->aug.pos[i] = a;
+            U->aug.idx[a] = i;
+            U->aug.kind[a] = 0;
+            U->aug.g[a] = 0;
+            U->delta.row_start[a] = 0;
+            U->delta.row_len[a] = 0;
+            U->delta.row_cap[a] = 0;
+            U->memo.off[a] = 0;
             U->memo.len[a] = i < U->n ? amps__path_len(U->F, U->F->iperm[i]) : 0;
             vneed += (size_t)U->memo.len[a];
         }
@@ -5557,11 +6519,14 @@ static size_t amps__grow_aug(amps_update *U) {
 static amps_status amps__need_memo(amps_ctx *ctx, amps_update *U, size_t vneed) {
     size_t need = U->memo.used + vneed, cap = U->memo.cap;
     if (need > cap && !U->grow)
-        return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: memoized columns need %.0f entries, cap_vpool is %.0f (raise it or set grow)",
+        return amps__err(ctx, AMPS_ERR_CAPACITY,
+                         "amps_update: memoized columns need %.0f entries, cap_vpool is %.0f (raise it or set grow)",
                          (double)need, (double)cap);
     if (need > cap) {
         while (cap < need) cap = cap * 2 + 1024;
-        if (amps__realloc(ctx, (void **)&U->memo.val, cap, sizeof(double)) || amps__realloc(ctx, (void **)&U->memo.idx, cap, sizeof(amps_int))) return AMPS_ERR_OOM;
+        if (amps__realloc(ctx, (void **)&U->memo.val, cap, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&U->memo.idx, cap, sizeof(amps_int)))
+            return AMPS_ERR_OOM;
         U->memo.cap = cap;
     }
     return AMPS_OK;
@@ -5572,7 +6537,7 @@ static void amps__step1(amps_update *U, amps_int u_old) {
     amps_int a, nb = 0, *list = U->work.idx;
     for (a = u_old; a < U->aug.size; a++)
         if (U->aug.idx[a] < U->n) {
-            U->memo.off[a] = U->memo.used;              /* memo.len was set with the position */
+            U->memo.off[a] = U->memo.used; /* memo.len was set with the position */
             U->memo.used += (size_t)U->memo.len[a];
             list[nb++] = a;
         }
@@ -5588,13 +6553,18 @@ static amps_status amps__delta_relocate(amps_ctx *ctx, amps_update *U, amps_int 
     amps_marker_next(tm);
     for (k = 0; k < U->pending.n_delta; k++) {
         amps_int e[2];
-        e[0] = U->aug.pos[U->pending.delta[k].r]; e[1] = U->aug.pos[U->pending.delta[k].c];
+        e[0] = U->aug.pos[U->pending.delta[k].r];
+        e[1] = U->aug.pos[U->pending.delta[k].c];
         for (t = 0; t < (e[0] == e[1] ? 1 : 2); t++) {
-            if (tm->mark[e[t]] != tm->stamp) { tm->mark[e[t]] = tm->stamp; n_add[e[t]] = 0; }
+            if (tm->mark[e[t]] != tm->stamp) {
+                tm->mark[e[t]] = tm->stamp;
+                n_add[e[t]] = 0;
+            }
             n_add[e[t]]++;
         }
     }
-    for (a = 0; a < U->aug.size; a++) if (tm->mark[a] == tm->stamp) need += U->delta.row_len[a] + n_add[a];
+    for (a = 0; a < U->aug.size; a++)
+        if (tm->mark[a] == tm->stamp) need += U->delta.row_len[a] + n_add[a];
     if (U->delta.used + need > U->delta.cap) {
         amps__delta_compact(U);
         *dused_old = U->delta.used;
@@ -5602,19 +6572,27 @@ static amps_status amps__delta_relocate(amps_ctx *ctx, amps_update *U, amps_int 
     if (U->delta.used + need > U->delta.cap) {
         amps_int cap = U->delta.cap;
         if (!U->grow)
-            return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update: %ld stored changes exceed cap_delta = %ld (raise it or set grow)", (long)(U->delta.used + need), (long)U->delta.cap);
+            return amps__err(ctx, AMPS_ERR_CAPACITY,
+                             "amps_update: %ld stored changes exceed cap_delta = %ld (raise it or set grow)",
+                             (long)(U->delta.used + need), (long)U->delta.cap);
         while (cap < U->delta.used + need) cap = cap * 2 + 256;
-        if (amps__realloc(ctx, (void **)&U->delta.col, (size_t)cap, sizeof(amps_int)) || amps__realloc(ctx, (void **)&U->delta.val, (size_t)cap, sizeof(double))) return AMPS_ERR_OOM;
+        if (amps__realloc(ctx, (void **)&U->delta.col, (size_t)cap, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&U->delta.val, (size_t)cap, sizeof(double)))
+            return AMPS_ERR_OOM;
         U->delta.cap = cap;
     }
     for (a = 0; a < U->aug.size; a++)
         if (tm->mark[a] == tm->stamp) {
             amps__djour *d = U->journal.rows + U->journal.n_rows++;
             amps_int st = U->delta.row_start[a], len = U->delta.row_len[a], used = U->delta.used;
-            d->pos = a; d->start = st; d->len = len; d->cap = U->delta.row_cap[a];
+            d->pos = a;
+            d->start = st;
+            d->len = len;
+            d->cap = U->delta.row_cap[a];
             memcpy(U->delta.col + used, U->delta.col + st, sizeof(amps_int) * (size_t)len);
             memcpy(U->delta.val + used, U->delta.val + st, sizeof(double) * (size_t)len);
-            U->delta.row_start[a] = used; U->delta.row_cap[a] = len + n_add[a];
+            U->delta.row_start[a] = used;
+            U->delta.row_cap[a] = len + n_add[a];
             U->delta.used += U->delta.row_cap[a];
         }
     return AMPS_OK;
@@ -5631,19 +6609,25 @@ static void amps__apply_pending(amps_update *U, amps_int u_old) {
         amps_int ra = U->aug.pos[U->pending.delta[k].r], rb = U->aug.pos[U->pending.delta[k].c];
         amps__delta_add(U, ra, rb, U->pending.delta[k].v);
         if (ra != rb) amps__delta_add(U, rb, ra, U->pending.delta[k].v);
-        cm->mark[ra] = cm->stamp; cm->mark[rb] = cm->stamp;
+        cm->mark[ra] = cm->stamp;
+        cm->mark[rb] = cm->stamp;
     }
     for (a = u_old; a < U->aug.size; a++) cm->mark[a] = cm->stamp;
     for (k = 0; k < U->pending.n_con; k++) {
         amps_int i = U->pending.con[k].i;
         amps__kjour *j;
         a = (i < U->N + U->pending.n_dofs && U->aug.pos[i] >= 0) ? U->aug.pos[i] : -1;
-        if (a < 0) continue;                      /* release of an unconstrained index */
+        if (a < 0) continue; /* release of an unconstrained index */
         if (U->pending.con[k].release && !(U->aug.kind[a] & AMPS__UCON)) continue;
         j = U->journal.kinds + U->journal.n_kinds++;
-        j->pos = a; j->kind = U->aug.kind[a]; j->g = U->aug.g[a];
+        j->pos = a;
+        j->kind = U->aug.kind[a];
+        j->g = U->aug.g[a];
         if (U->pending.con[k].release) U->aug.kind[a] &= (unsigned char)~AMPS__UCON;
-        else { U->aug.kind[a] |= AMPS__UCON; U->aug.g[a] = U->pending.con[k].v; }
+        else {
+            U->aug.kind[a] |= AMPS__UCON;
+            U->aug.g[a] = U->pending.con[k].v;
+        }
         if ((j->kind ^ U->aug.kind[a]) & AMPS__UCON) {
             amps_int t;
             cm->mark[a] = cm->stamp;
@@ -5657,12 +6641,18 @@ static void amps__apply_pending(amps_update *U, amps_int u_old) {
 static amps_int amps__reorder_columns(amps_update *U, amps_int u_old) {
     const amps_marker *cm = &U->lu.changed;
     amps_int *order = U->lu.col_order, *tmp = U->work.idx, q0 = u_old, q, m, a;
-    for (a = 0; a < u_old; a++) if (cm->mark[a] == cm->stamp && U->lu.col_pos[a] < q0) q0 = U->lu.col_pos[a];
+    for (a = 0; a < u_old; a++)
+        if (cm->mark[a] == cm->stamp && U->lu.col_pos[a] < q0) q0 = U->lu.col_pos[a];
     m = q0;
-    for (q = q0; q < u_old; q++) if (cm->mark[order[q]] != cm->stamp) tmp[m++] = order[q];
-    for (q = q0; q < u_old; q++) if (cm->mark[order[q]] == cm->stamp) tmp[m++] = order[q];
+    for (q = q0; q < u_old; q++)
+        if (cm->mark[order[q]] != cm->stamp) tmp[m++] = order[q];
+    for (q = q0; q < u_old; q++)
+        if (cm->mark[order[q]] == cm->stamp) tmp[m++] = order[q];
     for (q = q0; q < u_old; q++) order[q] = tmp[q];
-    for (a = u_old; a < U->aug.size; a++) { order[a] = a; U->lu.row_perm[a] = a; }
+    for (a = u_old; a < U->aug.size; a++) {
+        order[a] = a;
+        U->lu.row_perm[a] = a;
+    }
     return q0;
 }
 
@@ -5672,7 +6662,8 @@ static amps_status amps__lu_update(amps_update *U, amps_int q0, amps_int u_old, 
     const amps_marker *cm = &U->lu.changed;
     amps_int nk = 0, q, nf = q0;
     amps_status s;
-    for (q = q0; q < u_old; q++) if (cm->mark[U->lu.col_order[q]] != cm->stamp) nk++;
+    for (q = q0; q < u_old; q++)
+        if (cm->mark[U->lu.col_order[q]] != cm->stamp) nk++;
     if (nk >= 8 && u_old - q0 - nk <= AMPS__DMAX) {
         U->stats.lu_drops++;
         nf = amps__lu_drop(U, q0, nk, u_old);
@@ -5695,30 +6686,44 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
     if (U->refac.job) amps__bg_poll(ctx, U);
     if (!U->pending.n_delta && !U->pending.n_con && !U->pending.n_dofs) return AMPS_OK;
     t0 = amps_now();
-    u_old = U->aug.size; vused_old = U->memo.used; dused_old = U->delta.used;
-    U->journal.n_rows = 0; U->journal.n_kinds = 0;
+    u_old = U->aug.size;
+    vused_old = U->memo.used;
+    dused_old = U->delta.used;
+    U->journal.n_rows = 0;
+    U->journal.n_kinds = 0;
     /* grow U */
-    if ((s = amps__need_u(ctx, U, amps__count_new(U))) != AMPS_OK) { amps_update_discard(U); return s; }
+    if ((s = amps__need_u(ctx, U, amps__count_new(U))) != AMPS_OK) {
+        amps_update_discard(U);
+        return s;
+    }
     if ((s = amps__need_memo(ctx, U, amps__grow_aug(U))) != AMPS_OK) goto fail;
     /* Step 1: W columns */
     amps__step1(U, u_old);
-    t1 = amps_now(); U->stats.t_step[AMPS_STEP_WCOLS] = t1 - t0; t0 = t1;
+    t1 = amps_now();
+    U->stats.t_step[AMPS_STEP_WCOLS] = t1 - t0;
+    t0 = t1;
     /* Step 2: trapezoidal augmentation of G ([AMPS] Eq. 3.25-3.27), both triangles stored */
     amps__gcols(U, u_old);
-    t1 = amps_now(); U->stats.t_step[AMPS_STEP_GRAM] = t1 - t0; t0 = t1;
+    t1 = amps_now();
+    U->stats.t_step[AMPS_STEP_GRAM] = t1 - t0;
+    t0 = t1;
     /* apply the pending changes to Delta and the kinds */
     if ((s = amps__delta_relocate(ctx, U, &dused_old)) != AMPS_OK) goto fail;
     amps__apply_pending(U, u_old);
     /* Steps 3 and 5: refactor from the first changed column; the changed ones go last */
     q0 = amps__reorder_columns(U, u_old);
-    t1 = amps_now(); U->stats.t_step[AMPS_STEP_DCOLS] = t1 - t0; t0 = t1;
+    t1 = amps_now();
+    U->stats.t_step[AMPS_STEP_DCOLS] = t1 - t0;
+    t0 = t1;
     s = amps__lu_update(U, q0, u_old, &bad);
-    t1 = amps_now(); U->stats.t_step[AMPS_STEP_DENSE] = t1 - t0;
+    t1 = amps_now();
+    U->stats.t_step[AMPS_STEP_DENSE] = t1 - t0;
     if (s != AMPS_OK) {
         amps_int bi = bad >= 0 ? U->aug.idx[bad] : -1;
         amps__rollback(U, u_old, vused_old, dused_old);
         return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
-                         "amps_update_commit: the updated system is singular (pivot of index %ld below %g of its column); the changes were discarded",
+                         "amps_update_commit: the updated system is singular (pivot of index %ld below %g of its "
+                         "column); the changes were discarded",
                          (long)bi, U->singular_tol);
     }
     /* done: the log of a running re-factorization, the new order, the solution stale */
@@ -5747,7 +6752,10 @@ static void amps__update_ct(amps_update *U) {
     if (U->force.changed_all || U->force.n_increments >= 1024 || U->force.n_changed > n / 8) {
         for (k = 0; k < n; k++) x[k] = U->force.f[F->perm[k]];
         amps_lsolve(F, x);
-        for (k = 0; k < n; k++) { U->force.ct[k] = x[k] * U->base.inv_sqrt_d[k]; x[k] = 0; }
+        for (k = 0; k < n; k++) {
+            U->force.ct[k] = x[k] * U->base.inv_sqrt_d[k];
+            x[k] = 0;
+        }
         memcpy(U->force.f_ct, U->force.f, sizeof(double) * (size_t)n);
         U->force.n_increments = 0;
     } else {
@@ -5759,15 +6767,23 @@ static void amps__update_ct(amps_update *U) {
             U->force.f_ct[i] = U->force.f[i];
             if (d == 0.0) continue;
             x[p] += d;
-            if (U->work.mark_n.mark[p] != U->work.mark_n.stamp) { U->work.mark_n.mark[p] = U->work.mark_n.stamp; list[nb++] = p; }
+            if (U->work.mark_n.mark[p] != U->work.mark_n.stamp) {
+                U->work.mark_n.mark[p] = U->work.mark_n.stamp;
+                list[nb++] = p;
+            }
         }
         if (nb > 0) {
             ncl = amps_lsolve_sparse(F, nb, list, x, clo, &U->work.mark_n);
-            for (k = 0; k < ncl; k++) { amps_int j = clo[k]; U->force.ct[j] += x[j] * U->base.inv_sqrt_d[j]; x[j] = 0; }
+            for (k = 0; k < ncl; k++) {
+                amps_int j = clo[k];
+                U->force.ct[j] += x[j] * U->base.inv_sqrt_d[j];
+                x[j] = 0;
+            }
             U->force.n_increments++;
         }
     }
-    U->force.n_changed = 0; U->force.changed_all = 0;
+    U->force.n_changed = 0;
+    U->force.changed_all = 0;
 }
 
 /* Step 5: the forces w of the augmentation (and y = x_U, primal form) for right-hand side
@@ -5800,8 +6816,12 @@ static void amps__dense_step(amps_update *U, const double *r, int hom, double *y
         for (a = 0; a < u; a++) yv[a] = (U->aug.kind[a] & AMPS__UCON) ? AMPS__G(a) : z[a];
         for (a = 0; a < u; a++) {
             double sum = 0;
-            if (U->aug.kind[a] & AMPS__UCON) { wv[a] = z[a]; continue; }
-            for (k = 0; k < U->delta.row_len[a]; k++) sum += U->delta.val[U->delta.row_start[a] + k] * yv[U->delta.col[U->delta.row_start[a] + k]];
+            if (U->aug.kind[a] & AMPS__UCON) {
+                wv[a] = z[a];
+                continue;
+            }
+            for (k = 0; k < U->delta.row_len[a]; k++)
+                sum += U->delta.val[U->delta.row_start[a] + k] * yv[U->delta.col[U->delta.row_start[a] + k]];
             wv[a] = sum;
         }
     } else {
@@ -5810,8 +6830,12 @@ static void amps__dense_step(amps_update *U, const double *r, int hom, double *y
         for (a = 0; a < u; a++) rh[a] = (U->aug.kind[a] & AMPS__UCON) ? AMPS__G(a) : r[a];
         for (a = 0; a < u; a++) {
             double sum = 0;
-            if (U->aug.kind[a] & AMPS__UCON) { b[a] = r[a] - AMPS__G(a); continue; }
-            for (k = 0; k < U->delta.row_len[a]; k++) sum += U->delta.val[U->delta.row_start[a] + k] * rh[U->delta.col[U->delta.row_start[a] + k]];
+            if (U->aug.kind[a] & AMPS__UCON) {
+                b[a] = r[a] - AMPS__G(a);
+                continue;
+            }
+            for (k = 0; k < U->delta.row_len[a]; k++)
+                sum += U->delta.val[U->delta.row_start[a] + k] * rh[U->delta.col[U->delta.row_start[a] + k]];
             b[a] = sum;
         }
         amps__lu_solve_t(U, b, wv, U->dense.tmp);
@@ -5836,9 +6860,12 @@ static void amps__scatter_w(const amps_update *U, const double *c, double *sv) {
 static double amps__krow(const amps_update *U, amps_int i, const double *v) {
     amps_int p, a = U->aug.pos[i], k;
     double s = 0;
-    if (i < U->n) for (p = U->base.Kp[i]; p < U->base.Kp[i + 1]; p++) s += U->base.Kx[p] * v[U->base.Ki[p]];
+    if (i < U->n)
+        for (p = U->base.Kp[i]; p < U->base.Kp[i + 1]; p++) s += U->base.Kx[p] * v[U->base.Ki[p]];
     else s = U->sigma * v[i];
-    if (a >= 0) for (k = 0; k < U->delta.row_len[a]; k++) s += U->delta.val[U->delta.row_start[a] + k] * v[U->aug.idx[U->delta.col[U->delta.row_start[a] + k]]];
+    if (a >= 0)
+        for (k = 0; k < U->delta.row_len[a]; k++)
+            s += U->delta.val[U->delta.row_start[a] + k] * v[U->aug.idx[U->delta.col[U->delta.row_start[a] + k]]];
     return s;
 }
 
@@ -5857,19 +6884,29 @@ static void amps__refine(amps_update *U, const double *sv, const double *wv, con
         if (i >= n) continue;
         for (p = U->base.Kp[i]; p < U->base.Kp[i + 1]; p++) {
             amps_int q = F->iperm[U->base.Ki[p]];
-            if (U->work.mark_n.mark[q] != U->work.mark_n.stamp) { U->work.mark_n.mark[q] = U->work.mark_n.stamp; req[nreq++] = q; }
+            if (U->work.mark_n.mark[q] != U->work.mark_n.stamp) {
+                U->work.mark_n.mark[q] = U->work.mark_n.stamp;
+                req[nreq++] = q;
+            }
         }
         {
             amps_int q = F->iperm[i];
-            if (U->work.mark_n.mark[q] != U->work.mark_n.stamp) { U->work.mark_n.mark[q] = U->work.mark_n.stamp; req[nreq++] = q; }
+            if (U->work.mark_n.mark[q] != U->work.mark_n.stamp) {
+                U->work.mark_n.mark[q] = U->work.mark_n.stamp;
+                req[nreq++] = q;
+            }
         }
     }
     memcpy(s2, sv, sizeof(double) * (size_t)n);
     ncl = amps_closure(F, nreq, req, clo, &U->work.mark_n);
-    amps__ltsolve_closure_par(F, ncl, clo, s2, U->nthr, req);      /* req is free again */
+    amps__ltsolve_closure_par(F, ncl, clo, s2, U->nthr, req); /* req is free again */
     for (k = 0; k < ncl; k++) x[F->perm[clo[k]]] = s2[clo[k]];
-    for (k = n; k < U->N; k++) { a = U->aug.pos[k]; x[k] = (fv[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma; }
-    for (a = 0; a < u; a++) if (U->aug.kind[a] & AMPS__UCON) x[U->aug.idx[a]] = hom ? 0.0 : U->aug.g[a];
+    for (k = n; k < U->N; k++) {
+        a = U->aug.pos[k];
+        x[k] = (fv[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma;
+    }
+    for (a = 0; a < u; a++)
+        if (U->aug.kind[a] & AMPS__UCON) x[U->aug.idx[a]] = hom ? 0.0 : U->aug.g[a];
     for (a = 0; a < u; a++) {
         amps_int i = U->aug.idx[a];
         U->dense.rho[a] = (U->aug.kind[a] & AMPS__UCON) ? 0.0 : fv[i] - amps__krow(U, i, x);
@@ -5904,7 +6941,8 @@ static void amps__step4(amps_update *U, const double *ct, const double *fv, int 
             r[a] = sum;
         }
     }
-    for (a = 0; a < u; a++) if (U->aug.idx[a] >= n) r[a] = fv[U->aug.idx[a]] / U->sigma;
+    for (a = 0; a < u; a++)
+        if (U->aug.idx[a] >= n) r[a] = fv[U->aug.idx[a]] / U->sigma;
     if (cache) U->sol.n_rhs = u;
     U->stats.t_step[AMPS_STEP_RHS] += amps_now() - t0;
 }
@@ -5917,7 +6955,8 @@ static void amps__watch_fixed(amps_update *U, const double *fv, double *x) {
     for (k = 0; k < U->watch.n; k++) {
         amps_int i = U->watch.idx[k], a = U->aug.pos[i];
         U->watch.from_dense[k] = 1;
-        if (a >= 0 && ((U->aug.kind[a] & AMPS__UCON) || (U->xs_from_dense && U->form == AMPS_FORM_PRIMAL))) x[i] = U->dense.y[a];
+        if (a >= 0 && ((U->aug.kind[a] & AMPS__UCON) || (U->xs_from_dense && U->form == AMPS_FORM_PRIMAL)))
+            x[i] = U->dense.y[a];
         else if (i >= U->n) x[i] = (fv[i] - (a >= 0 ? U->dense.w[a] : 0.0)) / U->sigma;
         else U->watch.from_dense[k] = 0;
     }
@@ -5933,7 +6972,9 @@ static void amps__solve_core(amps_update *U, const double *ct, const double *fv,
     t0 = amps_now();
     /* Step 5 */
     amps__dense_step(U, r, hom, yv, wv);
-    t1 = amps_now(); U->stats.t_step[AMPS_STEP_DENSE] += t1 - t0; t0 = t1;
+    t1 = amps_now();
+    U->stats.t_step[AMPS_STEP_DENSE] += t1 - t0;
+    t0 = t1;
     /* Step 6: x = K-bar^{-1} (f - H w), permuted: L^{-T} D^{-1/2} (ct - sum_a w_a W_a) */
     for (k = 0; k < n; k++) sv[k] = ct[k] * U->base.inv_sqrt_d[k];
     amps__scatter_w(U, wv, sv);
@@ -5942,33 +6983,42 @@ static void amps__solve_core(amps_update *U, const double *ct, const double *fv,
         for (it = 0; it < U->refine; it++) {
             amps__refine(U, sv, wv, fv, hom, x);
             amps__scatter_w(U, U->dense.w_corr, sv);
-            for (a = 0; a < u; a++) { wv[a] += U->dense.w_corr[a]; yv[a] += U->dense.y_corr[a]; }
+            for (a = 0; a < u; a++) {
+                wv[a] += U->dense.w_corr[a];
+                yv[a] += U->dense.y_corr[a];
+            }
         }
     }
     if (watched) {
         amps__watch_fixed(U, fv, x);
         if (watched == 2) {
             /* a two-phase job: the backward solve runs later, in amps_update_watched_run */
-            for (k = 0; k < U->watch.n; k++) if (U->watch.from_dense[k]) U->watch.job_xw[k] = x[U->watch.idx[k]];
+            for (k = 0; k < U->watch.n; k++)
+                if (U->watch.from_dense[k]) U->watch.job_xw[k] = x[U->watch.idx[k]];
             memcpy(U->watch.job_y, sv, sizeof(double) * (size_t)n);
         } else {
             /* the watched entries only: L^{-T} on their closure */
             amps_ltsolve_closure(F, U->watch.n_closure, U->watch.closure, sv);
-            for (k = 0; k < U->watch.n; k++) if (!U->watch.from_dense[k]) x[U->watch.idx[k]] = sv[F->iperm[U->watch.idx[k]]];
+            for (k = 0; k < U->watch.n; k++)
+                if (!U->watch.from_dense[k]) x[U->watch.idx[k]] = sv[F->iperm[U->watch.idx[k]]];
         }
         memset(sv, 0, sizeof(double) * (size_t)n);
         U->stats.t_step[AMPS_STEP_SOLVE] += amps_now() - t0;
         return;
     } else {
         amps__ltsolve_par(F, sv, U->nthr);
-        for (k = 0; k < n; k++) { x[F->perm[k]] = sv[k]; sv[k] = 0.0; }
+        for (k = 0; k < n; k++) {
+            x[F->perm[k]] = sv[k];
+            sv[k] = 0.0;
+        }
         for (k = n; k < U->N; k++) {
             a = U->aug.pos[k];
             x[k] = (fv[k] - (a >= 0 ? wv[a] : 0.0)) / U->sigma;
         }
     }
     for (a = 0; a < u; a++)
-        if ((U->aug.kind[a] & AMPS__UCON) || (U->xs_from_dense && U->form == AMPS_FORM_PRIMAL)) x[U->aug.idx[a]] = yv[a];
+        if ((U->aug.kind[a] & AMPS__UCON) || (U->xs_from_dense && U->form == AMPS_FORM_PRIMAL))
+            x[U->aug.idx[a]] = yv[a];
     U->stats.t_step[AMPS_STEP_SOLVE] += amps_now() - t0;
 }
 
@@ -5985,7 +7035,8 @@ static double amps__residual_vec(amps_update *U, const double *x, double *rho, d
         num += rho[i] * rho[i];
     }
     for (i = 0; i < N; i++) tmp[i] = 0;
-    for (a = 0; a < U->aug.size; a++) if (U->aug.kind[a] & AMPS__UCON) tmp[U->aug.idx[a]] = U->aug.g[a];
+    for (a = 0; a < U->aug.size; a++)
+        if (U->aug.kind[a] & AMPS__UCON) tmp[U->aug.idx[a]] = U->aug.g[a];
     amps__kmul(U, tmp, tmp + N);
     for (i = 0; i < N; i++) {
         a = U->aug.pos[i];
@@ -5998,9 +7049,11 @@ static double amps__residual_vec(amps_update *U, const double *x, double *rho, d
 /* Step times of a solve: those of the commit since the last solve (if any) plus its own. */
 static void amps__solve_stats_begin(amps_update *U) {
     amps_int k;
-    if (!U->sol.commit_unsolved) for (k = 0; k < AMPS_STEP_SOLVE; k++) U->stats.t_step[k] = 0;
+    if (!U->sol.commit_unsolved)
+        for (k = 0; k < AMPS_STEP_SOLVE; k++) U->stats.t_step[k] = 0;
     U->sol.commit_unsolved = 0;
-    U->stats.t_step[AMPS_STEP_RHS] = 0; U->stats.t_step[AMPS_STEP_SOLVE] = 0;
+    U->stats.t_step[AMPS_STEP_RHS] = 0;
+    U->stats.t_step[AMPS_STEP_SOLVE] = 0;
     {
         double t0 = amps_now();
         amps__update_ct(U);
@@ -6027,8 +7080,10 @@ static double amps__guard_refine(amps_update *U, int pass) {
         U->stats.guard_steps++;
     }
     U->stats.relres = rel;
-    U->stats.guard_result = !(rel <= U->guard.tol) ? AMPS_GUARD_NOT_MET
-                            : pass ? AMPS_GUARD_REFACTORED : U->stats.guard_steps > 0 ? AMPS_GUARD_REFINED : AMPS_GUARD_MET;
+    U->stats.guard_result = !(rel <= U->guard.tol)     ? AMPS_GUARD_NOT_MET
+                            : pass                     ? AMPS_GUARD_REFACTORED
+                            : U->stats.guard_steps > 0 ? AMPS_GUARD_REFINED
+                                                       : AMPS_GUARD_MET;
     return rel;
 }
 
@@ -6045,7 +7100,8 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
 again:
     amps__solve_stats_begin(U);
     amps__solve_core(U, U->force.ct, U->force.f, 0, 0, U->sol.x);
-    U->stats.guard_steps = 0; U->stats.guard_result = AMPS_GUARD_MET;
+    U->stats.guard_steps = 0;
+    U->stats.guard_result = AMPS_GUARD_MET;
     U->stats.relres = -1;
     if (U->guard.tol > 0) {
         double rel = amps__guard_refine(U, pass);
@@ -6060,8 +7116,12 @@ again:
         amps_int i = U->aug.idx[a];
         U->sol.react[a] = (U->aug.kind[a] & AMPS__UCON) ? amps__krow(U, i, U->sol.x) - U->force.f[i] : 0.0;
     }
-    U->sol.x_stale = 0; U->sol.has_x = 1; U->sol.x_dim = U->N;
-    U->sol.react_stale = 0; U->sol.has_react = 1; U->sol.watched_stale = 0;
+    U->sol.x_stale = 0;
+    U->sol.has_x = 1;
+    U->sol.x_dim = U->N;
+    U->sol.react_stale = 0;
+    U->sol.has_react = 1;
+    U->sol.watched_stale = 0;
     U->stats.nsolve++;
     if (xout) memcpy(xout, U->sol.x, sizeof(double) * (size_t)U->N);
     {
@@ -6070,7 +7130,8 @@ again:
         amps__bg_policy(ctx, U, t);
     }
     if (U->guard.tol > 0 && U->stats.guard_result == AMPS_GUARD_NOT_MET)
-        return amps__err(ctx, AMPS_WARN_INACCURATE, "amps_update_solve: relative residual %.3g above the guard's %.3g", U->stats.relres, U->guard.tol);
+        return amps__err(ctx, AMPS_WARN_INACCURATE, "amps_update_solve: relative residual %.3g above the guard's %.3g",
+                         U->stats.relres, U->guard.tol);
     return AMPS_OK;
 }
 
@@ -6090,11 +7151,16 @@ static void amps__small_reactions(amps_update *U, const double *r, double *yv, c
         }
     for (a = 0; a < u; a++) {
         double sum = 0;
-        if (!(U->aug.kind[a] & AMPS__UCON)) { U->sol.react[a] = 0.0; continue; }
-        for (k = 0; k < U->delta.row_len[a]; k++) sum += U->delta.val[U->delta.row_start[a] + k] * yv[U->delta.col[U->delta.row_start[a] + k]];
+        if (!(U->aug.kind[a] & AMPS__UCON)) {
+            U->sol.react[a] = 0.0;
+            continue;
+        }
+        for (k = 0; k < U->delta.row_len[a]; k++)
+            sum += U->delta.val[U->delta.row_start[a] + k] * yv[U->delta.col[U->delta.row_start[a] + k]];
         U->sol.react[a] = sum - wv[a];
     }
-    U->sol.react_stale = 0; U->sol.has_react = 1;
+    U->sol.react_stale = 0;
+    U->sol.has_react = 1;
 }
 
 AMPS_API amps_status amps_update_solve_reactions(amps_ctx *ctx, amps_update *U) {
@@ -6121,14 +7187,21 @@ AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m
     if (m > U->watch.cap || !U->watch.closure) {
         unsigned char *wo = AMPS__CAST(unsigned char *, amps__malloc(ctx, (size_t)(m > 0 ? m : 1), 1));
         wi = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(m > 0 ? m : 1), sizeof(amps_int)));
-        wc = U->watch.closure ? U->watch.closure : AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(U->n > 0 ? U->n : 1), sizeof(amps_int)));
+        wc = U->watch.closure
+                     ? U->watch.closure
+                     : AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(U->n > 0 ? U->n : 1), sizeof(amps_int)));
         if (!wi || !wc || !wo) {
-            amps__free(ctx, wi); amps__free(ctx, wo);
+            amps__free(ctx, wi);
+            amps__free(ctx, wo);
             if (wc != U->watch.closure) amps__free(ctx, wc);
             return amps__err(ctx, AMPS_ERR_OOM, "amps_update_watch: out of memory for %ld indices", (long)m);
         }
-        amps__free(ctx, U->watch.idx); amps__free(ctx, U->watch.from_dense);
-        U->watch.idx = wi; U->watch.closure = wc; U->watch.from_dense = wo; U->watch.cap = m;
+        amps__free(ctx, U->watch.idx);
+        amps__free(ctx, U->watch.from_dense);
+        U->watch.idx = wi;
+        U->watch.closure = wc;
+        U->watch.from_dense = wo;
+        U->watch.cap = m;
     }
     for (k = 0; k < m; k++) {
         U->watch.idx[k] = idx[k];
@@ -6152,20 +7225,32 @@ static amps_status amps__watch_valid(amps_ctx *ctx, const amps_update *U, const 
 }
 AMPS_API const amps_factor *amps_update_factor(const amps_update *U) { return U ? U->F : NULL; }
 
-AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, amps_update_job *job, double *y, amps_int ylen, double *xw) {
+AMPS_API amps_status amps_update_watched_begin(amps_ctx *ctx, amps_update *U, amps_update_job *job, double *y,
+                                               amps_int ylen, double *xw) {
     amps_status s;
-    if (!U || !job || !y || (!xw && U->watch.n > 0)) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_watched_begin: NULL argument");
-    if (U->watch.job_y) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_watched_begin: a job is already in progress");
+    if (!U || !job || !y || (!xw && U->watch.n > 0))
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_update_watched_begin: NULL argument");
+    if (U->watch.job_y)
+        return amps__err(ctx, AMPS_ERR_STATE, "amps_update_watched_begin: a job is already in progress");
     if ((s = amps__watch_valid(ctx, U, "amps_update_watched_begin")) != AMPS_OK) return s;
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
-    if (ylen < U->n) return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update_watched_begin: y has %ld entries, the base order is %ld", (long)ylen, (long)U->n);
-    U->watch.job_y = y; U->watch.job_xw = xw;
+    if (ylen < U->n)
+        return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_update_watched_begin: y has %ld entries, the base order is %ld",
+                         (long)ylen, (long)U->n);
+    U->watch.job_y = y;
+    U->watch.job_xw = xw;
     amps__solve_stats_begin(U);
     amps__solve_core(U, U->force.ct, U->force.f, 0, 2, U->sol.x);
     amps__small_reactions(U, U->dense.rhs, U->dense.y, U->dense.w);
     U->stats.nsolve++;
-    job->F = U->F; job->nw = U->watch.n; job->ncw = U->watch.n_closure; job->widx = U->watch.idx; job->wclo = U->watch.closure;
-    job->wovr = U->watch.from_dense; job->y = y; job->xw = xw;
+    job->F = U->F;
+    job->nw = U->watch.n;
+    job->ncw = U->watch.n_closure;
+    job->widx = U->watch.idx;
+    job->wclo = U->watch.closure;
+    job->wovr = U->watch.from_dense;
+    job->y = y;
+    job->xw = xw;
     return AMPS_OK;
 }
 
@@ -6179,7 +7264,8 @@ AMPS_API void amps_update_watched_run(amps_update_job *job) {
 
 AMPS_API void amps_update_watched_end(amps_update *U, amps_update_job *job) {
     if (!U || !job) return;
-    U->watch.job_y = NULL; U->watch.job_xw = NULL;
+    U->watch.job_y = NULL;
+    U->watch.job_xw = NULL;
     job->F = NULL;
 }
 
@@ -6196,7 +7282,8 @@ AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, do
         U->sol.watched_stale = 0;
         U->stats.nsolve++;
     }
-    if (xw) for (k = 0; k < U->watch.n; k++) xw[k] = U->sol.x[U->watch.idx[k]];
+    if (xw)
+        for (k = 0; k < U->watch.n; k++) xw[k] = U->sol.x[U->watch.idx[k]];
     return AMPS_OK;
 }
 
@@ -6218,7 +7305,8 @@ static void amps__kmul(const amps_update *U, const double *v, double *y) {
     for (j = n; j < U->N; j++) y[j] = U->sigma * v[j];
     for (a = 0; a < U->aug.size; a++) {
         double s = 0;
-        for (k = 0; k < U->delta.row_len[a]; k++) s += U->delta.val[U->delta.row_start[a] + k] * v[U->aug.idx[U->delta.col[U->delta.row_start[a] + k]]];
+        for (k = 0; k < U->delta.row_len[a]; k++)
+            s += U->delta.val[U->delta.row_start[a] + k] * v[U->aug.idx[U->delta.col[U->delta.row_start[a] + k]]];
         y[U->aug.idx[a]] += s;
     }
 }
@@ -6229,7 +7317,9 @@ AMPS_API amps_status amps_update_residual(amps_ctx *ctx, amps_update *U, double 
     if (!U || !relres) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_residual: NULL argument");
     if (!U->sol.has_x || U->sol.x_stale || U->pending.n_delta || U->pending.n_con || U->pending.n_dofs)
         return amps__err(ctx, AMPS_ERR_STATE, "amps_update_residual: no current solution (call amps_update_solve)");
-    N = U->N; y = U->work.resid; gh = U->work.resid + U->cap_N;
+    N = U->N;
+    y = U->work.resid;
+    gh = U->work.resid + U->cap_N;
     /* numerator: (K^ x - f^) on free rows */
     amps__kmul(U, U->sol.x, y);
     for (i = 0; i < N; i++) {
@@ -6239,7 +7329,8 @@ AMPS_API amps_status amps_update_residual(amps_ctx *ctx, amps_update *U, double 
     }
     /* denominator: f^_F - K^_FC g, the right-hand side of the reduced system */
     for (i = 0; i < N; i++) gh[i] = 0;
-    for (a = 0; a < U->aug.size; a++) if (U->aug.kind[a] & AMPS__UCON) gh[U->aug.idx[a]] = U->aug.g[a];
+    for (a = 0; a < U->aug.size; a++)
+        if (U->aug.kind[a] & AMPS__UCON) gh[U->aug.idx[a]] = U->aug.g[a];
     amps__kmul(U, gh, y);
     for (i = 0; i < N; i++) {
         a = U->aug.pos[i];
@@ -6258,7 +7349,10 @@ AMPS_API void amps_update_get_stats(const amps_update *U, amps_update_stats *st)
         if (U->delta.row_len[a] > 0) nm++;
         if (U->aug.kind[a] & AMPS__UCON) nc++;
     }
-    st->dim = U->N; st->nmod = nm; st->ncon = nc; st->nsys = U->aug.size;
+    st->dim = U->N;
+    st->nmod = nm;
+    st->ncon = nc;
+    st->nsys = U->aug.size;
     st->vpool_entries = (double)U->memo.used;
     st->refactor_running = U->refac.job != NULL;
     st->refactor_nnzL = (double)U->F->Lp[U->F->n] + (double)U->F->n;
@@ -6267,7 +7361,10 @@ AMPS_API void amps_update_get_stats(const amps_update *U, amps_update_stats *st)
 /* ---- re-factorization ([Interactive cutting] Sec. 3.6) ---- */
 
 /* An entry of the m' log: r >= 0: K^[r,c] += v (and K^[c,r]); r < 0: c DOFs appended. */
-typedef struct amps__lentry { amps_int r, c; double v; } amps__lentry;
+typedef struct amps__lentry {
+    amps_int r, c;
+    double v;
+} amps__lentry;
 
 enum { AMPS__BG_RUNNING = 1, AMPS__BG_READY = 2, AMPS__BG_FAILED = 3 };
 
@@ -6278,28 +7375,39 @@ enum { AMPS__BG_RUNNING = 1, AMPS__BG_READY = 2, AMPS__BG_FAILED = 3 };
 #endif
 
 typedef struct amps__bg {
-    struct {                                     /* the snapshot at the start (owned) and the parent's base (immutable until the swap) */
-        amps_int N, n, nthr;                     /* order, base order, the parent's threads */
+    struct {                 /* the snapshot at the start (owned) and the parent's base (immutable until the swap) */
+        amps_int N, n, nthr; /* order, base order, the parent's threads */
         double sigma;
-        amps_int nt; amps_int *ti, *tj; double *tx;  /* K^ - K on the upper triangle, sigma on appended and constrained diagonals */
-        amps_int nc; amps_int *ci; double *cg;   /* constrained indices and values */
-        double *f;                               /* N forces */
-        const amps_int *Kp, *Ki; const double *Kx;  /* the parent's base K */
+        amps_int nt;
+        amps_int *ti, *tj;
+        double *tx; /* K^ - K on the upper triangle, sigma on appended and constrained diagonals */
+        amps_int nc;
+        amps_int *ci;
+        double *cg; /* constrained indices and values */
+        double *f;  /* N forces */
+        const amps_int *Kp, *Ki;
+        const double *Kx; /* the parent's base K */
         amps_update_opts opts;
         void *alloc_user;
     } snap;
-    struct {                                     /* the m' log: appended by the engine's thread, read by the worker (under mu) */
-        amps__lentry *entries; amps_int n, cap;
-        amps_int done;                           /* entries the worker has replayed */
+    struct { /* the m' log: appended by the engine's thread, read by the worker (under mu) */
+        amps__lentry *entries;
+        amps_int n, cap;
+        amps_int done; /* entries the worker has replayed */
     } log;
-    struct {                                     /* the new base: matrix, factor, engine */
-        amps_csc *K; amps_factor *F; amps_update *U;
+    struct { /* the new base: matrix, factor, engine */
+        amps_csc *K;
+        amps_factor *F;
+        amps_update *U;
     } result;
-    amps_status status; char msg[256];           /* the failure */
-    double t0, t1;                               /* start and ready times */
-    int state, cancel;                           /* AMPS__BG_*; cancel requested (under mu) */
+    amps_status status;
+    char msg[256];     /* the failure */
+    double t0, t1;     /* start and ready times */
+    int state, cancel; /* AMPS__BG_*; cancel requested (under mu) */
 #ifndef AMPS_NO_THREADS
-    pthread_mutex_t mu; pthread_t th; int has_thread, has_mu;
+    pthread_mutex_t mu;
+    pthread_t th;
+    int has_thread, has_mu;
 #endif
 } amps__bg;
 
@@ -6321,15 +7429,24 @@ static void amps__bg_unlock(amps__bg *b) {
 /* Reads a field shared with the worker under the lock. */
 static int amps__bg_get(amps__bg *b, const int *field) {
     int v;
-    amps__bg_lock(b); v = *field; amps__bg_unlock(b);
+    amps__bg_lock(b);
+    v = *field;
+    amps__bg_unlock(b);
     return v;
 }
 
 static void amps__bg_free(amps_ctx *ctx, amps__bg *b) {
     if (!b) return;
-    amps_update_free(ctx, b->result.U); amps_factor_free(ctx, b->result.F); amps_csc_free(ctx, b->result.K);
-    amps__free(ctx, b->snap.ti); amps__free(ctx, b->snap.tj); amps__free(ctx, b->snap.tx);
-    amps__free(ctx, b->snap.ci); amps__free(ctx, b->snap.cg); amps__free(ctx, b->snap.f); amps__free(ctx, b->log.entries);
+    amps_update_free(ctx, b->result.U);
+    amps_factor_free(ctx, b->result.F);
+    amps_csc_free(ctx, b->result.K);
+    amps__free(ctx, b->snap.ti);
+    amps__free(ctx, b->snap.tj);
+    amps__free(ctx, b->snap.tx);
+    amps__free(ctx, b->snap.ci);
+    amps__free(ctx, b->snap.cg);
+    amps__free(ctx, b->snap.f);
+    amps__free(ctx, b->log.entries);
 #ifndef AMPS_NO_THREADS
     if (b->has_mu) pthread_mutex_destroy(&b->mu);
 #endif
@@ -6341,10 +7458,17 @@ static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U) {
     amps__bg *b = AMPS__CAST(amps__bg *, amps__calloc(ctx, 1, sizeof(amps__bg)));
     amps_int a, k, nt = 0, nc = 0, cap;
     if (!b) return NULL;
-    b->snap.N = U->N; b->snap.n = U->n; b->snap.sigma = U->sigma; b->snap.nthr = U->nthr;
-    b->snap.Kp = U->base.Kp; b->snap.Ki = U->base.Ki; b->snap.Kx = U->base.Kx;
-    b->snap.opts = U->refac.opts; b->snap.alloc_user = ctx ? ctx->alloc_user : NULL;
-    for (a = 0; a < U->aug.size; a++) if (U->aug.kind[a] & AMPS__UCON) nc++;
+    b->snap.N = U->N;
+    b->snap.n = U->n;
+    b->snap.sigma = U->sigma;
+    b->snap.nthr = U->nthr;
+    b->snap.Kp = U->base.Kp;
+    b->snap.Ki = U->base.Ki;
+    b->snap.Kx = U->base.Kx;
+    b->snap.opts = U->refac.opts;
+    b->snap.alloc_user = ctx ? ctx->alloc_user : NULL;
+    for (a = 0; a < U->aug.size; a++)
+        if (U->aug.kind[a] & AMPS__UCON) nc++;
     cap = U->delta.used + (U->N - U->n) + nc + 1;
     b->snap.ti = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
     b->snap.tj = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
@@ -6352,22 +7476,38 @@ static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U) {
     b->snap.ci = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nc + 1, sizeof(amps_int)));
     b->snap.cg = AMPS__CAST(double *, amps__malloc(ctx, (size_t)nc + 1, sizeof(double)));
     b->snap.f = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->N + 1, sizeof(double)));
-    b->log.cap = 4 * U->refac.opts.cap_pending;          /* > 0: amps__create_opts */
+    b->log.cap = 4 * U->refac.opts.cap_pending; /* > 0: amps__create_opts */
     b->log.entries = AMPS__CAST(amps__lentry *, amps__malloc(ctx, (size_t)b->log.cap, sizeof(amps__lentry)));
-    if (!b->snap.ti || !b->snap.tj || !b->snap.tx || !b->snap.ci || !b->snap.cg || !b->snap.f || !b->log.entries) { amps__bg_free(ctx, b); return NULL; }
+    if (!b->snap.ti || !b->snap.tj || !b->snap.tx || !b->snap.ci || !b->snap.cg || !b->snap.f || !b->log.entries) {
+        amps__bg_free(ctx, b);
+        return NULL;
+    }
     for (a = 0; a < U->aug.size; a++) {
         amps_int i = U->aug.idx[a];
         for (k = 0; k < U->delta.row_len[a]; k++) {
             amps_int j = U->aug.idx[U->delta.col[U->delta.row_start[a] + k]];
-            if (i > j) continue;                                  /* Delta is stored in both rows */
-            b->snap.ti[nt] = i; b->snap.tj[nt] = j; b->snap.tx[nt] = U->delta.val[U->delta.row_start[a] + k]; nt++;
+            if (i > j) continue; /* Delta is stored in both rows */
+            b->snap.ti[nt] = i;
+            b->snap.tj[nt] = j;
+            b->snap.tx[nt] = U->delta.val[U->delta.row_start[a] + k];
+            nt++;
         }
-        if (U->aug.kind[a] & AMPS__UCON) {                           /* + sigma e_i e_i^T */
-            b->snap.ti[nt] = i; b->snap.tj[nt] = i; b->snap.tx[nt] = U->sigma; nt++;
-            b->snap.ci[b->snap.nc] = i; b->snap.cg[b->snap.nc] = U->aug.g[a]; b->snap.nc++;
+        if (U->aug.kind[a] & AMPS__UCON) { /* + sigma e_i e_i^T */
+            b->snap.ti[nt] = i;
+            b->snap.tj[nt] = i;
+            b->snap.tx[nt] = U->sigma;
+            nt++;
+            b->snap.ci[b->snap.nc] = i;
+            b->snap.cg[b->snap.nc] = U->aug.g[a];
+            b->snap.nc++;
         }
     }
-    for (k = U->n; k < U->N; k++) { b->snap.ti[nt] = k; b->snap.tj[nt] = k; b->snap.tx[nt] = U->sigma; nt++; }   /* K-bar */
+    for (k = U->n; k < U->N; k++) {
+        b->snap.ti[nt] = k;
+        b->snap.tj[nt] = k;
+        b->snap.tx[nt] = U->sigma;
+        nt++;
+    } /* K-bar */
     b->snap.nt = nt;
     memcpy(b->snap.f, U->force.f, sizeof(double) * (size_t)U->N);
 #ifndef AMPS_NO_THREADS
@@ -6389,7 +7529,11 @@ static void amps__csc_drop_zeros(amps_csc *A) {
         amps_int p1 = A->p[j + 1];
         A->p[j] = q;
         for (p = p0; p < p1; p++)
-            if (A->x[p] != 0.0 || A->i[p] == j) { A->i[q] = A->i[p]; A->x[q] = A->x[p]; q++; }
+            if (A->x[p] != 0.0 || A->i[p] == j) {
+                A->i[q] = A->i[p];
+                A->x[q] = A->x[p];
+                q++;
+            }
         p0 = p1;
     }
     A->p[A->ncol] = q;
@@ -6401,11 +7545,15 @@ static void amps__bg_log(amps_update *U, amps_int kpend, const amps__pdelta *pd,
     amps_int need, k;
     amps__bg_lock(b);
     need = b->log.n + npd + (kpend > 0);
-    if (b->state == AMPS__BG_FAILED) { amps__bg_unlock(b); return; }
+    if (b->state == AMPS__BG_FAILED) {
+        amps__bg_unlock(b);
+        return;
+    }
     if (need > b->log.cap) {
         amps_int cap = b->log.cap;
         amps_ctx c2;
-        amps_ctx_init(&c2); c2.alloc_user = b->snap.alloc_user;
+        amps_ctx_init(&c2);
+        c2.alloc_user = b->snap.alloc_user;
         while (cap < need) cap = cap * 2 + 1024;
         if (!U->grow || amps__realloc(&c2, (void **)&b->log.entries, (size_t)cap, sizeof(amps__lentry))) {
             b->cancel = 1;
@@ -6416,8 +7564,18 @@ static void amps__bg_log(amps_update *U, amps_int kpend, const amps__pdelta *pd,
         }
         b->log.cap = cap;
     }
-    if (kpend > 0) { b->log.entries[b->log.n].r = -1; b->log.entries[b->log.n].c = kpend; b->log.entries[b->log.n].v = 0; b->log.n++; }
-    for (k = 0; k < npd; k++) { b->log.entries[b->log.n].r = pd[k].r; b->log.entries[b->log.n].c = pd[k].c; b->log.entries[b->log.n].v = pd[k].v; b->log.n++; }
+    if (kpend > 0) {
+        b->log.entries[b->log.n].r = -1;
+        b->log.entries[b->log.n].c = kpend;
+        b->log.entries[b->log.n].v = 0;
+        b->log.n++;
+    }
+    for (k = 0; k < npd; k++) {
+        b->log.entries[b->log.n].r = pd[k].r;
+        b->log.entries[b->log.n].c = pd[k].c;
+        b->log.entries[b->log.n].v = pd[k].v;
+        b->log.n++;
+    }
     amps__bg_unlock(b);
 }
 
@@ -6443,7 +7601,9 @@ static amps_status amps__bg_replay(amps_ctx *ctx, amps_update *U2, const amps__l
 static amps_status amps__bg_assemble(amps_ctx *c2, amps__bg *b) {
     amps_int j, p, nz = 0, nt = b->snap.nt, *ti, *tj;
     double *tx;
-    for (j = 0; j < b->snap.n; j++) for (p = b->snap.Kp[j]; p < b->snap.Kp[j + 1]; p++) if (b->snap.Ki[p] <= j) nz++;
+    for (j = 0; j < b->snap.n; j++)
+        for (p = b->snap.Kp[j]; p < b->snap.Kp[j + 1]; p++)
+            if (b->snap.Ki[p] <= j) nz++;
     ti = AMPS__CAST(amps_int *, amps__malloc(c2, (size_t)(nz + nt) + 1, sizeof(amps_int)));
     tj = AMPS__CAST(amps_int *, amps__malloc(c2, (size_t)(nz + nt) + 1, sizeof(amps_int)));
     tx = AMPS__CAST(double *, amps__malloc(c2, (size_t)(nz + nt) + 1, sizeof(double)));
@@ -6451,13 +7611,20 @@ static amps_status amps__bg_assemble(amps_ctx *c2, amps__bg *b) {
         nz = 0;
         for (j = 0; j < b->snap.n; j++)
             for (p = b->snap.Kp[j]; p < b->snap.Kp[j + 1]; p++)
-                if (b->snap.Ki[p] <= j) { ti[nz] = b->snap.Ki[p]; tj[nz] = j; tx[nz] = b->snap.Kx[p]; nz++; }
+                if (b->snap.Ki[p] <= j) {
+                    ti[nz] = b->snap.Ki[p];
+                    tj[nz] = j;
+                    tx[nz] = b->snap.Kx[p];
+                    nz++;
+                }
         memcpy(ti + nz, b->snap.ti, sizeof(amps_int) * (size_t)nt);
         memcpy(tj + nz, b->snap.tj, sizeof(amps_int) * (size_t)nt);
         memcpy(tx + nz, b->snap.tx, sizeof(double) * (size_t)nt);
         b->result.K = amps_csc_from_triplets(c2, b->snap.N, nz + nt, ti, tj, tx, AMPS_UPPER);
     }
-    amps__free(c2, ti); amps__free(c2, tj); amps__free(c2, tx);
+    amps__free(c2, ti);
+    amps__free(c2, tj);
+    amps__free(c2, tx);
     if (!ti || !tj || !tx) return AMPS_ERR_OOM;
     if (!b->result.K) return c2->status;
     if (b->snap.opts.refactor_order.block != 0) amps__csc_drop_zeros(b->result.K);
@@ -6486,11 +7653,12 @@ static amps_status amps__bg_engine(amps_ctx *c2, amps__bg *b) {
     amps_update *V;
     amps_int j;
     amps_status s;
-    o2.grow = 1; o2.refactor = AMPS_REFACTOR_OFF;
-    c2->nthreads = b->snap.nthr;                     /* per-thread buffers for the owner's threads */
+    o2.grow = 1;
+    o2.refactor = AMPS_REFACTOR_OFF;
+    c2->nthreads = b->snap.nthr; /* per-thread buffers for the owner's threads */
     V = b->result.U = amps_update_create(c2, b->result.K, AMPS_UPPER, b->result.F, &o2);
     if (!V) return c2->status;
-    V->nthr = 1;                                     /* the catch-up runs on this thread alone */
+    V->nthr = 1; /* the catch-up runs on this thread alone */
     for (j = 0; j < b->snap.N; j++)
         if (b->snap.f[j] != 0.0 && (s = amps_update_set_force(c2, V, 1, &j, b->snap.f + j)) != AMPS_OK) return s;
     for (j = 0; j < b->snap.nc; j++) {
@@ -6510,17 +7678,24 @@ static amps_status amps__bg_follow_log(amps_ctx *c2, amps__bg *b) {
         amps_int lo, cnt;
         amps__lentry *chunk;
         amps__bg_lock(b);
-        lo = b->log.done; cnt = b->log.n - lo;
-        if (b->cancel || cnt < 32) { amps__bg_unlock(b); break; }
+        lo = b->log.done;
+        cnt = b->log.n - lo;
+        if (b->cancel || cnt < 32) {
+            amps__bg_unlock(b);
+            break;
+        }
         chunk = AMPS__CAST(amps__lentry *, amps__malloc(c2, (size_t)cnt, sizeof(amps__lentry)));
         if (chunk) memcpy(chunk, b->log.entries + lo, sizeof(amps__lentry) * (size_t)cnt);
         amps__bg_unlock(b);
         if (!chunk) return AMPS_ERR_OOM;
         if (AMPS_TEST_BG_FAULT(3)) s = amps__err(c2, AMPS_ERR_SINGULAR_UPDATE, "injected failure in the catch-up");
-        else if ((s = amps__bg_replay(c2, b->result.U, chunk, cnt, b->snap.sigma)) == AMPS_OK) s = amps_update_commit(c2, b->result.U);
+        else if ((s = amps__bg_replay(c2, b->result.U, chunk, cnt, b->snap.sigma)) == AMPS_OK)
+            s = amps_update_commit(c2, b->result.U);
         amps__free(c2, chunk);
         if (s != AMPS_OK) return s;
-        amps__bg_lock(b); b->log.done = lo + cnt; amps__bg_unlock(b);
+        amps__bg_lock(b);
+        b->log.done = lo + cnt;
+        amps__bg_unlock(b);
     }
     return AMPS_OK;
 }
@@ -6533,7 +7708,7 @@ static void amps__bg_work(amps__bg *b) {
     amps_status s;
     amps_ctx_init(&c2);
     c2.alloc_user = b->snap.alloc_user;
-    c2.nthreads = b->snap.opts.refactor_threads;        /* > 0: amps__create_opts */
+    c2.nthreads = b->snap.opts.refactor_threads; /* > 0: amps__create_opts */
     b->t0 = amps_now();
     if ((s = amps__bg_assemble(&c2, b)) == AMPS_OK && (s = amps__bg_factor(&c2, b)) == AMPS_OK &&
         (s = amps__bg_engine(&c2, b)) == AMPS_OK)
@@ -6550,13 +7725,19 @@ static void amps__bg_work(amps__bg *b) {
 }
 
 #ifndef AMPS_NO_THREADS
-static void *amps__bg_main(void *arg) { amps__bg_work(AMPS__CAST(amps__bg *, arg)); return NULL; }
+static void *amps__bg_main(void *arg) {
+    amps__bg_work(AMPS__CAST(amps__bg *, arg));
+    return NULL;
+}
 #endif
 
 /* Waits for the worker thread to end. */
 static void amps__bg_join(amps__bg *b) {
 #ifndef AMPS_NO_THREADS
-    if (b->has_thread) { pthread_join(b->th, NULL); b->has_thread = 0; }
+    if (b->has_thread) {
+        pthread_join(b->th, NULL);
+        b->has_thread = 0;
+    }
 #else
     (void)b;
 #endif
@@ -6576,7 +7757,11 @@ static void amps__bg_end(amps_ctx *ctx, amps_update *U, int failed) {
 static double amps__fact_estimate(const amps_factor *F, double t_solve) {
     double s1 = 0, s2 = 0;
     amps_int j;
-    for (j = 0; j < F->n; j++) { double c = (double)(F->Lp[j + 1] - F->Lp[j]) + 1; s1 += c; s2 += c * c; }
+    for (j = 0; j < F->n; j++) {
+        double c = (double)(F->Lp[j + 1] - F->Lp[j]) + 1;
+        s1 += c;
+        s2 += c * c;
+    }
     return s1 > 0 ? t_solve * s2 / (4 * s1) : 0;
 }
 #endif
@@ -6586,7 +7771,10 @@ static double amps__fact_estimate(const amps_factor *F, double t_solve) {
 static amps_status amps__bg_catch_up(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg *b) {
     amps_int lo, cnt, a, i;
     amps_status s;
-    amps__bg_lock(b); lo = b->log.done; cnt = b->log.n - lo; amps__bg_unlock(b);
+    amps__bg_lock(b);
+    lo = b->log.done;
+    cnt = b->log.n - lo;
+    amps__bg_unlock(b);
     if ((s = amps__bg_replay(c2, V, b->log.entries + lo, cnt, b->snap.sigma)) != AMPS_OK) return s;
     /* constraints and forces as they are now */
     for (a = 0; a < V->aug.size; a++) {
@@ -6604,18 +7792,24 @@ static amps_status amps__bg_catch_up(amps_ctx *c2, amps_update *U, amps_update *
     }
     if ((s = amps_update_commit(c2, V)) != AMPS_OK) return s;
     for (i = 0; i < U->N; i++)
-        if (V->force.f[i] != U->force.f[i] && (s = amps_update_set_force(c2, V, 1, &i, U->force.f + i)) != AMPS_OK) return s;
+        if (V->force.f[i] != U->force.f[i] && (s = amps_update_set_force(c2, V, 1, &i, U->force.f + i)) != AMPS_OK)
+            return s;
     /* changes recorded but not committed move along (as the log does) */
     if (U->pending.n_dofs > 0) {
         amps__lentry e;
-        e.r = -1; e.c = U->pending.n_dofs; e.v = 0;
+        e.r = -1;
+        e.c = U->pending.n_dofs;
+        e.v = 0;
         if ((s = amps__bg_replay(c2, V, &e, 1, b->snap.sigma)) != AMPS_OK) return s;
         memcpy(V->force.f + U->N, U->force.f + U->N, sizeof(double) * (size_t)U->pending.n_dofs);
     }
     for (a = 0; a < U->pending.n_delta; a++)
-        if ((s = amps_update_add(c2, V, 1, &U->pending.delta[a].r, &U->pending.delta[a].c, &U->pending.delta[a].v)) != AMPS_OK) return s;
+        if ((s = amps_update_add(c2, V, 1, &U->pending.delta[a].r, &U->pending.delta[a].c, &U->pending.delta[a].v)) !=
+            AMPS_OK)
+            return s;
     for (a = 0; a < U->pending.n_con; a++) {
-        s = U->pending.con[a].release ? amps_update_release(c2, V, 1, &U->pending.con[a].i) : amps_update_constrain(c2, V, 1, &U->pending.con[a].i, &U->pending.con[a].v);
+        s = U->pending.con[a].release ? amps_update_release(c2, V, 1, &U->pending.con[a].i)
+                                      : amps_update_constrain(c2, V, 1, &U->pending.con[a].i, &U->pending.con[a].v);
         if (s != AMPS_OK) return s;
     }
     return AMPS_OK;
@@ -6628,19 +7822,30 @@ static void amps__bg_take(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg
     amps_update old = *U;
     amps_int a;
     *U = *V;
-    U->grow = old.grow; U->nthr = old.nbuf; U->guard.tol = old.guard.tol;
+    U->grow = old.grow;
+    U->nthr = old.nbuf;
+    U->guard.tol = old.guard.tol;
     U->refac = old.refac;
     U->refac.job = NULL;
-    U->refac.F_own = b->result.F; U->refac.K_own = b->result.K;
-    b->result.F = NULL; b->result.K = NULL; b->result.U = NULL;
+    U->refac.F_own = b->result.F;
+    U->refac.K_own = b->result.K;
+    b->result.F = NULL;
+    b->result.K = NULL;
+    b->result.U = NULL;
     U->refac.t_factor = b->t1 - b->t0;
-    U->refac.t_step_base = 0; U->refac.t_extra = 0; U->refac.size_base = U->aug.size;
-    U->watch = old.watch;                           /* no job in progress (the callers check) */
-    old.watch.idx = NULL; old.watch.from_dense = NULL; old.watch.closure = NULL; old.refac.job = NULL;
+    U->refac.t_step_base = 0;
+    U->refac.t_extra = 0;
+    U->refac.size_base = U->aug.size;
+    U->watch = old.watch; /* no job in progress (the callers check) */
+    old.watch.idx = NULL;
+    old.watch.from_dense = NULL;
+    old.watch.closure = NULL;
+    old.refac.job = NULL;
     U->watch.n_closure = 0;
     if (U->watch.closure) {
         amps_int nb = 0, k;
-        for (k = 0; k < U->watch.n; k++) if (U->watch.idx[k] < U->n) U->work.idx[nb++] = U->F->iperm[U->watch.idx[k]];
+        for (k = 0; k < U->watch.n; k++)
+            if (U->watch.idx[k] < U->n) U->work.idx[nb++] = U->F->iperm[U->watch.idx[k]];
         U->watch.n_closure = amps_closure(U->F, nb, U->work.idx, U->watch.closure, &U->work.mark_n);
     }
     memcpy(U->sol.x, old.sol.x, sizeof(double) * (size_t)old.N);
@@ -6648,8 +7853,13 @@ static void amps__bg_take(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg
         amps_int ao = old.aug.pos[U->aug.idx[a]];
         U->sol.react[a] = ao >= 0 ? old.sol.react[ao] : 0.0;
     }
-    U->sol.x_stale = old.sol.x_stale; U->sol.has_x = old.sol.has_x; U->sol.react_stale = old.sol.react_stale; U->sol.has_react = old.sol.has_react;
-    U->sol.watched_stale = old.sol.watched_stale; U->sol.x_dim = old.sol.x_dim; U->sol.commit_unsolved = old.sol.commit_unsolved;
+    U->sol.x_stale = old.sol.x_stale;
+    U->sol.has_x = old.sol.has_x;
+    U->sol.react_stale = old.sol.react_stale;
+    U->sol.has_react = old.sol.has_react;
+    U->sol.watched_stale = old.sol.watched_stale;
+    U->sol.x_dim = old.sol.x_dim;
+    U->sol.commit_unsolved = old.sol.commit_unsolved;
     U->stats = old.stats;
     U->stats.nrefactor++;
     U->stats.t_refactor = b->t1 - b->t0;
@@ -6666,14 +7876,19 @@ static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
     amps_ctx c2;
     amps_status s;
     double t0 = amps_now();
-    amps_ctx_init(&c2); c2.alloc_user = ctx ? ctx->alloc_user : NULL;
+    amps_ctx_init(&c2);
+    c2.alloc_user = ctx ? ctx->alloc_user : NULL;
     amps__bg_join(b);
     V->nthr = U->nbuf;
     s = amps__bg_catch_up(&c2, U, V, b);
-    if (s == AMPS_OK && U->watch.closure && amps__realloc(&c2, (void **)&U->watch.closure, (size_t)V->n, sizeof(amps_int))) s = AMPS_ERR_OOM;
+    if (s == AMPS_OK && U->watch.closure &&
+        amps__realloc(&c2, (void **)&U->watch.closure, (size_t)V->n, sizeof(amps_int)))
+        s = AMPS_ERR_OOM;
     if (s != AMPS_OK) {
         amps__bg_end(&c2, U, 1);
-        return amps__err(ctx, s, "amps_update: swapping the re-factorization in failed (%s); the engine keeps its factors", c2.msg);
+        return amps__err(ctx, s,
+                         "amps_update: swapping the re-factorization in failed (%s); the engine keeps its factors",
+                         c2.msg);
     }
     amps__bg_take(&c2, U, V, b);
     amps__bg_free(&c2, b);
@@ -6688,7 +7903,8 @@ static void amps__bg_poll(amps_ctx *ctx, amps_update *U) {
         int st = amps__bg_get(U->refac.job, &U->refac.job->state);
         if (st == AMPS__BG_READY && !U->watch.job_y) {
             amps_ctx c2;
-            amps_ctx_init(&c2); c2.alloc_user = ctx ? ctx->alloc_user : NULL;
+            amps_ctx_init(&c2);
+            c2.alloc_user = ctx ? ctx->alloc_user : NULL;
             (void)amps__bg_swap(&c2, U);
         } else if (st == AMPS__BG_FAILED) amps__bg_end(ctx, U, 1);
     }
@@ -6708,18 +7924,22 @@ static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t) {
     U->refac.t_extra += t - U->refac.t_step_base;
     if (U->refac.t_extra >= U->refac.opts.refactor_ratio * U->refac.t_factor) {
         amps_ctx c2;
-        amps_ctx_init(&c2); c2.alloc_user = ctx ? ctx->alloc_user : NULL;
+        amps_ctx_init(&c2);
+        c2.alloc_user = ctx ? ctx->alloc_user : NULL;
         (void)amps_update_refactor_start(&c2, U);
     }
 #else
-    (void)ctx; (void)U; (void)t;
+    (void)ctx;
+    (void)U;
+    (void)t;
 #endif
 }
 
 AMPS_API amps_status amps_update_refactor_start(amps_ctx *ctx, amps_update *U) {
     amps__bg *b;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_refactor_start: NULL engine");
-    if (U->refac.opts.refactor == AMPS_REFACTOR_OFF) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_start: re-factorization is off (opts.refactor)");
+    if (U->refac.opts.refactor == AMPS_REFACTOR_OFF)
+        return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_start: re-factorization is off (opts.refactor)");
     if (U->refac.job) return AMPS_WARN_NOOP;
     b = amps__bg_snapshot(ctx, U);
     if (!b) return ctx && ctx->status ? ctx->status : AMPS_ERR_OOM;
@@ -6735,7 +7955,7 @@ AMPS_API amps_status amps_update_refactor_start(amps_ctx *ctx, amps_update *U) {
         return AMPS_OK;
     }
 #endif
-    amps__bg_work(b);                           /* no thread: synchronously */
+    amps__bg_work(b); /* no thread: synchronously */
     return AMPS_OK;
 }
 
@@ -6743,7 +7963,8 @@ AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U) {
     amps__bg *b;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_refactor_wait: NULL engine");
     if (!(b = U->refac.job)) return AMPS_WARN_NOOP;
-    if (U->watch.job_y) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_wait: a watched-solve job is in progress");
+    if (U->watch.job_y)
+        return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_wait: a watched-solve job is in progress");
     amps__bg_join(b);
     if (b->state == AMPS__BG_READY) return amps__bg_swap(ctx, U);
     {
@@ -6751,13 +7972,17 @@ AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U) {
         char msg[256];
         memcpy(msg, b->msg, sizeof(msg));
         amps__bg_end(ctx, U, 1);
-        return amps__err(ctx, s, "amps_update_refactor_wait: the re-factorization failed (%s); the engine keeps its factors", msg);
+        return amps__err(ctx, s,
+                         "amps_update_refactor_wait: the re-factorization failed (%s); the engine keeps its factors",
+                         msg);
     }
 }
 
 static void amps__bg_discard(amps_ctx *ctx, amps_update *U) {
     if (!U->refac.job) return;
-    amps__bg_lock(U->refac.job); U->refac.job->cancel = 1; amps__bg_unlock(U->refac.job);
+    amps__bg_lock(U->refac.job);
+    U->refac.job->cancel = 1;
+    amps__bg_unlock(U->refac.job);
     amps__bg_end(ctx, U, 0);
 }
 
@@ -6905,20 +8130,33 @@ AMPS_API void amps_sym3_eig(const double s[6], double lam[3]) {
         if (fabs(s[k]) > scale) scale = fabs(s[k]);
     }
     if (s[3] == 0.0 && s[4] == 0.0 && s[5] == 0.0) {
-        l0 = s[0]; l1 = s[1]; l2 = s[2];
+        l0 = s[0];
+        l1 = s[1];
+        l2 = s[2];
     } else {
         for (k = 0; k < 6; k++) a[k] = s[k] / scale;
         q = (a[0] + a[1] + a[2]) / 3.0;
-        a[0] -= q; a[1] -= q; a[2] -= q;
+        a[0] -= q;
+        a[1] -= q;
+        a[2] -= q;
         p2 = a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + 2.0 * (a[3] * a[3] + a[4] * a[4] + a[5] * a[5]);
         p = sqrt(p2 / 6.0);
         /* B = A / p has trace 0 and |B|_F^2 = 6: eigenvalues 2 cos(phi + 2 pi k / 3), cos(3 phi) = det(B) / 2 */
-        r = 0.5 * (a[0] * (a[1] * a[2] - a[4] * a[4]) - a[3] * (a[3] * a[2] - a[4] * a[5]) + a[5] * (a[3] * a[4] - a[1] * a[5])) / (p * p * p);
+        r = 0.5 *
+            (a[0] * (a[1] * a[2] - a[4] * a[4]) - a[3] * (a[3] * a[2] - a[4] * a[5]) +
+             a[5] * (a[3] * a[4] - a[1] * a[5])) /
+            (p * p * p);
         phi = r <= -1.0 ? pi / 3.0 : r >= 1.0 ? 0.0 : acos(r) / 3.0;
         l0 = p * (r >= 0.0 ? 2.0 * cos(phi) : 2.0 * cos(phi + 2.0 * pi / 3.0));
-        R[0][0] = a[0] - l0; R[0][1] = a[3]; R[0][2] = a[5];
-        R[1][0] = a[3]; R[1][1] = a[1] - l0; R[1][2] = a[4];
-        R[2][0] = a[5]; R[2][1] = a[4]; R[2][2] = a[2] - l0;
+        R[0][0] = a[0] - l0;
+        R[0][1] = a[3];
+        R[0][2] = a[5];
+        R[1][0] = a[3];
+        R[1][1] = a[1] - l0;
+        R[1][2] = a[4];
+        R[2][0] = a[5];
+        R[2][1] = a[4];
+        R[2][2] = a[2] - l0;
         for (i = 0; i < 3; i++)
             for (j = i + 1; j < 3; j++) {
                 double n2;
@@ -6928,20 +8166,28 @@ AMPS_API void amps_sym3_eig(const double s[6], double lam[3]) {
                 n2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
                 if (n2 > best) {
                     best = n2;
-                    v[0] = c[0]; v[1] = c[1]; v[2] = c[2];
+                    v[0] = c[0];
+                    v[1] = c[1];
+                    v[2] = c[2];
                 }
             }
         if (best == 0.0) {
             l1 = l2 = l0;
         } else {
             t = 1.0 / sqrt(best);
-            v[0] *= t; v[1] *= t; v[2] *= t;
+            v[0] *= t;
+            v[1] *= t;
+            v[2] *= t;
             if (fabs(v[0]) > fabs(v[1])) {
                 t = 1.0 / sqrt(v[0] * v[0] + v[2] * v[2]);
-                u[0] = -v[2] * t; u[1] = 0.0; u[2] = v[0] * t;
+                u[0] = -v[2] * t;
+                u[1] = 0.0;
+                u[2] = v[0] * t;
             } else {
                 t = 1.0 / sqrt(v[1] * v[1] + v[2] * v[2]);
-                u[0] = 0.0; u[1] = v[2] * t; u[2] = -v[1] * t;
+                u[0] = 0.0;
+                u[1] = v[2] * t;
+                u[2] = -v[1] * t;
             }
             w[0] = v[1] * u[2] - v[2] * u[1];
             w[1] = v[2] * u[0] - v[0] * u[2];
@@ -6964,9 +8210,21 @@ AMPS_API void amps_sym3_eig(const double s[6], double lam[3]) {
         l1 = (l1 + q) * scale;
         l2 = (l2 + q) * scale;
     }
-    if (l0 < l1) { t = l0; l0 = l1; l1 = t; }
-    if (l1 < l2) { t = l1; l1 = l2; l2 = t; }
-    if (l0 < l1) { t = l0; l0 = l1; l1 = t; }
+    if (l0 < l1) {
+        t = l0;
+        l0 = l1;
+        l1 = t;
+    }
+    if (l1 < l2) {
+        t = l1;
+        l1 = l2;
+        l2 = t;
+    }
+    if (l0 < l1) {
+        t = l0;
+        l0 = l1;
+        l1 = t;
+    }
     lam[0] = l0;
     lam[1] = l1;
     lam[2] = l2;
@@ -7010,7 +8268,8 @@ AMPS_API void amps_mesh_free(amps_ctx *ctx, amps_mesh *m) {
 }
 
 /* Error unless tet t (nodes tv) has volume > 1e-12 L^3, L = longest edge. */
-static amps_status amps__mesh_check_tet(amps_ctx *ctx, const char *fn, amps_int t, const amps_int *tv, const double *xyz) {
+static amps_status amps__mesh_check_tet(amps_ctx *ctx, const char *fn, amps_int t, const amps_int *tv,
+                                        const double *xyz) {
     double X[12], G[12], L2 = 0.0, vol;
     int a, b, c;
     for (a = 0; a < 4; a++)
@@ -7023,8 +8282,10 @@ static amps_status amps__mesh_check_tet(amps_ctx *ctx, const char *fn, amps_int 
         }
     vol = fabs(amps_tet_gradients(X, G));
     if (!(vol > 1e-12 * L2 * sqrt(L2)))
-        return amps__err(ctx, AMPS_ERR_MESH, "%s: tetrahedron %lld (nodes %lld %lld %lld %lld) is degenerate: volume %g, longest edge %g",
-                         fn, (long long)t, (long long)tv[0], (long long)tv[1], (long long)tv[2], (long long)tv[3], vol, sqrt(L2));
+        return amps__err(ctx, AMPS_ERR_MESH,
+                         "%s: tetrahedron %lld (nodes %lld %lld %lld %lld) is degenerate: volume %g, longest edge %g",
+                         fn, (long long)t, (long long)tv[0], (long long)tv[1], (long long)tv[2], (long long)tv[3], vol,
+                         sqrt(L2));
     return AMPS_OK;
 }
 
@@ -7065,7 +8326,8 @@ static amps_mesh *amps__mesh_new(amps_ctx *ctx, const char *fn, amps_int nnode, 
         return NULL;
     }
     if (nnode > AMPS__IMAX / 3 || ntet > AMPS__IMAX / 4) {
-        amps__err(ctx, AMPS_ERR_ARG, "%s: %lld nodes / %lld tetrahedra exceed the index type", fn, (long long)nnode, (long long)ntet);
+        amps__err(ctx, AMPS_ERR_ARG, "%s: %lld nodes / %lld tetrahedra exceed the index type", fn, (long long)nnode,
+                  (long long)ntet);
         return NULL;
     }
     for (k = 0; k < 3 * nnode; k++)
@@ -7078,8 +8340,8 @@ static amps_mesh *amps__mesh_new(amps_ctx *ctx, const char *fn, amps_int nnode, 
             k = tet[4 * t + q];
             if (k < 0 || k >= nnode) {
                 if (bad) *bad = t;
-                amps__err(ctx, AMPS_ERR_INDEX, "%s: tetrahedron %lld: node index %lld out of range [0, %lld)", fn, (long long)t,
-                          (long long)k, (long long)nnode);
+                amps__err(ctx, AMPS_ERR_INDEX, "%s: tetrahedron %lld: node index %lld out of range [0, %lld)", fn,
+                          (long long)t, (long long)k, (long long)nnode);
                 return NULL;
             }
         }
@@ -7116,14 +8378,17 @@ static amps_mesh *amps__mesh_new(amps_ctx *ctx, const char *fn, amps_int nnode, 
     return m;
 }
 
-AMPS_API amps_mesh *amps_mesh_create(amps_ctx *ctx, amps_int nnode, const double *xyz, amps_int ntet, const amps_int *tet) {
+AMPS_API amps_mesh *amps_mesh_create(amps_ctx *ctx, amps_int nnode, const double *xyz, amps_int ntet,
+                                     const amps_int *tet) {
     return amps__mesh_new(ctx, "amps_mesh_create", nnode, xyz, ntet, tet, NULL);
 }
 
 static amps_status amps__check_material(amps_ctx *ctx, const char *fn, double E, double nu) {
-    if (!amps__isfinite(E) || !amps__isfinite(nu)) return amps__err(ctx, AMPS_ERR_VALUE, "%s: non-finite material (E %g, nu %g)", fn, E, nu);
+    if (!amps__isfinite(E) || !amps__isfinite(nu))
+        return amps__err(ctx, AMPS_ERR_VALUE, "%s: non-finite material (E %g, nu %g)", fn, E, nu);
     if (!(E > 0.0)) return amps__err(ctx, AMPS_ERR_ARG, "%s: Young's modulus E = %g must be positive", fn, E);
-    if (!(nu > -1.0 && nu < 0.5)) return amps__err(ctx, AMPS_ERR_ARG, "%s: Poisson ratio nu = %g must lie in (-1, 0.5)", fn, nu);
+    if (!(nu > -1.0 && nu < 0.5))
+        return amps__err(ctx, AMPS_ERR_ARG, "%s: Poisson ratio nu = %g must lie in (-1, 0.5)", fn, nu);
     return AMPS_OK;
 }
 
@@ -7144,8 +8409,8 @@ AMPS_API amps_status amps_mesh_set_tet_material(amps_ctx *ctx, amps_mesh *m, amp
     amps_status s;
     if (!m) return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_set_tet_material: NULL mesh");
     if (t < 0 || t >= m->ntet)
-        return amps__err(ctx, AMPS_ERR_INDEX, "amps_mesh_set_tet_material: tetrahedron %lld out of range [0, %lld)", (long long)t,
-                         (long long)m->ntet);
+        return amps__err(ctx, AMPS_ERR_INDEX, "amps_mesh_set_tet_material: tetrahedron %lld out of range [0, %lld)",
+                         (long long)t, (long long)m->ntet);
     s = amps__check_material(ctx, "amps_mesh_set_tet_material", E, nu);
     if (s) return s;
     m->E[t] = E;
@@ -7158,16 +8423,16 @@ AMPS_API amps_status amps_mesh_set_tet_material(amps_ctx *ctx, amps_mesh *m, amp
    lattice path 0 -> (one axis) -> (two axes) -> 7, i.e. the 6 permutations of the axes, so all
    share the main diagonal 0-7. Every cell face is then split along its diagonal from the
    lowest to the highest corner, the same way from both sides: the mesh is conforming. */
-static amps_mesh *amps__mesh_grid(amps_ctx *ctx, const char *fn, amps_int nx, amps_int ny, amps_int nz, double hx, double hy,
-                                  double hz) {
+static amps_mesh *amps__mesh_grid(amps_ctx *ctx, const char *fn, amps_int nx, amps_int ny, amps_int nz, double hx,
+                                  double hy, double hz) {
     static const int kt[6][4] = {{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7}, {0, 2, 6, 7}, {0, 4, 5, 7}, {0, 4, 6, 7}};
     double *xyz;
     amps_int *tet, i, j, k, nn, nt = 0;
     amps_mesh *m;
     int c, q, s;
     if (nx < 2 || ny < 2 || nz < 2) {
-        amps__err(ctx, AMPS_ERR_ARG, "%s: need at least 2 nodes per direction (got %lld x %lld x %lld)", fn, (long long)nx,
-                  (long long)ny, (long long)nz);
+        amps__err(ctx, AMPS_ERR_ARG, "%s: need at least 2 nodes per direction (got %lld x %lld x %lld)", fn,
+                  (long long)nx, (long long)ny, (long long)nz);
         return NULL;
     }
     if (!(hx > 0.0 && hy > 0.0 && hz > 0.0) || !amps__isfinite(hx + hy + hz)) {
@@ -7175,13 +8440,14 @@ static amps_mesh *amps__mesh_grid(amps_ctx *ctx, const char *fn, amps_int nx, am
         return NULL;
     }
     if ((double)nx * (double)ny * (double)nz * 24.0 > (double)AMPS__IMAX) {
-        amps__err(ctx, AMPS_ERR_ARG, "%s: grid %lld x %lld x %lld too large for the index type", fn, (long long)nx, (long long)ny,
-                  (long long)nz);
+        amps__err(ctx, AMPS_ERR_ARG, "%s: grid %lld x %lld x %lld too large for the index type", fn, (long long)nx,
+                  (long long)ny, (long long)nz);
         return NULL;
     }
     nn = nx * ny * nz;
     xyz = AMPS__CAST(double *, amps__malloc(ctx, 3 * (size_t)nn, sizeof(double)));
-    tet = AMPS__CAST(amps_int *, amps__malloc(ctx, 24 * (size_t)(nx - 1) * (size_t)(ny - 1) * (size_t)(nz - 1), sizeof(amps_int)));
+    tet = AMPS__CAST(amps_int *,
+                     amps__malloc(ctx, 24 * (size_t)(nx - 1) * (size_t)(ny - 1) * (size_t)(nz - 1), sizeof(amps_int)));
     if (!xyz || !tet) {
         amps__free(ctx, xyz);
         amps__free(ctx, tet);
@@ -7211,7 +8477,8 @@ static amps_mesh *amps__mesh_grid(amps_ctx *ctx, const char *fn, amps_int nx, am
     return m;
 }
 
-AMPS_API amps_mesh *amps_mesh_grid(amps_ctx *ctx, amps_int nx, amps_int ny, amps_int nz, double hx, double hy, double hz) {
+AMPS_API amps_mesh *amps_mesh_grid(amps_ctx *ctx, amps_int nx, amps_int ny, amps_int nz, double hx, double hy,
+                                   double hz) {
     return amps__mesh_grid(ctx, "amps_mesh_grid", nx, ny, nz, hx, hy, hz);
 }
 
@@ -7228,7 +8495,8 @@ AMPS_API amps_mesh *amps_mesh_brick(amps_ctx *ctx, amps_int R) {
         amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_brick: resolution R = %lld must be at least 1", (long long)R);
         return NULL;
     }
-    return amps__mesh_grid(ctx, "amps_mesh_brick", R + 1, R + 1, 2 * R + 1, 1.0 / (double)R, 1.0 / (double)R, 1.0 / (double)R);
+    return amps__mesh_grid(ctx, "amps_mesh_brick", R + 1, R + 1, 2 * R + 1, 1.0 / (double)R, 1.0 / (double)R,
+                           1.0 / (double)R);
 }
 
 AMPS_API amps_status amps_mesh_reserve(amps_ctx *ctx, amps_mesh *m, amps_int node_cap) {
@@ -7237,7 +8505,8 @@ AMPS_API amps_status amps_mesh_reserve(amps_ctx *ctx, amps_mesh *m, amps_int nod
     if (!m) return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_reserve: NULL mesh");
     if (node_cap <= m->node_cap) return AMPS_OK;
     if (node_cap > AMPS__IMAX / 3)
-        return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_mesh_reserve: %lld nodes exceed the index type", (long long)node_cap);
+        return amps__err(ctx, AMPS_ERR_CAPACITY, "amps_mesh_reserve: %lld nodes exceed the index type",
+                         (long long)node_cap);
     /* arrays that grew before a failure stay grown; node_cap changes only when all succeed */
     p = m->xyz;
     if (amps__realloc(ctx, &p, 3 * nc, sizeof(double))) goto oom;
@@ -7282,17 +8551,22 @@ AMPS_API amps_status amps_mesh_check(amps_ctx *ctx, const amps_mesh *m) {
         for (q = 0; q < 4; q++) {
             v = m->tet[4 * t + q];
             if (v < 0 || v >= m->nnode)
-                return amps__err(ctx, AMPS_ERR_MESH, "%s: tetrahedron %lld: node %lld out of range", fn, (long long)t, (long long)v);
+                return amps__err(ctx, AMPS_ERR_MESH, "%s: tetrahedron %lld: node %lld out of range", fn, (long long)t,
+                                 (long long)v);
             for (r = 0; r < q; r++)
                 if (m->tet[4 * t + r] == v)
-                    return amps__err(ctx, AMPS_ERR_MESH, "%s: tetrahedron %lld repeats node %lld", fn, (long long)t, (long long)v);
+                    return amps__err(ctx, AMPS_ERR_MESH, "%s: tetrahedron %lld repeats node %lld", fn, (long long)t,
+                                     (long long)v);
         }
     for (v = 0; v < m->nnode; v++) {
         amps_int o = m->origin[v];
         if (v < m->nfile ? o != v : (o < 0 || o >= m->nfile))
-            return amps__err(ctx, AMPS_ERR_MESH, "%s: node %lld has invalid origin %lld", fn, (long long)v, (long long)o);
-        if (m->xyz[3 * v] != m->xyz[3 * o] || m->xyz[3 * v + 1] != m->xyz[3 * o + 1] || m->xyz[3 * v + 2] != m->xyz[3 * o + 2])
-            return amps__err(ctx, AMPS_ERR_MESH, "%s: copy %lld does not have the coordinates of its origin", fn, (long long)v);
+            return amps__err(ctx, AMPS_ERR_MESH, "%s: node %lld has invalid origin %lld", fn, (long long)v,
+                             (long long)o);
+        if (m->xyz[3 * v] != m->xyz[3 * o] || m->xyz[3 * v + 1] != m->xyz[3 * o + 1] ||
+            m->xyz[3 * v + 2] != m->xyz[3 * o + 2])
+            return amps__err(ctx, AMPS_ERR_MESH, "%s: copy %lld does not have the coordinates of its origin", fn,
+                             (long long)v);
     }
     seen = AMPS__CAST(unsigned char *, amps__calloc(ctx, 4 * (size_t)m->ntet, 1));
     if (!seen) return AMPS_ERR_OOM;
@@ -7320,21 +8594,27 @@ AMPS_API amps_status amps_mesh_check(amps_ctx *ctx, const amps_mesh *m) {
     }
     amps__free(ctx, seen);
     if (total != 4 * m->ntet)
-        return amps__err(ctx, AMPS_ERR_MESH, "%s: incidence lists hold %lld entries, expected %lld", fn, (long long)total,
-                         (long long)(4 * m->ntet));
+        return amps__err(ctx, AMPS_ERR_MESH, "%s: incidence lists hold %lld entries, expected %lld", fn,
+                         (long long)total, (long long)(4 * m->ntet));
     return AMPS_OK;
 }
 
 AMPS_API amps_int amps_mesh_select(amps_ctx *ctx, const amps_mesh *m, int axis, amps_cmp cmp, double value,
                                    amps_int *out) {
     amps_int v, n = 0;
-    if (!m) { amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_select: NULL mesh"); return -1; }
+    if (!m) {
+        amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_select: NULL mesh");
+        return -1;
+    }
     if (axis < 0 || axis > 2 || (cmp != AMPS_LT && cmp != AMPS_GT)) {
         amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_select: axis %d, comparison %d (axis 0-2, AMPS_LT or AMPS_GT)", axis,
                   (int)cmp);
         return -1;
     }
-    if (value != value) { amps__err(ctx, AMPS_ERR_VALUE, "amps_mesh_select: value is NaN"); return -1; }
+    if (value != value) {
+        amps__err(ctx, AMPS_ERR_VALUE, "amps_mesh_select: value is NaN");
+        return -1;
+    }
     for (v = 0; v < m->nnode; v++) {
         double x = m->xyz[3 * v + axis];
         if (cmp == AMPS_LT ? x < value : x > value) {
@@ -7366,8 +8646,8 @@ AMPS_API double amps_mesh_tet_stiffness(const amps_mesh *m, amps_int t, double K
     return amps_tet_stiffness(X, m->E[t], m->nu[t], Ke);
 }
 
-AMPS_API amps_status amps_mesh_stress(amps_ctx *ctx, const amps_mesh *m, const double *disp, double *sigma, double *von_mises,
-                                      double *principal) {
+AMPS_API amps_status amps_mesh_stress(amps_ctx *ctx, const amps_mesh *m, const double *disp, double *sigma,
+                                      double *von_mises, double *principal) {
     amps_int t;
     if (!m || !disp) return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_stress: NULL mesh or displacement");
     for (t = 0; t < m->ntet; t++) {
@@ -7415,7 +8695,7 @@ static amps_status amps__node_graph(amps_ctx *ctx, const char *fn, const amps_me
     adjp = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int)));
     if (!adjp) return AMPS_ERR_OOM;
     *adjp_out = adjp;
-    for (pass = 0; pass < 2; pass++) {   /* pass 0 counts, pass 1 fills */
+    for (pass = 0; pass < 2; pass++) { /* pass 0 counts, pass 1 fills */
         for (v = 0; v < n; v++) mark[v] = -1;
         for (v = 0, cnt = 0; v < n; v++) {
             const amps_int *lst = m->inc + m->inc_ptr[v];
@@ -7426,9 +8706,11 @@ static amps_status amps__node_graph(amps_ctx *ctx, const char *fn, const amps_me
                     w = m->tet[4 * lst[j] + e];
                     if (mark[w] == v) continue;
                     mark[w] = v;
-                    if (pass) adj[k++] = w; else cnt++;
+                    if (pass) adj[k++] = w;
+                    else cnt++;
                 }
-            if (cnt > (long long)AMPS__IMAX) return amps__err(ctx, AMPS_ERR_OOM, "%s: node graph too large for the index type", fn);
+            if (cnt > (long long)AMPS__IMAX)
+                return amps__err(ctx, AMPS_ERR_OOM, "%s: node graph too large for the index type", fn);
         }
         if (pass == 0) {
             adjp[n] = (amps_int)cnt;
@@ -7444,12 +8726,13 @@ static amps_status amps__node_graph(amps_ctx *ctx, const char *fn, const amps_me
    ascending order and appending i to every column c >= i it couples with gives each column its
    rows in ascending order. cc is workspace (ndof + 1, zero). */
 static amps_csc *amps__assemble_pattern(amps_ctx *ctx, const char *fn, const amps_int *dof, amps_int ndof,
-                                        const amps_int *owner, const amps_int *adjp, const amps_int *adj, amps_int *cc) {
+                                        const amps_int *owner, const amps_int *adjp, const amps_int *adj,
+                                        amps_int *cc) {
     amps_int i, j, c, k, v;
     long long cnt;
     amps_csc *A = NULL;
     int e, pass;
-    for (pass = 0; pass < 2; pass++) {   /* pass 0 counts the entries of each column, pass 1 places them */
+    for (pass = 0; pass < 2; pass++) { /* pass 0 counts the entries of each column, pass 1 places them */
         for (i = 0; i < ndof; i++) {
             if (owner[i] < 0) continue;
             v = owner[i] / 3;
@@ -7457,7 +8740,8 @@ static amps_csc *amps__assemble_pattern(amps_ctx *ctx, const char *fn, const amp
                 for (e = 0; e < 3; e++) {
                     c = dof[3 * adj[j] + e];
                     if (c < i) continue;
-                    if (pass) A->i[cc[c]++] = i; else cc[c + 1]++;
+                    if (pass) A->i[cc[c]++] = i;
+                    else cc[c + 1]++;
                 }
         }
         if (pass) break;
@@ -7489,7 +8773,7 @@ static void amps__csc_add_element(amps_csc *A, const amps_int rd[12], const doub
             if (row < 0 || row > col) continue;
             lo = A->p[col];
             hi = A->p[col + 1] - 1;
-            while (lo < hi) {                       /* binary search of row in column col */
+            while (lo < hi) { /* binary search of row in column col */
                 amps_int mid = lo + (hi - lo) / 2;
                 if (A->i[mid] < row) lo = mid + 1;
                 else hi = mid;
@@ -7514,7 +8798,7 @@ AMPS_API amps_csc *amps_mesh_assemble(amps_ctx *ctx, const amps_mesh *m, const a
     if (owner && cc && mark && amps__dof_owner(ctx, fn, m->nnode, dof, ndof, owner) == AMPS_OK &&
         amps__node_graph(ctx, fn, m, mark, &adjp, &adj) == AMPS_OK)
         A = amps__assemble_pattern(ctx, fn, dof, ndof, owner, adjp, adj, cc);
-    for (t = 0; A && t < m->ntet; t++) {                  /* values: every element matrix */
+    for (t = 0; A && t < m->ntet; t++) { /* values: every element matrix */
         double Ke[144];
         amps_int rd[12];
         int a;
@@ -7536,7 +8820,8 @@ static double amps__cut_side(const amps_mesh *m, amps_int t, const double p[3], 
     double s = 0.0;
     int c;
     for (c = 0; c < 3; c++) {
-        double x = 0.25 * (m->xyz[3 * tv[0] + c] + m->xyz[3 * tv[1] + c] + m->xyz[3 * tv[2] + c] + m->xyz[3 * tv[3] + c]);
+        double x =
+                0.25 * (m->xyz[3 * tv[0] + c] + m->xyz[3 * tv[1] + c] + m->xyz[3 * tv[2] + c] + m->xyz[3 * tv[3] + c]);
         s += (x - p[c]) * nrm[c];
     }
     return s;
@@ -7551,10 +8836,13 @@ AMPS_API amps_status amps_mesh_cut(amps_ctx *ctx, amps_mesh *m, amps_int v, cons
     if (nmoved) *nmoved = 0;
     if (!m || !p || !nrm || !moved) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL mesh, plane or moved array", fn);
     if (v < 0 || v >= m->nnode)
-        return amps__err(ctx, AMPS_ERR_INDEX, "%s: node %lld out of range [0, %lld)", fn, (long long)v, (long long)m->nnode);
+        return amps__err(ctx, AMPS_ERR_INDEX, "%s: node %lld out of range [0, %lld)", fn, (long long)v,
+                         (long long)m->nnode);
     for (c = 0; c < 3; c++)
-        if (!amps__isfinite(p[c]) || !amps__isfinite(nrm[c])) return amps__err(ctx, AMPS_ERR_VALUE, "%s: non-finite plane point or normal", fn);
-    if (nrm[0] == 0.0 && nrm[1] == 0.0 && nrm[2] == 0.0) return amps__err(ctx, AMPS_ERR_ARG, "%s: zero plane normal", fn);
+        if (!amps__isfinite(p[c]) || !amps__isfinite(nrm[c]))
+            return amps__err(ctx, AMPS_ERR_VALUE, "%s: non-finite plane point or normal", fn);
+    if (nrm[0] == 0.0 && nrm[1] == 0.0 && nrm[2] == 0.0)
+        return amps__err(ctx, AMPS_ERR_ARG, "%s: zero plane normal", fn);
     base = m->inc_ptr[v];
     deg = m->inc_len[v];
     for (j = 0; j < deg; j++) {
@@ -7562,13 +8850,15 @@ AMPS_API amps_status amps_mesh_cut(amps_ctx *ctx, amps_mesh *m, amps_int v, cons
         if (amps__cut_side(m, t, p, nrm) < 0.0) moved[nm++] = t;
     }
     if (nm == 0 || nm == deg)
-        return amps__err(ctx, AMPS_WARN_NOOP, "%s: all %lld tetrahedra at node %lld lie on one side of the plane; nothing cut", fn,
+        return amps__err(ctx, AMPS_WARN_NOOP,
+                         "%s: all %lld tetrahedra at node %lld lie on one side of the plane; nothing cut", fn,
                          (long long)deg, (long long)v);
     if (m->nnode == m->node_cap) {
         amps_int cap = m->node_cap + m->node_cap / 2 + 16;
         amps_status s;
         if (cap > AMPS__IMAX / 3 || cap < m->node_cap) cap = AMPS__IMAX / 3;
-        if (cap <= m->nnode) return amps__err(ctx, AMPS_ERR_CAPACITY, "%s: node count at the limit of the index type", fn);
+        if (cap <= m->nnode)
+            return amps__err(ctx, AMPS_ERR_CAPACITY, "%s: node count at the limit of the index type", fn);
         s = amps_mesh_reserve(ctx, m, cap);
         if (s) return s;
     }
@@ -7594,23 +8884,30 @@ AMPS_API amps_status amps_mesh_cut(amps_ctx *ctx, amps_mesh *m, amps_int v, cons
     return AMPS_OK;
 }
 
-AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, amps_int vc, const amps_int *moved, amps_int nmoved) {
+AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, amps_int vc, const amps_int *moved,
+                                     amps_int nmoved) {
     amps_int base, keep, i, j, w, k;
     int q;
-    if (!m || vc != m->nnode - 1 || v < 0 || v >= vc || m->inc_len[vc] != nmoved || m->inc_ptr[vc] != m->inc_ptr[v] + m->inc_len[v])
-        return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_uncut: node %ld is not the last copy of node %ld", (long)vc, (long)v);
+    if (!m || vc != m->nnode - 1 || v < 0 || v >= vc || m->inc_len[vc] != nmoved ||
+        m->inc_ptr[vc] != m->inc_ptr[v] + m->inc_len[v])
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_uncut: node %ld is not the last copy of node %ld", (long)vc,
+                         (long)v);
     for (k = 0; k < nmoved; k++)
         for (q = 0; q < 4; q++)
             if (m->tet[4 * moved[k] + q] == vc) m->tet[4 * moved[k] + q] = v;
     /* merge v's kept tets and the moved ones back into one ascending slot, from the back */
-    base = m->inc_ptr[v]; keep = m->inc_len[v];
-    i = keep - 1; j = nmoved - 1; w = keep + nmoved - 1;
+    base = m->inc_ptr[v];
+    keep = m->inc_len[v];
+    i = keep - 1;
+    j = nmoved - 1;
+    w = keep + nmoved - 1;
     while (j >= 0) {
         if (i >= 0 && m->inc[base + i] > moved[j]) m->inc[base + w--] = m->inc[base + i--];
         else m->inc[base + w--] = moved[j--];
     }
     m->inc_len[v] = keep + nmoved;
-    m->inc_len[vc] = 0; m->inc_ptr[vc] = 0;
+    m->inc_len[vc] = 0;
+    m->inc_ptr[vc] = 0;
     m->nnode--;
     return AMPS_OK;
 }
@@ -7622,51 +8919,51 @@ AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, am
 
 /* Per-node state (node.cap nodes allocated; vectors hold 3 entries per node). */
 typedef struct amps__scene_nodes {
-    amps_int cap;                   /* node capacity of the arrays */
-    unsigned char *fixed, *pinned;  /* fixed: eliminated from the system; pinned: constrained */
-    double *pin_value;              /* target displacement of a pin */
-    double *force;                  /* external force */
-    double *disp;                   /* displacement of the last solve */
-    amps_int *dof;                  /* equation of each DOF, or -1 */
+    amps_int cap;                  /* node capacity of the arrays */
+    unsigned char *fixed, *pinned; /* fixed: eliminated from the system; pinned: constrained */
+    double *pin_value;             /* target displacement of a pin */
+    double *force;                 /* external force */
+    double *disp;                  /* displacement of the last solve */
+    amps_int *dof;                 /* equation of each DOF, or -1 */
 } amps__scene_nodes;
 
 /* Workspace of a cut, sized by the largest node degree at the factorization. */
 typedef struct amps__scene_cutws {
     amps_int max_degree;
-    amps_int *moved;                /* the tets the cut moved */
-    amps_int *local_dof;            /* equations of their nodes (12 max_degree + 3) */
-    double *local_K;                /* the stiffness change on local_dof x local_dof */
-    amps_int *row, *col;            /* its upper triangle as triplets for amps_update_add */
+    amps_int *moved;     /* the tets the cut moved */
+    amps_int *local_dof; /* equations of their nodes (12 max_degree + 3) */
+    double *local_K;     /* the stiffness change on local_dof x local_dof */
+    amps_int *row, *col; /* its upper triangle as triplets for amps_update_add */
     double *val;
 } amps__scene_cutws;
 
 /* Workspace of the mechanism test of a cut (amps__cut_mechanism). */
 typedef struct amps__scene_mech {
-    amps_int *tet_piece;            /* per tet: label of the piece exploring it, -1 between tests */
-    amps_int *tet_next;             /* per tet: next tet in its piece's queue */
-    amps_int *visited;              /* the tets labelled in this test */
-    amps_marker node_seen;          /* per node: visited in the current joint scan */
-    amps_int *piece_parent;         /* per piece (max_degree + 1): union-find parent */
+    amps_int *tet_piece;    /* per tet: label of the piece exploring it, -1 between tests */
+    amps_int *tet_next;     /* per tet: next tet in its piece's queue */
+    amps_int *visited;      /* the tets labelled in this test */
+    amps_marker node_seen;  /* per node: visited in the current joint scan */
+    amps_int *piece_parent; /* per piece (max_degree + 1): union-find parent */
     amps_int *queue_head, *queue_tail;
-    amps_int *active;               /* 1 while the piece is still growing */
-    double scale;                   /* the model's extent (tolerance of the line test) */
+    amps_int *active; /* 1 while the piece is still growing */
+    double scale;     /* the model's extent (tolerance of the line test) */
 } amps__scene_mech;
 
 /* The watched nodes (amps_scene_watch). */
 typedef struct amps__scene_watch {
     amps_int *nodes, n, cap;
-    int stale;                      /* the engine's watch set must be rebuilt */
+    int stale; /* the engine's watch set must be rebuilt */
 } amps__scene_watch;
 
 struct amps_scene {
     amps_mesh *m;
     amps_scene_opts opts;
-    int prepared;                   /* K factored, engine created */
+    int prepared; /* K factored, engine created */
     amps__scene_nodes node;
-    amps_int ndof0;                 /* equations of the initial system */
-    amps_csc *K;                    /* initial stiffness matrix (upper triangle, equations) */
-    amps_factor *F;                 /* its factor */
-    amps_update *U;                 /* the engine holding every change since */
+    amps_int ndof0; /* equations of the initial system */
+    amps_csc *K;    /* initial stiffness matrix (upper triangle, equations) */
+    amps_factor *F; /* its factor */
+    amps_update *U; /* the engine holding every change since */
     amps__scene_watch watch;
     amps__scene_cutws cut;
     amps__scene_mech mech;
@@ -7687,13 +8984,27 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps_factor_free(ctx, S->F);
     amps_csc_free(ctx, S->K);
     amps_mesh_free(ctx, S->m);
-    amps__free(ctx, S->node.fixed); amps__free(ctx, S->node.pinned); amps__free(ctx, S->node.pin_value);
-    amps__free(ctx, S->node.force); amps__free(ctx, S->node.disp); amps__free(ctx, S->node.dof);
-    amps__free(ctx, S->cut.moved); amps__free(ctx, S->cut.local_dof); amps__free(ctx, S->cut.row); amps__free(ctx, S->cut.col);
-    amps__free(ctx, S->cut.local_K); amps__free(ctx, S->cut.val); amps__free(ctx, S->watch.nodes);
-    amps__free(ctx, S->mech.tet_piece); amps__free(ctx, S->mech.tet_next); amps__free(ctx, S->mech.visited);
+    amps__free(ctx, S->node.fixed);
+    amps__free(ctx, S->node.pinned);
+    amps__free(ctx, S->node.pin_value);
+    amps__free(ctx, S->node.force);
+    amps__free(ctx, S->node.disp);
+    amps__free(ctx, S->node.dof);
+    amps__free(ctx, S->cut.moved);
+    amps__free(ctx, S->cut.local_dof);
+    amps__free(ctx, S->cut.row);
+    amps__free(ctx, S->cut.col);
+    amps__free(ctx, S->cut.local_K);
+    amps__free(ctx, S->cut.val);
+    amps__free(ctx, S->watch.nodes);
+    amps__free(ctx, S->mech.tet_piece);
+    amps__free(ctx, S->mech.tet_next);
+    amps__free(ctx, S->mech.visited);
     amps_marker_free(ctx, &S->mech.node_seen);
-    amps__free(ctx, S->mech.piece_parent); amps__free(ctx, S->mech.queue_head); amps__free(ctx, S->mech.queue_tail); amps__free(ctx, S->mech.active);
+    amps__free(ctx, S->mech.piece_parent);
+    amps__free(ctx, S->mech.queue_head);
+    amps__free(ctx, S->mech.queue_tail);
+    amps__free(ctx, S->mech.active);
     amps__free(ctx, S);
 }
 
@@ -7703,14 +9014,22 @@ static amps_status amps__scene_grow(amps_ctx *ctx, amps_scene *S, amps_int cap) 
     amps_int v, old = S->node.cap;
     size_t c = (size_t)cap;
     if (amps__realloc(ctx, (void **)&S->node.fixed, c, 1) || amps__realloc(ctx, (void **)&S->node.pinned, c, 1) ||
-        amps__realloc(ctx, (void **)&S->node.pin_value, 3 * c, sizeof(double)) || amps__realloc(ctx, (void **)&S->node.force, 3 * c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&S->node.disp, 3 * c, sizeof(double)) || amps__realloc(ctx, (void **)&S->node.dof, 3 * c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&S->node.pin_value, 3 * c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&S->node.force, 3 * c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&S->node.disp, 3 * c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&S->node.dof, 3 * c, sizeof(amps_int)) ||
         amps_marker_grow(ctx, &S->mech.node_seen, cap))
         return AMPS_ERR_OOM;
     for (v = old; v < cap; v++) {
         int d;
-        S->node.fixed[v] = 0; S->node.pinned[v] = 0;
-        for (d = 0; d < 3; d++) { S->node.pin_value[3 * v + d] = 0; S->node.force[3 * v + d] = 0; S->node.disp[3 * v + d] = 0; S->node.dof[3 * v + d] = -1; }
+        S->node.fixed[v] = 0;
+        S->node.pinned[v] = 0;
+        for (d = 0; d < 3; d++) {
+            S->node.pin_value[3 * v + d] = 0;
+            S->node.force[3 * v + d] = 0;
+            S->node.disp[3 * v + d] = 0;
+            S->node.dof[3 * v + d] = -1;
+        }
     }
     S->node.cap = cap;
     return AMPS_OK;
@@ -7718,7 +9037,10 @@ static amps_status amps__scene_grow(amps_ctx *ctx, amps_scene *S, amps_int cap) 
 
 AMPS_API amps_scene *amps_scene_create(amps_ctx *ctx, amps_mesh *m, const amps_scene_opts *opts) {
     amps_scene *S;
-    if (!m) { amps__err(ctx, AMPS_ERR_ARG, "amps_scene_create: NULL mesh (did the mesh reader fail?)"); return NULL; }
+    if (!m) {
+        amps__err(ctx, AMPS_ERR_ARG, "amps_scene_create: NULL mesh (did the mesh reader fail?)");
+        return NULL;
+    }
     S = AMPS__CAST(amps_scene *, amps__calloc(ctx, 1, sizeof(amps_scene)));
     if (!S || amps__scene_grow(ctx, S, m->node_cap > m->nnode ? m->node_cap : m->nnode + 1)) {
         amps__err(ctx, AMPS_ERR_OOM, "amps_scene_create: out of memory");
@@ -7726,15 +9048,20 @@ AMPS_API amps_scene *amps_scene_create(amps_ctx *ctx, amps_mesh *m, const amps_s
         amps_mesh_free(ctx, m);
         return NULL;
     }
-    if (opts) S->opts = *opts; else amps_scene_opts_default(&S->opts);
+    if (opts) S->opts = *opts;
+    else amps_scene_opts_default(&S->opts);
     S->m = m;
     return S;
 }
 
 AMPS_API const amps_mesh *amps_scene_mesh(const amps_scene *S) { return S ? S->m : NULL; }
 AMPS_API amps_update *amps_scene_engine(const amps_scene *S) { return S ? S->U : NULL; }
-AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S) { return S && S->U ? amps_update_factor(S->U) : NULL; }
-AMPS_API amps_int amps_scene_ndof(const amps_scene *S) { return S && S->U ? amps_update_dim(S->U) : (S ? S->ndof0 : 0); }
+AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S) {
+    return S && S->U ? amps_update_factor(S->U) : NULL;
+}
+AMPS_API amps_int amps_scene_ndof(const amps_scene *S) {
+    return S && S->U ? amps_update_dim(S->U) : (S ? S->ndof0 : 0);
+}
 
 AMPS_API amps_status amps_scene_set_material(amps_ctx *ctx, amps_scene *S, double E, double nu) {
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_set_material: NULL scene");
@@ -7745,20 +9072,29 @@ AMPS_API amps_status amps_scene_set_material(amps_ctx *ctx, amps_scene *S, doubl
 AMPS_API amps_status amps_scene_fix(amps_ctx *ctx, amps_scene *S, amps_int nv, const amps_int *v) {
     amps_int k;
     if (!S || nv < 0 || (nv > 0 && !v)) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_fix: bad arguments");
-    if (S->prepared) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_fix: the system is already factored (fix nodes before the first change or solve)");
+    if (S->prepared)
+        return amps__err(ctx, AMPS_ERR_STATE,
+                         "amps_scene_fix: the system is already factored (fix nodes before the first change or solve)");
     for (k = 0; k < nv; k++)
-        if (v[k] < 0 || v[k] >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_fix: node %ld out of range [0, %ld)", (long)v[k], (long)S->m->nnode);
+        if (v[k] < 0 || v[k] >= S->m->nnode)
+            return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_fix: node %ld out of range [0, %ld)", (long)v[k],
+                             (long)S->m->nnode);
     for (k = 0; k < nv; k++) S->node.fixed[v[k]] = 1;
     return AMPS_OK;
 }
 
-AMPS_API amps_status amps_scene_fix_where(amps_ctx *ctx, amps_scene *S, int axis, amps_cmp cmp, double value, amps_int *count) {
+AMPS_API amps_status amps_scene_fix_where(amps_ctx *ctx, amps_scene *S, int axis, amps_cmp cmp, double value,
+                                          amps_int *count) {
     amps_int v, c = 0;
-    if (!S || axis < 0 || axis > 2 || !amps__isfinite(value)) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_fix_where: bad axis or value");
+    if (!S || axis < 0 || axis > 2 || !amps__isfinite(value))
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_fix_where: bad axis or value");
     if (S->prepared) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_fix_where: the system is already factored");
     for (v = 0; v < S->m->nnode; v++) {
         double x = S->m->xyz[3 * v + axis];
-        if (cmp == AMPS_LT ? x < value : x > value) { S->node.fixed[v] = 1; c++; }
+        if (cmp == AMPS_LT ? x < value : x > value) {
+            S->node.fixed[v] = 1;
+            c++;
+        }
     }
     if (count) *count = c;
     return AMPS_OK;
@@ -7777,7 +9113,10 @@ static amps_status amps__scene_factor(amps_ctx *ctx, amps_scene *S, amps_int n) 
     coords = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
     if (!coords) return AMPS_ERR_OOM;
     for (v = 0; v < S->m->nnode; v++)
-        if (S->node.dof[3 * v] >= 0) { for (k = 0; k < 3; k++) coords[3 * nfree + k] = S->m->xyz[3 * v + k]; nfree++; }
+        if (S->node.dof[3 * v] >= 0) {
+            for (k = 0; k < 3; k++) coords[3 * nfree + k] = S->m->xyz[3 * v + k];
+            nfree++;
+        }
     ord = S->opts.order;
     if (!ord.coords && ord.block == 3 && 3 * nfree == n) ord.coords = coords;
     S->F = amps_analyze(ctx, S->K, AMPS_UPPER, &ord);
@@ -7787,7 +9126,8 @@ static amps_status amps__scene_factor(amps_ctx *ctx, amps_scene *S, amps_int n) 
         char msg[256];
         memcpy(msg, ctx ? ctx->msg : "", ctx ? sizeof(msg) : 1);
         return amps__err(ctx, AMPS_ERR_NOT_SPD,
-                         "amps_scene_prepare: the stiffness matrix is singular (is the model held? fix some nodes): %s", msg);
+                         "amps_scene_prepare: the stiffness matrix is singular (is the model held? fix some nodes): %s",
+                         msg);
     }
     if (uo.refactor_order.block == 0) uo.refactor_order.block = 3; /* re-factorizations order node triples */
     S->U = amps_update_create(ctx, S->K, AMPS_UPPER, S->F, &uo);
@@ -7799,9 +9139,14 @@ static amps_status amps__scene_workspace(amps_ctx *ctx, amps_scene *S) {
     amps_int v, k, t, maxdeg = 0, nt = S->m->ntet, ng;
     size_t nl, ne;
     double lo[3], hi[3];
-    for (v = 0; v < S->m->nnode; v++) { amps_int d = amps_mesh_degree(S->m, v); if (d > maxdeg) maxdeg = d; }
+    for (v = 0; v < S->m->nnode; v++) {
+        amps_int d = amps_mesh_degree(S->m, v);
+        if (d > maxdeg) maxdeg = d;
+    }
     S->cut.max_degree = maxdeg;
-    nl = (size_t)(12 * maxdeg + 3); ne = nl * nl; ng = maxdeg + 1;
+    nl = (size_t)(12 * maxdeg + 3);
+    ne = nl * nl;
+    ng = maxdeg + 1;
     S->cut.moved = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)maxdeg + 1, sizeof(amps_int)));
     S->cut.local_dof = AMPS__CAST(amps_int *, amps__malloc(ctx, nl, sizeof(amps_int)));
     S->cut.local_K = AMPS__CAST(double *, amps__calloc(ctx, ne, sizeof(double)));
@@ -7820,7 +9165,10 @@ static amps_status amps__scene_workspace(amps_ctx *ctx, amps_scene *S) {
         !S->mech.queue_tail || !S->mech.active)
         return AMPS_ERR_OOM;
     for (t = 0; t < nt; t++) S->mech.tet_piece[t] = -1;
-    for (k = 0; k < 3; k++) { lo[k] = S->m->xyz[k]; hi[k] = lo[k]; }
+    for (k = 0; k < 3; k++) {
+        lo[k] = S->m->xyz[k];
+        hi[k] = lo[k];
+    }
     for (v = 0; v < S->m->nnode; v++)
         for (k = 0; k < 3; k++) {
             double x = S->m->xyz[3 * v + k];
@@ -7835,15 +9183,26 @@ static amps_status amps__scene_workspace(amps_ctx *ctx, amps_scene *S) {
 /* Frees what amps_scene_prepare made; the scene is unprepared again. */
 static void amps__scene_unprepare(amps_ctx *ctx, amps_scene *S) {
     amps_int v;
-    amps_update_free(ctx, S->U); S->U = NULL;
-    amps_factor_free(ctx, S->F); S->F = NULL;
-    amps_csc_free(ctx, S->K); S->K = NULL;
-    amps__free(ctx, S->cut.moved); amps__free(ctx, S->cut.local_dof); amps__free(ctx, S->cut.local_K);
-    amps__free(ctx, S->cut.row); amps__free(ctx, S->cut.col); amps__free(ctx, S->cut.val);
+    amps_update_free(ctx, S->U);
+    S->U = NULL;
+    amps_factor_free(ctx, S->F);
+    S->F = NULL;
+    amps_csc_free(ctx, S->K);
+    S->K = NULL;
+    amps__free(ctx, S->cut.moved);
+    amps__free(ctx, S->cut.local_dof);
+    amps__free(ctx, S->cut.local_K);
+    amps__free(ctx, S->cut.row);
+    amps__free(ctx, S->cut.col);
+    amps__free(ctx, S->cut.val);
     S->cut.moved = S->cut.local_dof = S->cut.row = S->cut.col = NULL;
     S->cut.local_K = S->cut.val = NULL;
-    amps__free(ctx, S->mech.tet_piece); amps__free(ctx, S->mech.tet_next); amps__free(ctx, S->mech.visited);
-    amps__free(ctx, S->mech.piece_parent); amps__free(ctx, S->mech.queue_head); amps__free(ctx, S->mech.queue_tail);
+    amps__free(ctx, S->mech.tet_piece);
+    amps__free(ctx, S->mech.tet_next);
+    amps__free(ctx, S->mech.visited);
+    amps__free(ctx, S->mech.piece_parent);
+    amps__free(ctx, S->mech.queue_head);
+    amps__free(ctx, S->mech.queue_tail);
     amps__free(ctx, S->mech.active);
     S->mech.tet_piece = S->mech.tet_next = S->mech.visited = NULL;
     S->mech.piece_parent = S->mech.queue_head = S->mech.queue_tail = S->mech.active = NULL;
@@ -7878,7 +9237,8 @@ fail:
 
 static amps_status amps__scene_node(amps_ctx *ctx, amps_scene *S, amps_int v, const char *fn) {
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL scene", fn);
-    if (v < 0 || v >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "%s: node %ld out of range [0, %ld)", fn, (long)v, (long)S->m->nnode);
+    if (v < 0 || v >= S->m->nnode)
+        return amps__err(ctx, AMPS_ERR_INDEX, "%s: node %ld out of range [0, %ld)", fn, (long)v, (long)S->m->nnode);
     return AMPS_OK;
 }
 
@@ -7894,10 +9254,16 @@ AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, 
     double val[3];
     amps_status s;
     if (!f) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_force: NULL force");
-    for (k = 0; k < 3; k++) if (!amps__isfinite(f[k])) return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_force: non-finite force on node %ld", (long)v);
+    for (k = 0; k < 3; k++)
+        if (!amps__isfinite(f[k]))
+            return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_force: non-finite force on node %ld", (long)v);
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_force")) != AMPS_OK) return s;
     for (k = 0; k < 3; k++)
-        if (S->prepared && S->node.dof[3 * v + k] >= 0) { idx[m] = S->node.dof[3 * v + k]; val[m] = f[k]; m++; }
+        if (S->prepared && S->node.dof[3 * v + k] >= 0) {
+            idx[m] = S->node.dof[3 * v + k];
+            val[m] = f[k];
+            m++;
+        }
     if (S->prepared && (s = amps_update_set_force(ctx, S->U, m, idx, val)) != AMPS_OK) return s;
     for (k = 0; k < 3; k++) S->node.force[3 * v + k] = f[k];
     return AMPS_OK;
@@ -7907,10 +9273,13 @@ AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, co
     amps_int k, idx[3];
     amps_status s;
     if (!u) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_pin: NULL displacement");
-    for (k = 0; k < 3; k++) if (!amps__isfinite(u[k])) return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_pin: non-finite displacement for node %ld", (long)v);
+    for (k = 0; k < 3; k++)
+        if (!amps__isfinite(u[k]))
+            return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_pin: non-finite displacement for node %ld", (long)v);
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_pin")) != AMPS_OK) return s;
     if (S->node.fixed[v]) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_pin: node %ld is fixed", (long)v);
-    if (amps_mesh_degree(S->m, v) == 0) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_pin: node %ld belongs to no tetrahedron", (long)v);
+    if (amps_mesh_degree(S->m, v) == 0)
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_pin: node %ld belongs to no tetrahedron", (long)v);
     if (!S->prepared) {
         S->node.pinned[v] = 1;
         for (k = 0; k < 3; k++) S->node.pin_value[3 * v + k] = u[k];
@@ -7929,13 +9298,17 @@ AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v
     amps_status s;
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_release")) != AMPS_OK) return s;
     if (!S->node.pinned[v]) return AMPS_OK;
-    if (!S->prepared) { S->node.pinned[v] = 0; return AMPS_OK; }
+    if (!S->prepared) {
+        S->node.pinned[v] = 0;
+        return AMPS_OK;
+    }
     for (k = 0; k < 3; k++) idx[k] = S->node.dof[3 * v + k];
     if ((s = amps_update_release(ctx, S->U, 3, idx)) != AMPS_OK) return s;
     if ((s = amps__scene_commit(ctx, S)) != AMPS_OK) {
         char msg[256];
         memcpy(msg, ctx ? ctx->msg : "", ctx ? sizeof(msg) : 1);
-        return amps__err(ctx, s, "amps_scene_release: releasing node %ld leaves a piece held by nothing (%s)", (long)v, msg);
+        return amps__err(ctx, s, "amps_scene_release: releasing node %ld leaves a piece held by nothing (%s)", (long)v,
+                         msg);
     }
     S->node.pinned[v] = 0;
     return AMPS_OK;
@@ -7950,32 +9323,50 @@ static amps_int amps__tet_face_nb(const amps_mesh *m, amps_int t, int q) {
         amps_int o = m->inc[m->inc_ptr[a] + k], r;
         int hb = 0, hc = 0;
         if (o == t) continue;
-        for (r = 0; r < 4; r++) { hb |= m->tet[4 * o + r] == b; hc |= m->tet[4 * o + r] == c; }
+        for (r = 0; r < 4; r++) {
+            hb |= m->tet[4 * o + r] == b;
+            hc |= m->tet[4 * o + r] == c;
+        }
         if (hb && hc) return o;
     }
     return -1;
 }
 
 /* Points added one by one: are they all on one line? Points closer than tol count as one. */
-typedef struct amps__line { int state; double p0[3], d[3], tol; } amps__line;   /* state: 0 none, 1 point, 2 line, 3 not on a line */
+typedef struct amps__line {
+    int state;
+    double p0[3], d[3], tol;
+} amps__line; /* state: 0 none, 1 point, 2 line, 3 not on a line */
 static void amps__line_add(amps__line *L, const double *p) {
     double w[3], c[3], len;
     int k;
     if (L->state == 3) return;
-    if (L->state == 0) { for (k = 0; k < 3; k++) L->p0[k] = p[k]; L->state = 1; return; }
+    if (L->state == 0) {
+        for (k = 0; k < 3; k++) L->p0[k] = p[k];
+        L->state = 1;
+        return;
+    }
     for (k = 0; k < 3; k++) w[k] = p[k] - L->p0[k];
     if (L->state == 1) {
         len = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
-        if (len > L->tol) { for (k = 0; k < 3; k++) L->d[k] = w[k] / len; L->state = 2; }
+        if (len > L->tol) {
+            for (k = 0; k < 3; k++) L->d[k] = w[k] / len;
+            L->state = 2;
+        }
         return;
     }
     /* distance from the line: |w x d| */
-    c[0] = w[1] * L->d[2] - w[2] * L->d[1]; c[1] = w[2] * L->d[0] - w[0] * L->d[2]; c[2] = w[0] * L->d[1] - w[1] * L->d[0];
+    c[0] = w[1] * L->d[2] - w[2] * L->d[1];
+    c[1] = w[2] * L->d[0] - w[0] * L->d[2];
+    c[2] = w[0] * L->d[1] - w[1] * L->d[0];
     if (sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) > L->tol) L->state = 3;
 }
 
 static amps_int amps__gfind(amps_int *par, amps_int g) {
-    while (par[g] != g) { par[g] = par[par[g]]; g = par[g]; }
+    while (par[g] != g) {
+        par[g] = par[par[g]];
+        g = par[g];
+    }
     return g;
 }
 
@@ -7990,9 +9381,12 @@ static int amps__piece_loose(amps_scene *S, amps_int g, amps_int nvis, amps_int 
     amps__line J, JX, JR;
     amps_int k, n;
     int q;
-    J.state = 0; J.tol = 1e-9 * S->mech.scale;
-    JX = J; JR = J;
-    *nj = 0; *jn = -1;
+    J.state = 0;
+    J.tol = 1e-9 * S->mech.scale;
+    JX = J;
+    JR = J;
+    *nj = 0;
+    *jn = -1;
     amps_marker_next(&S->mech.node_seen);
     for (k = 0; k < nvis; k++) {
         amps_int t = S->mech.visited[k];
@@ -8006,15 +9400,20 @@ static int amps__piece_loose(amps_scene *S, amps_int g, amps_int nvis, amps_int 
                 amps_int o = m->inc[m->inc_ptr[v] + r];
                 joint = S->mech.tet_piece[o] < 0 || amps__gfind(S->mech.piece_parent, S->mech.tet_piece[o]) != g;
             }
-            if (joint) { amps__line_add(&J, m->xyz + 3 * v); (*nj)++; *jn = v; }
+            if (joint) {
+                amps__line_add(&J, m->xyz + 3 * v);
+                (*nj)++;
+                *jn = v;
+            }
             if (joint || S->node.fixed[v] || S->node.pinned[v]) amps__line_add(&JX, m->xyz + 3 * v);
         }
     }
-    if (J.state == 3) return 0;                       /* a rigid joint */
+    if (J.state == 3) return 0; /* a rigid joint */
     /* the rest: the joint and the constrained nodes outside X */
     JR = J;
     for (n = 0; n < m->nnode && JR.state != 3; n++)
-        if ((S->node.fixed[n] || S->node.pinned[n]) && seen->mark[n] != seen->stamp) amps__line_add(&JR, m->xyz + 3 * n);
+        if ((S->node.fixed[n] || S->node.pinned[n]) && seen->mark[n] != seen->stamp)
+            amps__line_add(&JR, m->xyz + 3 * n);
     return JX.state != 3 || JR.state != 3;
 }
 
@@ -8032,8 +9431,13 @@ static int amps__cut_mechanism(amps_scene *S, amps_int v, amps_int vc, amps_int 
         for (k = 0; k < m->inc_len[nodes[w]] && ng <= S->cut.max_degree; k++) {
             amps_int t = m->inc[m->inc_ptr[nodes[w]] + k];
             if (S->mech.tet_piece[t] >= 0) continue;
-            S->mech.piece_parent[ng] = ng; S->mech.queue_head[ng] = t; S->mech.queue_tail[ng] = t; S->mech.active[ng] = 1;
-            S->mech.tet_piece[t] = ng; S->mech.tet_next[t] = -1; S->mech.visited[nvis++] = t;
+            S->mech.piece_parent[ng] = ng;
+            S->mech.queue_head[ng] = t;
+            S->mech.queue_tail[ng] = t;
+            S->mech.active[ng] = 1;
+            S->mech.tet_piece[t] = ng;
+            S->mech.tet_next[t] = -1;
+            S->mech.visited[nvis++] = t;
             ng++;
         }
     nact = ng;
@@ -8043,12 +9447,15 @@ static int amps__cut_mechanism(amps_scene *S, amps_int v, amps_int vc, amps_int 
             int q;
             if (!S->mech.active[g]) continue;
             t = S->mech.queue_head[g];
-            if (t < 0) {                                   /* piece g is finished */
+            if (t < 0) { /* piece g is finished */
                 amps_int c = 0;
-                S->mech.active[g] = 0; nact--;
+                S->mech.active[g] = 0;
+                nact--;
                 if (amps__piece_loose(S, g, nvis, nj, jn)) {
-                    for (k = 0; k < nvis; k++) c += amps__gfind(S->mech.piece_parent, S->mech.tet_piece[S->mech.visited[k]]) == g;
-                    *ntet = c; loose = 1;
+                    for (k = 0; k < nvis; k++)
+                        c += amps__gfind(S->mech.piece_parent, S->mech.tet_piece[S->mech.visited[k]]) == g;
+                    *ntet = c;
+                    loose = 1;
                 }
                 continue;
             }
@@ -8057,9 +9464,12 @@ static int amps__cut_mechanism(amps_scene *S, amps_int v, amps_int vc, amps_int 
             for (q = 0; q < 4; q++) {
                 amps_int o = amps__tet_face_nb(m, t, q), h;
                 if (o < 0) continue;
-                if (S->mech.tet_piece[o] < 0) {                      /* a new tet of piece g */
-                    S->mech.tet_piece[o] = g; S->mech.tet_next[o] = -1; S->mech.visited[nvis++] = o;
-                    if (S->mech.queue_tail[g] >= 0) S->mech.tet_next[S->mech.queue_tail[g]] = o; else S->mech.queue_head[g] = o;
+                if (S->mech.tet_piece[o] < 0) { /* a new tet of piece g */
+                    S->mech.tet_piece[o] = g;
+                    S->mech.tet_next[o] = -1;
+                    S->mech.visited[nvis++] = o;
+                    if (S->mech.queue_tail[g] >= 0) S->mech.tet_next[S->mech.queue_tail[g]] = o;
+                    else S->mech.queue_head[g] = o;
                     S->mech.queue_tail[g] = o;
                     continue;
                 }
@@ -8068,10 +9478,14 @@ static int amps__cut_mechanism(amps_scene *S, amps_int v, amps_int vc, amps_int 
                 /* pieces g and h meet: h joins g with its queue */
                 S->mech.piece_parent[h] = g;
                 if (S->mech.queue_head[h] >= 0) {
-                    if (S->mech.queue_tail[g] >= 0) S->mech.tet_next[S->mech.queue_tail[g]] = S->mech.queue_head[h]; else S->mech.queue_head[g] = S->mech.queue_head[h];
+                    if (S->mech.queue_tail[g] >= 0) S->mech.tet_next[S->mech.queue_tail[g]] = S->mech.queue_head[h];
+                    else S->mech.queue_head[g] = S->mech.queue_head[h];
                     S->mech.queue_tail[g] = S->mech.queue_tail[h];
                 }
-                if (S->mech.active[h]) { S->mech.active[h] = 0; nact--; }
+                if (S->mech.active[h]) {
+                    S->mech.active[h] = 0;
+                    nact--;
+                }
             }
         }
     }
@@ -8120,11 +9534,13 @@ static amps_status amps__scene_cut_held(amps_ctx *ctx, amps_scene *S, amps_int v
     if (nj == 0)
         return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
                          "amps_scene_cut: the cut at node %ld detaches a piece of %ld tets held by nothing; "
-                         "the cut was undone", (long)v, (long)nt);
-    return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
-                     "amps_scene_cut: the cut at node %ld leaves a piece of %ld tets joined to the rest at %ld node%s on "
-                     "one line (node %ld) and not held otherwise: it could turn about that line; the cut was undone",
-                     (long)v, (long)nt, (long)nj, nj == 1 ? "" : "s", (long)jn);
+                         "the cut was undone",
+                         (long)v, (long)nt);
+    return amps__err(
+            ctx, AMPS_ERR_SINGULAR_UPDATE,
+            "amps_scene_cut: the cut at node %ld leaves a piece of %ld tets joined to the rest at %ld node%s on "
+            "one line (node %ld) and not held otherwise: it could turn about that line; the cut was undone",
+            (long)v, (long)nt, (long)nj, nj == 1 ? "" : "s", (long)jn);
 }
 
 /* cut.local_dof = the equations of the nodes of the moved tets, with v's for each DOF of vc;
@@ -8166,7 +9582,8 @@ static void amps__cut_local_K(amps_scene *S, amps_int v, amps_int vc, amps_int n
             amps_int node = m->tet[4 * S->cut.moved[k] + q];
             for (d = 0; d < 3; d++) {
                 amps_int en = S->node.dof[3 * node + d], eo = node == vc ? S->node.dof[3 * v + d] : en;
-                loc_new[3 * q + d] = -1; loc_old[3 * q + d] = -1;
+                loc_new[3 * q + d] = -1;
+                loc_old[3 * q + d] = -1;
                 for (t = 0; t < nl; t++) {
                     if (ld[t] == en) loc_new[3 * q + d] = t;
                     if (ld[t] == eo) loc_old[3 * q + d] = t;
@@ -8180,7 +9597,8 @@ static void amps__cut_local_K(amps_scene *S, amps_int v, amps_int vc, amps_int n
             double sg = pass ? 1.0 : -1.0;
             for (a = 0; a < 12; a++) {
                 if (loc[a] < 0) continue;
-                for (b = 0; b < 12; b++) if (loc[b] >= 0) lk[loc[a] * nl + loc[b]] += sg * Ke[12 * a + b];
+                for (b = 0; b < 12; b++)
+                    if (loc[b] >= 0) lk[loc[a] * nl + loc[b]] += sg * Ke[12 * a + b];
             }
         }
     }
@@ -8192,12 +9610,14 @@ static amps_status amps__scene_cut_update(amps_ctx *ctx, amps_scene *S, amps_int
                                           const double nrm[3], amps_int *vcp) {
     amps_int vc, nmoved = 0, k, nl, nz = 0, first = -1, a, b;
     amps_status s = amps_mesh_cut(ctx, S->m, v, p, nrm, &vc, S->cut.moved, &nmoved);
-    if (s != AMPS_OK) return s;                                         /* includes the no-op */
+    if (s != AMPS_OK) return s; /* includes the no-op */
     S->node.fixed[vc] = S->node.fixed[v];
     S->node.pinned[vc] = 0;
     for (k = 0; k < 3; k++) {
-        S->node.pin_value[3 * vc + k] = 0; S->node.force[3 * vc + k] = 0;
-        S->node.disp[3 * vc + k] = S->node.disp[3 * v + k]; S->node.dof[3 * vc + k] = -1;
+        S->node.pin_value[3 * vc + k] = 0;
+        S->node.force[3 * vc + k] = 0;
+        S->node.disp[3 * vc + k] = S->node.disp[3 * v + k];
+        S->node.dof[3 * vc + k] = -1;
     }
     if ((s = amps__scene_cut_held(ctx, S, v, vc)) != AMPS_OK) goto undo;
     if (!S->node.fixed[v] && S->node.dof[3 * v] >= 0) {
@@ -8206,11 +9626,14 @@ static amps_status amps__scene_cut_update(amps_ctx *ctx, amps_scene *S, amps_int
     }
     nl = amps__cut_local_dofs(S, v, vc, nmoved);
     amps__cut_local_K(S, v, vc, nmoved, nl);
-    for (a = 0; a < nl; a++)                                            /* its upper triangle */
+    for (a = 0; a < nl; a++) /* its upper triangle */
         for (b = a; b < nl; b++) {
             double val = S->cut.local_K[a * nl + b];
             if (val == 0.0) continue;
-            S->cut.row[nz] = S->cut.local_dof[a]; S->cut.col[nz] = S->cut.local_dof[b]; S->cut.val[nz] = val; nz++;
+            S->cut.row[nz] = S->cut.local_dof[a];
+            S->cut.col[nz] = S->cut.local_dof[b];
+            S->cut.val[nz] = val;
+            nz++;
         }
     if ((s = amps_update_add(ctx, S->U, nz, S->cut.row, S->cut.col, S->cut.val)) != AMPS_OK) goto undo_engine;
     if ((s = amps__scene_commit(ctx, S)) != AMPS_OK) {
@@ -8241,12 +9664,15 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
     int watched;
     if (new_node) *new_node = -1;
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_cut")) != AMPS_OK) return s;
-    if (S->prepared && (s = amps__scene_commit(ctx, S)) != AMPS_OK) return s;   /* earlier changes first */
+    if (S->prepared && (s = amps__scene_commit(ctx, S)) != AMPS_OK) return s; /* earlier changes first */
     if ((s = amps__scene_cut_room(ctx, S, v, &watched)) != AMPS_OK) return s;
     s = S->prepared ? amps__scene_cut_update(ctx, S, v, p, nrm, &vc) : amps__scene_cut_topology(ctx, S, v, p, nrm, &vc);
     if (s != AMPS_OK) return s;
     if (new_node) *new_node = vc;
-    if (watched) { S->watch.nodes[S->watch.n++] = vc; S->watch.stale = 1; }
+    if (watched) {
+        S->watch.nodes[S->watch.n++] = vc;
+        S->watch.stale = 1;
+    }
     return AMPS_OK;
 }
 
@@ -8258,19 +9684,22 @@ AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S) {
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if ((s = amps_update_solve(ctx, S->U, NULL)) < 0) return s;
     amps__scene_gather(S, 0, NULL);
-    return s;                                   /* AMPS_WARN_INACCURATE: solved all the same */
+    return s; /* AMPS_WARN_INACCURATE: solved all the same */
 }
 
 AMPS_API amps_status amps_scene_watch(amps_ctx *ctx, amps_scene *S, amps_int nv, const amps_int *nodes) {
     amps_int k;
     if (!S || nv < 0 || (nv > 0 && !nodes)) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_watch: bad arguments");
     for (k = 0; k < nv; k++)
-        if (nodes[k] < 0 || nodes[k] >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_watch: node %ld out of range [0, %ld)", (long)nodes[k], (long)S->m->nnode);
+        if (nodes[k] < 0 || nodes[k] >= S->m->nnode)
+            return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_watch: node %ld out of range [0, %ld)", (long)nodes[k],
+                             (long)S->m->nnode);
     if (nv > S->watch.cap) {
         amps_int *w = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nv, sizeof(amps_int)));
         if (!w) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_watch: out of memory");
         amps__free(ctx, S->watch.nodes);
-        S->watch.nodes = w; S->watch.cap = nv;
+        S->watch.nodes = w;
+        S->watch.cap = nv;
     }
     for (k = 0; k < nv; k++) S->watch.nodes[k] = nodes[k];
     S->watch.n = nv;
@@ -8298,7 +9727,9 @@ AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S) {
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if (S->watch.stale) {
         /* the engine watches the equations of the watched nodes */
-        amps_int k, d, m = 0, *idx = AMPS__CAST(amps_int *, amps__malloc(ctx, 3 * (size_t)(S->watch.n > 0 ? S->watch.n : 1), sizeof(amps_int)));
+        amps_int k, d, m = 0,
+                       *idx = AMPS__CAST(amps_int *, amps__malloc(ctx, 3 * (size_t)(S->watch.n > 0 ? S->watch.n : 1),
+                                                                  sizeof(amps_int)));
         if (!idx) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_solve_watched: out of memory");
         for (k = 0; k < S->watch.n; k++)
             for (d = 0; d < 3; d++) {
@@ -8324,13 +9755,15 @@ AMPS_API amps_status amps_scene_solve_reactions(amps_ctx *ctx, amps_scene *S) {
 
 AMPS_API const double *amps_scene_displacements(const amps_scene *S) { return S ? S->node.disp : NULL; }
 
-AMPS_API amps_status amps_scene_positions(amps_ctx *ctx, const amps_scene *S, amps_int n, const amps_int *nodes, double *out) {
+AMPS_API amps_status amps_scene_positions(amps_ctx *ctx, const amps_scene *S, amps_int n, const amps_int *nodes,
+                                          double *out) {
     amps_int k, d;
     if (!S || !out) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_positions: NULL argument");
     if (!nodes) n = S->m->nnode;
     for (k = 0; k < n; k++) {
         amps_int v = nodes ? nodes[k] : k;
-        if (v < 0 || v >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_positions: node %ld out of range", (long)v);
+        if (v < 0 || v >= S->m->nnode)
+            return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_positions: node %ld out of range", (long)v);
         for (d = 0; d < 3; d++) out[3 * k + d] = S->m->xyz[3 * v + d] + S->node.disp[3 * v + d];
     }
     return AMPS_OK;
@@ -8339,8 +9772,10 @@ AMPS_API amps_status amps_scene_positions(amps_ctx *ctx, const amps_scene *S, am
 AMPS_API amps_status amps_scene_reaction(amps_ctx *ctx, const amps_scene *S, amps_int v, double r[3]) {
     int k;
     if (!S || !r) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_reaction: NULL argument");
-    if (v < 0 || v >= S->m->nnode) return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_reaction: node %ld out of range", (long)v);
-    for (k = 0; k < 3; k++) r[k] = (S->U && S->node.pinned[v]) ? amps_update_reaction(S->U, S->node.dof[3 * v + k]) : 0.0;
+    if (v < 0 || v >= S->m->nnode)
+        return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_reaction: node %ld out of range", (long)v);
+    for (k = 0; k < 3; k++)
+        r[k] = (S->U && S->node.pinned[v]) ? amps_update_reaction(S->U, S->node.dof[3 * v + k]) : 0.0;
     return AMPS_OK;
 }
 
@@ -8349,7 +9784,8 @@ AMPS_API amps_status amps_scene_residual(amps_ctx *ctx, amps_scene *S, double *r
     return amps_update_residual(ctx, S->U, relres);
 }
 
-AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, double *sigma, double *von_mises, double *principal) {
+AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, double *sigma, double *von_mises,
+                                       double *principal) {
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_stress: NULL scene");
     return amps_mesh_stress(ctx, S->m, S->node.disp, sigma, von_mises, principal);
 }
@@ -8504,7 +9940,8 @@ static int amps__lx_real(const amps__lex *L, double *v) {
 static amps_status amps__lx_int(amps__lex *L, int cross, long long *v, const char *what) {
     char sh[40];
     if (!amps__lx_tok(L, cross)) return amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "missing %s", what);
-    if (!amps__lx_ll(L, v)) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "invalid integer '%s' for %s", amps__lx_show(L, sh), what);
+    if (!amps__lx_ll(L, v))
+        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "invalid integer '%s' for %s", amps__lx_show(L, sh), what);
     return AMPS_OK;
 }
 
@@ -8512,8 +9949,10 @@ static amps_status amps__lx_int(amps__lex *L, int cross, long long *v, const cha
 static amps_status amps__lx_num(amps__lex *L, int cross, double *v, const char *what) {
     char sh[40];
     if (!amps__lx_tok(L, cross)) return amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "missing %s", what);
-    if (!amps__lx_real(L, v)) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "invalid number '%s' for %s", amps__lx_show(L, sh), what);
-    if (!amps__isfinite(*v)) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "non-finite %s '%s'", what, amps__lx_show(L, sh));
+    if (!amps__lx_real(L, v))
+        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "invalid number '%s' for %s", amps__lx_show(L, sh), what);
+    if (!amps__isfinite(*v))
+        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "non-finite %s '%s'", what, amps__lx_show(L, sh));
     return AMPS_OK;
 }
 
@@ -8538,7 +9977,8 @@ static amps_status amps__lx_count(amps__lex *L, long long n, int mintok, const c
 
 /* Reads a count named what (e.g. "point count") of n records named unit (e.g. "point") of at
    least mintok tokens each, checked by amps__lx_count. */
-static amps_status amps__lx_nrec(amps__lex *L, int cross, long long *n, const char *what, const char *unit, int mintok) {
+static amps_status amps__lx_nrec(amps__lex *L, int cross, long long *n, const char *what, const char *unit,
+                                 int mintok) {
     amps_status s = amps__lx_int(L, cross, n, what);
     return s ? s : amps__lx_count(L, *n, mintok, unit);
 }
@@ -8560,23 +10000,27 @@ static amps_status amps__lx_found(amps__lex *L, const char *msg) {
    units read" if the file ends first. */
 static amps_status amps__lx_rec(amps__lex *L, long long k, long long n, const char *units) {
     if (amps__lx_skip(L, 1)) return AMPS_OK;
-    return amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "unexpected end of file: %lld of %lld %s read", k, n, units);
+    return amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "unexpected end of file: %lld of %lld %s read", k, n,
+                        units);
 }
 
 /* End of a file of n units: error if any token follows. */
 static amps_status amps__lx_trail(amps__lex *L, long long n, const char *units) {
     char sh[40];
     if (!amps__lx_tok(L, 1)) return AMPS_OK;
-    return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "unexpected data '%s' after %lld %s", amps__lx_show(L, sh), n, units);
+    return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "unexpected data '%s' after %lld %s", amps__lx_show(L, sh), n,
+                        units);
 }
 
 /* Reads an index named what, in [base, base + n - 1], into *out as v - base. */
-static amps_status amps__lx_index(amps__lex *L, int cross, const char *what, long long base, long long n, amps_int *out) {
+static amps_status amps__lx_index(amps__lex *L, int cross, const char *what, long long base, long long n,
+                                  amps_int *out) {
     long long v;
     amps_status s = amps__lx_int(L, cross, &v, what);
     if (s) return s;
     if (v < base || v - base >= n)
-        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "%s %lld out of range [%lld, %lld]", what, v, base, base + n - 1);
+        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "%s %lld out of range [%lld, %lld]", what, v, base,
+                            base + n - 1);
     *out = (amps_int)(v - base);
     return AMPS_OK;
 }
@@ -8659,8 +10103,9 @@ static amps_mesh *amps__rd_mesh(amps__rd *R) {
     m = amps__mesh_new(L->ctx, "mesh", R->nn, R->xyz, R->tb.n, R->tb.tet, &bad);
     if (!m && bad >= 0 && L->ctx && L->ctx->status == AMPS_ERR_MESH) {
         const amps_int *tv = R->tb.tet + 4 * (size_t)bad;
-        amps__lx_err(L, R->tb.line[bad], AMPS_ERR_MESH, "degenerate tetrahedron (file nodes %lld %lld %lld %lld, 0-based)",
-                     (long long)tv[0], (long long)tv[1], (long long)tv[2], (long long)tv[3]);
+        amps__lx_err(L, R->tb.line[bad], AMPS_ERR_MESH,
+                     "degenerate tetrahedron (file nodes %lld %lld %lld %lld, 0-based)", (long long)tv[0],
+                     (long long)tv[1], (long long)tv[2], (long long)tv[3]);
     }
     return m;
 }
@@ -8683,7 +10128,8 @@ static amps_status amps__tetgen_node_head(amps__lex *L, long long *np) {
     amps_status s = amps__lx_nrec(L, 1, np, "point count", "point", 4);
     if (s) return s;
     if (*np == 0) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "the file declares no points");
-    if ((r = amps__lx_optint(L, &dim)) != 0 && (r < 0 || dim != 3)) return amps__lx_found(L, "dimension must be 3, found ");
+    if ((r = amps__lx_optint(L, &dim)) != 0 && (r < 0 || dim != 3))
+        return amps__lx_found(L, "dimension must be 3, found ");
     if ((r = amps__lx_optint(L, &nat)) != 0 && (r < 0 || nat < 0)) return amps__lx_found(L, "invalid attribute count ");
     if ((r = amps__lx_optint(L, &nbm)) != 0 && (r < 0 || nbm < 0 || nbm > 1))
         return amps__lx_found(L, "boundary marker flag must be 0 or 1, found ");
@@ -8705,7 +10151,8 @@ static amps_status amps__tetgen_points(amps__rd *R, long long np, long long *bas
             return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "first point number must be 0 or 1, found %lld", idx);
         if (k == 0) *base = idx;
         else if (idx != *base + k)
-            return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "point number %lld out of sequence (expected %lld)", idx, *base + k);
+            return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "point number %lld out of sequence (expected %lld)", idx,
+                                *base + k);
         s = amps__lx_xyz(L, 0, R->xyz + 3 * k);
         if (!s) amps__lx_eol(L); /* attributes and boundary marker */
     }
@@ -8751,8 +10198,9 @@ static amps_status amps__tetgen_tets(amps__rd *R, long long ne, long long nper, 
     return s ? s : amps__lx_trail(L, ne, "tetrahedra");
 }
 
-AMPS_API amps_mesh *amps_mesh_read_tetgen_mem(amps_ctx *ctx, const char *node_buf, size_t node_len, const char *node_name,
-                                              const char *ele_buf, size_t ele_len, const char *ele_name) {
+AMPS_API amps_mesh *amps_mesh_read_tetgen_mem(amps_ctx *ctx, const char *node_buf, size_t node_len,
+                                              const char *node_name, const char *ele_buf, size_t ele_len,
+                                              const char *ele_name) {
     amps__rd R;
     long long np = 0, base = 0, ne = 0, nper = 4, nat = 0;
     amps_status s;
@@ -8785,7 +10233,7 @@ typedef struct amps__gmsh {
     amps__gtag *tags; /* R.nn node tags with file position and line; sorted by tag after $Nodes */
     int version;      /* 2 (2.x) or 4 (4.1) after $MeshFormat, else 0 */
     int have_nodes, have_elems;
-    char sec[24];     /* name of the current section, without '$' */
+    char sec[24]; /* name of the current section, without '$' */
 } amps__gmsh;
 
 /* Header of a 4.1 entity block. */
@@ -8826,9 +10274,11 @@ static void amps__gmsh_want(char want[32], const char *sec) {
 static amps_status amps__gmsh_end(amps__lex *L, const char *sec, const char *after) {
     char want[32], sh[40];
     amps__gmsh_want(want, sec);
-    if (!amps__lx_tok(L, 1)) return amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "unexpected end of file, expected %s", want);
+    if (!amps__lx_tok(L, 1))
+        return amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "unexpected end of file, expected %s", want);
     if (!amps__lx_is(L, want, 0))
-        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "expected %s%s, found '%s'", want, after, amps__lx_show(L, sh));
+        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "expected %s%s, found '%s'", want, after,
+                            amps__lx_show(L, sh));
     amps__lx_eol(L);
     return AMPS_OK;
 }
@@ -8839,7 +10289,8 @@ static amps_status amps__gmsh_skip(amps__lex *L, const char *sec) {
     long long start = L->tline;
     amps__gmsh_want(want, sec);
     for (;;) {
-        if (!amps__lx_tok(L, 1)) return amps__lx_err(L, start, AMPS_ERR_PARSE, "section $%s is not closed by %s", sec, want);
+        if (!amps__lx_tok(L, 1))
+            return amps__lx_err(L, start, AMPS_ERR_PARSE, "section $%s is not closed by %s", sec, want);
         amps__lx_eol(L);
         if (amps__lx_is(L, want, 0)) return AMPS_OK;
     }
@@ -8858,10 +10309,13 @@ static amps_status amps__gmsh_format(amps__gmsh *G) {
     if (s) return s;
     if (ver >= 2.0 && ver < 3.0) G->version = 2;
     else if (ver == 4.1) G->version = 4;
-    else return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "unsupported .msh version %s (readable: 2.x, 4.1)", amps__lx_show(L, sh));
+    else
+        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "unsupported .msh version %s (readable: 2.x, 4.1)",
+                            amps__lx_show(L, sh));
     s = amps__lx_int(L, 0, &a, "file type");
     if (s) return s;
-    if (a == 1) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "binary .msh files are not supported; save the mesh as ASCII");
+    if (a == 1)
+        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "binary .msh files are not supported; save the mesh as ASCII");
     if (a != 0) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "invalid file type %lld (0 = ASCII)", a);
     s = amps__lx_int(L, 0, &a, "data size");
     if (s) return s;
@@ -8884,7 +10338,8 @@ static amps_status amps__gmsh_head(amps__gmsh *G, int elems, long long *nblk, lo
         if (s) return s;
         cross = 0;
     }
-    s = elems ? amps__lx_nrec(L, cross, total, "element count", "element", 2) : amps__lx_nrec(L, cross, total, "node count", "node", 4);
+    s = elems ? amps__lx_nrec(L, cross, total, "element count", "element", 2)
+              : amps__lx_nrec(L, cross, total, "node count", "node", 4);
     if (!s) amps__lx_eol(L);
     return s;
 }
@@ -8900,7 +10355,8 @@ static amps_status amps__gmsh_block(amps__lex *L, int elems, long long total, lo
     if (!s) s = amps__lx_int(L, 0, &h->n, elems ? "block element count" : "block node count");
     if (s) return s;
     if (h->n < 0 || h->n > total - got)
-        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "block %s count %lld exceeds the %lld %ss declared", unit, h->n, total, unit);
+        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "block %s count %lld exceeds the %lld %ss declared", unit,
+                            h->n, total, unit);
     amps__lx_eol(L);
     return AMPS_OK;
 }
@@ -8908,8 +10364,8 @@ static amps_status amps__gmsh_block(amps__lex *L, int elems, long long total, lo
 /* Error unless the 4.1 blocks of $Nodes (elems 0) or $Elements (elems 1) held the total. */
 static amps_status amps__gmsh_held(amps__lex *L, int elems, long long total, long long got) {
     if (got == total) return AMPS_OK;
-    return amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "%s declares %lld %ss, its blocks hold %lld", elems ? "$Elements" : "$Nodes",
-                        total, elems ? "element" : "node", got);
+    return amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "%s declares %lld %ss, its blocks hold %lld",
+                        elems ? "$Elements" : "$Nodes", total, elems ? "element" : "node", got);
 }
 
 /* Reads the tag of node k (on a later line) into G->tags[k]. */
@@ -8965,7 +10421,8 @@ static amps_status amps__gmsh_tagmap(amps__gmsh *G) {
     qsort(t, (size_t)n, sizeof(amps__gtag), amps__gtag_cmp);
     for (k = 1; k < n; k++)
         if (t[k].tag == t[k - 1].tag)
-            return amps__lx_err(&G->R.L, t[k].line, AMPS_ERR_PARSE, "duplicate node tag %lld (first on line %lld)", t[k].tag, t[k - 1].line);
+            return amps__lx_err(&G->R.L, t[k].line, AMPS_ERR_PARSE, "duplicate node tag %lld (first on line %lld)",
+                                t[k].tag, t[k - 1].line);
     return AMPS_OK;
 }
 
@@ -9055,7 +10512,8 @@ static amps_status amps__gmsh_section(amps__gmsh *G) {
         return amps__lx_found(L, "expected a section header like $Nodes, found ");
     memcpy(G->sec, L->tok + 1, L->tlen - 1);
     G->sec[L->tlen - 1] = 0;
-    if (!G->version && !amps__lx_is(L, "$MeshFormat", 0)) return amps__lx_found(L, "the file must start with $MeshFormat, found ");
+    if (!G->version && !amps__lx_is(L, "$MeshFormat", 0))
+        return amps__lx_found(L, "the file must start with $MeshFormat, found ");
     amps__lx_eol(L);
     if (!strcmp(G->sec, "MeshFormat")) return amps__gmsh_format(G);
     if (!strcmp(G->sec, "Nodes")) return amps__gmsh_nodes(G);
@@ -9073,7 +10531,8 @@ AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size
     while (!s && amps__lx_tok(L, 1)) s = amps__gmsh_section(&G);
     if (!s && !G.version) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "empty file (no $MeshFormat)");
     if (!s && !G.have_nodes) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no $Nodes section");
-    if (!s && G.R.tb.n == 0) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no tetrahedra (element type 4) in the file");
+    if (!s && G.R.tb.n == 0)
+        s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no tetrahedra (element type 4) in the file");
     m = amps__rd_end(&G.R, s);
     amps__free(ctx, G.tags);
     return m;
@@ -9171,7 +10630,8 @@ AMPS_API amps_mesh *amps_mesh_read_medit_mem(amps_ctx *ctx, const char *buf, siz
         }
     }
     if (!s && !R.xyz) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no Vertices section");
-    if (!s && (!have_tets || R.tb.n == 0)) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no Tetrahedra in the file");
+    if (!s && (!have_tets || R.tb.n == 0))
+        s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no Tetrahedra in the file");
     return amps__rd_end(&R, s);
 }
 
@@ -9228,9 +10688,13 @@ static amps_mesh *amps__read_with(amps_ctx *ctx, const char *path,
     return m;
 }
 
-AMPS_API amps_mesh *amps_mesh_read_gmsh(amps_ctx *ctx, const char *path) { return amps__read_with(ctx, path, amps_mesh_read_gmsh_mem); }
+AMPS_API amps_mesh *amps_mesh_read_gmsh(amps_ctx *ctx, const char *path) {
+    return amps__read_with(ctx, path, amps_mesh_read_gmsh_mem);
+}
 
-AMPS_API amps_mesh *amps_mesh_read_medit(amps_ctx *ctx, const char *path) { return amps__read_with(ctx, path, amps_mesh_read_medit_mem); }
+AMPS_API amps_mesh *amps_mesh_read_medit(amps_ctx *ctx, const char *path) {
+    return amps__read_with(ctx, path, amps_mesh_read_medit_mem);
+}
 
 AMPS_API amps_mesh *amps_mesh_read_tetgen(amps_ctx *ctx, const char *node_path, const char *ele_path) {
     char *nb, *eb;
@@ -9315,7 +10779,7 @@ static amps_status amps__close_out(amps_ctx *ctx, const char *fn, const char *pa
 }
 
 AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const amps_mesh *m, const double *disp,
-                                    const double *von_mises, const double *principal) {
+                                         const double *von_mises, const double *principal) {
     const char *fn = "amps_mesh_write_vtu";
     amps__out o;
     amps_int v, t;
@@ -9323,14 +10787,18 @@ AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const 
     if (!m) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL mesh", fn);
     s = amps__open_out(ctx, fn, path, &o);
     if (s) return s;
-    amps__pr(&o, "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n");
-    amps__pr(&o, "<UnstructuredGrid>\n<Piece NumberOfPoints=\"%lld\" NumberOfCells=\"%lld\">\n", (long long)m->nnode, (long long)m->ntet);
+    amps__pr(&o, "<?xml version=\"1.0\"?>\n"
+                 "<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n");
+    amps__pr(&o, "<UnstructuredGrid>\n<Piece NumberOfPoints=\"%lld\" NumberOfCells=\"%lld\">\n", (long long)m->nnode,
+             (long long)m->ntet);
     amps__pr(&o, "<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-    for (v = 0; v < m->nnode; v++) amps__pr(&o, "%.17g %.17g %.17g\n", m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
-    amps__pr(&o, "</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
+    for (v = 0; v < m->nnode; v++)
+        amps__pr(&o, "%.17g %.17g %.17g\n", m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
+    amps__pr(&o,
+             "</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
     for (t = 0; t < m->ntet; t++)
-        amps__pr(&o, "%lld %lld %lld %lld\n", (long long)m->tet[4 * t], (long long)m->tet[4 * t + 1], (long long)m->tet[4 * t + 2],
-                 (long long)m->tet[4 * t + 3]);
+        amps__pr(&o, "%lld %lld %lld %lld\n", (long long)m->tet[4 * t], (long long)m->tet[4 * t + 1],
+                 (long long)m->tet[4 * t + 2], (long long)m->tet[4 * t + 3]);
     amps__pr(&o, "</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
     for (t = 0; t < m->ntet; t++) amps__pr(&o, "%lld\n", 4 * (long long)(t + 1));
     amps__pr(&o, "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
@@ -9339,7 +10807,8 @@ AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const 
     amps__pr(&o, "<PointData%s>\n", disp ? " Vectors=\"displacement\"" : "");
     if (disp) {
         amps__pr(&o, "<DataArray type=\"Float64\" Name=\"displacement\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-        for (v = 0; v < m->nnode; v++) amps__pr(&o, "%.17g %.17g %.17g\n", disp[3 * v], disp[3 * v + 1], disp[3 * v + 2]);
+        for (v = 0; v < m->nnode; v++)
+            amps__pr(&o, "%.17g %.17g %.17g\n", disp[3 * v], disp[3 * v + 1], disp[3 * v + 2]);
         amps__pr(&o, "</DataArray>\n");
     }
     amps__pr(&o, "<DataArray type=\"Int64\" Name=\"origin\" format=\"ascii\">\n");
@@ -9352,8 +10821,10 @@ AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const 
         amps__pr(&o, "</DataArray>\n");
     }
     if (principal) {
-        amps__pr(&o, "<DataArray type=\"Float64\" Name=\"principal_stress\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-        for (t = 0; t < m->ntet; t++) amps__pr(&o, "%.17g %.17g %.17g\n", principal[3 * t], principal[3 * t + 1], principal[3 * t + 2]);
+        amps__pr(&o,
+                 "<DataArray type=\"Float64\" Name=\"principal_stress\" NumberOfComponents=\"3\" format=\"ascii\">\n");
+        for (t = 0; t < m->ntet; t++)
+            amps__pr(&o, "%.17g %.17g %.17g\n", principal[3 * t], principal[3 * t + 1], principal[3 * t + 2]);
         amps__pr(&o, "</DataArray>\n");
     }
     amps__pr(&o, "<DataArray type=\"UInt8\" Name=\"cut\" format=\"ascii\">\n");
@@ -9384,7 +10855,8 @@ AMPS_API amps_status amps_mesh_write_tetgen(amps_ctx *ctx, const char *base, con
     if (!s) {
         amps__pr(&o, "%lld 3 0 0\n", (long long)m->nnode);
         for (v = 0; v < m->nnode; v++)
-            amps__pr(&o, "%lld %.17g %.17g %.17g\n", (long long)v + first_index, m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
+            amps__pr(&o, "%lld %.17g %.17g %.17g\n", (long long)v + first_index, m->xyz[3 * v], m->xyz[3 * v + 1],
+                     m->xyz[3 * v + 2]);
         amps__pr(&o, "# written by amps.h\n");
         s = amps__close_out(ctx, fn, path, &o);
     }
@@ -9395,9 +10867,9 @@ AMPS_API amps_status amps_mesh_write_tetgen(amps_ctx *ctx, const char *base, con
     if (!s) {
         amps__pr(&o, "%lld 4 0\n", (long long)m->ntet);
         for (t = 0; t < m->ntet; t++)
-            amps__pr(&o, "%lld %lld %lld %lld %lld\n", (long long)t + first_index, (long long)m->tet[4 * t] + first_index,
-                     (long long)m->tet[4 * t + 1] + first_index, (long long)m->tet[4 * t + 2] + first_index,
-                     (long long)m->tet[4 * t + 3] + first_index);
+            amps__pr(&o, "%lld %lld %lld %lld %lld\n", (long long)t + first_index,
+                     (long long)m->tet[4 * t] + first_index, (long long)m->tet[4 * t + 1] + first_index,
+                     (long long)m->tet[4 * t + 2] + first_index, (long long)m->tet[4 * t + 3] + first_index);
         s = amps__close_out(ctx, fn, path, &o);
     }
     amps__free(ctx, path);
@@ -9410,7 +10882,8 @@ AMPS_API amps_status amps_mesh_write_gmsh(amps_ctx *ctx, const char *path, const
     amps_int v, t;
     amps_status s;
     long long nn, nt;
-    if (!m || (version != 2 && version != 4)) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL mesh or version not 2 or 4", fn);
+    if (!m || (version != 2 && version != 4))
+        return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL mesh or version not 2 or 4", fn);
     s = amps__open_out(ctx, fn, path, &o);
     if (s) return s;
     nn = (long long)m->nnode;
@@ -9419,19 +10892,23 @@ AMPS_API amps_status amps_mesh_write_gmsh(amps_ctx *ctx, const char *path, const
     if (version == 2) {
         amps__pr(&o, "%lld\n", nn);
         for (v = 0; v < m->nnode; v++)
-            amps__pr(&o, "%lld %.17g %.17g %.17g\n", (long long)v + 1, m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
+            amps__pr(&o, "%lld %.17g %.17g %.17g\n", (long long)v + 1, m->xyz[3 * v], m->xyz[3 * v + 1],
+                     m->xyz[3 * v + 2]);
         amps__pr(&o, "$EndNodes\n$Elements\n%lld\n", nt);
         for (t = 0; t < m->ntet; t++)
-            amps__pr(&o, "%lld 4 2 0 1 %lld %lld %lld %lld\n", (long long)t + 1, (long long)m->tet[4 * t] + 1, (long long)m->tet[4 * t + 1] + 1,
-                     (long long)m->tet[4 * t + 2] + 1, (long long)m->tet[4 * t + 3] + 1);
+            amps__pr(&o, "%lld 4 2 0 1 %lld %lld %lld %lld\n", (long long)t + 1, (long long)m->tet[4 * t] + 1,
+                     (long long)m->tet[4 * t + 1] + 1, (long long)m->tet[4 * t + 2] + 1,
+                     (long long)m->tet[4 * t + 3] + 1);
     } else {
         amps__pr(&o, "1 %lld 1 %lld\n3 1 0 %lld\n", nn, nn, nn);
         for (v = 0; v < m->nnode; v++) amps__pr(&o, "%lld\n", (long long)v + 1);
-        for (v = 0; v < m->nnode; v++) amps__pr(&o, "%.17g %.17g %.17g\n", m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
+        for (v = 0; v < m->nnode; v++)
+            amps__pr(&o, "%.17g %.17g %.17g\n", m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
         amps__pr(&o, "$EndNodes\n$Elements\n1 %lld 1 %lld\n3 1 4 %lld\n", nt, nt, nt);
         for (t = 0; t < m->ntet; t++)
-            amps__pr(&o, "%lld %lld %lld %lld %lld\n", (long long)t + 1, (long long)m->tet[4 * t] + 1, (long long)m->tet[4 * t + 1] + 1,
-                     (long long)m->tet[4 * t + 2] + 1, (long long)m->tet[4 * t + 3] + 1);
+            amps__pr(&o, "%lld %lld %lld %lld %lld\n", (long long)t + 1, (long long)m->tet[4 * t] + 1,
+                     (long long)m->tet[4 * t + 1] + 1, (long long)m->tet[4 * t + 2] + 1,
+                     (long long)m->tet[4 * t + 3] + 1);
     }
     amps__pr(&o, "$EndElements\n");
     return amps__close_out(ctx, fn, path, &o);
@@ -9446,11 +10923,12 @@ AMPS_API amps_status amps_mesh_write_medit(amps_ctx *ctx, const char *path, cons
     s = amps__open_out(ctx, fn, path, &o);
     if (s) return s;
     amps__pr(&o, "MeshVersionFormatted 2\nDimension 3\nVertices\n%lld\n", (long long)m->nnode);
-    for (v = 0; v < m->nnode; v++) amps__pr(&o, "%.17g %.17g %.17g 0\n", m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
+    for (v = 0; v < m->nnode; v++)
+        amps__pr(&o, "%.17g %.17g %.17g 0\n", m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
     amps__pr(&o, "Tetrahedra\n%lld\n", (long long)m->ntet);
     for (t = 0; t < m->ntet; t++)
-        amps__pr(&o, "%lld %lld %lld %lld 1\n", (long long)m->tet[4 * t] + 1, (long long)m->tet[4 * t + 1] + 1, (long long)m->tet[4 * t + 2] + 1,
-                 (long long)m->tet[4 * t + 3] + 1);
+        amps__pr(&o, "%lld %lld %lld %lld 1\n", (long long)m->tet[4 * t] + 1, (long long)m->tet[4 * t + 1] + 1,
+                 (long long)m->tet[4 * t + 2] + 1, (long long)m->tet[4 * t + 3] + 1);
     amps__pr(&o, "End\n");
     return amps__close_out(ctx, fn, path, &o);
 }

@@ -37,19 +37,33 @@ int main(int argc, char **argv) {
         fprintf(stderr, "usage: haptic <beam:h|brick:R|file> <steps> <cuts> <out.csv> [npins]\n");
         return 2;
     }
-    spec = argv[1]; steps = atoi(argv[2]); ncuts = atoi(argv[3]); out = argv[4];
+    spec = argv[1];
+    steps = atoi(argv[2]);
+    ncuts = atoi(argv[3]);
+    out = argv[4];
     if (argc > 5) npins = atoi(argv[5]);
     if (steps < 1 || npins < 1) return 2;
     bench_mesh_name(spec, name, sizeof(name));
     amps_ctx_init(&ctx);
     bench_model_init(&ctx, spec, NULL, &B);
-    m = B.m; S = B.S; fixed = B.fixed; force = B.force; nn = B.nn; up = B.up; cp = B.cp;
-    memcpy(lo, B.lo, sizeof(lo)); memcpy(hi, B.hi, sizeof(hi));
+    m = B.m;
+    S = B.S;
+    fixed = B.fixed;
+    force = B.force;
+    nn = B.nn;
+    up = B.up;
+    cp = B.cp;
+    memcpy(lo, B.lo, sizeof(lo));
+    memcpy(hi, B.hi, sizeof(hi));
     ax3 = up == 2 ? 1 : 2;
-    for (k = 0; k < 3; k++) if (hi[k] - lo[k] > amp) amp = hi[k] - lo[k];
+    for (k = 0; k < 3; k++)
+        if (hi[k] - lo[k] > amp) amp = hi[k] - lo[k];
     amp *= 0.01;
     t_prep = amps_now();
-    if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "first solve: %s\n", ctx.msg); return 1; }
+    if (amps_scene_solve(&ctx, S) != AMPS_OK) {
+        fprintf(stderr, "first solve: %s\n", ctx.msg);
+        return 1;
+    }
     t_prep = amps_now() - t_prep;
     ndid = bench_cuts(&ctx, &B, ncuts);
     /* the tool: the npins highest free, unloaded original nodes (selection by repeated maximum) */
@@ -62,8 +76,12 @@ int main(int argc, char **argv) {
                 if (fixed[v] || taken[v] || force[3 * v] != 0.0) continue;
                 if (best < 0 || m->xyz[3 * v + up] > m->xyz[3 * best + up]) best = v;
             }
-            if (best < 0) { npins = k; break; }
-            pins[k] = best; taken[best] = 1;
+            if (best < 0) {
+                npins = k;
+                break;
+            }
+            pins[k] = best;
+            taken[best] = 1;
         }
         free(taken);
     }
@@ -75,7 +93,10 @@ int main(int argc, char **argv) {
     {
         double u0[3] = {0, 0, 0};
         for (k = 0; k < npins; k++) amps_scene_pin(&ctx, S, pins[k], u0);
-        if (amps_scene_solve_reactions(&ctx, S) != AMPS_OK) { fprintf(stderr, "forces: %s\n", ctx.msg); return 1; }
+        if (amps_scene_solve_reactions(&ctx, S) != AMPS_OK) {
+            fprintf(stderr, "forces: %s\n", ctx.msg);
+            return 1;
+        }
     }
     amps_update_get_stats(amps_scene_engine(S), &us);
     for (st = 1; st <= steps; st++) {
@@ -84,10 +105,15 @@ int main(int argc, char **argv) {
         u[ax3] = 0.5 * amp * sin(wt);
         t0 = amps_now();
         for (k = 0; k < npins; k++) amps_scene_pin(&ctx, S, pins[k], u);
-        if (amps_scene_solve_reactions(&ctx, S) != AMPS_OK) { fprintf(stderr, "step %d: %s\n", st, ctx.msg); return 1; }
+        if (amps_scene_solve_reactions(&ctx, S) != AMPS_OK) {
+            fprintf(stderr, "step %d: %s\n", st, ctx.msg);
+            return 1;
+        }
         for (k = 0; k < npins; k++) {
             amps_scene_reaction(&ctx, S, pins[k], r1 + 3 * k);
-            ftot[0] += r1[3 * k]; ftot[1] += r1[3 * k + 1]; ftot[2] += r1[3 * k + 2];
+            ftot[0] += r1[3 * k];
+            ftot[1] += r1[3 * k + 1];
+            ftot[2] += r1[3 * k + 2];
         }
         t_step[ndone++] = amps_now() - t0;
         {
@@ -97,13 +123,20 @@ int main(int argc, char **argv) {
         if (st % HAPTIC_CHECK == 0) {
             double num = 0, den = 0, rel;
             t0 = amps_now();
-            if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "full solve: %s\n", ctx.msg); return 1; }
+            if (amps_scene_solve(&ctx, S) != AMPS_OK) {
+                fprintf(stderr, "full solve: %s\n", ctx.msg);
+                return 1;
+            }
             t_full[nchk] = amps_now() - t0;
             for (k = 0; k < npins; k++) amps_scene_reaction(&ctx, S, pins[k], r2 + 3 * k);
-            for (k = 0; k < 3 * npins; k++) { num += (r1[k] - r2[k]) * (r1[k] - r2[k]); den += r2[k] * r2[k]; }
+            for (k = 0; k < 3 * npins; k++) {
+                num += (r1[k] - r2[k]) * (r1[k] - r2[k]);
+                den += r2[k] * r2[k];
+            }
             rel = den > 0 ? sqrt(num / den) : sqrt(num);
             if (rel > relmax) relmax = rel;
-            relsum += rel; nchk++;
+            relsum += rel;
+            nchk++;
         }
     }
     {
@@ -126,12 +159,23 @@ int main(int argc, char **argv) {
                nchk, 1e3 * fmed, fmed / med, relmax, nchk ? relsum / nchk : 0.0);
         csv = bench_csv(out, "mesh,nodes,equations,nnzL,cuts,pins,nsys,steps,mean_ms,median_ms,p99_ms,max_ms,rate_hz,"
                              "full_solve_ms,reaction_reldiff_max,reaction_reldiff_mean");
-        if (!csv) { fprintf(stderr, "cannot write %s\n", out); return 1; }
-        fprintf(csv, "%s,%d,%ld,%.0f,%d,%d,%ld,%d,%.4f,%.4f,%.4f,%.4f,%.0f,%.3f,%.3e,%.3e\n", name, nn, (long)F->n, amps_factor_nnz(F), ndid,
-                npins, (long)us.nsys, ndone, 1e3 * mean, 1e3 * med, 1e3 * p99, 1e3 * mx, 1 / mean, 1e3 * fmed, relmax, nchk ? relsum / nchk : 0.0);
+        if (!csv) {
+            fprintf(stderr, "cannot write %s\n", out);
+            return 1;
+        }
+        fprintf(csv, "%s,%d,%ld,%.0f,%d,%d,%ld,%d,%.4f,%.4f,%.4f,%.4f,%.0f,%.3f,%.3e,%.3e\n", name, nn, (long)F->n,
+                amps_factor_nnz(F), ndid, npins, (long)us.nsys, ndone, 1e3 * mean, 1e3 * med, 1e3 * p99, 1e3 * mx,
+                1 / mean, 1e3 * fmed, relmax, nchk ? relsum / nchk : 0.0);
         fclose(csv);
     }
     amps_scene_free(&ctx, S);
-    free(fixed); free(force); free(cp.path); free(pins); free(t_step); free(t_full); free(r1); free(r2);
+    free(fixed);
+    free(force);
+    free(cp.path);
+    free(pins);
+    free(t_step);
+    free(t_full);
+    free(r1);
+    free(r2);
     return 0;
 }

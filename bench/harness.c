@@ -49,15 +49,19 @@ static const double tols[NTOL] = {1e-4, 1e-6, 1e-8, 1e-10};
 static FILE *csv;
 static int cur_step;
 
-static void put(const char *method, double tol, double t, int iters, double res, double err, int conv, long dim, long nsys,
-                const double *ts) {
+static void put(const char *method, double tol, double t, int iters, double res, double err, int conv, long dim,
+                long nsys, const double *ts) {
     static const double z[AMPS_STEP_COUNT] = {0};
     if (!ts) ts = z;
-    fprintf(csv, "%d,%s,%g,%.6e,%d,%.3e,%.3e,%d,%ld,%ld,%.4e,%.4e,%.4e,%.4e,%.4e,%.4e\n", cur_step, method, tol, t, iters, res, err,
-            conv, dim, nsys, ts[AMPS_STEP_WCOLS], ts[AMPS_STEP_GRAM], ts[AMPS_STEP_DCOLS], ts[AMPS_STEP_RHS], ts[AMPS_STEP_DENSE], ts[AMPS_STEP_SOLVE]);
+    fprintf(csv, "%d,%s,%g,%.6e,%d,%.3e,%.3e,%d,%ld,%ld,%.4e,%.4e,%.4e,%.4e,%.4e,%.4e\n", cur_step, method, tol, t,
+            iters, res, err, conv, dim, nsys, ts[AMPS_STEP_WCOLS], ts[AMPS_STEP_GRAM], ts[AMPS_STEP_DCOLS],
+            ts[AMPS_STEP_RHS], ts[AMPS_STEP_DENSE], ts[AMPS_STEP_SOLVE]);
 }
 
-static int envi(const char *name, int def) { const char *s = getenv(name); return s ? atoi(s) : def; }
+static int envi(const char *name, int def) {
+    const char *s = getenv(name);
+    return s ? atoi(s) : def;
+}
 
 /* ======================= CHOLMOD on the explicit reduced system ======================= */
 
@@ -76,7 +80,10 @@ static cholmod_sparse *reduced(const bench_sys *S, int *fmap, cholmod_dense **B,
         if (fmap[j] < 0) continue;
         ((int *)A->p)[fmap[j]] = nz;
         for (p = S->K->p[j]; p < S->K->p[j + 1]; p++)
-            if (fmap[S->K->i[p]] >= 0) { ((int *)A->i)[nz] = fmap[S->K->i[p]]; ((double *)A->x)[nz++] = S->K->x[p]; }
+            if (fmap[S->K->i[p]] >= 0) {
+                ((int *)A->i)[nz] = fmap[S->K->i[p]];
+                ((double *)A->x)[nz++] = S->K->x[p];
+            }
         ((double *)(*B)->x)[fmap[j]] = S->b[j];
     }
     ((int *)A->p)[nf] = nz;
@@ -111,21 +118,25 @@ static void reference(const bench_sys *S, double *xref, double *work, int simpl)
     t_sol = amps_now() - t0;
     if (!X || !X2 || c.status != CHOLMOD_OK) bench_die("cholmod", "reference factorization failed");
     expand(S, fmap, (double *)X->x, x0);
-    for (it = 0; it < 3; it++) {   /* X2 += A^{-1} (B - A X2) */
+    for (it = 0; it < 3; it++) { /* X2 += A^{-1} (B - A X2) */
         cholmod_dense *D;
         size_t k;
         R = cholmod_copy_dense(B, &c);
         cholmod_sdmult(A, 0, mone, one, X2, R, &c);
         D = cholmod_solve(CHOLMOD_A, L, R, &c);
         for (k = 0; k < X2->nrow; k++) ((double *)X2->x)[k] += ((double *)D->x)[k];
-        cholmod_free_dense(&R, &c); cholmod_free_dense(&D, &c);
+        cholmod_free_dense(&R, &c);
+        cholmod_free_dense(&D, &c);
     }
     expand(S, fmap, (double *)X2->x, xref);
     put("chol_refactor", 0, t_ref, 0, bench_sys_relres(S, x0, work), bench_sys_relerr(S, x0, xref), 1, S->n, 0, NULL);
     put("chol_solve", 0, t_sol, 0, bench_sys_relres(S, x0, work), bench_sys_relerr(S, x0, xref), 1, S->n, 0, NULL);
-    cholmod_free_dense(&X, &c); cholmod_free_dense(&X2, &c); cholmod_free_factor(&L, &c);
+    cholmod_free_dense(&X, &c);
+    cholmod_free_dense(&X2, &c);
+    cholmod_free_factor(&L, &c);
     if (simpl) {
-        c.supernodal = CHOLMOD_SIMPLICIAL; c.final_ll = 0;
+        c.supernodal = CHOLMOD_SIMPLICIAL;
+        c.final_ll = 0;
         t0 = amps_now();
         L = cholmod_analyze(A, &c);
         cholmod_factorize(A, L, &c);
@@ -134,11 +145,14 @@ static void reference(const bench_sys *S, double *xref, double *work, int simpl)
         expand(S, fmap, (double *)X->x, x0);
         put("chol_refactor_simpl", 0, t_ref, 0, bench_sys_relres(S, x0, work), bench_sys_relerr(S, x0, xref), 1, S->n,
             0, NULL);
-        cholmod_free_dense(&X, &c); cholmod_free_factor(&L, &c);
+        cholmod_free_dense(&X, &c);
+        cholmod_free_factor(&L, &c);
     }
-    cholmod_free_dense(&B, &c); cholmod_free_sparse(&A, &c);
+    cholmod_free_dense(&B, &c);
+    cholmod_free_sparse(&A, &c);
     cholmod_finish(&c);
-    free(fmap); free(x0);
+    free(fmap);
+    free(x0);
 }
 
 /* ============================ CHOLMOD update / downdate ============================
@@ -172,7 +186,8 @@ static void updown_init(updown *u, const bench_sys *S0, int reserve) {
     int j, p, nz = 0, n0 = S0->n;
     double t0 = amps_now();
     cholmod_start(&u->c);
-    u->n0 = n0; u->N = n0 + reserve;
+    u->n0 = n0;
+    u->N = n0 + reserve;
     A = cholmod_allocate_sparse((size_t)u->N, (size_t)u->N, (size_t)(S0->K->p[n0] + reserve), 1, 1, 1, CHOLMOD_REAL,
                                 &u->c);
     for (j = 0; j < u->N; j++) {
@@ -182,7 +197,10 @@ static void updown_init(updown *u, const bench_sys *S0, int reserve) {
                 ((int *)A->i)[nz] = S0->K->i[p];
                 ((double *)A->x)[nz++] = S0->K->x[p];
             }
-        else { ((int *)A->i)[nz] = j; ((double *)A->x)[nz++] = 1.0; }
+        else {
+            ((int *)A->i)[nz] = j;
+            ((double *)A->x)[nz++] = 1.0;
+        }
     }
     ((int *)A->p)[u->N] = nz;
     u->L = cholmod_analyze(A, &u->c);
@@ -200,7 +218,8 @@ static void updown_init(updown *u, const bench_sys *S0, int reserve) {
 }
 
 static void updown_free(updown *u) {
-    cholmod_free_factor(&u->L, &u->c); cholmod_free_dense(&u->B, &u->c);
+    cholmod_free_factor(&u->L, &u->c);
+    cholmod_free_dense(&u->B, &u->c);
     cholmod_finish(&u->c);
     free(u->iperm);
 }
@@ -213,7 +232,7 @@ static void tet_w(const amps_mesh *m, amps_int t, double W[72]) {
     V = fabs(amps_tet_gradients(X, G));
     amps_tet_B(G, Bm);
     amps_elasticity(m->E[t], m->nu[t], C);
-    for (a = 0; a < 6; a++)   /* Cholesky C = Lc Lc^T */
+    for (a = 0; a < 6; a++) /* Cholesky C = Lc Lc^T */
         for (b = 0; b <= a; b++) {
             double s = C[6 * a + b];
             for (k = 0; k < b; k++) s -= Lc[6 * a + k] * Lc[6 * b + k];
@@ -251,14 +270,23 @@ static cholmod_sparse *updown_c(updown *u, const amps_mesh *M, const amps_int *n
                         Cx[nz++] = W[6 * (3 * a + d) + q];
                     }
             }
-            for (i = start + 1; i < nz; i++)   /* insertion sort of the column */
+            for (i = start + 1; i < nz; i++) /* insertion sort of the column */
                 for (j = i; j > start && Ci[j - 1] > Ci[j]; j--) {
-                    int ti = Ci[j]; double tx = Cx[j];
-                    Ci[j] = Ci[j - 1]; Cx[j] = Cx[j - 1]; Ci[j - 1] = ti; Cx[j - 1] = tx;
+                    int ti = Ci[j];
+                    double tx = Cx[j];
+                    Ci[j] = Ci[j - 1];
+                    Cx[j] = Cx[j - 1];
+                    Ci[j - 1] = ti;
+                    Cx[j - 1] = tx;
                 }
         }
     }
-    if (ident) for (d = 0; d < 3; d++, col++) { Cp[col] = nz; Ci[nz] = u->iperm[ndof[3 * s->vc + d]]; Cx[nz++] = 1.0; }
+    if (ident)
+        for (d = 0; d < 3; d++, col++) {
+            Cp[col] = nz;
+            Ci[nz] = u->iperm[ndof[3 * s->vc + d]];
+            Cx[nz++] = 1.0;
+        }
     Cp[col] = nz;
     return C;
 }
@@ -273,14 +301,16 @@ static double updown_step(updown *u, const amps_mesh *M, const amps_int *ndof, c
         cholmod_sparse *Cp = updown_c(u, M, ndof, s, s->vc, 0), *Cm = updown_c(u, M, ndof, s, s->node, 1);
         cholmod_updown(1, Cp, u->L, &u->c);
         cholmod_updown(0, Cm, u->L, &u->c);
-        cholmod_free_sparse(&Cp, &u->c); cholmod_free_sparse(&Cm, &u->c);
+        cholmod_free_sparse(&Cp, &u->c);
+        cholmod_free_sparse(&Cm, &u->c);
     } else {
         for (d = 0; d < 3; d++) {
             int e = (int)ndof[3 * s->node + d], p;
             if (e < 0) continue;
             cholmod_rowdel((size_t)u->iperm[e], NULL, u->L, &u->c);
             con[e] = 1;
-            for (p = Kf0->p[e]; p < Kf0->p[e + 1]; p++) if (!con[Kf0->i[p]]) b[Kf0->i[p]] -= Kf0->x[p] * s->u[d];
+            for (p = Kf0->p[e]; p < Kf0->p[e + 1]; p++)
+                if (!con[Kf0->i[p]]) b[Kf0->i[p]] -= Kf0->x[p] * s->u[d];
             b[e] = s->u[d];
         }
     }
@@ -295,7 +325,10 @@ static double updown_step(updown *u, const amps_mesh *M, const amps_int *ndof, c
    K_FF x_F = b_F on the full numbering with x_C = g held: r = (f - K x)_F, products with p
    zero on C and the result zeroed on C. Jacobi: z = r ./ diag(K). Stops at ||r|| <= tol ||b_F||
    (recursive residual) or maxit. Records for each tolerance the time, iterations and iterate. */
-typedef struct snaps { double t[NTOL], *x[NTOL]; int it[NTOL], conv[NTOL]; } snaps;
+typedef struct snaps {
+    double t[NTOL], *x[NTOL];
+    int it[NTOL], conv[NTOL];
+} snaps;
 
 static void cg_run(const bench_sys *S, const double *x0, int jacobi, int maxit, snaps *sn) {
     int n = S->n, i, it = 0, ti = 0;
@@ -309,7 +342,9 @@ static void cg_run(const bench_sys *S, const double *x0, int jacobi, int maxit, 
     for (i = 0; i < n; i++) {
         amps_int k;
         dinv[i] = 1;
-        if (jacobi) for (k = S->Kf->p[i]; k < S->Kf->p[i + 1]; k++) if (S->Kf->i[k] == i) dinv[i] = 1 / S->Kf->x[k];
+        if (jacobi)
+            for (k = S->Kf->p[i]; k < S->Kf->p[i + 1]; k++)
+                if (S->Kf->i[k] == i) dinv[i] = 1 / S->Kf->x[k];
         x[i] = S->con[i] ? S->g[i] : x0[i];
     }
     bench_spmv(S->Kf, x, q);
@@ -317,20 +352,26 @@ static void cg_run(const bench_sys *S, const double *x0, int jacobi, int maxit, 
     for (i = 0; i < n; i++) {
         r[i] = S->con[i] ? 0 : S->f[i] - q[i];
         z[i] = p[i] = dinv[i] * r[i];
-        rz += r[i] * z[i]; rr += r[i] * r[i];
+        rz += r[i] * z[i];
+        rr += r[i] * r[i];
     }
     for (;;) {
         double pq = 0, alpha, rz1 = 0, beta;
-        while (ti < NTOL && sqrt(rr) <= tols[ti] * S->nb) {   /* snapshot, not timed */
+        while (ti < NTOL && sqrt(rr) <= tols[ti] * S->nb) { /* snapshot, not timed */
             double t1 = amps_now();
-            sn->t[ti] = t1 - t0 - tpause; sn->it[ti] = it; sn->conv[ti] = 1;
+            sn->t[ti] = t1 - t0 - tpause;
+            sn->it[ti] = it;
+            sn->conv[ti] = 1;
             memcpy(sn->x[ti], x, sizeof(double) * (size_t)n);
             ti++;
             tpause += amps_now() - t1;
         }
         if (ti == NTOL || it >= maxit) break;
         bench_spmv(S->Kf, p, q);
-        for (i = 0; i < n; i++) { if (S->con[i]) q[i] = 0; pq += p[i] * q[i]; }
+        for (i = 0; i < n; i++) {
+            if (S->con[i]) q[i] = 0;
+            pq += p[i] * q[i];
+        }
         alpha = rz / pq;
         rr = 0;
         for (i = 0; i < n; i++) {
@@ -340,7 +381,8 @@ static void cg_run(const bench_sys *S, const double *x0, int jacobi, int maxit, 
             rz1 += r[i] * z[i];
             rr += r[i] * r[i];
         }
-        beta = rz1 / rz; rz = rz1;
+        beta = rz1 / rz;
+        rz = rz1;
         for (i = 0; i < n; i++) p[i] = z[i] + beta * p[i];
         it++;
     }
@@ -350,7 +392,12 @@ static void cg_run(const bench_sys *S, const double *x0, int jacobi, int maxit, 
         sn->conv[ti] = 0;
         memcpy(sn->x[ti], x, sizeof(double) * (size_t)n);
     }
-    free(x); free(r); free(z); free(p); free(q); free(dinv);
+    free(x);
+    free(r);
+    free(z);
+    free(p);
+    free(q);
+    free(dinv);
 }
 
 /* ================= [Interactive cutting]: augmented system + GMRES =================
@@ -373,7 +420,7 @@ static void cg_run(const bench_sys *S, const double *x0, int jacobi, int maxit, 
    Step 3: a1 by a sparse forward and a full backward solve. */
 typedef struct gmres {
     const amps_factor *F;
-    int n0, m, n, *pos;             /* pos[i] = position of equation i in Lset or -1 */
+    int n0, m, n, *pos; /* pos[i] = position of equation i in Lset or -1 */
     double *w, *z, *sa, *sd,
             *sc; /* w: permuted work (n0), z: work (n); S = tridiag(sa sup, sd diag, sc sub) by columns */
     amps_int *cl, *bi, *req, *tch;
@@ -382,13 +429,14 @@ typedef struct gmres {
     /* J (CSC n x m) for the current step */
     int *Jp, *Ji;
     double *Jx;
-    void *num;                      /* UMFPACK factor of M */
+    void *num; /* UMFPACK factor of M */
 } gmres;
 
 static void gm_init(amps_ctx *ctx, gmres *G, const amps_factor *F, const bench_sys *S0, int ncap) {
     int j, n0 = (int)F->n;
     memset(G, 0, sizeof(*G));
-    G->F = F; G->n0 = n0;
+    G->F = F;
+    G->n0 = n0;
     G->w = (double *)bench_alloc(sizeof(double) * (size_t)n0);
     G->z = (double *)bench_alloc(sizeof(double) * (size_t)ncap);
     G->pos = (int *)bench_alloc(sizeof(int) * (size_t)ncap);
@@ -407,11 +455,13 @@ static void gm_init(amps_ctx *ctx, gmres *G, const amps_factor *F, const bench_s
         const amps_csc *K = S0->Kf;
         int c[3], nc = 0, a, b, k;
         double Gm[9], rhs[3], s[3];
-        for (a = j - 1; a <= j + 1; a++) if (a >= 0 && a < n0) c[nc++] = a;
+        for (a = j - 1; a <= j + 1; a++)
+            if (a >= 0 && a < n0) c[nc++] = a;
         for (a = 0; a < nc; a++) {
             rhs[a] = 0;
-            for (k = K->p[c[a]]; k < K->p[c[a] + 1]; k++) if (K->i[k] == j) rhs[a] = K->x[k];
-            for (b = 0; b < nc; b++) {   /* dot of sparse columns c[a], c[b] (rows sorted) */
+            for (k = K->p[c[a]]; k < K->p[c[a] + 1]; k++)
+                if (K->i[k] == j) rhs[a] = K->x[k];
+            for (b = 0; b < nc; b++) { /* dot of sparse columns c[a], c[b] (rows sorted) */
                 int p = K->p[c[a]], q = K->p[c[b]];
                 double d = 0;
                 while (p < K->p[c[a] + 1] && q < K->p[c[b] + 1]) {
@@ -422,7 +472,7 @@ static void gm_init(amps_ctx *ctx, gmres *G, const amps_factor *F, const bench_s
                 Gm[3 * a + b] = d;
             }
         }
-        for (a = 0; a < nc; a++) {   /* Gaussian elimination, SPD */
+        for (a = 0; a < nc; a++) { /* Gaussian elimination, SPD */
             for (b = a + 1; b < nc; b++) {
                 double l = Gm[3 * b + a] / Gm[3 * a + a];
                 for (k = a; k < nc; k++) Gm[3 * b + k] -= l * Gm[3 * a + k];
@@ -435,16 +485,27 @@ static void gm_init(amps_ctx *ctx, gmres *G, const amps_factor *F, const bench_s
             s[a] /= Gm[3 * a + a];
         }
         for (a = 0; a < nc; a++) {
-            if (c[a] == j - 1) G->sa[j] = s[a];       /* S(j-1, j) */
+            if (c[a] == j - 1) G->sa[j] = s[a]; /* S(j-1, j) */
             else if (c[a] == j) G->sd[j] = s[a];
-            else G->sc[j] = s[a];                    /* S(j+1, j) */
+            else G->sc[j] = s[a]; /* S(j+1, j) */
         }
     }
 }
 
 static void gm_free(amps_ctx *ctx, gmres *G) {
-    free(G->w); free(G->z); free(G->pos); free(G->cl); free(G->bi); free(G->tch); free(G->req);
-    free(G->sa); free(G->sd); free(G->sc); free(G->Jp); free(G->Ji); free(G->Jx);
+    free(G->w);
+    free(G->z);
+    free(G->pos);
+    free(G->cl);
+    free(G->bi);
+    free(G->tch);
+    free(G->req);
+    free(G->sa);
+    free(G->sd);
+    free(G->sc);
+    free(G->Jp);
+    free(G->Ji);
+    free(G->Jx);
     amps_marker_free(ctx, &G->mk);
 }
 
@@ -466,7 +527,8 @@ static void gm_hrinv(gmres *G, const int *Lset, int nt, double *out) {
         /* the forward closure's entries outside closure(req) keep D^-1 L^-1 v: clear them after reading */
         for (q = 0; q < nc; q++) G->bi[q] = G->cl[q];
         k = (int)amps_ltsolve_partial(F, G->nreq, G->req, G->w, G->cl, &G->mk);
-        for (q = 0; q < G->m; q++) if (Lset[q] < G->n0) out[q] = G->w[F->iperm[Lset[q]]];
+        for (q = 0; q < G->m; q++)
+            if (Lset[q] < G->n0) out[q] = G->w[F->iperm[Lset[q]]];
         while (k > 0) G->w[G->cl[--k]] = 0;
         for (q = 0; q < nc; q++) G->w[G->bi[q]] = 0;
     }
@@ -479,9 +541,9 @@ static int gm_jmul(gmres *G, const double *a, double scale) {
     for (k = 0; k < G->m; k++)
         for (p = G->Jp[k]; p < G->Jp[k + 1]; p++) {
             int i = G->Ji[p];
-            if (G->z[i] == 0) G->tch[nt++] = i;   /* may list an index twice if a sum cancels: harmless below */
+            if (G->z[i] == 0) G->tch[nt++] = i; /* may list an index twice if a sum cancels: harmless below */
             G->z[i] += scale * G->Jx[p] * a[k];
-            if (G->z[i] == 0) G->z[i] = 1e-300;   /* keep it listed once */
+            if (G->z[i] == 0) G->z[i] = 1e-300; /* keep it listed once */
         }
     return nt;
 }
@@ -507,14 +569,20 @@ static int gm_prec_build(gmres *G, int prec, double *tx, int *ti, int *tj, int *
             for (r = -1; r <= 1; r++) {
                 int row = i + r;
                 if (row < 0 || row >= G->n || G->pos[row] < 0 || sv[r + 1] == 0) continue;
-                ti[nz] = G->pos[row]; tj[nz] = k; tx[nz++] = sv[r + 1] * y;
+                ti[nz] = G->pos[row];
+                tj[nz] = k;
+                tx[nz++] = sv[r + 1] * y;
             }
         }
     umfpack_di_triplet_to_col(G->m, G->m, nz, ti, tj, tx, Mp, Mi, Mx, NULL);
     st = umfpack_di_symbolic(G->m, G->m, Mp, Mi, Mx, &sym, NULL, NULL);
     if (st == UMFPACK_OK) st = umfpack_di_numeric(Mp, Mi, Mx, sym, &G->num, NULL, NULL);
     umfpack_di_free_symbolic(&sym);
-    if (st != UMFPACK_OK) { if (G->num) umfpack_di_free_numeric(&G->num); G->num = NULL; return 0; }
+    if (st != UMFPACK_OK) {
+        if (G->num) umfpack_di_free_numeric(&G->num);
+        G->num = NULL;
+        return 0;
+    }
     return 1;
 }
 
@@ -548,11 +616,14 @@ static void gm_run(gmres *G, const bench_sys *S, const int *Lset, int m, const d
     int *ti_ = NULL, *tj_ = NULL, *Mp = NULL, *Mi = NULL;
     double *tx_ = NULL, *Mx = NULL;
     int nz;
-    G->m = m; G->n = n;
+    G->m = m;
+    G->n = n;
     for (k = 0; k < NTOL; k++) a2s[k] = (double *)bench_alloc(sizeof(double) * (size_t)m);
     /* J and H (Eq. 5-6) */
     for (k = 0, nz = 0; k < m; k++) nz += S->con[Lset[k]] ? 1 : S->Kf->p[Lset[k] + 1] - S->Kf->p[Lset[k]];
-    free(G->Jp); free(G->Ji); free(G->Jx);
+    free(G->Jp);
+    free(G->Ji);
+    free(G->Jx);
     G->Jp = (int *)bench_alloc(sizeof(int) * ((size_t)m + 1));
     G->Ji = (int *)bench_alloc(sizeof(int) * (size_t)nz);
     G->Jx = (double *)bench_alloc(sizeof(double) * (size_t)nz);
@@ -561,15 +632,23 @@ static void gm_run(gmres *G, const bench_sys *S, const int *Lset, int m, const d
         G->pos[e] = k;
         if (e < G->n0) G->req[G->nreq++] = G->F->iperm[e];
         G->Jp[k] = nz;
-        if (S->con[e]) { G->Ji[nz] = e; G->Jx[nz++] = 1; }
-        else for (p = S->Kf->p[e]; p < S->Kf->p[e + 1]; p++) { G->Ji[nz] = S->Kf->i[p]; G->Jx[nz++] = S->Kf->x[p]; }
+        if (S->con[e]) {
+            G->Ji[nz] = e;
+            G->Jx[nz++] = 1;
+        } else
+            for (p = S->Kf->p[e]; p < S->Kf->p[e + 1]; p++) {
+                G->Ji[nz] = S->Kf->i[p];
+                G->Jx[nz++] = S->Kf->x[p];
+            }
     }
     G->Jp[m] = nz;
     if (prec) {
         int cap = 3 * nz + 1;
-        ti_ = (int *)bench_alloc(sizeof(int) * (size_t)cap); tj_ = (int *)bench_alloc(sizeof(int) * (size_t)cap);
+        ti_ = (int *)bench_alloc(sizeof(int) * (size_t)cap);
+        tj_ = (int *)bench_alloc(sizeof(int) * (size_t)cap);
         tx_ = (double *)bench_alloc(sizeof(double) * (size_t)cap);
-        Mp = (int *)bench_alloc(sizeof(int) * ((size_t)m + 1)); Mi = (int *)bench_alloc(sizeof(int) * (size_t)cap);
+        Mp = (int *)bench_alloc(sizeof(int) * ((size_t)m + 1));
+        Mi = (int *)bench_alloc(sizeof(int) * (size_t)cap);
         Mx = (double *)bench_alloc(sizeof(double) * (size_t)cap);
         if (!gm_prec_build(G, prec, tx_, ti_, tj_, Mp, Mi, Mx)) {
             fprintf(stderr, "gmres: M singular, no preconditioner\n");
@@ -584,17 +663,24 @@ static void gm_run(gmres *G, const bench_sys *S, const int *Lset, int m, const d
     /* step 1: rhs = H R^{-1} fhat, fhat = b */
     {
         int nt = 0;
-        for (i = 0; i < n; i++) if (S->b[i] != 0) { G->z[i] = S->b[i]; G->tch[nt++] = i; }
+        for (i = 0; i < n; i++)
+            if (S->b[i] != 0) {
+                G->z[i] = S->b[i];
+                G->tch[nt++] = i;
+            }
         gm_hrinv(G, Lset, nt, rhs);
     }
     nrhs = 0;
     for (k = 0; k < m; k++) nrhs += rhs[k] * rhs[k];
     nrhs = sqrt(nrhs);
-    for (k = 0; k < m; k++) a[k] = S->con[Lset[k]] ? 0 : x0[Lset[k]];   /* warm start */
-    for (;;) {   /* restart cycles */
+    for (k = 0; k < m; k++) a[k] = S->con[Lset[k]] ? 0 : x0[Lset[k]]; /* warm start */
+    for (;;) {                                                        /* restart cycles */
         int jj = 0;
         gm_op(G, Lset, a, tmp);
-        for (k = 0, beta = 0; k < m; k++) { r[k] = rhs[k] - tmp[k]; beta += r[k] * r[k]; }
+        for (k = 0, beta = 0; k < m; k++) {
+            r[k] = rhs[k] - tmp[k];
+            beta += r[k] * r[k];
+        }
         beta = sqrt(beta);
         while (ti < NTOL && beta <= tols[ti] * nrhs) {
             memcpy(a2s[ti], a, sizeof(double) * (size_t)m);
@@ -610,7 +696,7 @@ static void gm_run(gmres *G, const bench_sys *S, const int *Lset, int m, const d
             double *vj = V + (size_t)j * m, *w = V + (size_t)(j + 1) * m, hn, res;
             PREC(vj, Z + (size_t)j * m);
             gm_op(G, Lset, Z + (size_t)j * m, w);
-            for (i = 0; i <= j; i++) {   /* modified Gram-Schmidt */
+            for (i = 0; i <= j; i++) { /* modified Gram-Schmidt */
                 double h = 0, *vi = V + (size_t)i * m;
                 for (k = 0; k < m; k++) h += w[k] * vi[k];
                 for (k = 0; k < m; k++) w[k] -= h * vi[k];
@@ -618,30 +704,39 @@ static void gm_run(gmres *G, const bench_sys *S, const int *Lset, int m, const d
             }
             for (k = 0, hn = 0; k < m; k++) hn += w[k] * w[k];
             hn = sqrt(hn);
-            if (hn > 0) for (k = 0; k < m; k++) w[k] /= hn;
-            for (i = 0; i < j; i++) {   /* previous Givens rotations */
+            if (hn > 0)
+                for (k = 0; k < m; k++) w[k] /= hn;
+            for (i = 0; i < j; i++) { /* previous Givens rotations */
                 double h1 = H[i * mr + j], h2 = H[(i + 1) * mr + j];
-                H[i * mr + j] = cs[i] * h1 + sn_[i] * h2; H[(i + 1) * mr + j] = -sn_[i] * h1 + cs[i] * h2;
+                H[i * mr + j] = cs[i] * h1 + sn_[i] * h2;
+                H[(i + 1) * mr + j] = -sn_[i] * h1 + cs[i] * h2;
             }
             {
                 double h1 = H[j * mr + j], d = sqrt(h1 * h1 + hn * hn);
-                cs[j] = h1 / d; sn_[j] = hn / d;
+                cs[j] = h1 / d;
+                sn_[j] = hn / d;
                 H[j * mr + j] = d;
-                g[j + 1] = -sn_[j] * g[j]; g[j] = cs[j] * g[j];
+                g[j + 1] = -sn_[j] * g[j];
+                g[j] = cs[j] * g[j];
             }
-            it++; jj = j + 1;
+            it++;
+            jj = j + 1;
             res = fabs(g[j + 1]);
-            while (ti < NTOL && res <= tols[ti] * nrhs) {   /* a2 = a + Z y, y = H^{-1} g */
+            while (ti < NTOL && res <= tols[ti] * nrhs) { /* a2 = a + Z y, y = H^{-1} g */
                 hess_solve(H, mr, g, j + 1, y);
                 memcpy(a2s[ti], a, sizeof(double) * (size_t)m);
-                for (i = 0; i <= j; i++) for (k = 0; k < m; k++) a2s[ti][k] += y[i] * Z[(size_t)i * m + k];
-                t_snap[ti] = amps_now() - t0 - tpause; sn->it[ti] = it; sn->conv[ti++] = 1;
+                for (i = 0; i <= j; i++)
+                    for (k = 0; k < m; k++) a2s[ti][k] += y[i] * Z[(size_t)i * m + k];
+                t_snap[ti] = amps_now() - t0 - tpause;
+                sn->it[ti] = it;
+                sn->conv[ti++] = 1;
             }
             if (ti == NTOL || hn == 0) break;
         }
         if (ti == NTOL) break;
         hess_solve(H, mr, g, jj, y);
-        for (i = 0; i < jj; i++) for (k = 0; k < m; k++) a[k] += y[i] * Z[(size_t)i * m + k];
+        for (i = 0; i < jj; i++)
+            for (k = 0; k < m; k++) a[k] += y[i] * Z[(size_t)i * m + k];
         if (it >= maxit) {
             for (; ti < NTOL; ti++) {
                 memcpy(a2s[ti], a, sizeof(double) * (size_t)m);
@@ -658,7 +753,11 @@ static void gm_run(gmres *G, const bench_sys *S, const int *Lset, int m, const d
         double t1 = amps_now(), *x = sn->x[ti], *w = G->w;
         const amps_factor *F = G->F;
         int nt = gm_jmul(G, a2s[ti], -1.0), nb = 0;
-        for (i = 0; i < n; i++) if (S->b[i] != 0) { if (G->z[i] == 0) G->tch[nt++] = i; G->z[i] += S->b[i]; }
+        for (i = 0; i < n; i++)
+            if (S->b[i] != 0) {
+                if (G->z[i] == 0) G->tch[nt++] = i;
+                G->z[i] += S->b[i];
+            }
         for (k = 0; k < nt; k++)
             if (G->tch[k] < G->n0) {
                 amps_int pk = F->iperm[G->tch[k]];
@@ -679,8 +778,23 @@ static void gm_run(gmres *G, const bench_sys *S, const int *Lset, int m, const d
     if (G->num) umfpack_di_free_numeric(&G->num);
     G->num = NULL;
     for (k = 0; k < NTOL; k++) free(a2s[k]);
-    free(rhs); free(a); free(r); free(tmp); free(V); free(Z); free(H); free(cs); free(sn_); free(g); free(y);
-    free(ti_); free(tj_); free(tx_); free(Mp); free(Mi); free(Mx);
+    free(rhs);
+    free(a);
+    free(r);
+    free(tmp);
+    free(V);
+    free(Z);
+    free(H);
+    free(cs);
+    free(sn_);
+    free(g);
+    free(y);
+    free(ti_);
+    free(tj_);
+    free(tx_);
+    free(Mp);
+    free(Mi);
+    free(Mx);
 }
 
 /* =================================== driver =================================== */
@@ -711,23 +825,29 @@ int main(int argc, char **argv) {
         fprintf(stderr, "usage: harness <beam:h|brick:R|file> <cut|deform> <steps> <every> <out.csv>\n");
         return 2;
     }
-    spec = argv[1]; cut = !strcmp(argv[2], "cut"); steps = atoi(argv[3]); every = atoi(argv[4]); out = argv[5];
+    spec = argv[1];
+    cut = !strcmp(argv[2], "cut");
+    steps = atoi(argv[3]);
+    every = atoi(argv[4]);
+    out = argv[5];
     if (every < 1) every = 1;
     amps_ctx_init(&ctx);
-    {   /* amps configurations */
+    { /* amps configurations */
         const char *l = getenv("BENCH_AMPS") ? getenv("BENCH_AMPS") : "p2,p1,d2,d1";
         while (*l && nconf < MAXCONF) {
             int len = 0;
             while (l[len] && l[len] != ',' && len < 7) len++;
             snprintf(conf[nconf], sizeof(conf[nconf]), "amps_%.*s", len, l);
             nconf++;
-            l += len; if (*l == ',') l++;
+            l += len;
+            if (*l == ',') l++;
         }
     }
     M = bench_mesh(&ctx, spec);
     bench_scen_init(&sc, M, spec, cut, steps);
     if (amps_mesh_reserve(&ctx, M, sc.cap) != AMPS_OK) bench_die("amps_mesh_reserve", ctx.msg);
-    for (v = 0; v < sc.nn0; v++) if (amps_mesh_degree(M, v) > maxdeg) maxdeg = (int)amps_mesh_degree(M, v);
+    for (v = 0; v < sc.nn0; v++)
+        if (amps_mesh_degree(M, v) > maxdeg) maxdeg = (int)amps_mesh_degree(M, v);
     s.moved = (amps_int *)bench_alloc(sizeof(amps_int) * (size_t)maxdeg);
     for (k = 0; k < nconf; k++) {
         amps_scene_opts so;
@@ -809,7 +929,11 @@ int main(int argc, char **argv) {
             amps_update_get_stats(amps_scene_engine(S[k]), &us[k]);
             amps_scene_residual(&cctx[k], S[k], &res_conf[k]);
         }
-        if (fail) { bench_scen_undo(&ctx, &sc, M, &s); st--; continue; }
+        if (fail) {
+            bench_scen_undo(&ctx, &sc, M, &s);
+            st--;
+            continue;
+        }
         /* bookkeeping (not timed): new equations, the changed set of [Interactive cutting] */
         if (cut) {
             int q, a;
@@ -842,7 +966,8 @@ int main(int argc, char **argv) {
         t_ud = updown_step(&ud, M, ndof, &s, &sc, S0.Kf, udcon, xud);
         sampled = st == 1 || st % every == 0 || st == steps || sc.cp.ip >= sc.cp.npath;
         if (!sampled) {
-            for (k = 0; k < nconf; k++) put(conf[k], 0, t_conf[k], 0, res_conf[k], -1, 1, us[k].dim, us[k].nsys, us[k].t_step);
+            for (k = 0; k < nconf; k++)
+                put(conf[k], 0, t_conf[k], 0, res_conf[k], -1, 1, us[k].dim, us[k].nsys, us[k].t_step);
             put("chol_updown", 0, t_ud, 0, -1, -1, 1, ndofc, 0, NULL);
         } else {
             bench_sys Sy;
@@ -853,7 +978,8 @@ int main(int argc, char **argv) {
             reference(&Sy, xref, work, Sy.n <= simpl_maxn && (nsampled == 1 || st == steps));
             for (k = 0; k < nconf; k++) {
                 bench_sys_from_disp(&Sy, amps_scene_displacements(S[k]), x);
-                put(conf[k], 0, t_conf[k], 0, bench_sys_relres(&Sy, x, work), bench_sys_relerr(&Sy, x, xref), 1, us[k].dim, us[k].nsys, us[k].t_step);
+                put(conf[k], 0, t_conf[k], 0, bench_sys_relres(&Sy, x, work), bench_sys_relerr(&Sy, x, xref), 1,
+                    us[k].dim, us[k].nsys, us[k].t_step);
             }
             put("chol_updown", 0, t_ud, 0, bench_sys_relres(&Sy, xud, work), bench_sys_relerr(&Sy, xud, xref), 1, Sy.n,
                 0, NULL);

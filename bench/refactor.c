@@ -27,9 +27,15 @@ static double cut_step(amps_ctx *ctx, amps_scene *S, bench_cut *cp, int *nsk, in
     int node;
     double t0 = amps_now();
     while ((s = bench_cut_next(ctx, S, cp, &node)) == AMPS_ERR_SINGULAR_UPDATE) (*nsk)++;
-    if (s != AMPS_OK) { fprintf(stderr, "step %d: cut at %d: %s\n", st, node, ctx->msg); return -1; }
+    if (s != AMPS_OK) {
+        fprintf(stderr, "step %d: cut at %d: %s\n", st, node, ctx->msg);
+        return -1;
+    }
     s = amps_scene_solve(ctx, S);
-    if (s != AMPS_OK) { fprintf(stderr, "step %d: solve: %s\n", st, ctx->msg); return -1; }
+    if (s != AMPS_OK) {
+        fprintf(stderr, "step %d: solve: %s\n", st, ctx->msg);
+        return -1;
+    }
     return amps_now() - t0;
 }
 
@@ -47,8 +53,12 @@ int main(int argc, char **argv) {
     FILE *f;
     bench_model B;
     amps_update_stats uend;
-    if (argc < 5) { fprintf(stderr, "usage: refactor <mesh> <steps> <on|off> <out.csv> [tmax] [run]\n"); return 2; }
-    steps = atoi(argv[2]); on = strcmp(argv[3], "off") != 0;
+    if (argc < 5) {
+        fprintf(stderr, "usage: refactor <mesh> <steps> <on|off> <out.csv> [tmax] [run]\n");
+        return 2;
+    }
+    steps = atoi(argv[2]);
+    on = strcmp(argv[3], "off") != 0;
     tmax = argc > 5 ? atof(argv[5]) : 0;
     snprintf(pol, sizeof(pol), "%s%s", on ? "on" : "off", run);
     snprintf(frl, sizeof(frl), "fresh%s", run);
@@ -60,9 +70,16 @@ int main(int argc, char **argv) {
     if (getenv("AMPS_REFACTOR_ORDER"))
         so.update.refactor_order.method = !strcmp(getenv("AMPS_REFACTOR_ORDER"), "nd") ? AMPS_ORDER_ND : AMPS_ORDER_AMD;
     bench_model_init(&ctx, argv[1], &so, &B);
-    S = B.S; fixed = B.fixed; force = B.force; cp = B.cp; cp.wrap = 1;
+    S = B.S;
+    fixed = B.fixed;
+    force = B.force;
+    cp = B.cp;
+    cp.wrap = 1;
     t = (double *)malloc(sizeof(double) * (size_t)steps);
-    if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "first solve: %s\n", ctx.msg); return 1; }
+    if (amps_scene_solve(&ctx, S) != AMPS_OK) {
+        fprintf(stderr, "first solve: %s\n", ctx.msg);
+        return 1;
+    }
     f = bench_csv(argv[4], "mesh,policy,step,t_step,nsys,nrefactor,running,t_swap,t_refactor,relres,lu_cols");
     for (st = 0; st < steps; st++) {
         amps_update_stats us;
@@ -74,17 +91,18 @@ int main(int argc, char **argv) {
         t_run += t[st];
         if (st % 50 == 49 && amps_scene_residual(&ctx, S, &res) == AMPS_OK && res > worst_res) worst_res = res;
         amps_update_get_stats(amps_scene_engine(S), &us);
-        if (f) fprintf(f, "%s,%s,%d,%.6e,%d,%d,%d,%.6e,%.6e,%.3e,%d\n", name, pol, st + 1, t[st], (int)us.nsys,
-                       (int)us.nrefactor, us.refactor_running, (int)us.nrefactor > nref0 ? us.t_swap : 0.0,
-                       (int)us.nrefactor > nref0 ? us.t_refactor : 0.0, res, (int)us.lu_cols);
-        if (tmax > 0 && t_run > tmax && st + 1 < steps) {   /* time guard: the summary covers the steps run */
+        if (f)
+            fprintf(f, "%s,%s,%d,%.6e,%d,%d,%d,%.6e,%.6e,%.3e,%d\n", name, pol, st + 1, t[st], (int)us.nsys,
+                    (int)us.nrefactor, us.refactor_running, (int)us.nrefactor > nref0 ? us.t_swap : 0.0,
+                    (int)us.nrefactor > nref0 ? us.t_refactor : 0.0, res, (int)us.lu_cols);
+        if (tmax > 0 && t_run > tmax && st + 1 < steps) { /* time guard: the summary covers the steps run */
             printf("  stopped after %d of %d steps: %.0f s of step time (tmax %.0f s)\n", st + 1, steps, t_run, tmax);
             steps = st + 1;
             break;
         }
     }
     amps_update_get_stats(amps_scene_engine(S), &uend);
-    if (on) {   /* a fresh base at the end: synchronous re-factorization, then 15 steps */
+    if (on) { /* a fresh base at the end: synchronous re-factorization, then 15 steps */
         double tf[15];
         int k;
         if (amps_update_refactor(&ctx, amps_scene_engine(S)) != AMPS_OK || amps_scene_solve(&ctx, S) != AMPS_OK) {
@@ -95,19 +113,24 @@ int main(int argc, char **argv) {
             amps_update_stats us;
             if ((tf[k] = cut_step(&ctx, S, &cp, &nsk, steps + k)) < 0) return 1;
             amps_update_get_stats(amps_scene_engine(S), &us);
-            if (f) fprintf(f, "%s,%s,%d,%.6e,%d,%d,%d,0,0,-1,%d\n", name, frl, steps + k + 1, tf[k], (int)us.nsys, (int)us.nrefactor,
-                           us.refactor_running, (int)us.lu_cols);
+            if (f)
+                fprintf(f, "%s,%s,%d,%.6e,%d,%d,%d,0,0,-1,%d\n", name, frl, steps + k + 1, tf[k], (int)us.nsys,
+                        (int)us.nrefactor, us.refactor_running, (int)us.lu_cols);
         }
         fresh = bench_median(tf + 4, 11);
     }
     if (f) fclose(f);
-    {   /* rate at the end: median and mean of the last min(100, steps/5) steps against the
+    { /* rate at the end: median and mean of the last min(100, steps/5) steps against the
            median of steps 5-15 */
         int k, nf = 0, nl = steps / 5 < 100 ? steps / 5 : 100;
         double mean = 0, m0, m1;
         for (k = 4; k < 15 && k < steps; k++) first[nf++] = t[k];
-        for (k = 0; k < nl; k++) { last[k] = t[steps - 1 - k]; mean += last[k] / nl; }
-        m0 = bench_median(first, nf); m1 = bench_median(last, nl);
+        for (k = 0; k < nl; k++) {
+            last[k] = t[steps - 1 - k];
+            mean += last[k] / nl;
+        }
+        m0 = bench_median(first, nf);
+        m1 = bench_median(last, nl);
         printf("%-10s re-factorization %-3s  steps %d (skipped cuts %d)  step 5-15 median %.2f ms;"
                " last %d steps: median %.2f ms (x%.2f), "
                "mean %.2f ms (x%.2f)  |S u C| at the end %d  re-factorizations %d (failed %d)  worst residual %.1e\n",
@@ -119,6 +142,9 @@ int main(int argc, char **argv) {
                    name, steps, 1e3 * fresh, fresh / m0, nl, m1 / fresh);
     }
     amps_scene_free(&ctx, S);
-    free(fixed); free(force); free(t); free(cp.path);
+    free(fixed);
+    free(force);
+    free(t);
+    free(cp.path);
     return 0;
 }

@@ -35,22 +35,40 @@ int main(int argc, char **argv) {
     bench_model B;
     amps_update_stats us;
     FILE *csv;
-    if (argc < 5) { fprintf(stderr, "usage: watch <beam:h|brick:R|file> <reps> <cuts> <out.csv>\n"); return 2; }
-    spec = argv[1]; reps = atoi(argv[2]); ncuts = atoi(argv[3]); out = argv[4];
+    if (argc < 5) {
+        fprintf(stderr, "usage: watch <beam:h|brick:R|file> <reps> <cuts> <out.csv>\n");
+        return 2;
+    }
+    spec = argv[1];
+    reps = atoi(argv[2]);
+    ncuts = atoi(argv[3]);
+    out = argv[4];
     if (reps < 1) return 2;
     bench_mesh_name(spec, name, sizeof(name));
     amps_ctx_init(&ctx);
     bench_model_init(&ctx, spec, NULL, &B);
-    m = B.m; S = B.S; fixed = B.fixed; force = B.force; nn0 = B.nn; up = B.up; cp = B.cp;
+    m = B.m;
+    S = B.S;
+    fixed = B.fixed;
+    force = B.force;
+    nn0 = B.nn;
+    up = B.up;
+    cp = B.cp;
     /* the equations of the original nodes: the scene numbers them as amps_mesh_number_dofs does
        (checked below against the solution); cut copies get appended equations, outside L */
     dof0 = (amps_int *)malloc(sizeof(amps_int) * 3 * (size_t)nn0);
     if (!dof0) return 1;
     amps_mesh_number_dofs(m, fixed, dof0);
     /* factor the uncut model, then cut */
-    if (amps_scene_prepare(&ctx, S) != AMPS_OK) { fprintf(stderr, "prepare: %s\n", ctx.msg); return 1; }
+    if (amps_scene_prepare(&ctx, S) != AMPS_OK) {
+        fprintf(stderr, "prepare: %s\n", ctx.msg);
+        return 1;
+    }
     ndid = bench_cuts(&ctx, &B, ncuts);
-    if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "solve: %s\n", ctx.msg); return 1; }
+    if (amps_scene_solve(&ctx, S) != AMPS_OK) {
+        fprintf(stderr, "solve: %s\n", ctx.msg);
+        return 1;
+    }
     F = amps_scene_factor(S);
     {
         const double *x = amps_update_solution(amps_scene_engine(S)), *u = amps_scene_displacements(S);
@@ -80,7 +98,10 @@ int main(int argc, char **argv) {
            "watched ms", "speed-up", "setup ms", "rel diff");
     csv = bench_csv(out, "mesh,nodes,equations,nnzL,cuts,nsys,set,watched_nodes,closure,closure_frac,nnzL_frac,full_ms,"
                          "watched_ms,speedup,setup_ms,rel_diff");
-    if (!csv) { fprintf(stderr, "cannot write %s\n", out); return 1; }
+    if (!csv) {
+        fprintf(stderr, "cannot write %s\n", out);
+        return 1;
+    }
     for (set = 0; set < 3; set++) {
         static const char *names[3] = {"surface", "random100", "probe"};
         amps_int *w = surf, nw = nsurf, ni = 0, cnt, one = probe;
@@ -96,10 +117,13 @@ int main(int argc, char **argv) {
                 amps_int j, t;
                 seed = seed * 6364136223846793005UL + 1442695040888963407UL;
                 j = k + (amps_int)((seed >> 33) % (unsigned long)(nsurf - k));
-                t = w[k]; w[k] = w[j]; w[j] = t;
+                t = w[k];
+                w[k] = w[j];
+                w[j] = t;
             }
         } else if (set == 2) {
-            w = &one; nw = 1;
+            w = &one;
+            nw = 1;
         }
         /* closure_L of the watched equations of original nodes (permuted numbering) */
         for (k = 0; k < nw; k++)
@@ -116,20 +140,29 @@ int main(int argc, char **argv) {
             f[up] = 0.1 * (sign = -sign);
             amps_scene_force(&ctx, S, probe, f);
             t0 = amps_now();
-            if (amps_scene_solve(&ctx, S) != AMPS_OK) { fprintf(stderr, "solve: %s\n", ctx.msg); return 1; }
+            if (amps_scene_solve(&ctx, S) != AMPS_OK) {
+                fprintf(stderr, "solve: %s\n", ctx.msg);
+                return 1;
+            }
             tf[r] = amps_now() - t0;
         }
         /* watched solves: the first one computes the closure */
         amps_scene_watch(&ctx, S, nw, w);
         setup = amps_now();
-        if (amps_scene_solve_watched(&ctx, S) != AMPS_OK) { fprintf(stderr, "watched: %s\n", ctx.msg); return 1; }
+        if (amps_scene_solve_watched(&ctx, S) != AMPS_OK) {
+            fprintf(stderr, "watched: %s\n", ctx.msg);
+            return 1;
+        }
         setup = amps_now() - setup;
         for (r = 0; r < reps; r++) {
             double f[3] = {0, 0, 0}, t0;
             f[up] = 0.1 * (sign = -sign);
             amps_scene_force(&ctx, S, probe, f);
             t0 = amps_now();
-            if (amps_scene_solve_watched(&ctx, S) != AMPS_OK) { fprintf(stderr, "watched: %s\n", ctx.msg); return 1; }
+            if (amps_scene_solve_watched(&ctx, S) != AMPS_OK) {
+                fprintf(stderr, "watched: %s\n", ctx.msg);
+                return 1;
+            }
             tw[r] = amps_now() - t0;
         }
         /* the last watched solve against a full solve of the same system */
@@ -142,18 +175,28 @@ int main(int argc, char **argv) {
             if (d > dmax) dmax = d;
             if (fabs(u[3 * w[k / 3] + k % 3]) > umax) umax = fabs(u[3 * w[k / 3] + k % 3]);
         }
-        tfm = bench_median(tf, reps); twm = bench_median(tw, reps);
+        tfm = bench_median(tf, reps);
+        twm = bench_median(tw, reps);
         printf("  %-10s %7ld %9ld %8.4f %8.4f %10.3f %10.3f %8.1f %10.2f %9.1e\n", names[set], (long)nw, (long)cnt,
                (double)cnt / (double)F->n, lnz / amps_factor_nnz(F), 1e3 * tfm, 1e3 * twm, tfm / twm, 1e3 * setup,
                umax > 0 ? dmax / umax : dmax);
-        fprintf(csv, "%s,%d,%ld,%.0f,%d,%ld,%s,%ld,%ld,%.5f,%.5f,%.4f,%.4f,%.2f,%.3f,%.2e\n", name, nn, (long)F->n, amps_factor_nnz(F), ndid,
-                (long)us.nsys, names[set], (long)nw, (long)cnt, (double)cnt / (double)F->n, lnz / amps_factor_nnz(F), 1e3 * tfm, 1e3 * twm,
-                tfm / twm, 1e3 * setup, umax > 0 ? dmax / umax : dmax);
+        fprintf(csv, "%s,%d,%ld,%.0f,%d,%ld,%s,%ld,%ld,%.5f,%.5f,%.4f,%.4f,%.2f,%.3f,%.2e\n", name, nn, (long)F->n,
+                amps_factor_nnz(F), ndid, (long)us.nsys, names[set], (long)nw, (long)cnt, (double)cnt / (double)F->n,
+                lnz / amps_factor_nnz(F), 1e3 * tfm, 1e3 * twm, tfm / twm, 1e3 * setup, umax > 0 ? dmax / umax : dmax);
         if (set == 1) free(w);
     }
     fclose(csv);
     amps_marker_free(&ctx, &mk);
     amps_scene_free(&ctx, S);
-    free(fixed); free(force); free(cp.path); free(dof0); free(surf); free(idx); free(clo); free(xw); free(tf); free(tw);
+    free(fixed);
+    free(force);
+    free(cp.path);
+    free(dof0);
+    free(surf);
+    free(idx);
+    free(clo);
+    free(xw);
+    free(tf);
+    free(tw);
     return 0;
 }

@@ -12,7 +12,7 @@
    At the end: the achieved rates, the worst haptic period and the missed haptic deadlines.
    Build: make examples (or cc -std=c99 -O2 -I. examples/haptic_loop.c -lpthread -lm). */
 #ifndef _POSIX_C_SOURCE
-#define _POSIX_C_SOURCE 200809L   /* clock_nanosleep, clock_gettime */
+#define _POSIX_C_SOURCE 200809L /* clock_nanosleep, clock_gettime */
 #endif
 #define AMPS_IMPLEMENTATION
 #include "amps.h"
@@ -24,16 +24,16 @@
 #include <math.h>
 
 #define NTOOL 4
-#define HAPTIC_NS 1000000L          /* 1 ms */
+#define HAPTIC_NS 1000000L /* 1 ms */
 #define VISUAL_NS (1000000000L / 60)
 
 typedef struct shared {
-    pthread_mutex_t lock;           /* guards every call on the scene and its engine */
+    pthread_mutex_t lock; /* guards every call on the scene and its engine */
     amps_scene *S;
     amps_int tool[NTOOL];
-    double amp;                     /* tool path amplitude */
-    double force[3];                /* latest tool force (haptic thread writes, under lock) */
-    int stop;                       /* 1: both loops end (read and written under lock) */
+    double amp;      /* tool path amplitude */
+    double force[3]; /* latest tool force (haptic thread writes, under lock) */
+    int stop;        /* 1: both loops end (read and written under lock) */
     /* surface watch set: watched equation k is component wdim[k] of node wnode[k] */
     amps_int nw, *widx, *wnode;
     int *wdim;
@@ -63,7 +63,10 @@ static double now_s(void) {
 }
 static void add_ns(struct timespec *t, long ns) {
     t->tv_nsec += ns;
-    while (t->tv_nsec >= 1000000000L) { t->tv_nsec -= 1000000000L; t->tv_sec++; }
+    while (t->tv_nsec >= 1000000000L) {
+        t->tv_nsec -= 1000000000L;
+        t->tv_sec++;
+    }
 }
 static double ts_s(const struct timespec *t) { return (double)t->tv_sec + 1e-9 * (double)t->tv_nsec; }
 
@@ -97,10 +100,15 @@ static void *haptic_thread(void *arg) {
         tool_path(sh->amp, ts_s(&next) - t0, u);
         pthread_mutex_lock(&sh->lock);
         for (k = 0; k < NTOOL; k++) amps_scene_pin(&ctx, sh->S, sh->tool[k], u);
-        if (amps_scene_solve_reactions(&ctx, sh->S) != AMPS_OK) { fprintf(stderr, "haptic: %s\n", ctx.msg); sh->stop = 1; }  /* lock held */
+        if (amps_scene_solve_reactions(&ctx, sh->S) != AMPS_OK) {
+            fprintf(stderr, "haptic: %s\n", ctx.msg);
+            sh->stop = 1;
+        } /* lock held */
         for (k = 0; k < NTOOL; k++) {
             amps_scene_reaction(&ctx, sh->S, sh->tool[k], r);
-            f[0] += r[0]; f[1] += r[1]; f[2] += r[2];
+            f[0] += r[0];
+            f[1] += r[1];
+            f[2] += r[2];
         }
         memcpy(sh->force, f, sizeof(f));
         pthread_mutex_unlock(&sh->lock);
@@ -130,12 +138,15 @@ static void *visual_thread(void *arg) {
     amps_update_job job;
     struct timespec next;
     const amps_mesh *m = amps_scene_mesh(sh->S);
-    amps_int ylen = amps_update_dim(U);   /* the base order is at most the dimension (no cuts here) */
+    amps_int ylen = amps_update_dim(U); /* the base order is at most the dimension (no cuts here) */
     double *y = (double *)malloc(sizeof(double) * (size_t)ylen);
     double *xw = (double *)malloc(sizeof(double) * (size_t)(sh->nw > 0 ? sh->nw : 1));
     double *disp = sh->outdir ? (double *)calloc(3 * (size_t)m->nnode, sizeof(double)) : NULL;
     amps_ctx_init(&ctx);
-    if (!y || !xw || (sh->outdir && !disp)) { fprintf(stderr, "visual: out of memory\n"); stop_all(sh); }
+    if (!y || !xw || (sh->outdir && !disp)) {
+        fprintf(stderr, "visual: out of memory\n");
+        stop_all(sh);
+    }
     clock_gettime(CLOCK_MONOTONIC, &next);
     while (!stopped(sh)) {
         amps_status s;
@@ -146,8 +157,12 @@ static void *visual_thread(void *arg) {
         pthread_mutex_lock(&sh->lock);
         s = amps_update_watched_begin(&ctx, U, &job, y, ylen, xw);
         pthread_mutex_unlock(&sh->lock);
-        if (s != AMPS_OK) { fprintf(stderr, "visual: %s\n", ctx.msg); stop_all(sh); break; }
-        amps_update_watched_run(&job);                    /* the expensive part, lock-free */
+        if (s != AMPS_OK) {
+            fprintf(stderr, "visual: %s\n", ctx.msg);
+            stop_all(sh);
+            break;
+        }
+        amps_update_watched_run(&job); /* the expensive part, lock-free */
         pthread_mutex_lock(&sh->lock);
         amps_update_watched_end(U, &job);
         memcpy(f, sh->force, sizeof(f));
@@ -160,16 +175,20 @@ static void *visual_thread(void *arg) {
             if (a > umax) umax = a;
         }
         if (sh->frames % 15 == 0)
-            printf("frame %4ld  max surface displacement %.4e  tool force (%+.4e, %+.4e, %+.4e)\n", sh->frames, sqrt(umax), f[0], f[1], f[2]);
+            printf("frame %4ld  max surface displacement %.4e  tool force (%+.4e, %+.4e, %+.4e)\n", sh->frames,
+                   sqrt(umax), f[0], f[1], f[2]);
         if (disp && sh->frames % 30 == 0) {
             char path[1024];
             for (k = 0; k < sh->nw; k++) disp[3 * sh->wnode[k] + sh->wdim[k]] = xw[k];
             snprintf(path, sizeof(path), "%s/frame_%04ld.vtu", sh->outdir, sh->frames);
-            if (amps_mesh_write_vtu(&ctx, path, m, disp, NULL, NULL) != AMPS_OK) fprintf(stderr, "visual: %s\n", ctx.msg);
+            if (amps_mesh_write_vtu(&ctx, path, m, disp, NULL, NULL) != AMPS_OK)
+                fprintf(stderr, "visual: %s\n", ctx.msg);
         }
         sh->frames++;
     }
-    free(y); free(xw); free(disp);
+    free(y);
+    free(xw);
+    free(disp);
     return NULL;
 }
 
@@ -177,7 +196,8 @@ static void *visual_thread(void *arg) {
 static int face_cmp(const void *a, const void *b) {
     const amps_int *x = (const amps_int *)a, *y = (const amps_int *)b;
     int k;
-    for (k = 0; k < 3; k++) if (x[k] != y[k]) return x[k] < y[k] ? -1 : 1;
+    for (k = 0; k < 3; k++)
+        if (x[k] != y[k]) return x[k] < y[k] ? -1 : 1;
     return 0;
 }
 static int surface_nodes(const amps_mesh *m, unsigned char *on) {
@@ -188,15 +208,30 @@ static int surface_nodes(const amps_mesh *m, unsigned char *on) {
     for (t = 0; t < m->ntet; t++)
         for (k = 0; k < 4; k++) {
             amps_int *q = fc + 3 * (4 * (size_t)t + (size_t)k), w;
-            q[0] = m->tet[4 * t + (k + 1) % 4]; q[1] = m->tet[4 * t + (k + 2) % 4]; q[2] = m->tet[4 * t + (k + 3) % 4];
-            if (q[0] > q[1]) { w = q[0]; q[0] = q[1]; q[1] = w; }
-            if (q[1] > q[2]) { w = q[1]; q[1] = q[2]; q[2] = w; }
-            if (q[0] > q[1]) { w = q[0]; q[0] = q[1]; q[1] = w; }
+            q[0] = m->tet[4 * t + (k + 1) % 4];
+            q[1] = m->tet[4 * t + (k + 2) % 4];
+            q[2] = m->tet[4 * t + (k + 3) % 4];
+            if (q[0] > q[1]) {
+                w = q[0];
+                q[0] = q[1];
+                q[1] = w;
+            }
+            if (q[1] > q[2]) {
+                w = q[1];
+                q[1] = q[2];
+                q[2] = w;
+            }
+            if (q[0] > q[1]) {
+                w = q[0];
+                q[0] = q[1];
+                q[1] = w;
+            }
         }
     qsort(fc, nf, 3 * sizeof(amps_int), face_cmp);
     for (f = 0; f < nf; f = g) {
         for (g = f + 1; g < nf && !face_cmp(fc + 3 * f, fc + 3 * g); g++) {}
-        if (g - f == 1) for (k = 0; k < 3; k++) on[fc[3 * f + (size_t)k]] = 1;
+        if (g - f == 1)
+            for (k = 0; k < 3; k++) on[fc[3 * f + (size_t)k]] = 1;
     }
     free(fc);
     return 0;
@@ -213,17 +248,25 @@ int main(int argc, char **argv) {
     unsigned char *fixed, *surf;
     int a, k, d;
     amps_ctx_init(&ctx);
-    ctx.nthreads = 1;   /* one thread per loop: the haptic step is tiny, and an OpenMP team's
+    ctx.nthreads = 1; /* one thread per loop: the haptic step is tiny, and an OpenMP team's
                            wake-up (worse on a busy machine) would cost more than it saves */
     memset(&sh, 0, sizeof(sh));
     for (a = 1; a < argc; a++) {
         if (!strcmp(argv[a], "-t") && a + 1 < argc) seconds = atof(argv[++a]);
         else if (!strcmp(argv[a], "-o") && a + 1 < argc) sh.outdir = argv[++a];
-        else if (argv[a][0] == '-') { fprintf(stderr, "usage: haptic_loop [-t seconds] [-o outdir] [mesh file]\n"); return 2; }
-        else if (!(m = amps_mesh_read(&ctx, argv[a]))) { fprintf(stderr, "%s\n", ctx.msg); return 1; }
+        else if (argv[a][0] == '-') {
+            fprintf(stderr, "usage: haptic_loop [-t seconds] [-o outdir] [mesh file]\n");
+            return 2;
+        } else if (!(m = amps_mesh_read(&ctx, argv[a]))) {
+            fprintf(stderr, "%s\n", ctx.msg);
+            return 1;
+        }
     }
-    if (!m) m = amps_mesh_brick(&ctx, 10);                     /* 1 x 1 x 2, 2541 nodes */
-    if (!m) { fprintf(stderr, "%s\n", ctx.msg); return 1; }
+    if (!m) m = amps_mesh_brick(&ctx, 10); /* 1 x 1 x 2, 2541 nodes */
+    if (!m) {
+        fprintf(stderr, "%s\n", ctx.msg);
+        return 1;
+    }
     nn = m->nnode;
     for (v = 0; v < nn; v++)
         for (d = 0; d < 3; d++) {
@@ -237,45 +280,77 @@ int main(int argc, char **argv) {
     sh.widx = (amps_int *)malloc(sizeof(amps_int) * 3 * (size_t)nn);
     sh.wnode = (amps_int *)malloc(sizeof(amps_int) * 3 * (size_t)nn);
     sh.wdim = (int *)malloc(sizeof(int) * 3 * (size_t)nn);
-    if (!fixed || !surf || !dof || !sh.widx || !sh.wnode || !sh.wdim || surface_nodes(m, surf)) { fprintf(stderr, "out of memory\n"); return 1; }
+    if (!fixed || !surf || !dof || !sh.widx || !sh.wnode || !sh.wdim || surface_nodes(m, surf)) {
+        fprintf(stderr, "out of memory\n");
+        return 1;
+    }
     /* the bottom face held; the tool: the NTOOL free nodes nearest the centre of the top face */
     for (v = 0; v < nn; v++) fixed[v] = m->xyz[3 * v + 2] < lo[2] + 0.02 * (hi[2] - lo[2]);
-    for (k = 0; k < NTOOL; k++) { sh.tool[k] = -1; best[k] = 1e300; }
+    for (k = 0; k < NTOOL; k++) {
+        sh.tool[k] = -1;
+        best[k] = 1e300;
+    }
     for (v = 0; v < nn; v++) {
         const double *x = m->xyz + 3 * v;
         double dx = x[0] - 0.5 * (lo[0] + hi[0]), dy = x[1] - 0.5 * (lo[1] + hi[1]), dz = x[2] - hi[2];
         double dist = dx * dx + dy * dy + dz * dz;
         if (fixed[v] || dist >= best[NTOOL - 1]) continue;
-        for (k = NTOOL - 1; k > 0 && best[k - 1] > dist; k--) { best[k] = best[k - 1]; sh.tool[k] = sh.tool[k - 1]; }
-        best[k] = dist; sh.tool[k] = v;
+        for (k = NTOOL - 1; k > 0 && best[k - 1] > dist; k--) {
+            best[k] = best[k - 1];
+            sh.tool[k] = sh.tool[k - 1];
+        }
+        best[k] = dist;
+        sh.tool[k] = v;
     }
     /* the scene numbers the equations of the nodes as amps_mesh_number_dofs with the fixed nodes
        (checked against the first solve below) */
     amps_mesh_number_dofs(m, fixed, dof);
-    sh.S = amps_scene_create(&ctx, m, NULL);                  /* the scene owns m from here */
-    if (!sh.S) { fprintf(stderr, "%s\n", ctx.msg); return 1; }
-    amps_scene_set_material(&ctx, sh.S, 3000.0, 0.45);        /* soft tissue: E = 3 kPa, nu = 0.45 */
-    for (v = 0; v < nn; v++) if (fixed[v]) amps_scene_fix(&ctx, sh.S, 1, &v);
-    for (k = 0; k < NTOOL; k++) { double u0[3] = {0, 0, 0}; amps_scene_pin(&ctx, sh.S, sh.tool[k], u0); }
+    sh.S = amps_scene_create(&ctx, m, NULL); /* the scene owns m from here */
+    if (!sh.S) {
+        fprintf(stderr, "%s\n", ctx.msg);
+        return 1;
+    }
+    amps_scene_set_material(&ctx, sh.S, 3000.0, 0.45); /* soft tissue: E = 3 kPa, nu = 0.45 */
+    for (v = 0; v < nn; v++)
+        if (fixed[v]) amps_scene_fix(&ctx, sh.S, 1, &v);
+    for (k = 0; k < NTOOL; k++) {
+        double u0[3] = {0, 0, 0};
+        amps_scene_pin(&ctx, sh.S, sh.tool[k], u0);
+    }
     t0 = now_s();
-    if (amps_scene_solve(&ctx, sh.S) != AMPS_OK) { fprintf(stderr, "%s\n", ctx.msg); return 1; }
-    printf("model: %ld nodes, %ld equations, factored and solved in %.3f s; tool: %d nodes; %.1f s run\n",
-           (long)nn, (long)amps_scene_ndof(sh.S), now_s() - t0, NTOOL, seconds);
+    if (amps_scene_solve(&ctx, sh.S) != AMPS_OK) {
+        fprintf(stderr, "%s\n", ctx.msg);
+        return 1;
+    }
+    printf("model: %ld nodes, %ld equations, factored and solved in %.3f s; tool: %d nodes; %.1f s run\n", (long)nn,
+           (long)amps_scene_ndof(sh.S), now_s() - t0, NTOOL, seconds);
     {
         const double *x = amps_update_solution(amps_scene_engine(sh.S)), *u = amps_scene_displacements(sh.S);
         for (k = 0; k < 3 * (int)nn; k++)
-            if (dof[k] >= 0 && x[dof[k]] != u[k]) { fprintf(stderr, "unexpected equation numbering\n"); return 1; }
+            if (dof[k] >= 0 && x[dof[k]] != u[k]) {
+                fprintf(stderr, "unexpected equation numbering\n");
+                return 1;
+            }
     }
     /* the watch set: every equation of the free surface nodes */
     for (v = 0; v < nn; v++)
         if (surf[v])
             for (d = 0; d < 3; d++)
-                if (dof[3 * v + d] >= 0) { sh.widx[sh.nw] = dof[3 * v + d]; sh.wnode[sh.nw] = v; sh.wdim[sh.nw] = d; sh.nw++; }
-    if (amps_update_watch(&ctx, amps_scene_engine(sh.S), sh.nw, sh.widx) != AMPS_OK) { fprintf(stderr, "%s\n", ctx.msg); return 1; }
+                if (dof[3 * v + d] >= 0) {
+                    sh.widx[sh.nw] = dof[3 * v + d];
+                    sh.wnode[sh.nw] = v;
+                    sh.wdim[sh.nw] = d;
+                    sh.nw++;
+                }
+    if (amps_update_watch(&ctx, amps_scene_engine(sh.S), sh.nw, sh.widx) != AMPS_OK) {
+        fprintf(stderr, "%s\n", ctx.msg);
+        return 1;
+    }
     pthread_mutex_init(&sh.lock, NULL);
     t0 = now_s();
     if (pthread_create(&th, NULL, haptic_thread, &sh) || pthread_create(&tv, NULL, visual_thread, &sh)) {
-        fprintf(stderr, "cannot start the threads\n"); return 1;
+        fprintf(stderr, "cannot start the threads\n");
+        return 1;
     }
     while (!stopped(&sh) && now_s() - t0 < seconds) {
         struct timespec ts = {0, 10000000L};
@@ -286,10 +361,17 @@ int main(int argc, char **argv) {
     pthread_join(tv, NULL);
     el = now_s() - t0;
     printf("haptic: %ld steps in %.2f s = %.1f Hz (target 1000), step mean %.3f ms, max %.3f ms, worst period %.3f ms, missed deadlines %ld\n",
-           sh.hsteps, el, sh.hsteps / el, sh.hsteps ? 1e3 * sh.hstep_sum / sh.hsteps : 0.0, 1e3 * sh.hstep_max, 1e3 * sh.hworst, sh.hmissed);
-    printf("visual: %ld frames in %.2f s = %.1f Hz (target 60), %ld watched surface equations\n", sh.frames, el, sh.frames / el, (long)sh.nw);
+           sh.hsteps, el, sh.hsteps / el, sh.hsteps ? 1e3 * sh.hstep_sum / sh.hsteps : 0.0, 1e3 * sh.hstep_max,
+           1e3 * sh.hworst, sh.hmissed);
+    printf("visual: %ld frames in %.2f s = %.1f Hz (target 60), %ld watched surface equations\n", sh.frames, el,
+           sh.frames / el, (long)sh.nw);
     pthread_mutex_destroy(&sh.lock);
     amps_scene_free(&ctx, sh.S);
-    free(fixed); free(surf); free(dof); free(sh.widx); free(sh.wnode); free(sh.wdim);
+    free(fixed);
+    free(surf);
+    free(dof);
+    free(sh.widx);
+    free(sh.wnode);
+    free(sh.wdim);
     return 0;
 }

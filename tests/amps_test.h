@@ -7,16 +7,16 @@
 
 static int amps_t_pass = 0, amps_t_fail = 0;
 
-#define CHECK(cond, ...)                                                   \
-    do {                                                                   \
-        if (cond) {                                                        \
-            amps_t_pass++;                                                 \
-        } else {                                                           \
-            amps_t_fail++;                                                 \
-            fprintf(stderr, "FAIL %s:%d: ", __FILE__, __LINE__);           \
-            fprintf(stderr, __VA_ARGS__);                                  \
-            fprintf(stderr, "\n");                                         \
-        }                                                                  \
+#define CHECK(cond, ...)                                         \
+    do {                                                         \
+        if (cond) {                                              \
+            amps_t_pass++;                                       \
+        } else {                                                 \
+            amps_t_fail++;                                       \
+            fprintf(stderr, "FAIL %s:%d: ", __FILE__, __LINE__); \
+            fprintf(stderr, __VA_ARGS__);                        \
+            fprintf(stderr, "\n");                               \
+        }                                                        \
     } while (0)
 
 /* Prints the per-program summary line and returns the exit code. */
@@ -29,26 +29,34 @@ static int amps_t_end(const char *name) {
 static unsigned long long amps_t_rng = 88172645463325252ULL;
 static inline void t_seed(unsigned long long s) { amps_t_rng = s * 2654435761ULL + 1; }
 static inline unsigned long long t_rand(void) {
-    amps_t_rng ^= amps_t_rng >> 12; amps_t_rng ^= amps_t_rng << 25; amps_t_rng ^= amps_t_rng >> 27;
+    amps_t_rng ^= amps_t_rng >> 12;
+    amps_t_rng ^= amps_t_rng << 25;
+    amps_t_rng ^= amps_t_rng >> 27;
     return amps_t_rng * 2685821657736338717ULL;
 }
 static inline double t_unif(void) { return (double)(t_rand() >> 11) * (1.0 / 9007199254740992.0); }
 static inline int t_int(int n) { return (int)(t_rand() % (unsigned long long)n); }
 
 static inline double t_norm(int n, const double *x) {
-    double s = 0; int i;
+    double s = 0;
+    int i;
     for (i = 0; i < n; i++) s += x[i] * x[i];
     return sqrt(s);
 }
 static inline double t_reldiff(int n, const double *x, const double *y) {
-    double s = 0, t = 0; int i;
-    for (i = 0; i < n; i++) { s += (x[i] - y[i]) * (x[i] - y[i]); t += y[i] * y[i]; }
+    double s = 0, t = 0;
+    int i;
+    for (i = 0; i < n; i++) {
+        s += (x[i] - y[i]) * (x[i] - y[i]);
+        t += y[i] * y[i];
+    }
     return t > 0 ? sqrt(s / t) : sqrt(s);
 }
 #ifndef AMPS_NO_FEM
 /* K (upper triangle) of mesh m with the nodes below z = 0.5 fixed; *fixed (1 per node), *dof
    (3 per node, -1 for fixed) and *n (equations) receive the numbering. */
-static inline amps_csc *t_fixed_stiffness(amps_ctx *ctx, const amps_mesh *m, unsigned char **fixed, amps_int **dof, amps_int *n) {
+static inline amps_csc *t_fixed_stiffness(amps_ctx *ctx, const amps_mesh *m, unsigned char **fixed, amps_int **dof,
+                                          amps_int *n) {
     amps_int v;
     *fixed = (unsigned char *)calloc((size_t)m->nnode, 1);
     *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * (size_t)m->nnode);

@@ -13,7 +13,11 @@ REF_UNUSED static amps_csc *m_fe(amps_ctx *ctx, fe_mesh m, int fix) {
     n = fe_number(&m, fixed, dof);
     nz = fe_assemble(&m, dof, 1000.0, 0.3, &ti, &tj, &tx);
     A = amps_csc_from_triplets(ctx, n, nz, ti, tj, tx, AMPS_UPPER);
-    free(ti); free(tj); free(tx); free(fixed); free(dof);
+    free(ti);
+    free(tj);
+    free(tx);
+    free(fixed);
+    free(dof);
     fe_free(&m);
     return A;
 }
@@ -30,12 +34,24 @@ REF_UNUSED static amps_csc *m_rand(amps_ctx *ctx, int n, int deg, double dd, dou
         int i = t_int(n), j = t_int(n);
         double v = 2 * t_unif() - 1;
         if (i == j) continue;
-        ti[nz] = i; tj[nz] = j; tx[nz] = v; nz++;
-        rs[i] += fabs(v); rs[j] += fabs(v);
+        ti[nz] = i;
+        tj[nz] = j;
+        tx[nz] = v;
+        nz++;
+        rs[i] += fabs(v);
+        rs[j] += fabs(v);
     }
-    for (k = 0; k < n; k++) { ti[nz] = k; tj[nz] = k; tx[nz] = dd > 0 ? dd * rs[k] + 1 : diag; nz++; }
+    for (k = 0; k < n; k++) {
+        ti[nz] = k;
+        tj[nz] = k;
+        tx[nz] = dd > 0 ? dd * rs[k] + 1 : diag;
+        nz++;
+    }
     A = amps_csc_from_triplets(ctx, n, nz, ti, tj, tx, AMPS_UPPER);
-    free(ti); free(tj); free(tx); free(rs);
+    free(ti);
+    free(tj);
+    free(tx);
+    free(rs);
     return A;
 }
 
@@ -44,19 +60,35 @@ REF_UNUSED static amps_csc *m_btb(amps_ctx *ctx, int n, int m, int k, double shi
     int cap = m * k * k + n, nz = 0, r, a, b;
     int *ti = (int *)malloc(sizeof(int) * (size_t)cap), *tj = (int *)malloc(sizeof(int) * (size_t)cap);
     double *tx = (double *)malloc(sizeof(double) * (size_t)cap);
-    int cols[16]; double vals[16];
+    int cols[16];
+    double vals[16];
     amps_csc *A;
     t_seed(seed);
     for (r = 0; r < m; r++) {
         int base = t_int(n);
-        for (a = 0; a < k; a++) { cols[a] = (base + t_int(n / 8 + 2)) % n; vals[a] = 2 * t_unif() - 1; }
+        for (a = 0; a < k; a++) {
+            cols[a] = (base + t_int(n / 8 + 2)) % n;
+            vals[a] = 2 * t_unif() - 1;
+        }
         for (a = 0; a < k; a++)
             for (b = 0; b < k; b++)
-                if (cols[a] <= cols[b]) { ti[nz] = cols[a]; tj[nz] = cols[b]; tx[nz] = vals[a] * vals[b]; nz++; }
+                if (cols[a] <= cols[b]) {
+                    ti[nz] = cols[a];
+                    tj[nz] = cols[b];
+                    tx[nz] = vals[a] * vals[b];
+                    nz++;
+                }
     }
-    for (a = 0; a < n; a++) { ti[nz] = a; tj[nz] = a; tx[nz] = shift; nz++; }
+    for (a = 0; a < n; a++) {
+        ti[nz] = a;
+        tj[nz] = a;
+        tx[nz] = shift;
+        nz++;
+    }
     A = amps_csc_from_triplets(ctx, n, nz, ti, tj, tx, AMPS_UPPER);
-    free(ti); free(tj); free(tx);
+    free(ti);
+    free(tj);
+    free(tx);
     return A;
 }
 
@@ -67,9 +99,16 @@ REF_UNUSED static amps_csc *m_convert(amps_ctx *ctx, const amps_csc *U, amps_sty
     double *tx = (double *)malloc(sizeof(double) * (size_t)(nz + 1));
     amps_csc *A;
     for (j = 0; j < n; j++)
-        for (p = U->p[j]; p < U->p[j + 1]; p++) { ti[k] = U->i[p]; tj[k] = j; tx[k] = U->x[p]; k++; }
+        for (p = U->p[j]; p < U->p[j + 1]; p++) {
+            ti[k] = U->i[p];
+            tj[k] = j;
+            tx[k] = U->x[p];
+            k++;
+        }
     A = amps_csc_from_triplets(ctx, n, nz, ti, tj, tx, stype);
-    free(ti); free(tj); free(tx);
+    free(ti);
+    free(tj);
+    free(tx);
     return A;
 }
 
@@ -84,7 +123,8 @@ REF_UNUSED static int *m_cholmod_perm(const amps_csc *A, int method) {
 static amps_factor *m_analyze(amps_ctx *ctx, const amps_csc *A, const int *perm) {
     amps_order_opts o;
     memset(&o, 0, sizeof(o));
-    o.method = AMPS_ORDER_GIVEN; o.perm = perm;
+    o.method = AMPS_ORDER_GIVEN;
+    o.perm = perm;
     return amps_analyze(ctx, A, AMPS_UPPER, perm ? &o : NULL);
 }
 #endif

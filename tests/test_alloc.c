@@ -18,7 +18,10 @@ static void *ta_realloc(void *p, size_t sz) {
     return q;
 }
 static void ta_free(void *p) {
-    if (p) { ta_live--; free(p); }
+    if (p) {
+        ta_live--;
+        free(p);
+    }
 }
 #define AMPS_MALLOC(sz, u) ((void)(u), ta_malloc(sz))
 #define AMPS_REALLOC(p, sz, u) ((void)(u), ta_realloc((p), (sz)))
@@ -30,7 +33,10 @@ static void ta_free(void *p) {
 #include <string.h>
 
 /* Arms the allocator to fail at call k (counting from the next call); -1 disarms. */
-static void arm(long k) { ta_calls = 0; ta_fail_at = k; }
+static void arm(long k) {
+    ta_calls = 0;
+    ta_fail_at = k;
+}
 
 int main(void) {
     amps_ctx ctx;
@@ -76,15 +82,17 @@ int main(void) {
         int *perm = (int *)malloc(sizeof(int) * n), pass;
         for (k = 0; k < n; k++) perm[k] = n - 1 - k;
         memset(&o, 0, sizeof(o));
-        o.method = AMPS_ORDER_GIVEN; o.perm = perm;
+        o.method = AMPS_ORDER_GIVEN;
+        o.perm = perm;
         for (pass = 0; pass < 2; pass++) {
             for (k = 1, fails = 0;; k++) {
                 arm(k);
                 F = amps_analyze(&ctx, A, AMPS_UPPER, pass ? &o : NULL);
                 if (F) break;
                 fails++;
-                CHECK(ctx.status == AMPS_ERR_OOM && ta_live == base, "analyze pass %d fail at %d: status %d (%s), live %ld",
-                      pass, k, (int)ctx.status, ctx.msg, ta_live);
+                CHECK(ctx.status == AMPS_ERR_OOM && ta_live == base,
+                      "analyze pass %d fail at %d: status %d (%s), live %ld", pass, k, (int)ctx.status, ctx.msg,
+                      ta_live);
             }
             CHECK(fails >= 10, "analyze failed only %d times", fails);
             if (!pass) amps_factor_free(&ctx, F);
@@ -112,18 +120,25 @@ int main(void) {
         CHECK(amps_solve_multi_work(&ctx, F, 3) <= (size_t)n * 8, "solve_multi work size");
         CHECK(amps_solve_multi(&ctx, F, 3, b, n, x, n, w) == AMPS_OK, "solve_multi: %s", ctx.msg);
         memset(x, 0, sizeof(double) * n);
-        x[0] = 1; x[5] = 2;
+        x[0] = 1;
+        x[5] = 2;
         CHECK(amps_lsolve_sparse(F, 2, idx, x, cl, &mk) > 0, "sparse solve");
         CHECK(amps_ltsolve_partial(F, 2, idx, x, cl, &mk) > 0, "partial solve");
         CHECK(ta_calls == 0, "factorize/solves allocated %ld times", ta_calls);
         arm(-1);
         amps_marker_free(&ctx, &mk);
-        free(b); free(x); free(w); free(cl);
+        free(b);
+        free(x);
+        free(w);
+        free(cl);
     }
     amps_factor_free(&ctx, F);
     amps_csc_free(&ctx, A);
     CHECK(ta_live == 0, "live allocations at the end: %ld", ta_live);
-    free(ti); free(tj); free(tx); free(dof);
+    free(ti);
+    free(tj);
+    free(tx);
+    free(dof);
     fe_free(&m);
     fe_free(&m2);
     t_seed(1);

@@ -13,19 +13,19 @@
 
 static void arm(long k) { t_al.fail_at = k; }
 static void disarm(void) { t_al.fail_at = -1; }
-static long points = 0;   /* allocation failures injected */
+static long points = 0; /* allocation failures injected */
 
 /* ---------------------------------- engine ---------------------------------- */
 
 typedef struct eng {
-    amps_ctx ctx;        /* counted */
+    amps_ctx ctx; /* counted */
     amps_csc *K;
     amps_factor *F;
     amps_update *U;
     amps_int n;
 } eng;
 
-static amps_csc *base_K;      /* uncounted base */
+static amps_csc *base_K; /* uncounted base */
 static amps_factor *base_F;
 
 static void eng_open(eng *e) {
@@ -36,8 +36,13 @@ static void eng_open(eng *e) {
     e->ctx.nthreads = 1;
     e->n = base_K->ncol;
     amps_update_opts_default(&o);
-    o.grow = 1; o.cap_mod = 1; o.cap_new = 1; o.cap_pending = 1; o.cap_delta = 1; o.cap_vpool = 1;
-    o.refactor = AMPS_REFACTOR_MANUAL;   /* the counting allocator is single-threaded */
+    o.grow = 1;
+    o.cap_mod = 1;
+    o.cap_new = 1;
+    o.cap_pending = 1;
+    o.cap_delta = 1;
+    o.cap_vpool = 1;
+    o.refactor = AMPS_REFACTOR_MANUAL; /* the counting allocator is single-threaded */
     e->U = amps_update_create(&e->ctx, base_K, AMPS_UPPER, base_F, &o);
     CHECK(e->U != NULL, "engine create: %s", e->ctx.msg);
 }
@@ -45,67 +50,86 @@ static void eng_open(eng *e) {
 /* The sequence: recorded changes and solves (S). */
 static const int op_kind[] = {0, 1, 9, 2, 9, 3, 9, 4, 9, 5, 9, 0, 1, 9, 6, 9, 7, 9, 8, 9};
 #define NOPS ((int)(sizeof(op_kind) / sizeof(op_kind[0])))
-static const char *op_name[] = {"add_dofs", "add", "set_force", "constrain", "set_rows", "release", "constrain", "add", "release", "solve"};
+static const char *op_name[] = {"add_dofs", "add",       "set_force", "constrain", "set_rows",
+                                "release",  "constrain", "add",       "release",   "solve"};
 static int is_solve(int j) { return op_kind[j] == 9; }
 
 static amps_status eng_op(eng *e, int j, double *x) {
     amps_int n = e->n, dim = amps_update_dim(e->U);
     switch (op_kind[j]) {
-    case 0: {           /* three new DOFs */
-        amps_int first;
-        return amps_update_add_dofs(&e->ctx, e->U, 3, &first);
+    case 0: { /* three new DOFs */ amps_int first; return amps_update_add_dofs(&e->ctx, e->U, 3, &first);
     }
-    case 1: {           /* ... hung on springs to base DOFs */
+    case 1: { /* ... hung on springs to base DOFs */
         amps_int r[9], c[9], d, q = 0, nd = dim - 3;
         double v[9], sp = 50.0;
         for (d = 0; d < 3; d++) {
             amps_int b = (7 * (nd + d)) % n;
-            r[q] = nd + d; c[q] = nd + d; v[q++] = sp;
-            r[q] = b; c[q] = nd + d; v[q++] = -sp;
-            r[q] = b; c[q] = b; v[q++] = sp;
+            r[q] = nd + d;
+            c[q] = nd + d;
+            v[q++] = sp;
+            r[q] = b;
+            c[q] = nd + d;
+            v[q++] = -sp;
+            r[q] = b;
+            c[q] = b;
+            v[q++] = sp;
         }
         return amps_update_add(&e->ctx, e->U, q, r, c, v);
     }
-    case 2: {           /* forces */
+    case 2: { /* forces */
         amps_int idx[4] = {3, 17, n - 1, n + 1};
         double v[4] = {1, -2, 0.5, 3};
         return amps_update_set_force(&e->ctx, e->U, 4, idx, v);
     }
-    case 3: {           /* constraints */
+    case 3: { /* constraints */
         amps_int idx[4] = {5, 9, 30, n + 2};
         double v[4] = {0.01, -0.02, 0.03, 0.001};
         return amps_update_constrain(&e->ctx, e->U, 3, idx, v);
     }
-    case 6: {           /* many constraints (the pending list grows) */
+    case 6: { /* many constraints (the pending list grows) */
         amps_int idx[80], q;
         double v[80];
-        for (q = 0; q < 80; q++) { idx[q] = 100 + q; v[q] = 1e-3 * (q % 7); }
+        for (q = 0; q < 80; q++) {
+            idx[q] = 100 + q;
+            v[q] = 1e-3 * (q % 7);
+        }
         return amps_update_constrain(&e->ctx, e->U, 80, idx, v);
     }
-    case 4: {           /* new row of the first appended DOF: its spring to base DOF 0 (the one
+    case 4: { /* new row of the first appended DOF: its spring to base DOF 0 (the one
                            case 1 hung it on, 7n mod n) and weak springs to 100 odd base DOFs */
         amps_int row = n, cp[2], ci[102], q;
         double cx[102];
-        ci[0] = 0; cx[0] = -50.0;
-        for (q = 0; q < 100; q++) { ci[q + 1] = 2 * q + 1; cx[q + 1] = -1e-3; }
-        ci[101] = n; cx[101] = 50.1;
-        cp[0] = 0; cp[1] = 102;
+        ci[0] = 0;
+        cx[0] = -50.0;
+        for (q = 0; q < 100; q++) {
+            ci[q + 1] = 2 * q + 1;
+            cx[q + 1] = -1e-3;
+        }
+        ci[101] = n;
+        cx[101] = 50.1;
+        cp[0] = 0;
+        cp[1] = 102;
         return amps_update_set_rows(&e->ctx, e->U, 1, &row, cp, ci, cx);
     }
-    case 5: {           /* release two pins, and 98 indices that are not pinned */
+    case 5: { /* release two pins, and 98 indices that are not pinned */
         amps_int idx[100], q;
-        idx[0] = 5; idx[1] = 30;
+        idx[0] = 5;
+        idx[1] = 30;
         for (q = 2; q < 100; q++) idx[q] = 100 + q;
         return amps_update_release(&e->ctx, e->U, 100, idx);
     }
-    case 7: {           /* a stiffness term on 20 base DOFs (210 entries: the pending list grows) */
+    case 7: { /* a stiffness term on 20 base DOFs (210 entries: the pending list grows) */
         amps_int r[210], c[210], a, b, q = 0;
         double v[210];
         for (a = 0; a < 20; a++)
-            for (b = a; b < 20; b++) { r[q] = 10 + 2 * a; c[q] = 10 + 2 * b; v[q++] = 5.0 * (a % 2 ? 1 : -1) * (b % 2 ? 1 : -1); }
+            for (b = a; b < 20; b++) {
+                r[q] = 10 + 2 * a;
+                c[q] = 10 + 2 * b;
+                v[q++] = 5.0 * (a % 2 ? 1 : -1) * (b % 2 ? 1 : -1);
+            }
         return amps_update_add(&e->ctx, e->U, q, r, c, v);
     }
-    case 8: {           /* release most of them and one more */
+    case 8: { /* release most of them and one more */
         amps_int idx[71], q;
         for (q = 0; q < 70; q++) idx[q] = 100 + q;
         idx[70] = 9;
@@ -127,7 +151,8 @@ static void test_engine(void) {
     int t, j;
     long k;
     eng e;
-    x = (double *)malloc(sizeof(double) * 4096); xp = (double *)malloc(sizeof(double) * 4096);
+    x = (double *)malloc(sizeof(double) * 4096);
+    xp = (double *)malloc(sizeof(double) * 4096);
     /* fault-free run: the solution after each solve */
     eng_open(&e);
     CHECK(amps_update_solve(&e.ctx, e.U, x) == AMPS_OK, "first solve");
@@ -136,7 +161,10 @@ static void test_engine(void) {
         CHECK(s == AMPS_OK, "fault-free op %d: %s", j, e.ctx.msg);
         dims[j] = amps_update_dim(e.U);
         xfree[j] = NULL;
-        if (is_solve(j)) { xfree[j] = (double *)malloc(sizeof(double) * dims[j]); memcpy(xfree[j], x, sizeof(double) * dims[j]); }
+        if (is_solve(j)) {
+            xfree[j] = (double *)malloc(sizeof(double) * dims[j]);
+            memcpy(xfree[j], x, sizeof(double) * dims[j]);
+        }
     }
     CHECK(is_solve(NOPS - 1), "the sequence ends with a solve");
     eng_close(&e);
@@ -145,15 +173,21 @@ static void test_engine(void) {
         amps_ctx c;
         amps_update_opts o;
         amps_update *U;
-        amps_ctx_init(&c); c.alloc_user = &t_al;
+        amps_ctx_init(&c);
+        c.alloc_user = &t_al;
         amps_update_opts_default(&o);
         arm(k);
         U = amps_update_create(&c, base_K, AMPS_UPPER, base_F, &o);
         disarm();
-        if (U) { amps_update_free(&c, U); printf("  update create: %ld allocation points\n", k); break; }
+        if (U) {
+            amps_update_free(&c, U);
+            printf("  update create: %ld allocation points\n", k);
+            break;
+        }
         points++;
         if (k > 2000) break;
-        CHECK(c.status == AMPS_ERR_OOM && t_al.live == 0, "update_create fail at %ld: status %d live %ld", k, (int)c.status, t_al.live);
+        CHECK(c.status == AMPS_ERR_OOM && t_al.live == 0, "update_create fail at %ld: status %d live %ld", k,
+              (int)c.status, t_al.live);
         t_al.live = 0;
     }
     /* each operation t with its k-th allocation failing */
@@ -174,7 +208,11 @@ static void test_engine(void) {
             arm(k);
             s = eng_op(&e, t, x);
             disarm();
-            if (s == AMPS_OK) { eng_close(&e); printf("  engine op %2d (%s): %ld allocation points\n", t, op_name[op_kind[t]], k); break; }
+            if (s == AMPS_OK) {
+                eng_close(&e);
+                printf("  engine op %2d (%s): %ld allocation points\n", t, op_name[op_kind[t]], k);
+                break;
+            }
             points++;
             if (s != AMPS_ERR_OOM || k > 2000) {
                 CHECK(0, "op %d: status %d at fault %ld: %s", t, (int)s, k, e.ctx.msg);
@@ -197,14 +235,17 @@ static void test_engine(void) {
                 CHECK(amps_update_dim(e.U) == dim0, "op %d fail at %ld: dimension changed", t, k);
             }
             /* redo what was lost and finish: the fault-free answer */
-            for (j = after ? t + 1 : (is_solve(t) ? ps + 1 : t); j < NOPS; j++) if ((s = eng_op(&e, j, x)) != AMPS_OK) break;
-            CHECK(s == AMPS_OK && amps_update_dim(e.U) == dims[NOPS - 1] && t_reldiff((int)dims[NOPS - 1], x, xfree[NOPS - 1]) <= 1e-10,
+            for (j = after ? t + 1 : (is_solve(t) ? ps + 1 : t); j < NOPS; j++)
+                if ((s = eng_op(&e, j, x)) != AMPS_OK) break;
+            CHECK(s == AMPS_OK && amps_update_dim(e.U) == dims[NOPS - 1] &&
+                          t_reldiff((int)dims[NOPS - 1], x, xfree[NOPS - 1]) <= 1e-10,
                   "op %d fail at %ld: finishing the sequence: %s", t, k, s == AMPS_OK ? "different answer" : e.ctx.msg);
             eng_close(&e);
         }
     }
     for (j = 0; j < NOPS; j++) free(xfree[j]);
-    free(x); free(xp);
+    free(x);
+    free(xp);
 }
 
 /* ---------------------------------- scene ---------------------------------- */
@@ -217,13 +258,19 @@ static amps_status scene_op(amps_ctx *c, amps_scene *S, int j) {
     switch (j) {
     case 0: return amps_scene_force(c, S, 40, f);
     case 1: return amps_scene_pin(c, S, 30, u);
-    case 2: case 6: case 10: case 13: return amps_scene_solve(c, S);
+    case 2:
+    case 6:
+    case 10:
+    case 13: return amps_scene_solve(c, S);
     case 3: memcpy(p, m->xyz + 3 * 22, sizeof(p)); return amps_scene_cut(c, S, 22, p, nrm, &vc);
     case 4: return amps_scene_pin(c, S, 30, u2);
     case 5: return amps_scene_pin(c, S, 31, u);
     case 7: return amps_scene_release(c, S, 30);
     case 8: memcpy(p, m->xyz + 3 * 13, sizeof(p)); return amps_scene_cut(c, S, 13, p, nrm, &vc);
-    case 9: memcpy(p, m->xyz + 3 * 31, sizeof(p)); nrm[0] = -1; return amps_scene_cut(c, S, 31, p, nrm, &vc);
+    case 9:
+        memcpy(p, m->xyz + 3 * 31, sizeof(p));
+        nrm[0] = -1;
+        return amps_scene_cut(c, S, 31, p, nrm, &vc);
     case 11: return amps_scene_force(c, S, 44, u2);
     case 12: return amps_scene_release(c, S, 31);
     }
@@ -239,8 +286,12 @@ static amps_scene *scene_open(amps_ctx *c) {
     c->nthreads = 1;
     m = amps_mesh_brick(c, 2);
     amps_scene_opts_default(&so);
-    so.update.cap_mod = 1; so.update.cap_new = 1; so.update.cap_pending = 1; so.update.cap_delta = 1; so.update.cap_vpool = 1;
-    so.update.refactor = AMPS_REFACTOR_MANUAL;   /* the counting allocator is single-threaded */
+    so.update.cap_mod = 1;
+    so.update.cap_new = 1;
+    so.update.cap_pending = 1;
+    so.update.cap_delta = 1;
+    so.update.cap_vpool = 1;
+    so.update.refactor = AMPS_REFACTOR_MANUAL; /* the counting allocator is single-threaded */
     S = amps_scene_create(c, m, &so);
     amps_scene_set_material(c, S, 1000, 0.3);
     amps_scene_fix_where(c, S, 2, AMPS_LT, 1e-9, NULL);
@@ -276,12 +327,17 @@ static void test_scene(void) {
     /* create and prepare */
     for (k = 0;; k++) {
         amps_mesh *m;
-        amps_ctx_init(&c); c.alloc_user = &t_al;
+        amps_ctx_init(&c);
+        c.alloc_user = &t_al;
         m = amps_mesh_brick(&c, 2);
         arm(k);
         S = amps_scene_create(&c, m, NULL);
         disarm();
-        if (S) { amps_scene_free(&c, S); printf("  scene create: %ld allocation points\n", k); break; }
+        if (S) {
+            amps_scene_free(&c, S);
+            printf("  scene create: %ld allocation points\n", k);
+            break;
+        }
         points++;
         if (k > 2000) break;
         CHECK(c.status == AMPS_ERR_OOM, "scene_create fail at %ld: %s", k, c.msg);
@@ -294,11 +350,20 @@ static void test_scene(void) {
         arm(k);
         s = amps_scene_prepare(&c, S);
         disarm();
-        if (s == AMPS_OK) { amps_scene_free(&c, S); printf("  scene prepare: %ld allocation points\n", k); break; }
+        if (s == AMPS_OK) {
+            amps_scene_free(&c, S);
+            printf("  scene prepare: %ld allocation points\n", k);
+            break;
+        }
         points++;
-        if (s != AMPS_ERR_OOM || k > 2000) { CHECK(0, "prepare: status %d at %ld: %s", (int)s, k, c.msg); amps_scene_free(&c, S); break; }
+        if (s != AMPS_ERR_OOM || k > 2000) {
+            CHECK(0, "prepare: status %d at %ld: %s", (int)s, k, c.msg);
+            amps_scene_free(&c, S);
+            break;
+        }
         CHECK(s == AMPS_ERR_OOM, "scene_prepare fail at %ld: %d %s", k, (int)s, c.msg);
-        CHECK(scene_disp(&c, S, u) == nb[0] && t_reldiff(3 * nb[0], u, ub[0]) <= 1e-12, "scene_prepare fail at %ld: solve after", k);
+        CHECK(scene_disp(&c, S, u) == nb[0] && t_reldiff(3 * nb[0], u, ub[0]) <= 1e-12,
+              "scene_prepare fail at %ld: solve after", k);
         amps_scene_free(&c, S);
         CHECK(t_al.live == 0, "scene_prepare fail at %ld: %ld live", k, t_al.live);
         t_al.live = 0;
@@ -315,22 +380,29 @@ static void test_scene(void) {
             arm(k);
             s = scene_op(&c, S, t);
             disarm();
-            if (s >= 0) { amps_scene_free(&c, S); t_al.live = 0; printf("  scene op %2d: %ld allocation points\n", t, k); break; }
+            if (s >= 0) {
+                amps_scene_free(&c, S);
+                t_al.live = 0;
+                printf("  scene op %2d: %ld allocation points\n", t, k);
+                break;
+            }
             points++;
             if (s != AMPS_ERR_OOM || k > 2000) {
                 CHECK(0, "scene op %d: status %d at fault %ld: %s", t, (int)s, k, c.msg);
-                amps_scene_free(&c, S); t_al.live = 0;
+                amps_scene_free(&c, S);
+                t_al.live = 0;
                 break;
             }
             CHECK(s == AMPS_ERR_OOM, "scene op %d fail at %ld: status %d: %s", t, k, (int)s, c.msg);
-            CHECK(amps_scene_mesh(S)->nnode == nn && amps_mesh_check(&c, amps_scene_mesh(S)) == AMPS_OK, "scene op %d fail at %ld: mesh changed", t, k);
+            CHECK(amps_scene_mesh(S)->nnode == nn && amps_mesh_check(&c, amps_scene_mesh(S)) == AMPS_OK,
+                  "scene op %d fail at %ld: mesh changed", t, k);
             /* the state without the operation (a solve: the state it was solving) */
             CHECK(scene_disp(&c, S, u) == nb[t] && t_reldiff(3 * nb[t], u, ub[t]) <= 1e-10,
                   "scene op %d fail at %ld: solve after the failure differs from the state before it (%.2e)", t, k,
                   t_reldiff(3 * nb[t], u, ub[t]));
             for (j = t; j < SOPS; j++) scene_op(&c, S, j);
-            CHECK(scene_disp(&c, S, u) == nfin && t_reldiff(3 * nfin, u, ufin) <= 1e-10, "scene op %d fail at %ld: finishing: %.2e", t, k,
-                  t_reldiff(3 * nfin, u, ufin));
+            CHECK(scene_disp(&c, S, u) == nfin && t_reldiff(3 * nfin, u, ufin) <= 1e-10,
+                  "scene op %d fail at %ld: finishing: %.2e", t, k, t_reldiff(3 * nfin, u, ufin));
             amps_scene_free(&c, S);
             CHECK(t_al.live == 0, "scene op %d fail at %ld: %ld live", t, k, t_al.live);
             t_al.live = 0;
@@ -344,12 +416,15 @@ static void test_scene(void) {
 static void test_readers(void) {
     static const char node[] = "5 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 1 1 1\n";
     static const char ele[] = "2 4 0\n0 0 1 2 3\n1 1 2 3 4\n";
-    static const char msh2[] = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n5\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 1 1 1\n$EndNodes\n"
-                               "$Elements\n3\n1 15 2 0 1 1\n2 4 2 0 1 1 2 3 4\n3 4 2 0 1 2 3 4 5\n$EndElements\n";
-    static const char msh4[] = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 5 1 5\n3 1 0 5\n1\n2\n3\n4\n5\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 1\n$EndNodes\n"
-                               "$Elements\n1 2 1 2\n3 1 4 2\n1 1 2 3 4\n2 2 3 4 5\n$EndElements\n";
-    static const char medit[] = "MeshVersionFormatted 2\nDimension 3\nVertices\n5\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\n1 1 1 0\n"
-                                "Tetrahedra\n2\n1 2 3 4 0\n2 3 4 5 0\nEnd\n";
+    static const char msh2[] =
+            "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n5\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 1 1 1\n$EndNodes\n"
+            "$Elements\n3\n1 15 2 0 1 1\n2 4 2 0 1 1 2 3 4\n3 4 2 0 1 2 3 4 5\n$EndElements\n";
+    static const char msh4[] =
+            "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 5 1 5\n3 1 0 5\n1\n2\n3\n4\n5\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 1\n$EndNodes\n"
+            "$Elements\n1 2 1 2\n3 1 4 2\n1 1 2 3 4\n2 2 3 4 5\n$EndElements\n";
+    static const char medit[] =
+            "MeshVersionFormatted 2\nDimension 3\nVertices\n5\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\n1 1 1 0\n"
+            "Tetrahedra\n2\n1 2 3 4 0\n2 3 4 5 0\nEnd\n";
     int r;
     for (r = 0; r < 4; r++) {
         long k;
@@ -357,9 +432,11 @@ static void test_readers(void) {
         for (k = 0;; k++) {
             amps_ctx c;
             amps_mesh *m;
-            amps_ctx_init(&c); c.alloc_user = &t_al;
+            amps_ctx_init(&c);
+            c.alloc_user = &t_al;
             arm(k);
-            if (r == 0) m = amps_mesh_read_tetgen_mem(&c, node, sizeof(node) - 1, "a.node", ele, sizeof(ele) - 1, "a.ele");
+            if (r == 0)
+                m = amps_mesh_read_tetgen_mem(&c, node, sizeof(node) - 1, "a.node", ele, sizeof(ele) - 1, "a.ele");
             else if (r == 1) m = amps_mesh_read_gmsh_mem(&c, msh2, sizeof(msh2) - 1, "a.msh");
             else if (r == 2) m = amps_mesh_read_gmsh_mem(&c, msh4, sizeof(msh4) - 1, "b.msh");
             else m = amps_mesh_read_medit_mem(&c, medit, sizeof(medit) - 1, "a.mesh");
@@ -370,10 +447,14 @@ static void test_readers(void) {
                 CHECK(t_al.live == 0, "reader %d: %ld live", r, t_al.live);
                 break;
             }
-            points++; fails++;
-            if (c.status != AMPS_ERR_OOM || k > 2000) { CHECK(0, "reader %d: %s", r, c.msg); break; }
-            CHECK(c.status == AMPS_ERR_OOM && t_al.live == 0, "reader %d fail at %ld: status %d (%s), live %ld", r, k, (int)c.status, c.msg,
-                  t_al.live);
+            points++;
+            fails++;
+            if (c.status != AMPS_ERR_OOM || k > 2000) {
+                CHECK(0, "reader %d: %s", r, c.msg);
+                break;
+            }
+            CHECK(c.status == AMPS_ERR_OOM && t_al.live == 0, "reader %d fail at %ld: status %d (%s), live %ld", r, k,
+                  (int)c.status, c.msg, t_al.live);
             t_al.live = 0;
         }
         CHECK(fails > 0, "reader %d never allocated", r);
@@ -386,7 +467,7 @@ int main(void) {
     amps_mesh *m;
     amps_int *dof, n;
     unsigned char *fixed;
-    amps_ctx_init(&c);   /* uncounted */
+    amps_ctx_init(&c); /* uncounted */
     m = amps_mesh_beam(&c, 4);
     base_K = t_fixed_stiffness(&c, m, &fixed, &dof, &n);
     base_F = amps_analyze(&c, base_K, AMPS_UPPER, NULL);
@@ -395,7 +476,10 @@ int main(void) {
     test_scene();
     test_readers();
     printf("  allocation failures injected: %ld\n", points);
-    amps_factor_free(&c, base_F); amps_csc_free(&c, base_K); amps_mesh_free(&c, m);
-    free(fixed); free(dof);
+    amps_factor_free(&c, base_F);
+    amps_csc_free(&c, base_K);
+    amps_mesh_free(&c, m);
+    free(fixed);
+    free(dof);
     return amps_t_end("test_alloc_update");
 }

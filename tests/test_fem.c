@@ -27,7 +27,11 @@ static void t_rand_tet(double X[12]) {
     int k;
     for (k = 0; k < 12; k++) X[k] = R[k] + 0.3 * (t_unif() - 0.5) + (k % 3 == 0 ? 5.0 : -2.0);
     if (t_int(2)) { /* swap nodes 1, 2: other orientation */
-        for (k = 0; k < 3; k++) { double s = X[3 + k]; X[3 + k] = X[6 + k]; X[6 + k] = s; }
+        for (k = 0; k < 3; k++) {
+            double s = X[3 + k];
+            X[3 + k] = X[6 + k];
+            X[6 + k] = s;
+        }
     }
 }
 
@@ -39,22 +43,33 @@ static void t_rigid(const double X[12], int mode, double u[12]) {
         double *w = u + 3 * a;
         w[0] = w[1] = w[2] = 0;
         if (mode < 3) w[mode] = 1;
-        else if (mode == 3) { w[1] = -x[2]; w[2] = x[1]; }
-        else if (mode == 4) { w[0] = x[2]; w[2] = -x[0]; }
-        else { w[0] = -x[1]; w[1] = x[0]; }
+        else if (mode == 3) {
+            w[1] = -x[2];
+            w[2] = x[1];
+        } else if (mode == 4) {
+            w[0] = x[2];
+            w[2] = -x[0];
+        } else {
+            w[0] = -x[1];
+            w[1] = x[0];
+        }
     }
 }
 
 static double t_maxabs(int n, const double *x) {
-    double m = 0; int i;
-    for (i = 0; i < n; i++) if (fabs(x[i]) > m) m = fabs(x[i]);
+    double m = 0;
+    int i;
+    for (i = 0; i < n; i++)
+        if (fabs(x[i]) > m) m = fabs(x[i]);
     return m;
 }
 
 /* fe_util mesh with the same nodes and tets as m. */
 static fe_mesh t_fe_of(const amps_mesh *m) {
-    fe_mesh f; int k;
-    f.nn = (int)m->nnode; f.nt = (int)m->ntet;
+    fe_mesh f;
+    int k;
+    f.nn = (int)m->nnode;
+    f.nt = (int)m->ntet;
     f.xyz = (double *)malloc(sizeof(double) * 3 * f.nn);
     f.tet = (int *)malloc(sizeof(int) * 4 * f.nt);
     for (k = 0; k < 3 * f.nn; k++) f.xyz[k] = m->xyz[k];
@@ -63,11 +78,12 @@ static fe_mesh t_fe_of(const amps_mesh *m) {
 }
 
 /* Checks the CSC upper-triangle structure and compares to fe_util's triplets (dense). */
-static void t_compare_assembly(amps_ctx *ctx, const amps_mesh *m, const amps_int *dof, amps_int ndof, double E, double nu,
-                               const char *what) {
+static void t_compare_assembly(amps_ctx *ctx, const amps_mesh *m, const amps_int *dof, amps_int ndof, double E,
+                               double nu, const char *what) {
     fe_mesh f = t_fe_of(m);
     int *fdof = (int *)malloc(sizeof(int) * 3 * f.nn), *ti, *tj, nz, k, ok = 1;
-    double *tx, *D1 = (double *)calloc((size_t)ndof * ndof, sizeof(double)), *D2 = (double *)calloc((size_t)ndof * ndof, sizeof(double));
+    double *tx, *D1 = (double *)calloc((size_t)ndof * ndof, sizeof(double)),
+                *D2 = (double *)calloc((size_t)ndof * ndof, sizeof(double));
     unsigned char *pat = (unsigned char *)calloc((size_t)ndof * ndof, 1);
     amps_csc *A;
     amps_int j, p, npat = 0;
@@ -75,7 +91,10 @@ static void t_compare_assembly(amps_ctx *ctx, const amps_mesh *m, const amps_int
     nz = fe_assemble(&f, fdof, E, nu, &ti, &tj, &tx);
     for (k = 0; k < nz; k++) {
         D2[(size_t)ti[k] * ndof + tj[k]] += tx[k];
-        if (!pat[(size_t)ti[k] * ndof + tj[k]]) { pat[(size_t)ti[k] * ndof + tj[k]] = 1; npat++; }
+        if (!pat[(size_t)ti[k] * ndof + tj[k]]) {
+            pat[(size_t)ti[k] * ndof + tj[k]] = 1;
+            npat++;
+        }
     }
     A = amps_mesh_assemble(ctx, m, dof, ndof);
     CHECK(A != NULL, "%s: assemble failed: %s", what, ctx->msg);
@@ -90,16 +109,24 @@ static void t_compare_assembly(amps_ctx *ctx, const amps_mesh *m, const amps_int
             }
         }
         CHECK(ok, "%s: rows not sorted / not upper", what);
-        CHECK(A->p[ndof] == npat, "%s: nnz %lld, element coupling pattern has %lld", what, (long long)A->p[ndof], (long long)npat);
+        CHECK(A->p[ndof] == npat, "%s: nnz %lld, element coupling pattern has %lld", what, (long long)A->p[ndof],
+              (long long)npat);
         {
             double md = 0, mx = t_maxabs(ndof * ndof, D2);
             size_t q;
-            for (q = 0; q < (size_t)ndof * ndof; q++) if (fabs(D1[q] - D2[q]) > md) md = fabs(D1[q] - D2[q]);
+            for (q = 0; q < (size_t)ndof * ndof; q++)
+                if (fabs(D1[q] - D2[q]) > md) md = fabs(D1[q] - D2[q]);
             CHECK(md <= 1e-13 * mx, "%s: max diff %g (max entry %g)", what, md, mx);
         }
         amps_csc_free(ctx, A);
     }
-    free(ti); free(tj); free(tx); free(D1); free(D2); free(pat); free(fdof);
+    free(ti);
+    free(tj);
+    free(tx);
+    free(D1);
+    free(D2);
+    free(pat);
+    free(fdof);
     fe_free(&f);
 }
 
@@ -109,7 +136,8 @@ static void test_element(void) {
     int trial, a, b, k, mode;
     t_seed(1);
     for (trial = 0; trial < 50; trial++) {
-        double X[12], Ke[144], Kf[144], G[12], Bm[72], C[36], CB[72], vol, svol, E = 0.5 + t_unif() * 100, nu = -0.5 + t_unif() * 0.99;
+        double X[12], Ke[144], Kf[144], G[12], Bm[72], C[36], CB[72], vol, svol, E = 0.5 + t_unif() * 100,
+                                                                                 nu = -0.5 + t_unif() * 0.99;
         double asym = 0, md = 0, mx, worst = 0, u[12], f[12], energy;
         t_rand_tet(X);
         vol = amps_tet_stiffness(X, E, nu, Ke);
@@ -117,34 +145,47 @@ static void test_element(void) {
         svol = amps_tet_gradients(X, G);
         CHECK(vol > 0 && fabs(fabs(svol) - vol) <= 1e-15 * vol, "volume %g vs %g", vol, svol);
         mx = t_maxabs(144, Ke);
-        for (a = 0; a < 12; a++) for (b = 0; b < 12; b++) {
-            if (fabs(Ke[12 * a + b] - Ke[12 * b + a]) > asym) asym = fabs(Ke[12 * a + b] - Ke[12 * b + a]);
-            if (fabs(Ke[12 * a + b] - Kf[12 * a + b]) > md) md = fabs(Ke[12 * a + b] - Kf[12 * a + b]);
-        }
+        for (a = 0; a < 12; a++)
+            for (b = 0; b < 12; b++) {
+                if (fabs(Ke[12 * a + b] - Ke[12 * b + a]) > asym) asym = fabs(Ke[12 * a + b] - Ke[12 * b + a]);
+                if (fabs(Ke[12 * a + b] - Kf[12 * a + b]) > md) md = fabs(Ke[12 * a + b] - Kf[12 * a + b]);
+            }
         CHECK(asym == 0, "Ke not symmetric: %g", asym);
         CHECK(md <= 1e-12 * mx, "Ke differs from fe_util: %g", md);
         /* barycentric gradients: N_a(x_b) = delta_ab */
-        for (a = 0; a < 4; a++) for (b = 0; b < 4; b++) {
-            double n = (a == 0) + G[3 * a] * (X[3 * b] - X[0]) + G[3 * a + 1] * (X[3 * b + 1] - X[1]) + G[3 * a + 2] * (X[3 * b + 2] - X[2]);
-            if (fabs(n - (a == b)) > worst) worst = fabs(n - (a == b));
-        }
+        for (a = 0; a < 4; a++)
+            for (b = 0; b < 4; b++) {
+                double n = (a == 0) + G[3 * a] * (X[3 * b] - X[0]) + G[3 * a + 1] * (X[3 * b + 1] - X[1]) +
+                           G[3 * a + 2] * (X[3 * b + 2] - X[2]);
+                if (fabs(n - (a == b)) > worst) worst = fabs(n - (a == b));
+            }
         CHECK(worst < 1e-12, "barycentric gradients off by %g", worst);
         /* Ke = V B^T C B through the small building blocks */
         amps_tet_B(G, Bm);
         amps_elasticity(E, nu, C);
-        for (a = 0; a < 6; a++) for (b = 0; b < 12; b++) { double s = 0; for (k = 0; k < 6; k++) s += C[6 * a + k] * Bm[12 * k + b]; CB[12 * a + b] = s; }
+        for (a = 0; a < 6; a++)
+            for (b = 0; b < 12; b++) {
+                double s = 0;
+                for (k = 0; k < 6; k++) s += C[6 * a + k] * Bm[12 * k + b];
+                CB[12 * a + b] = s;
+            }
         md = 0;
-        for (a = 0; a < 12; a++) for (b = 0; b < 12; b++) {
-            double s = 0;
-            for (k = 0; k < 6; k++) s += Bm[12 * k + a] * CB[12 * k + b];
-            if (fabs(vol * s - Ke[12 * a + b]) > md) md = fabs(vol * s - Ke[12 * a + b]);
-        }
+        for (a = 0; a < 12; a++)
+            for (b = 0; b < 12; b++) {
+                double s = 0;
+                for (k = 0; k < 6; k++) s += Bm[12 * k + a] * CB[12 * k + b];
+                if (fabs(vol * s - Ke[12 * a + b]) > md) md = fabs(vol * s - Ke[12 * a + b]);
+            }
         CHECK(md <= 1e-12 * mx, "Ke != V B^T C B: %g", md);
         /* null space: the 6 rigid modes */
         worst = 0;
         for (mode = 0; mode < 6; mode++) {
             t_rigid(X, mode, u);
-            for (a = 0; a < 12; a++) { double s = 0; for (b = 0; b < 12; b++) s += Ke[12 * a + b] * u[b]; f[a] = s; }
+            for (a = 0; a < 12; a++) {
+                double s = 0;
+                for (b = 0; b < 12; b++) s += Ke[12 * a + b] * u[b];
+                f[a] = s;
+            }
             if (t_norm(12, f) / (mx * t_norm(12, u)) > worst) worst = t_norm(12, f) / (mx * t_norm(12, u));
         }
         CHECK(worst < 1e-13, "rigid mode not in null space: %g", worst);
@@ -156,7 +197,8 @@ static void test_element(void) {
             for (a = 0; a < 12; a++) u[a] += (t_unif() - 0.5) * r[a];
         }
         energy = 0;
-        for (a = 0; a < 12; a++) for (b = 0; b < 12; b++) energy += u[a] * Ke[12 * a + b] * u[b];
+        for (a = 0; a < 12; a++)
+            for (b = 0; b < 12; b++) energy += u[a] * Ke[12 * a + b] * u[b];
         CHECK(energy > 1e-8 * mx * t_norm(12, u) * t_norm(12, u), "non-rigid field has energy %g", energy);
     }
     /* a stretch in x is not rigid: energy = V E' eps^2 with eps = 1 for u = (x, 0, 0) */
@@ -165,14 +207,16 @@ static void test_element(void) {
         double nu = 0.25, E = 3, lam = E * nu / ((1 + nu) * (1 - 2 * nu)), mu = E / (2 * (1 + nu));
         for (a = 0; a < 4; a++) u[3 * a] = X[3 * a];
         CHECK(fabs(amps_tet_stiffness(X, E, nu, Ke) - 1.0 / 6) < 1e-16, "unit tet volume");
-        for (a = 0; a < 12; a++) for (b = 0; b < 12; b++) en += u[a] * Ke[12 * a + b] * u[b];
+        for (a = 0; a < 12; a++)
+            for (b = 0; b < 12; b++) en += u[a] * Ke[12 * a + b] * u[b];
         CHECK(fabs(en - (lam + 2 * mu) / 6) < 1e-14, "stretch energy %g vs %g", en, (lam + 2 * mu) / 6);
         amps_tet_strain(X, u, eps);
         CHECK(fabs(eps[0] - 1) < 1e-15 && t_maxabs(5, eps + 1) < 1e-15, "stretch strain");
     }
     /* degenerate tets give volume 0 and zero outputs */
     {
-        double X[12] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0}, Ke[144], G[12], s[6], vm = 1, pr[3], u[12] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12};
+        double X[12] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0}, Ke[144], G[12], s[6], vm = 1, pr[3],
+               u[12] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12};
         CHECK(amps_tet_stiffness(X, 1, 0.3, Ke) == 0 && t_maxabs(144, Ke) == 0, "flat tet stiffness");
         CHECK(amps_tet_gradients(X, G) == 0 && t_maxabs(12, G) == 0, "flat tet gradients");
         CHECK(amps_tet_stress(X, 1, 0.3, u, s, &vm, pr) == 0 && t_maxabs(6, s) == 0 && vm == 0, "flat tet stress");
@@ -186,17 +230,35 @@ static void t_jacobi(const double s[6], double lam[3]) {
     double A[3][3] = {{s[0], s[3], s[5]}, {s[3], s[1], s[4]}, {s[5], s[4], s[2]}};
     int it, p, q, r;
     for (it = 0; it < 100; it++)
-        for (p = 0; p < 3; p++) for (q = p + 1; q < 3; q++) {
-            double th, c, sn, t;
-            if (A[p][q] == 0) continue;
-            th = (A[q][q] - A[p][p]) / (2 * A[p][q]);
-            t = (th >= 0 ? 1 : -1) / (fabs(th) + sqrt(th * th + 1));
-            c = 1 / sqrt(t * t + 1); sn = t * c;
-            for (r = 0; r < 3; r++) { double a = A[r][p], b = A[r][q]; A[r][p] = c * a - sn * b; A[r][q] = sn * a + c * b; }
-            for (r = 0; r < 3; r++) { double a = A[p][r], b = A[q][r]; A[p][r] = c * a - sn * b; A[q][r] = sn * a + c * b; }
-        }
-    lam[0] = A[0][0]; lam[1] = A[1][1]; lam[2] = A[2][2];
-    for (p = 0; p < 3; p++) for (q = p + 1; q < 3; q++) if (lam[q] > lam[p]) { double t = lam[p]; lam[p] = lam[q]; lam[q] = t; }
+        for (p = 0; p < 3; p++)
+            for (q = p + 1; q < 3; q++) {
+                double th, c, sn, t;
+                if (A[p][q] == 0) continue;
+                th = (A[q][q] - A[p][p]) / (2 * A[p][q]);
+                t = (th >= 0 ? 1 : -1) / (fabs(th) + sqrt(th * th + 1));
+                c = 1 / sqrt(t * t + 1);
+                sn = t * c;
+                for (r = 0; r < 3; r++) {
+                    double a = A[r][p], b = A[r][q];
+                    A[r][p] = c * a - sn * b;
+                    A[r][q] = sn * a + c * b;
+                }
+                for (r = 0; r < 3; r++) {
+                    double a = A[p][r], b = A[q][r];
+                    A[p][r] = c * a - sn * b;
+                    A[q][r] = sn * a + c * b;
+                }
+            }
+    lam[0] = A[0][0];
+    lam[1] = A[1][1];
+    lam[2] = A[2][2];
+    for (p = 0; p < 3; p++)
+        for (q = p + 1; q < 3; q++)
+            if (lam[q] > lam[p]) {
+                double t = lam[p];
+                lam[p] = lam[q];
+                lam[q] = t;
+            }
 }
 
 static void test_eig(void) {
@@ -206,29 +268,53 @@ static void test_eig(void) {
     for (trial = 0; trial < 2000; trial++) {
         double s[6], l1[3], l2[3], sc = pow(10.0, (double)(t_int(41) - 20)), nrm = 0;
         for (k = 0; k < 6; k++) s[k] = (t_unif() - 0.5) * sc;
-        if (trial % 5 == 1) s[3] = s[4] = s[5] = 0;             /* diagonal */
-        if (trial % 5 == 2) { s[1] = s[0]; s[4] = s[5] = 0; s[3] = 0; } /* repeated */
-        if (trial % 5 == 3) { s[3] *= 1e-9; s[4] *= 1e-9; s[5] *= 1e-9; } /* nearly diagonal */
-        if (trial % 5 == 4) { s[1] = s[0] * (1 + 1e-14); s[3] = s[0] * 1e-12; s[4] = s[5] = 0; } /* nearly repeated */
+        if (trial % 5 == 1) s[3] = s[4] = s[5] = 0; /* diagonal */
+        if (trial % 5 == 2) {
+            s[1] = s[0];
+            s[4] = s[5] = 0;
+            s[3] = 0;
+        } /* repeated */
+        if (trial % 5 == 3) {
+            s[3] *= 1e-9;
+            s[4] *= 1e-9;
+            s[5] *= 1e-9;
+        } /* nearly diagonal */
+        if (trial % 5 == 4) {
+            s[1] = s[0] * (1 + 1e-14);
+            s[3] = s[0] * 1e-12;
+            s[4] = s[5] = 0;
+        } /* nearly repeated */
         amps_sym3_eig(s, l1);
         t_jacobi(s, l2);
         for (k = 0; k < 6; k++) nrm += s[k] * s[k] * (k < 3 ? 1 : 2);
         nrm = sqrt(nrm);
-        for (k = 0; k < 3; k++) if (fabs(l1[k] - l2[k]) / nrm > worst) worst = fabs(l1[k] - l2[k]) / nrm;
+        for (k = 0; k < 3; k++)
+            if (fabs(l1[k] - l2[k]) / nrm > worst) worst = fabs(l1[k] - l2[k]) / nrm;
         CHECK(l1[0] >= l1[1] && l1[1] >= l1[2], "eigenvalues not descending");
     }
     CHECK(worst < 1e-12, "closed-form eigenvalues vs Jacobi: relative error %g", worst);
     {
-        double s1[6] = {3, 3, 3, 0, 0, 0}, s2[6] = {2, 1, 1, 0, 0, 0}, s3[6] = {1e300, -1e300, 0, 1e300, 0, 0}, s4[6] = {0, 0, 0, 0, 0, 0}, l[3];
+        double s1[6] = {3, 3, 3, 0, 0, 0}, s2[6] = {2, 1, 1, 0, 0, 0}, s3[6] = {1e300, -1e300, 0, 1e300, 0, 0},
+               s4[6] = {0, 0, 0, 0, 0, 0}, l[3];
         double s5[6] = {0, 0, 0, 1, 0, 0};
-        amps_sym3_eig(s1, l); CHECK(l[0] == 3 && l[1] == 3 && l[2] == 3, "3I: %g %g %g", l[0], l[1], l[2]);
-        amps_sym3_eig(s2, l); CHECK(l[0] == 2 && l[1] == 1 && l[2] == 1, "diag(2,1,1)");
-        s2[3] = 1e-30; amps_sym3_eig(s2, l); CHECK(fabs(l[0] - 2) < 1e-15 && fabs(l[1] - 1) < 1e-15 && fabs(l[2] - 1) < 1e-15, "diag(2,1,1) + tiny shear");
-        amps_sym3_eig(s3, l); CHECK(fabs(l[0] - sqrt(2.0) * 1e300) < 1e286 && fabs(l[1]) < 1e286 && fabs(l[2] + sqrt(2.0) * 1e300) < 1e286, "huge: %g %g %g", l[0], l[1], l[2]);
-        amps_sym3_eig(s4, l); CHECK(l[0] == 0 && l[1] == 0 && l[2] == 0, "zero");
-        amps_sym3_eig(s5, l); CHECK(fabs(l[0] - 1) < 1e-15 && fabs(l[1]) < 1e-15 && fabs(l[2] + 1) < 1e-15, "shear: %g %g %g", l[0], l[1], l[2]);
+        amps_sym3_eig(s1, l);
+        CHECK(l[0] == 3 && l[1] == 3 && l[2] == 3, "3I: %g %g %g", l[0], l[1], l[2]);
+        amps_sym3_eig(s2, l);
+        CHECK(l[0] == 2 && l[1] == 1 && l[2] == 1, "diag(2,1,1)");
+        s2[3] = 1e-30;
+        amps_sym3_eig(s2, l);
+        CHECK(fabs(l[0] - 2) < 1e-15 && fabs(l[1] - 1) < 1e-15 && fabs(l[2] - 1) < 1e-15, "diag(2,1,1) + tiny shear");
+        amps_sym3_eig(s3, l);
+        CHECK(fabs(l[0] - sqrt(2.0) * 1e300) < 1e286 && fabs(l[1]) < 1e286 && fabs(l[2] + sqrt(2.0) * 1e300) < 1e286,
+              "huge: %g %g %g", l[0], l[1], l[2]);
+        amps_sym3_eig(s4, l);
+        CHECK(l[0] == 0 && l[1] == 0 && l[2] == 0, "zero");
+        amps_sym3_eig(s5, l);
+        CHECK(fabs(l[0] - 1) < 1e-15 && fabs(l[1]) < 1e-15 && fabs(l[2] + 1) < 1e-15, "shear: %g %g %g", l[0], l[1],
+              l[2]);
         s5[2] = s5[2] / 0.0 * 0.0; /* NaN */
-        amps_sym3_eig(s5, l); CHECK(l[0] != l[0] && l[2] != l[2], "NaN input gives NaN");
+        amps_sym3_eig(s5, l);
+        CHECK(l[0] != l[0] && l[2] != l[2], "NaN input gives NaN");
     }
 }
 
@@ -237,19 +323,28 @@ static void test_eig(void) {
 static int t_face_cmp(const void *a, const void *b) {
     const long long *x = (const long long *)a, *y = (const long long *)b;
     int k;
-    for (k = 0; k < 3; k++) if (x[k] != y[k]) return x[k] < y[k] ? -1 : 1;
+    for (k = 0; k < 3; k++)
+        if (x[k] != y[k]) return x[k] < y[k] ? -1 : 1;
     return 0;
 }
 
 /* Counts faces used once (boundary) and checks no face is used more than twice. */
 static long long t_boundary_faces(const amps_mesh *m, int *ok) {
     long long *F = (long long *)malloc(sizeof(long long) * 3 * 4 * m->ntet), nb = 0;
-    amps_int t; int f, k, l, i;
+    amps_int t;
+    int f, k, l, i;
     for (t = 0; t < m->ntet; t++)
         for (f = 0; f < 4; f++) {
             long long *x = F + 3 * (4 * t + f);
-            for (k = 0, i = 0; k < 4; k++) if (k != f) x[i++] = m->origin[m->tet[4 * t + k]];
-            for (k = 0; k < 3; k++) for (l = k + 1; l < 3; l++) if (x[l] < x[k]) { long long s = x[k]; x[k] = x[l]; x[l] = s; }
+            for (k = 0, i = 0; k < 4; k++)
+                if (k != f) x[i++] = m->origin[m->tet[4 * t + k]];
+            for (k = 0; k < 3; k++)
+                for (l = k + 1; l < 3; l++)
+                    if (x[l] < x[k]) {
+                        long long s = x[k];
+                        x[k] = x[l];
+                        x[l] = s;
+                    }
         }
     qsort(F, (size_t)(4 * m->ntet), 3 * sizeof(long long), t_face_cmp);
     *ok = 1;
@@ -265,13 +360,20 @@ static long long t_boundary_faces(const amps_mesh *m, int *ok) {
 }
 
 static double t_total_volume(const amps_mesh *m) {
-    double v = 0, X[12], G[12]; amps_int t;
-    for (t = 0; t < m->ntet; t++) { amps_mesh_tet_coords(m, t, X); v += fabs(amps_tet_gradients(X, G)); }
+    double v = 0, X[12], G[12];
+    amps_int t;
+    for (t = 0; t < m->ntet; t++) {
+        amps_mesh_tet_coords(m, t, X);
+        v += fabs(amps_tet_gradients(X, G));
+    }
     return v;
 }
 
 static void test_mesh_create(void) {
-    amps_ctx ctx; amps_mesh *m; int ok; amps_int h, R;
+    amps_ctx ctx;
+    amps_mesh *m;
+    int ok;
+    amps_int h, R;
     amps_ctx_init(&ctx);
     for (h = 2; h <= 5; h++) {
         m = amps_mesh_beam(&ctx, h);
@@ -300,7 +402,7 @@ static void test_mesh_create(void) {
     /* creation from arrays: validation */
     {
         double xyz[15] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1};
-        amps_int tet[8] = {0, 1, 2, 3, 1, 2, 3, 4};     /* tet 1 has the other orientation */
+        amps_int tet[8] = {0, 1, 2, 3, 1, 2, 3, 4}; /* tet 1 has the other orientation */
         amps_int bad[8] = {0, 1, 2, 3, 1, 2, 3, 5};
         amps_int flat[8] = {0, 1, 2, 3, 0, 1, 2, 2};
         amps_int nearflat[8] = {0, 1, 2, 3, 1, 2, 3, 4};
@@ -308,21 +410,30 @@ static void test_mesh_create(void) {
         m = amps_mesh_create(&ctx, 5, xyz, 2, tet);
         CHECK(m && amps_mesh_check(&ctx, m) == AMPS_OK, "create: %s", ctx.msg);
         if (m) {
-            amps_int deg; const amps_int *inc = amps_mesh_incident(m, 2, &deg);
-            CHECK(deg == 2 && inc[0] == 0 && inc[1] == 1 && amps_mesh_degree(m, 0) == 1 && amps_mesh_degree(m, 4) == 1, "incidence");
-            CHECK(amps_mesh_incident(m, 5, &deg) == NULL && deg == 0 && amps_mesh_degree(m, -1) == 0, "incidence of invalid node");
+            amps_int deg;
+            const amps_int *inc = amps_mesh_incident(m, 2, &deg);
+            CHECK(deg == 2 && inc[0] == 0 && inc[1] == 1 && amps_mesh_degree(m, 0) == 1 && amps_mesh_degree(m, 4) == 1,
+                  "incidence");
+            CHECK(amps_mesh_incident(m, 5, &deg) == NULL && deg == 0 && amps_mesh_degree(m, -1) == 0,
+                  "incidence of invalid node");
             CHECK(amps_mesh_set_material(&ctx, m, 0, 0.3) == AMPS_ERR_ARG, "E = 0");
             CHECK(amps_mesh_set_material(&ctx, m, 1, 0.5) == AMPS_ERR_ARG, "nu = 0.5");
             CHECK(amps_mesh_set_material(&ctx, m, 1, -1) == AMPS_ERR_ARG, "nu = -1");
             CHECK(amps_mesh_set_material(&ctx, m, xyz[0] / 0.0 * 0.0, 0.3) == AMPS_ERR_VALUE, "E = NaN");
             CHECK(amps_mesh_set_tet_material(&ctx, m, 2, 1, 0.3) == AMPS_ERR_INDEX, "tet 2 out of range");
             CHECK(m->E[0] == 1.0 && m->nu[0] == 0.3, "failed calls leave the material");
-            CHECK(amps_mesh_set_material(&ctx, m, 200, -0.2) == AMPS_OK && m->E[1] == 200 && m->nu[1] == -0.2, "set all");
-            CHECK(amps_mesh_set_tet_material(&ctx, m, 1, 5, 0.49) == AMPS_OK && m->E[1] == 5 && m->E[0] == 200, "set one");
+            CHECK(amps_mesh_set_material(&ctx, m, 200, -0.2) == AMPS_OK && m->E[1] == 200 && m->nu[1] == -0.2,
+                  "set all");
+            CHECK(amps_mesh_set_tet_material(&ctx, m, 1, 5, 0.49) == AMPS_OK && m->E[1] == 5 && m->E[0] == 200,
+                  "set one");
             amps_mesh_free(&ctx, m);
         }
-        CHECK(!amps_mesh_create(&ctx, 5, xyz, 2, bad) && ctx.status == AMPS_ERR_INDEX && strstr(ctx.msg, "tetrahedron 1"), "index: %s", ctx.msg);
-        CHECK(!amps_mesh_create(&ctx, 5, xyz, 2, flat) && ctx.status == AMPS_ERR_MESH && strstr(ctx.msg, "tetrahedron 1"), "flat: %s", ctx.msg);
+        CHECK(!amps_mesh_create(&ctx, 5, xyz, 2, bad) && ctx.status == AMPS_ERR_INDEX &&
+                      strstr(ctx.msg, "tetrahedron 1"),
+              "index: %s", ctx.msg);
+        CHECK(!amps_mesh_create(&ctx, 5, xyz, 2, flat) && ctx.status == AMPS_ERR_MESH &&
+                      strstr(ctx.msg, "tetrahedron 1"),
+              "flat: %s", ctx.msg);
         /* node 4 at distance d above the centroid of face 1 2 3: volume ~ 0.1 d L^3 */
         memcpy(xyz2, xyz, sizeof(xyz));
         xyz2[12] = xyz2[13] = xyz2[14] = 1.0 / 3 + 1e-6 / sqrt(3.0);
@@ -330,10 +441,13 @@ static void test_mesh_create(void) {
         CHECK(m != NULL, "thin but valid tet rejected: %s", ctx.msg);
         amps_mesh_free(&ctx, m);
         xyz2[12] = xyz2[13] = xyz2[14] = 1.0 / 3 + 1e-13;
-        CHECK(!amps_mesh_create(&ctx, 5, xyz2, 2, nearflat) && ctx.status == AMPS_ERR_MESH && strstr(ctx.msg, "tetrahedron 1"), "near-flat: %s", ctx.msg);
+        CHECK(!amps_mesh_create(&ctx, 5, xyz2, 2, nearflat) && ctx.status == AMPS_ERR_MESH &&
+                      strstr(ctx.msg, "tetrahedron 1"),
+              "near-flat: %s", ctx.msg);
         memcpy(xyz2, xyz, sizeof(xyz));
         xyz2[7] = xyz2[7] / 0.0;
-        CHECK(!amps_mesh_create(&ctx, 5, xyz2, 2, tet) && ctx.status == AMPS_ERR_VALUE && strstr(ctx.msg, "node 2"), "inf: %s", ctx.msg);
+        CHECK(!amps_mesh_create(&ctx, 5, xyz2, 2, tet) && ctx.status == AMPS_ERR_VALUE && strstr(ctx.msg, "node 2"),
+              "inf: %s", ctx.msg);
         CHECK(!amps_mesh_create(&ctx, 5, xyz, 0, tet) && ctx.status == AMPS_ERR_MESH, "no tets");
         CHECK(!amps_mesh_create(&ctx, -1, xyz, 1, tet) && ctx.status == AMPS_ERR_ARG, "negative count");
         CHECK(!amps_mesh_create(&ctx, 5, NULL, 1, tet) && ctx.status == AMPS_ERR_ARG, "NULL xyz");
@@ -342,7 +456,8 @@ static void test_mesh_create(void) {
         CHECK(m && amps_mesh_degree(m, 4) == 0, "isolated node");
         if (m) {
             amps_int dof[15];
-            CHECK(amps_mesh_number_dofs(m, NULL, dof) == 12 && dof[12] == -1 && dof[11] == 11, "number_dofs with isolated node");
+            CHECK(amps_mesh_number_dofs(m, NULL, dof) == 12 && dof[12] == -1 && dof[11] == 11,
+                  "number_dofs with isolated node");
             amps_mesh_free(&ctx, m);
         }
     }
@@ -350,18 +465,24 @@ static void test_mesh_create(void) {
 
 /* amps_mesh_check detects each kind of corruption (fields are restored after each case). */
 static void test_check(void) {
-    amps_ctx ctx; amps_mesh *m; amps_int s, moved[32], nm, vc;
+    amps_ctx ctx;
+    amps_mesh *m;
+    amps_int s, moved[32], nm, vc;
     double p[3] = {0.5, 0.5, 0.5}, n[3] = {1, 0, 0}, x;
     amps_ctx_init(&ctx);
     m = amps_mesh_grid(&ctx, 2, 2, 2, 1, 1, 1);
-    if (!m) { CHECK(0, "grid"); return; }
+    if (!m) {
+        CHECK(0, "grid");
+        return;
+    }
     amps_mesh_cut(&ctx, m, 0, p, n, &vc, moved, &nm);
     CHECK(amps_mesh_check(&ctx, m) == AMPS_OK, "valid mesh: %s", ctx.msg);
-#define T_BREAK(field, val, what)                                                                                   \
-    do {                                                                                                            \
-        s = field; field = val;                                                                                     \
-        CHECK(amps_mesh_check(&ctx, m) == AMPS_ERR_MESH, "check misses: %s", what);                                 \
-        field = s;                                                                                                  \
+#define T_BREAK(field, val, what)                                                   \
+    do {                                                                            \
+        s = field;                                                                  \
+        field = val;                                                                \
+        CHECK(amps_mesh_check(&ctx, m) == AMPS_ERR_MESH, "check misses: %s", what); \
+        field = s;                                                                  \
     } while (0)
     T_BREAK(m->tet[5], 99, "node out of range");
     T_BREAK(m->tet[5], m->tet[4], "repeated node");
@@ -375,7 +496,8 @@ static void test_check(void) {
     T_BREAK(m->inc[m->inc_ptr[8]], m->inc[m->inc_ptr[0]], "tet without the node");
     T_BREAK(m->nfile, m->nnode + 1, "counts");
 #undef T_BREAK
-    x = m->xyz[3 * 8]; m->xyz[3 * 8] = 5;
+    x = m->xyz[3 * 8];
+    m->xyz[3 * 8] = 5;
     CHECK(amps_mesh_check(&ctx, m) == AMPS_ERR_MESH, "check misses a moved copy");
     m->xyz[3 * 8] = x;
     CHECK(amps_mesh_check(&ctx, m) == AMPS_OK, "restored");
@@ -383,24 +505,35 @@ static void test_check(void) {
 }
 
 static void test_select(void) {
-    amps_ctx ctx; amps_mesh *m; amps_int out[200], n, k; int ok = 1;
+    amps_ctx ctx;
+    amps_mesh *m;
+    amps_int out[200], n, k;
+    int ok = 1;
     unsigned char fixed[100];
     amps_int dof[300];
     amps_ctx_init(&ctx);
     m = amps_mesh_beam(&ctx, 4);
-    if (!m) { CHECK(0, "beam"); return; }
+    if (!m) {
+        CHECK(0, "beam");
+        return;
+    }
     n = amps_mesh_select(&ctx, m, 2, AMPS_LT, 0.5, out);
     CHECK(n == 25, "fix z lt 0.5: %d", (int)n);
-    for (k = 0; k < n; k++) if (out[k] != k) ok = 0;
+    for (k = 0; k < n; k++)
+        if (out[k] != k) ok = 0;
     CHECK(ok, "z lt 0.5 selects nodes 0..24");
     CHECK(amps_mesh_select(&ctx, m, 2, AMPS_GT, 2.5, NULL) == 25, "z gt 2.5");
     CHECK(amps_mesh_select(&ctx, m, 0, AMPS_LT, 1.0, NULL) == 20, "x lt 1 (strict)");
     CHECK(amps_mesh_select(&ctx, m, 1, AMPS_GT, -1, NULL) == 100, "y gt -1");
-    CHECK(amps_mesh_select(&ctx, m, 3, AMPS_LT, 0, NULL) == -1 && ctx.status == AMPS_ERR_ARG && strstr(ctx.msg, "axis 3"), "bad axis: %s", ctx.msg);
+    CHECK(amps_mesh_select(&ctx, m, 3, AMPS_LT, 0, NULL) == -1 && ctx.status == AMPS_ERR_ARG &&
+                  strstr(ctx.msg, "axis 3"),
+          "bad axis: %s", ctx.msg);
     memset(fixed, 0, sizeof(fixed));
     n = amps_mesh_select(&ctx, m, 2, AMPS_LT, 0.5, out);
     for (k = 0; k < n; k++) fixed[out[k]] = 1;
-    CHECK(amps_mesh_number_dofs(m, fixed, dof) == 225 && dof[0] == -1 && dof[74] == -1 && dof[75] == 0 && dof[299] == 224, "number_dofs");
+    CHECK(amps_mesh_number_dofs(m, fixed, dof) == 225 && dof[0] == -1 && dof[74] == -1 && dof[75] == 0 &&
+                  dof[299] == 224,
+          "number_dofs");
     amps_mesh_free(&ctx, m);
 }
 
@@ -409,38 +542,58 @@ static void test_select(void) {
 /* amps_mesh_beam / amps_mesh_brick are fe_util's meshes node for node and tet for tet; their
    assembled matrices agree (dof from fe_number, bottom or x = 0 face fixed). */
 static void test_fe_util_meshes(void) {
-    amps_ctx ctx; int which, k;
+    amps_ctx ctx;
+    int which, k;
     amps_ctx_init(&ctx);
     for (which = 0; which < 4; which++) {
         fe_mesh f = which < 2 ? fe_beam(3 + 2 * which) : fe_brick(which - 1);
         amps_mesh *m = which < 2 ? amps_mesh_beam(&ctx, 3 + 2 * which) : amps_mesh_brick(&ctx, which - 1);
-        int *fixed = (int *)calloc((size_t)f.nn, sizeof(int)), *fdof = (int *)malloc(sizeof(int) * 3 * f.nn), ndof, same = 1;
+        int *fixed = (int *)calloc((size_t)f.nn, sizeof(int)), *fdof = (int *)malloc(sizeof(int) * 3 * f.nn), ndof,
+            same = 1;
         amps_int *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * f.nn);
         double *x1 = (double *)malloc(sizeof(double) * 3 * f.nn);
         CHECK(m && m->nnode == f.nn && m->ntet == f.nt, "mesh %d counts", which);
-        if (!m || m->nnode != f.nn || m->ntet != f.nt) { fe_free(&f); free(fixed); free(fdof); free(dof); free(x1); amps_mesh_free(&ctx, m); continue; }
+        if (!m || m->nnode != f.nn || m->ntet != f.nt) {
+            fe_free(&f);
+            free(fixed);
+            free(fdof);
+            free(dof);
+            free(x1);
+            amps_mesh_free(&ctx, m);
+            continue;
+        }
         for (k = 0; k < 3 * f.nn; k++) x1[k] = m->xyz[k];
         CHECK(t_reldiff(3 * f.nn, x1, f.xyz) == 0, "mesh %d coordinates", which);
-        for (k = 0; k < 4 * f.nt; k++) if (m->tet[k] != f.tet[k]) same = 0;
+        for (k = 0; k < 4 * f.nt; k++)
+            if (m->tet[k] != f.tet[k]) same = 0;
         CHECK(same, "mesh %d tets", which);
         for (k = 0; k < f.nn; k++) fixed[k] = which < 2 ? f.xyz[3 * k + 2] == 0 : f.xyz[3 * k] == 0;
         ndof = fe_number(&f, fixed, fdof);
         for (k = 0; k < 3 * f.nn; k++) dof[k] = fdof[k];
         amps_mesh_set_material(&ctx, m, 3.0, 0.35);
         t_compare_assembly(&ctx, m, dof, ndof, 3.0, 0.35, which < 2 ? "fe_beam" : "fe_brick");
-        fe_free(&f); free(fixed); free(fdof); free(dof); free(x1);
+        fe_free(&f);
+        free(fixed);
+        free(fdof);
+        free(dof);
+        free(x1);
         amps_mesh_free(&ctx, m);
     }
 }
 
 static void test_assembly(void) {
-    amps_ctx ctx; amps_mesh *m; amps_int *dof, ndof, k, n;
+    amps_ctx ctx;
+    amps_mesh *m;
+    amps_int *dof, ndof, k, n;
     unsigned char *fixed;
     amps_ctx_init(&ctx);
     t_seed(3);
     /* beam, bottom fixed, node order */
     m = amps_mesh_beam(&ctx, 5);
-    if (!m) { CHECK(0, "beam"); return; }
+    if (!m) {
+        CHECK(0, "beam");
+        return;
+    }
     amps_mesh_set_material(&ctx, m, 1000, 0.3);
     dof = (amps_int *)malloc(sizeof(amps_int) * 3 * m->nnode);
     fixed = (unsigned char *)calloc((size_t)m->nnode, 1);
@@ -452,7 +605,8 @@ static void test_assembly(void) {
     for (k = 0; k < 3 * m->nnode; k++) dof[k] = (t_int(7) == 0) ? -1 : n++;
     for (k = 3 * m->nnode - 1; k > 0; k--) {
         amps_int j = t_int((int)k + 1), s = dof[k];
-        dof[k] = dof[j]; dof[j] = s;
+        dof[k] = dof[j];
+        dof[j] = s;
     }
     t_compare_assembly(&ctx, m, dof, n, 1000, 0.3, "beam random numbering");
     /* errors: out-of-range and duplicate equations */
@@ -460,7 +614,8 @@ static void test_assembly(void) {
     dof[5] = ndof;
     CHECK(!amps_mesh_assemble(&ctx, m, dof, ndof) && ctx.status == AMPS_ERR_INDEX, "dof out of range");
     dof[5] = 4;
-    CHECK(!amps_mesh_assemble(&ctx, m, dof, ndof) && ctx.status == AMPS_ERR_ARG && strstr(ctx.msg, "equation 4"), "duplicate: %s", ctx.msg);
+    CHECK(!amps_mesh_assemble(&ctx, m, dof, ndof) && ctx.status == AMPS_ERR_ARG && strstr(ctx.msg, "equation 4"),
+          "duplicate: %s", ctx.msg);
     CHECK(!amps_mesh_assemble(&ctx, m, dof, -1) && ctx.status == AMPS_ERR_ARG, "negative ndof");
     /* a gap in the numbering gives an empty column */
     ndof = amps_mesh_number_dofs(m, NULL, dof);
@@ -470,12 +625,16 @@ static void test_assembly(void) {
         CHECK(A && A->p[1] == 0 && A->p[2] == 1, "empty column 0");
         amps_csc_free(&ctx, A);
     }
-    free(dof); free(fixed);
+    free(dof);
+    free(fixed);
     amps_mesh_free(&ctx, m);
 
     /* brick, x = 0 face fixed, other material */
     m = amps_mesh_brick(&ctx, 3);
-    if (!m) { CHECK(0, "brick"); return; }
+    if (!m) {
+        CHECK(0, "brick");
+        return;
+    }
     amps_mesh_set_material(&ctx, m, 2.5, 0.45);
     dof = (amps_int *)malloc(sizeof(amps_int) * 3 * m->nnode);
     fixed = (unsigned char *)calloc((size_t)m->nnode, 1);
@@ -487,27 +646,38 @@ static void test_assembly(void) {
     /* per-tet material: doubling E everywhere doubles K */
     {
         amps_csc *A = amps_mesh_assemble(&ctx, m, dof, ndof), *B;
-        amps_int t; double md = 0;
+        amps_int t;
+        double md = 0;
         for (t = 0; t < m->ntet; t++) amps_mesh_set_tet_material(&ctx, m, t, 5.0, 0.45);
         B = amps_mesh_assemble(&ctx, m, dof, ndof);
-        if (A && B) for (k = 0; k < A->p[ndof]; k++) if (fabs(B->x[k] - 2 * A->x[k]) > md) md = fabs(B->x[k] - 2 * A->x[k]);
+        if (A && B)
+            for (k = 0; k < A->p[ndof]; k++)
+                if (fabs(B->x[k] - 2 * A->x[k]) > md) md = fabs(B->x[k] - 2 * A->x[k]);
         CHECK(A && B && md < 1e-12, "per-tet material: %g", md);
-        amps_csc_free(&ctx, A); amps_csc_free(&ctx, B);
+        amps_csc_free(&ctx, A);
+        amps_csc_free(&ctx, B);
     }
-    free(dof); free(fixed);
+    free(dof);
+    free(fixed);
     amps_mesh_free(&ctx, m);
 }
 
 /* ---- patch test and uniaxial stress ---- */
 
 static void test_patch(void) {
-    amps_ctx ctx; amps_mesh *m; amps_int *dof, ndof, v, t; amps_csc *K;
+    amps_ctx ctx;
+    amps_mesh *m;
+    amps_int *dof, ndof, v, t;
+    amps_csc *K;
     double A[9], b[3], *u, *f, eps[6], worst = 0, fmax = 0, fint = 0, sum[3] = {0, 0, 0};
     int k;
     amps_ctx_init(&ctx);
     t_seed(4);
     m = amps_mesh_brick(&ctx, 3);
-    if (!m) { CHECK(0, "brick"); return; }
+    if (!m) {
+        CHECK(0, "brick");
+        return;
+    }
     amps_mesh_set_material(&ctx, m, 7, 0.3);
     for (k = 0; k < 9; k++) A[k] = t_unif() - 0.5;
     for (k = 0; k < 3; k++) b[k] = t_unif();
@@ -515,16 +685,21 @@ static void test_patch(void) {
     f = (double *)malloc(sizeof(double) * 3 * m->nnode);
     dof = (amps_int *)malloc(sizeof(amps_int) * 3 * m->nnode);
     for (v = 0; v < m->nnode; v++)
-        for (k = 0; k < 3; k++) u[3 * v + k] = A[3 * k] * m->xyz[3 * v] + A[3 * k + 1] * m->xyz[3 * v + 1] + A[3 * k + 2] * m->xyz[3 * v + 2] + b[k];
+        for (k = 0; k < 3; k++)
+            u[3 * v + k] = A[3 * k] * m->xyz[3 * v] + A[3 * k + 1] * m->xyz[3 * v + 1] +
+                           A[3 * k + 2] * m->xyz[3 * v + 2] + b[k];
     /* constant strain = sym(A) in every tet */
     for (t = 0; t < m->ntet; t++) {
-        double X[12], ue[12]; int a, c;
+        double X[12], ue[12];
+        int a, c;
         amps_mesh_tet_coords(m, t, X);
-        for (a = 0; a < 4; a++) for (c = 0; c < 3; c++) ue[3 * a + c] = u[3 * m->tet[4 * t + a] + c];
+        for (a = 0; a < 4; a++)
+            for (c = 0; c < 3; c++) ue[3 * a + c] = u[3 * m->tet[4 * t + a] + c];
         amps_tet_strain(X, ue, eps);
         {
             double want[6] = {A[0], A[4], A[8], A[1] + A[3], A[5] + A[7], A[2] + A[6]};
-            for (c = 0; c < 6; c++) if (fabs(eps[c] - want[c]) > worst) worst = fabs(eps[c] - want[c]);
+            for (c = 0; c < 6; c++)
+                if (fabs(eps[c] - want[c]) > worst) worst = fabs(eps[c] - want[c]);
         }
     }
     CHECK(worst < 1e-13, "patch: strain not constant (%g)", worst);
@@ -535,7 +710,8 @@ static void test_patch(void) {
         t_symv(K, u, f);
         for (v = 0; v < m->nnode; v++) {
             const double *x = m->xyz + 3 * v;
-            int interior = x[0] > 1e-9 && x[0] < 1 - 1e-9 && x[1] > 1e-9 && x[1] < 1 - 1e-9 && x[2] > 1e-9 && x[2] < 2 - 1e-9;
+            int interior =
+                    x[0] > 1e-9 && x[0] < 1 - 1e-9 && x[1] > 1e-9 && x[1] < 1 - 1e-9 && x[2] > 1e-9 && x[2] < 2 - 1e-9;
             for (k = 0; k < 3; k++) {
                 if (interior && fabs(f[3 * v + k]) > fint) fint = fabs(f[3 * v + k]);
                 if (fabs(f[3 * v + k]) > fmax) fmax = fabs(f[3 * v + k]);
@@ -551,7 +727,8 @@ static void test_patch(void) {
     /* uniaxial stress s along z: u = (-nu s/E x, -nu s/E y, s/E z) */
     {
         double E = 7, nu = 0.3, s = -2.5, *vm = (double *)malloc(sizeof(double) * m->ntet);
-        double *pr = (double *)malloc(sizeof(double) * 3 * m->ntet), *sig = (double *)malloc(sizeof(double) * 6 * m->ntet);
+        double *pr = (double *)malloc(sizeof(double) * 3 * m->ntet),
+               *sig = (double *)malloc(sizeof(double) * 6 * m->ntet);
         double err = 0;
         for (v = 0; v < m->nnode; v++) {
             u[3 * v] = -nu * s / E * m->xyz[3 * v];
@@ -561,7 +738,8 @@ static void test_patch(void) {
         CHECK(amps_mesh_stress(&ctx, m, u, sig, vm, pr) == AMPS_OK, "mesh stress");
         for (t = 0; t < m->ntet; t++) {
             double want[6] = {0, 0, s, 0, 0, 0};
-            for (k = 0; k < 6; k++) if (fabs(sig[6 * t + k] - want[k]) > err) err = fabs(sig[6 * t + k] - want[k]);
+            for (k = 0; k < 6; k++)
+                if (fabs(sig[6 * t + k] - want[k]) > err) err = fabs(sig[6 * t + k] - want[k]);
             if (fabs(vm[t] - fabs(s)) > err) err = fabs(vm[t] - fabs(s));
             if (fabs(pr[3 * t] - 0) > err) err = fabs(pr[3 * t]);
             if (fabs(pr[3 * t + 1] - 0) > err) err = fabs(pr[3 * t + 1]);
@@ -573,76 +751,118 @@ static void test_patch(void) {
             double X[12], ue[12], sg[6], vmt, prt[3], tau = 0.7, G = E / (2 * (1 + nu));
             int a;
             t_rand_tet(X);
-            for (a = 0; a < 4; a++) { ue[3 * a] = -nu * 3 / E * X[3 * a]; ue[3 * a + 1] = -nu * 3 / E * X[3 * a + 1]; ue[3 * a + 2] = 3 / E * X[3 * a + 2]; }
+            for (a = 0; a < 4; a++) {
+                ue[3 * a] = -nu * 3 / E * X[3 * a];
+                ue[3 * a + 1] = -nu * 3 / E * X[3 * a + 1];
+                ue[3 * a + 2] = 3 / E * X[3 * a + 2];
+            }
             amps_tet_stress(X, E, nu, ue, sg, &vmt, prt);
-            CHECK(fabs(sg[2] - 3) < 1e-13 && fabs(vmt - 3) < 1e-13 && fabs(prt[0] - 3) < 1e-13 && fabs(prt[2]) < 1e-13, "tension");
-            for (a = 0; a < 4; a++) { ue[3 * a] = tau / G * X[3 * a + 1]; ue[3 * a + 1] = 0; ue[3 * a + 2] = 0; }
+            CHECK(fabs(sg[2] - 3) < 1e-13 && fabs(vmt - 3) < 1e-13 && fabs(prt[0] - 3) < 1e-13 && fabs(prt[2]) < 1e-13,
+                  "tension");
+            for (a = 0; a < 4; a++) {
+                ue[3 * a] = tau / G * X[3 * a + 1];
+                ue[3 * a + 1] = 0;
+                ue[3 * a + 2] = 0;
+            }
             amps_tet_stress(X, E, nu, ue, sg, &vmt, NULL);
             CHECK(fabs(sg[3] - tau) < 1e-13 && fabs(vmt - sqrt(3.0) * tau) < 1e-13, "shear: sxy %g vm %g", sg[3], vmt);
         }
-        free(vm); free(pr); free(sig);
+        free(vm);
+        free(pr);
+        free(sig);
     }
-    free(u); free(f); free(dof);
+    free(u);
+    free(f);
+    free(dof);
     amps_mesh_free(&ctx, m);
 }
 
 /* ---- cuts ---- */
 
-typedef struct t_snap { amps_int nnode, ntet, cap; amps_int *tet, *inc, *ptr, *len, *org; } t_snap;
+typedef struct t_snap {
+    amps_int nnode, ntet, cap;
+    amps_int *tet, *inc, *ptr, *len, *org;
+} t_snap;
 static t_snap t_snap_take(const amps_mesh *m) {
     t_snap s;
-    s.nnode = m->nnode; s.ntet = m->ntet; s.cap = m->node_cap;
-    s.tet = (amps_int *)malloc(sizeof(amps_int) * 4 * m->ntet); memcpy(s.tet, m->tet, sizeof(amps_int) * 4 * m->ntet);
-    s.inc = (amps_int *)malloc(sizeof(amps_int) * 4 * m->ntet); memcpy(s.inc, m->inc, sizeof(amps_int) * 4 * m->ntet);
-    s.ptr = (amps_int *)malloc(sizeof(amps_int) * m->nnode); memcpy(s.ptr, m->inc_ptr, sizeof(amps_int) * m->nnode);
-    s.len = (amps_int *)malloc(sizeof(amps_int) * m->nnode); memcpy(s.len, m->inc_len, sizeof(amps_int) * m->nnode);
-    s.org = (amps_int *)malloc(sizeof(amps_int) * m->nnode); memcpy(s.org, m->origin, sizeof(amps_int) * m->nnode);
+    s.nnode = m->nnode;
+    s.ntet = m->ntet;
+    s.cap = m->node_cap;
+    s.tet = (amps_int *)malloc(sizeof(amps_int) * 4 * m->ntet);
+    memcpy(s.tet, m->tet, sizeof(amps_int) * 4 * m->ntet);
+    s.inc = (amps_int *)malloc(sizeof(amps_int) * 4 * m->ntet);
+    memcpy(s.inc, m->inc, sizeof(amps_int) * 4 * m->ntet);
+    s.ptr = (amps_int *)malloc(sizeof(amps_int) * m->nnode);
+    memcpy(s.ptr, m->inc_ptr, sizeof(amps_int) * m->nnode);
+    s.len = (amps_int *)malloc(sizeof(amps_int) * m->nnode);
+    memcpy(s.len, m->inc_len, sizeof(amps_int) * m->nnode);
+    s.org = (amps_int *)malloc(sizeof(amps_int) * m->nnode);
+    memcpy(s.org, m->origin, sizeof(amps_int) * m->nnode);
     return s;
 }
 static int t_snap_same(const t_snap *s, const amps_mesh *m) {
     return s->nnode == m->nnode && s->ntet == m->ntet && !memcmp(s->tet, m->tet, sizeof(amps_int) * 4 * m->ntet) &&
-           !memcmp(s->inc, m->inc, sizeof(amps_int) * 4 * m->ntet) && !memcmp(s->ptr, m->inc_ptr, sizeof(amps_int) * m->nnode) &&
-           !memcmp(s->len, m->inc_len, sizeof(amps_int) * m->nnode) && !memcmp(s->org, m->origin, sizeof(amps_int) * m->nnode);
+           !memcmp(s->inc, m->inc, sizeof(amps_int) * 4 * m->ntet) &&
+           !memcmp(s->ptr, m->inc_ptr, sizeof(amps_int) * m->nnode) &&
+           !memcmp(s->len, m->inc_len, sizeof(amps_int) * m->nnode) &&
+           !memcmp(s->org, m->origin, sizeof(amps_int) * m->nnode);
 }
-static void t_snap_free(t_snap *s) { free(s->tet); free(s->inc); free(s->ptr); free(s->len); free(s->org); }
+static void t_snap_free(t_snap *s) {
+    free(s->tet);
+    free(s->inc);
+    free(s->ptr);
+    free(s->len);
+    free(s->org);
+}
 
 static double t_side(const amps_mesh *m, amps_int t, const double p[3], const double n[3]) {
-    double s = 0; int c;
+    double s = 0;
+    int c;
     for (c = 0; c < 3; c++) {
-        double x = 0.25 * (m->xyz[3 * m->tet[4 * t] + c] + m->xyz[3 * m->tet[4 * t + 1] + c] + m->xyz[3 * m->tet[4 * t + 2] + c] + m->xyz[3 * m->tet[4 * t + 3] + c]);
+        double x = 0.25 * (m->xyz[3 * m->tet[4 * t] + c] + m->xyz[3 * m->tet[4 * t + 1] + c] +
+                           m->xyz[3 * m->tet[4 * t + 2] + c] + m->xyz[3 * m->tet[4 * t + 3] + c]);
         s += (x - p[c]) * n[c];
     }
     return s;
 }
 
 /* Cuts v and checks the result against a brute-force evaluation of the rule. */
-static void t_cut_check(amps_ctx *ctx, amps_mesh *m, amps_int v, const double p[3], const double n[3], const char *what) {
+static void t_cut_check(amps_ctx *ctx, amps_mesh *m, amps_int v, const double p[3], const double n[3],
+                        const char *what) {
     amps_int deg, nm = -5, vc = -5, moved[256], want[256], nw = 0, k, before = m->nnode, ok = 1, keep;
     const amps_int *inc = amps_mesh_incident(m, v, &deg);
     amps_status s;
-    for (k = 0; k < deg; k++) if (t_side(m, inc[k], p, n) < 0) want[nw++] = inc[k];
+    for (k = 0; k < deg; k++)
+        if (t_side(m, inc[k], p, n) < 0) want[nw++] = inc[k];
     keep = deg - nw;
     s = amps_mesh_cut(ctx, m, v, p, n, &vc, moved, &nm);
     if (nw == 0 || nw == deg) {
         CHECK(s == AMPS_WARN_NOOP && nm == 0 && vc == -1 && m->nnode == before, "%s: expected a no-op", what);
         return;
     }
-    CHECK(s == AMPS_OK && vc == before && m->nnode == before + 1 && nm == nw, "%s: cut failed (%d: %s)", what, (int)s, ctx->msg);
+    CHECK(s == AMPS_OK && vc == before && m->nnode == before + 1 && nm == nw, "%s: cut failed (%d: %s)", what, (int)s,
+          ctx->msg);
     if (s != AMPS_OK) return;
-    for (k = 0; k < nw; k++) if (moved[k] != want[k]) ok = 0;
+    for (k = 0; k < nw; k++)
+        if (moved[k] != want[k]) ok = 0;
     CHECK(ok, "%s: wrong tets moved", what);
     for (k = 0; k < nw; k++) {
         const amps_int *tv = m->tet + 4 * moved[k];
-        if (!(tv[0] == vc || tv[1] == vc || tv[2] == vc || tv[3] == vc) || tv[0] == v || tv[1] == v || tv[2] == v || tv[3] == v) ok = 0;
+        if (!(tv[0] == vc || tv[1] == vc || tv[2] == vc || tv[3] == vc) || tv[0] == v || tv[1] == v || tv[2] == v ||
+            tv[3] == v)
+            ok = 0;
     }
     CHECK(ok, "%s: moved tets do not use the copy", what);
-    CHECK(m->origin[vc] == m->origin[v] && m->xyz[3 * vc] == m->xyz[3 * v] && m->xyz[3 * vc + 2] == m->xyz[3 * v + 2], "%s: copy", what);
+    CHECK(m->origin[vc] == m->origin[v] && m->xyz[3 * vc] == m->xyz[3 * v] && m->xyz[3 * vc + 2] == m->xyz[3 * v + 2],
+          "%s: copy", what);
     CHECK(amps_mesh_degree(m, v) == keep && amps_mesh_degree(m, vc) == nw, "%s: degrees", what);
     CHECK(amps_mesh_check(ctx, m) == AMPS_OK, "%s: check: %s", what, ctx->msg);
 }
 
 static void test_cut(void) {
-    amps_ctx ctx; amps_mesh *m; amps_int moved[64], nm, vc, k;
+    amps_ctx ctx;
+    amps_mesh *m;
+    amps_int moved[64], nm, vc, k;
     amps_ctx_init(&ctx);
     /* two tets sharing the face 1 2 3 */
     {
@@ -652,29 +872,45 @@ static void test_cut(void) {
         double pc[3] = {0.25, 0.25, 0.25}; /* centroid of tet 0: exact tie */
         t_snap sn;
         m = amps_mesh_create(&ctx, 5, xyz, 2, tet);
-        if (!m) { CHECK(0, "create"); return; }
+        if (!m) {
+            CHECK(0, "create");
+            return;
+        }
         sn = t_snap_take(m);
-        CHECK(amps_mesh_cut(&ctx, m, 1, far, x1, &vc, moved, &nm) == AMPS_WARN_NOOP && nm == 0 && vc == -1 && t_snap_same(&sn, m), "no-op: all on + side");
+        CHECK(amps_mesh_cut(&ctx, m, 1, far, x1, &vc, moved, &nm) == AMPS_WARN_NOOP && nm == 0 && vc == -1 &&
+                      t_snap_same(&sn, m),
+              "no-op: all on + side");
         CHECK(ctx.status == AMPS_WARN_NOOP && strstr(ctx.msg, "node 1"), "no-op message: %s", ctx.msg);
-        CHECK(amps_mesh_cut(&ctx, m, 1, far, nn, &vc, moved, &nm) == AMPS_WARN_NOOP && t_snap_same(&sn, m), "no-op: all on - side");
-        CHECK(amps_mesh_cut(&ctx, m, 0, p, n, &vc, moved, &nm) == AMPS_WARN_NOOP && t_snap_same(&sn, m), "no-op: degree 1");
-        CHECK(amps_mesh_cut(&ctx, m, 1, pc, n, &vc, moved, &nm) == AMPS_WARN_NOOP && t_snap_same(&sn, m), "tie keeps v -> no-op");
+        CHECK(amps_mesh_cut(&ctx, m, 1, far, nn, &vc, moved, &nm) == AMPS_WARN_NOOP && t_snap_same(&sn, m),
+              "no-op: all on - side");
+        CHECK(amps_mesh_cut(&ctx, m, 0, p, n, &vc, moved, &nm) == AMPS_WARN_NOOP && t_snap_same(&sn, m),
+              "no-op: degree 1");
+        CHECK(amps_mesh_cut(&ctx, m, 1, pc, n, &vc, moved, &nm) == AMPS_WARN_NOOP && t_snap_same(&sn, m),
+              "tie keeps v -> no-op");
         CHECK(amps_mesh_cut(&ctx, m, 5, p, n, &vc, moved, &nm) == AMPS_ERR_INDEX && t_snap_same(&sn, m), "invalid v");
         CHECK(amps_mesh_cut(&ctx, m, -1, p, n, &vc, moved, &nm) == AMPS_ERR_INDEX, "negative v");
-        { double z[3] = {0, 0, 0}, nan3[3] = {0, 0, 0}; nan3[1] = z[0] / z[0];
-          CHECK(amps_mesh_cut(&ctx, m, 1, p, z, &vc, moved, &nm) == AMPS_ERR_ARG, "zero normal");
-          CHECK(amps_mesh_cut(&ctx, m, 1, p, nan3, &vc, moved, &nm) == AMPS_ERR_VALUE, "NaN normal");
-          CHECK(amps_mesh_cut(&ctx, m, 1, nan3, n, &vc, moved, &nm) == AMPS_ERR_VALUE, "NaN point"); }
+        {
+            double z[3] = {0, 0, 0}, nan3[3] = {0, 0, 0};
+            nan3[1] = z[0] / z[0];
+            CHECK(amps_mesh_cut(&ctx, m, 1, p, z, &vc, moved, &nm) == AMPS_ERR_ARG, "zero normal");
+            CHECK(amps_mesh_cut(&ctx, m, 1, p, nan3, &vc, moved, &nm) == AMPS_ERR_VALUE, "NaN normal");
+            CHECK(amps_mesh_cut(&ctx, m, 1, nan3, n, &vc, moved, &nm) == AMPS_ERR_VALUE, "NaN point");
+        }
         CHECK(amps_mesh_cut(&ctx, m, 1, p, n, &vc, NULL, &nm) == AMPS_ERR_ARG && t_snap_same(&sn, m), "moved NULL");
         t_snap_free(&sn);
         /* tie at tet 0's centroid with normal -n: tet 1 (centroid on the + side of n) moves, tet 0 stays */
-        CHECK(amps_mesh_cut(&ctx, m, 2, pc, nn, &vc, moved, &nm) == AMPS_OK && nm == 1 && moved[0] == 1 && vc == 5, "tie: %s", ctx.msg);
-        CHECK(m->tet[4] == 4 && m->tet[6] == 5 && m->tet[2] == 2 && m->origin[5] == 2 && m->nfile == 5, "tets after cut");
+        CHECK(amps_mesh_cut(&ctx, m, 2, pc, nn, &vc, moved, &nm) == AMPS_OK && nm == 1 && moved[0] == 1 && vc == 5,
+              "tie: %s", ctx.msg);
+        CHECK(m->tet[4] == 4 && m->tet[6] == 5 && m->tet[2] == 2 && m->origin[5] == 2 && m->nfile == 5,
+              "tets after cut");
         /* cut node 1 with the plane between the centroids: tet 0 moves */
         t_cut_check(&ctx, m, 1, p, n, "two tets node 1");
         CHECK(m->nnode == 7 && m->tet[1] == 6 && m->origin[6] == 1, "second cut");
         /* node 3: separated; a copy of a copy keeps the file origin */
-        { double p2[3] = {0.4, 0.4, 0.4}; t_cut_check(&ctx, m, 3, p2, nn, "two tets node 3"); }
+        {
+            double p2[3] = {0.4, 0.4, 0.4};
+            t_cut_check(&ctx, m, 3, p2, nn, "two tets node 3");
+        }
         CHECK(m->nnode == 8 && m->origin[7] == 3 && m->tet[7] == 7, "third cut moved tet 1");
         amps_mesh_free(&ctx, m);
     }
@@ -683,21 +919,36 @@ static void test_cut(void) {
         double p[3], n[3];
         amps_int v = 2 + 5 * (2 + 5 * 2), c1;
         m = amps_mesh_beam(&ctx, 5);
-        if (!m) { CHECK(0, "beam"); return; }
+        if (!m) {
+            CHECK(0, "beam");
+            return;
+        }
         CHECK(amps_mesh_degree(m, v) == 24, "interior Kuhn node degree %d", (int)amps_mesh_degree(m, v));
-        p[0] = 2; p[1] = 2; p[2] = 2; n[0] = 0; n[1] = 0; n[2] = 1;
+        p[0] = 2;
+        p[1] = 2;
+        p[2] = 2;
+        n[0] = 0;
+        n[1] = 0;
+        n[2] = 1;
         t_cut_check(&ctx, m, v, p, n, "beam z plane");
         CHECK(amps_mesh_degree(m, v) == 12, "half the tets stay");
         c1 = m->nnode - 1;
-        n[0] = 1; n[1] = 0.3; n[2] = 0;
+        n[0] = 1;
+        n[1] = 0.3;
+        n[2] = 0;
         t_cut_check(&ctx, m, c1, p, n, "beam cut the copy");
         CHECK(m->origin[m->nnode - 1] == v && m->nnode == 127, "copy of copy origin");
-        n[0] = 0.2; n[1] = -1; n[2] = 0.1;
+        n[0] = 0.2;
+        n[1] = -1;
+        n[2] = 0.1;
         t_cut_check(&ctx, m, v, p, n, "beam cut v again");
         for (k = 0; k < 40; k++) { /* random planes through random nodes */
             amps_int w = t_int((int)m->nnode);
             int c;
-            for (c = 0; c < 3; c++) { p[c] = m->xyz[3 * w + c] + (t_unif() - 0.5); n[c] = t_unif() - 0.5; }
+            for (c = 0; c < 3; c++) {
+                p[c] = m->xyz[3 * w + c] + (t_unif() - 0.5);
+                n[c] = t_unif() - 0.5;
+            }
             t_cut_check(&ctx, m, w, p, n, "beam random");
         }
         amps_mesh_free(&ctx, m);
@@ -705,9 +956,14 @@ static void test_cut(void) {
     /* full crack through the beam at z = 2: the part above floats free */
     {
         double p[3] = {0, 0, 2}, n[3] = {0, 0, 1}, *u, *f, fmax = 0;
-        amps_int v, *dof, ndof, ncut = 0; unsigned char *fixed; amps_csc *K;
+        amps_int v, *dof, ndof, ncut = 0;
+        unsigned char *fixed;
+        amps_csc *K;
         m = amps_mesh_beam(&ctx, 5);
-        if (!m) { CHECK(0, "beam"); return; }
+        if (!m) {
+            CHECK(0, "beam");
+            return;
+        }
         for (v = 0; v < 125; v++)
             if (m->xyz[3 * v + 2] == 2.0 && amps_mesh_cut(&ctx, m, v, p, n, &vc, moved, &nm) == AMPS_OK) ncut++;
         CHECK(ncut == 25 && m->nnode == 150 && amps_mesh_check(&ctx, m) == AMPS_OK, "crack: %d cuts", (int)ncut);
@@ -720,14 +976,18 @@ static void test_cut(void) {
         K = amps_mesh_assemble(&ctx, m, dof, ndof);
         /* translate the upper part (nodes at z > 2, and the layer z = 2 that the upper tets kept) */
         for (v = 0; v < m->nnode; v++)
-            if (dof[3 * v] >= 0 && (m->xyz[3 * v + 2] > 2 || (m->xyz[3 * v + 2] == 2 && v < 125))) u[dof[3 * v + 1]] = 1;
+            if (dof[3 * v] >= 0 && (m->xyz[3 * v + 2] > 2 || (m->xyz[3 * v + 2] == 2 && v < 125)))
+                u[dof[3 * v + 1]] = 1;
         if (K) {
             t_symv(K, u, f);
             fmax = t_maxabs((int)ndof, f);
             CHECK(fmax < 1e-12, "crack: upper part not free (residual %g)", fmax);
             amps_csc_free(&ctx, K);
         } else CHECK(0, "assemble after cuts: %s", ctx.msg);
-        free(dof); free(fixed); free(u); free(f);
+        free(dof);
+        free(fixed);
+        free(u);
+        free(f);
         amps_mesh_free(&ctx, m);
     }
 }
@@ -735,7 +995,10 @@ static void test_cut(void) {
 /* ---- allocation behaviour ---- */
 
 static void test_alloc(void) {
-    amps_ctx ctx; amps_mesh *m; amps_int moved[64], nm, vc, *dof, ndof, k; long base, calls;
+    amps_ctx ctx;
+    amps_mesh *m;
+    amps_int moved[64], nm, vc, *dof, ndof, k;
+    long base, calls;
     double p[3] = {2, 2, 2}, n[3] = {0, 0, 1};
     amps_status s;
     int fails;
@@ -744,7 +1007,10 @@ static void test_alloc(void) {
     base = t_al.live;
     /* no allocation when the capacity suffices */
     m = amps_mesh_beam(&ctx, 5);
-    if (!m) { CHECK(0, "beam"); return; }
+    if (!m) {
+        CHECK(0, "beam");
+        return;
+    }
     CHECK(amps_mesh_reserve(&ctx, m, m->nnode + 10) == AMPS_OK && m->node_cap == 135, "reserve");
     calls = t_al.calls;
     for (k = 0; k < 10; k++) {
@@ -760,7 +1026,8 @@ static void test_alloc(void) {
         p[2] = 3;
         t_al.fail_at = 2; /* third array of the growth */
         s = amps_mesh_cut(&ctx, m, v, p, n, &vc, moved, &nm);
-        CHECK(s == AMPS_ERR_OOM && t_snap_same(&sn, m) && m->node_cap == 135 && vc == -1 && nm == 0, "growth failure: %d", (int)s);
+        CHECK(s == AMPS_ERR_OOM && t_snap_same(&sn, m) && m->node_cap == 135 && vc == -1 && nm == 0,
+              "growth failure: %d", (int)s);
         CHECK(amps_mesh_check(&ctx, m) == AMPS_OK, "check after failed growth");
         t_al.fail_at = -1;
         s = amps_mesh_cut(&ctx, m, v, p, n, &vc, moved, &nm);
@@ -776,7 +1043,10 @@ static void test_alloc(void) {
         t_al.fail_at = -1;
         if (m) break;
         fails++;
-        if (ctx.status != AMPS_ERR_OOM || t_al.live != base) { CHECK(0, "brick failure %d: status %d, leak %ld", (int)k, (int)ctx.status, t_al.live - base); break; }
+        if (ctx.status != AMPS_ERR_OOM || t_al.live != base) {
+            CHECK(0, "brick failure %d: status %d, leak %ld", (int)k, (int)ctx.status, t_al.live - base);
+            break;
+        }
     }
     CHECK(m && fails > 5, "brick after %d failures", fails);
     if (!m) return;
@@ -788,9 +1058,15 @@ static void test_alloc(void) {
         t_al.fail_at = k;
         A = amps_mesh_assemble(&ctx, m, dof, ndof);
         t_al.fail_at = -1;
-        if (A) { amps_csc_free(&ctx, A); break; }
+        if (A) {
+            amps_csc_free(&ctx, A);
+            break;
+        }
         fails++;
-        if (ctx.status != AMPS_ERR_OOM || t_al.live != live) { CHECK(0, "assemble failure %d: leak", (int)k); break; }
+        if (ctx.status != AMPS_ERR_OOM || t_al.live != live) {
+            CHECK(0, "assemble failure %d: leak", (int)k);
+            break;
+        }
     }
     CHECK(fails >= 5, "assemble failure paths: %d", fails);
     CHECK(amps_mesh_check(&ctx, m) == AMPS_OK, "check");

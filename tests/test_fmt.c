@@ -29,7 +29,7 @@ static void t_cmp(size_t size, const char *fmt, ...) {
 static double t_rand_double(void) {
     double v = t_unif(), m = pow(10.0, t_int(61) - 30);
     switch (t_int(4)) {
-    case 0: v = floor(v * 1e6) / 1e3; break;       /* few digits */
+    case 0: v = floor(v * 1e6) / 1e3; break;         /* few digits */
     case 1: v = (floor(v * 2e6) + 0.5) / 1e6; break; /* a 7th-digit tie, roughly */
     case 2: v = (double)(t_int(100000)); break;
     default: break;
@@ -38,9 +38,11 @@ static double t_rand_double(void) {
 }
 
 int main(void) {
-    static const double special[] = {0.0, -0.0, 1.0, -1.0, 0.5, 1.5, 2.5, 9.5, 0.05, 99999.95, 999999.5, 9999995.0, 1e-5, 1e-4,
-                                     1e-3, 123456.0, 1234567.0, 1e15, 1e16, 1e17, 1e21, 1e100, 1e300, 1e-300, 4.9e-324,
-                                     DBL_MAX, DBL_MIN, 0.1, 0.2, 0.3, 1.0 / 3.0, 2.0 / 3.0, 12.5, 0.125, 1e-310, 123.456e10};
+    static const double special[] = {0.0,       -0.0,     1.0,      -1.0,      0.5,  1.5,   2.5,       9.5,
+                                     0.05,      99999.95, 999999.5, 9999995.0, 1e-5, 1e-4,  1e-3,      123456.0,
+                                     1234567.0, 1e15,     1e16,     1e17,      1e21, 1e100, 1e300,     1e-300,
+                                     4.9e-324,  DBL_MAX,  DBL_MIN,  0.1,       0.2,  0.3,   1.0 / 3.0, 2.0 / 3.0,
+                                     12.5,      0.125,    1e-310,   123.456e10};
     static const char *dfmt[] = {"%g", "%.3g", "%e", "%.0f", "%.3f", "%.1g", "%.0g", "%.0e", "%f", "%.12g"};
     size_t i, k;
     int r;
@@ -59,10 +61,11 @@ int main(void) {
         t_cmp(400, "%g|%.3g|%e", v, v, v);
         if (fabs(v) < 1e9) t_cmp(400, "%.0f|%.3f", v, v);
     }
-    t_cmp(400, "%d %d %d %ld %ld %lld %lld %lu %llu %u", 0, INT_MIN, INT_MAX, LONG_MIN, LONG_MAX, LLONG_MIN, LLONG_MAX, ULONG_MAX,
-          ULLONG_MAX, 7u);
+    t_cmp(400, "%d %d %d %ld %ld %lld %lld %lu %llu %u", 0, INT_MIN, INT_MAX, LONG_MIN, LONG_MAX, LLONG_MIN, LLONG_MAX,
+          ULONG_MAX, ULLONG_MAX, 7u);
     t_cmp(400, "%s: [%s] %c 100%% %s", "amps_fn", "", 'q', "tail");
-    t_cmp(400, "amps_factorize: matrix not positive definite: pivot %.3g at column %lld (diagonal %.3g)", -1.5e-13, 17LL, 2.0);
+    t_cmp(400, "amps_factorize: matrix not positive definite: pivot %.3g at column %lld (diagonal %.3g)", -1.5e-13,
+          17LL, 2.0);
     t_cmp(400, "need %.0f entries, cap_vpool is %.0f", 123456789012.0, 1e6);
     for (k = 1; k < 40; k += 3) t_cmp(k, "%s:%lld: %s %g", "file.msh", 123456LL, "expected $EndNodes", 3.25);
     t_cmp(1, "%d", 5);

@@ -22,12 +22,20 @@ static int t_write(const char *path, const char *s, size_t n) {
 
 static char *t_slurp(const char *path, size_t *len) {
     FILE *f = fopen(path, "rb");
-    char *b; long n;
+    char *b;
+    long n;
     if (!f) return NULL;
-    fseek(f, 0, SEEK_END); n = ftell(f); fseek(f, 0, SEEK_SET);
+    fseek(f, 0, SEEK_END);
+    n = ftell(f);
+    fseek(f, 0, SEEK_SET);
     b = (char *)malloc((size_t)n + 1);
-    if (fread(b, 1, (size_t)n, f) != (size_t)n) { free(b); fclose(f); return NULL; }
-    b[n] = 0; fclose(f);
+    if (fread(b, 1, (size_t)n, f) != (size_t)n) {
+        free(b);
+        fclose(f);
+        return NULL;
+    }
+    b[n] = 0;
+    fclose(f);
     if (len) *len = (size_t)n;
     return b;
 }
@@ -35,65 +43,83 @@ static char *t_slurp(const char *path, size_t *len) {
 
 /* Readers on exact-size heap copies (no NUL terminator), so overreads are caught by ASan. */
 static amps_mesh *t_gmsh(amps_ctx *ctx, const char *s) {
-    size_t n = strlen(s); char *b = (char *)malloc(n ? n : 1); amps_mesh *m;
-    memcpy(b, s, n); m = amps_mesh_read_gmsh_mem(ctx, b, n, "g.msh"); free(b); return m;
+    size_t n = strlen(s);
+    char *b = (char *)malloc(n ? n : 1);
+    amps_mesh *m;
+    memcpy(b, s, n);
+    m = amps_mesh_read_gmsh_mem(ctx, b, n, "g.msh");
+    free(b);
+    return m;
 }
 static amps_mesh *t_medit(amps_ctx *ctx, const char *s) {
-    size_t n = strlen(s); char *b = (char *)malloc(n ? n : 1); amps_mesh *m;
-    memcpy(b, s, n); m = amps_mesh_read_medit_mem(ctx, b, n, "m.mesh"); free(b); return m;
+    size_t n = strlen(s);
+    char *b = (char *)malloc(n ? n : 1);
+    amps_mesh *m;
+    memcpy(b, s, n);
+    m = amps_mesh_read_medit_mem(ctx, b, n, "m.mesh");
+    free(b);
+    return m;
 }
 static amps_mesh *t_tetgen(amps_ctx *ctx, const char *node, const char *ele) {
-    size_t n = strlen(node), e = strlen(ele); char *b = (char *)malloc(n ? n : 1), *c = (char *)malloc(e ? e : 1); amps_mesh *m;
-    memcpy(b, node, n); memcpy(c, ele, e);
+    size_t n = strlen(node), e = strlen(ele);
+    char *b = (char *)malloc(n ? n : 1), *c = (char *)malloc(e ? e : 1);
+    amps_mesh *m;
+    memcpy(b, node, n);
+    memcpy(c, ele, e);
     m = amps_mesh_read_tetgen_mem(ctx, b, n, "t.node", c, e, "t.ele");
-    free(b); free(c); return m;
+    free(b);
+    free(c);
+    return m;
 }
 
 /* m is NULL, ctx has status st and a message starting with prefix (e.g. "g.msh:13:"). */
 static void t_expect(amps_ctx *ctx, amps_mesh *m, amps_status st, const char *prefix, const char *what) {
-    CHECK(!m && ctx->status == st && !strncmp(ctx->msg, prefix, strlen(prefix)), "%s: want %d '%s', got %s (%d: %s)", what, (int)st, prefix,
-          m ? "a mesh" : "NULL", (int)ctx->status, ctx->msg);
+    CHECK(!m && ctx->status == st && !strncmp(ctx->msg, prefix, strlen(prefix)), "%s: want %d '%s', got %s (%d: %s)",
+          what, (int)st, prefix, m ? "a mesh" : "NULL", (int)ctx->status, ctx->msg);
     amps_mesh_free(ctx, m);
 }
 
 static int t_same_mesh(const amps_mesh *a, const amps_mesh *b) {
-    return a && b && a->nnode == b->nnode && a->ntet == b->ntet && t_reldiff((int)(3 * a->nnode), a->xyz, b->xyz) == 0 &&
-           t_norm((int)(3 * a->nnode), a->xyz) == t_norm((int)(3 * b->nnode), b->xyz) && !memcmp(a->tet, b->tet, sizeof(amps_int) * 4 * a->ntet);
+    return a && b && a->nnode == b->nnode && a->ntet == b->ntet &&
+           t_reldiff((int)(3 * a->nnode), a->xyz, b->xyz) == 0 &&
+           t_norm((int)(3 * a->nnode), a->xyz) == t_norm((int)(3 * b->nnode), b->xyz) &&
+           !memcmp(a->tet, b->tet, sizeof(amps_int) * 4 * a->ntet);
 }
 
 /* ---- fixtures ---- */
 
 static const char *G22 =
-    "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"
-    "$Elements\n1\n1 4 2 0 1 1 2 3 4\n$EndElements\n";
+        "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"
+        "$Elements\n1\n1 4 2 0 1 1 2 3 4\n$EndElements\n";
 
 static const char *G22_MIXED =
-    "$MeshFormat\r\n2.2 0 8\r\n$EndMeshFormat\r\n$PhysicalNames\r\n2\r\n2 1 \"skin $EndNodes\"\r\n3 2 \"body\"\r\n$EndPhysicalNames\r\n"
-    "$Nodes\r\n6\r\n10 0 0 0\r\n20 1 0 0\r\n30 0 1 0\r\n40 0 0 1\r\n7 1 1 1\r\n5 0.5 0.5 -1\r\n$EndNodes\r\n"
-    "$Elements\r\n6\r\n1 15 2 0 1 10\r\n2 1 2 0 1 10 20\r\n3 2 2 1 1 10 20 30\r\n4 4 2 2 1 10 20 30 40\r\n"
-    "5 4 3 2 1 0 20 30 40 7\r\n6 4 0 10 30 20 5\r\n$EndElements\r\n";
+        "$MeshFormat\r\n2.2 0 8\r\n$EndMeshFormat\r\n$PhysicalNames\r\n2\r\n2 1 \"skin $EndNodes\"\r\n3 2 \"body\"\r\n$EndPhysicalNames\r\n"
+        "$Nodes\r\n6\r\n10 0 0 0\r\n20 1 0 0\r\n30 0 1 0\r\n40 0 0 1\r\n7 1 1 1\r\n5 0.5 0.5 -1\r\n$EndNodes\r\n"
+        "$Elements\r\n6\r\n1 15 2 0 1 10\r\n2 1 2 0 1 10 20\r\n3 2 2 1 1 10 20 30\r\n4 4 2 2 1 10 20 30 40\r\n"
+        "5 4 3 2 1 0 20 30 40 7\r\n6 4 0 10 30 20 5\r\n$EndElements\r\n";
 
 static const char *G41_MIXED =
-    "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Entities\n1 0 0 1\n1 0 0 0 0\n1 0 0 0 1 1 1 1 0 0\n$EndEntities\n"
-    "$Nodes\n3 6 5 40\n0 1 0 1\n10\n0 0 0\n2 1 1 2\n20\n30\n1 0 0 0.5 0.5\n0 1 0 0.25 0.75\n3 1 0 3\n40\n7\n5\n0 0 1\n1 1 1\n0.5 0.5 -1\n$EndNodes\n"
-    "$Elements\n3 5 1 5\n0 1 15 1\n1 10\n2 1 2 1\n2 10 20 30\n3 1 4 3\n3 10 20 30 40\n4 20 30 40 7\n5 10 30 20 5\n$EndElements\n";
+        "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Entities\n1 0 0 1\n1 0 0 0 0\n1 0 0 0 1 1 1 1 0 0\n$EndEntities\n"
+        "$Nodes\n3 6 5 40\n0 1 0 1\n10\n0 0 0\n2 1 1 2\n20\n30\n1 0 0 0.5 0.5\n0 1 0 0.25 0.75\n3 1 0 3\n40\n7\n5\n0 0 1\n1 1 1\n0.5 0.5 -1\n$EndNodes\n"
+        "$Elements\n3 5 1 5\n0 1 15 1\n1 10\n2 1 2 1\n2 10 20 30\n3 1 4 3\n3 10 20 30 40\n4 20 30 40 7\n5 10 30 20 5\n$EndElements\n";
 
 static const double MIXED_XYZ[18] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1, 0.5, 0.5, -1};
 static const amps_int MIXED_TET[12] = {0, 1, 2, 3, 1, 2, 3, 4, 0, 2, 1, 5};
 
 static const char *M_BASE =
-    "MeshVersionFormatted 2\nDimension 3\nVertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\nTetrahedra\n1\n1 2 3 4 0\nEnd\n";
+        "MeshVersionFormatted 2\nDimension 3\nVertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\nTetrahedra\n1\n1 2 3 4 0\nEnd\n";
 
 static const char *M_MIXED =
-    "MeshVersionFormatted 2\r\n# comment line\r\nDimension\r\n3\r\nVertices\r\n6\r\n0 0 0 1\r\n1 0 0 1\r\n0 1 0 1   # trailing comment\r\n"
-    "0 0 1 2\r\n1 1 1 2\r\n0.5 0.5 -1 3\r\nEdges\r\n1\r\n1 2 0\r\nTriangles\r\n2\r\n1 2 3 1\r\n2 3 4 1\r\nRequiredVertices 1 3\r\n"
-    "Tetrahedra\r\n3\r\n1 2 3 4 1\r\n2 3 4 5 7\r\n1 3 2 6 7\r\nCorners\r\n2\r\n1 2\r\nEnd\r\nanything after End is ignored\r\n";
+        "MeshVersionFormatted 2\r\n# comment line\r\nDimension\r\n3\r\nVertices\r\n6\r\n0 0 0 1\r\n1 0 0 1\r\n0 1 0 1   # trailing comment\r\n"
+        "0 0 1 2\r\n1 1 1 2\r\n0.5 0.5 -1 3\r\nEdges\r\n1\r\n1 2 0\r\nTriangles\r\n2\r\n1 2 3 1\r\n2 3 4 1\r\nRequiredVertices 1 3\r\n"
+        "Tetrahedra\r\n3\r\n1 2 3 4 1\r\n2 3 4 5 7\r\n1 3 2 6 7\r\nCorners\r\n2\r\n1 2\r\nEnd\r\nanything after End is ignored\r\n";
 
 static const char *T_NODE4 = "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n";
 static const char *T_ELE1 = "1 4 0\n0 0 1 2 3\n";
 
 static void test_valid_inputs(void) {
-    amps_ctx ctx; amps_mesh *m, *ref;
+    amps_ctx ctx;
+    amps_mesh *m, *ref;
     amps_ctx_init(&ctx);
     ref = amps_mesh_create(&ctx, 6, MIXED_XYZ, 3, MIXED_TET);
     m = t_gmsh(&ctx, G22_MIXED);
@@ -106,9 +132,10 @@ static void test_valid_inputs(void) {
     CHECK(t_same_mesh(m, ref), "medit mixed keywords, comments, CRLF: %s", ctx.msg);
     amps_mesh_free(&ctx, m);
     /* TetGen: 1-based, attributes, markers, comments, 10-node tets */
-    m = t_tetgen(&ctx,
-                 "# points\n6 3 1 1\n1 0 0 0 0.5 1\n2 1 0 0 0.5 1\n\n3 0 1 0 0.5 0\n4 0 0 1 0.5 0 # last attr\n5 1 1 1 2 1\n6 0.5 0.5 -1 0 0\n# end\n",
-                 "# tets, 10 nodes, one attribute\n3 10 1\n1 1 2 3 4 1 2 3 4 5 1 7\n2 2 3 4 5 1 1 1 1 1 1 8\n3 1 3 2 6 6 6 6 6 6 6 0\n");
+    m = t_tetgen(
+            &ctx,
+            "# points\n6 3 1 1\n1 0 0 0 0.5 1\n2 1 0 0 0.5 1\n\n3 0 1 0 0.5 0\n4 0 0 1 0.5 0 # last attr\n5 1 1 1 2 1\n6 0.5 0.5 -1 0 0\n# end\n",
+            "# tets, 10 nodes, one attribute\n3 10 1\n1 1 2 3 4 1 2 3 4 5 1 7\n2 2 3 4 5 1 1 1 1 1 1 8\n3 1 3 2 6 6 6 6 6 6 6 0\n");
     CHECK(t_same_mesh(m, ref), "tetgen 1-based, 10-node: %s", ctx.msg);
     amps_mesh_free(&ctx, m);
     /* TetGen: 0-based, CRLF, header without optional fields */
@@ -125,39 +152,56 @@ static void test_malformed_tetgen(void) {
     amps_ctx ctx;
     amps_ctx_init(&ctx);
     t_expect(&ctx, t_tetgen(&ctx, "", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "empty node file");
-    t_expect(&ctx, t_tetgen(&ctx, "# only a comment\n\n", T_ELE1), AMPS_ERR_PARSE, "t.node:2:", "node file without data");
-    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:3:", "truncated node file");
-    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0", T_ELE1), AMPS_ERR_PARSE, "t.node:3:", "truncated mid-line");
-    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 1 1 1\n", T_ELE1), AMPS_ERR_PARSE, "t.node:6:", "too many points");
+    t_expect(&ctx, t_tetgen(&ctx, "# only a comment\n\n", T_ELE1), AMPS_ERR_PARSE,
+             "t.node:2:", "node file without data");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n", T_ELE1), AMPS_ERR_PARSE,
+             "t.node:3:", "truncated node file");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0", T_ELE1), AMPS_ERR_PARSE,
+             "t.node:3:", "truncated mid-line");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 1 1 1\n", T_ELE1), AMPS_ERR_PARSE,
+             "t.node:6:", "too many points");
     t_expect(&ctx, t_tetgen(&ctx, "-4 3 0 0\n0 0 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "negative count");
     t_expect(&ctx, t_tetgen(&ctx, "99999999999 3 0 0\n0 0 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "absurd count");
-    t_expect(&ctx, t_tetgen(&ctx, "99999999999999999999999 3\n", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "overflowing count");
+    t_expect(&ctx, t_tetgen(&ctx, "99999999999999999999999 3\n", T_ELE1), AMPS_ERR_PARSE,
+             "t.node:1:", "overflowing count");
     t_expect(&ctx, t_tetgen(&ctx, "0 3 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "zero points");
     t_expect(&ctx, t_tetgen(&ctx, "4 2 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "dimension 2");
     t_expect(&ctx, t_tetgen(&ctx, "4 3 0 7\n", T_ELE1), AMPS_ERR_PARSE, "t.node:1:", "bad marker flag");
-    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 nan 0 0\n2 0 1 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_PARSE, "t.node:3:", "NaN");
-    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1e999 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_PARSE, "t.node:4:", "overflow to Inf");
-    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 -inf 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_PARSE, "t.node:4:", "-inf");
-    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 abc 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_PARSE, "t.node:4:", "non-numeric");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 nan 0 0\n2 0 1 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_PARSE,
+             "t.node:3:", "NaN");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1e999 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_PARSE,
+             "t.node:4:", "overflow to Inf");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 -inf 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_PARSE,
+             "t.node:4:", "-inf");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 abc 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_PARSE,
+             "t.node:4:", "non-numeric");
     t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n2 0 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:2:", "first number 2");
-    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n2 1 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:3:", "out of sequence");
-    t_expect(&ctx, t_tetgen(&ctx, "# c\n\n4 3 0 0\n0 0 0 0\n\n1 x 0 0\n", T_ELE1), AMPS_ERR_PARSE, "t.node:6:", "line count with comments");
-    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\r\n0 0 0 0\r\n1 1 0 0\r\n2 0 1 0\r\n3 0 0 z\r\n", T_ELE1), AMPS_ERR_PARSE, "t.node:5:", "CRLF line count");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n2 1 0 0\n", T_ELE1), AMPS_ERR_PARSE,
+             "t.node:3:", "out of sequence");
+    t_expect(&ctx, t_tetgen(&ctx, "# c\n\n4 3 0 0\n0 0 0 0\n\n1 x 0 0\n", T_ELE1), AMPS_ERR_PARSE,
+             "t.node:6:", "line count with comments");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\r\n0 0 0 0\r\n1 1 0 0\r\n2 0 1 0\r\n3 0 0 z\r\n", T_ELE1), AMPS_ERR_PARSE,
+             "t.node:5:", "CRLF line count");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, ""), AMPS_ERR_PARSE, "t.ele:1:", "empty ele");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 2 4\n"), AMPS_ERR_PARSE, "t.ele:2:", "index out of range");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 2 -1\n"), AMPS_ERR_PARSE, "t.ele:2:", "negative index");
-    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n", "1 4 0\n1 0 1 2 3\n"), AMPS_ERR_PARSE, "t.ele:2:", "0 in 1-based");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n", "1 4 0\n1 0 1 2 3\n"),
+             AMPS_ERR_PARSE, "t.ele:2:", "0 in 1-based");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 2\n"), AMPS_ERR_PARSE, "t.ele:2:", "missing index");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 x 3\n"), AMPS_ERR_PARSE, "t.ele:2:", "non-numeric index");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 2.0 3\n"), AMPS_ERR_PARSE, "t.ele:2:", "fractional index");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 5 0\n0 0 1 2 3 3\n"), AMPS_ERR_PARSE, "t.ele:1:", "5 nodes per tet");
-    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "2 4 0\n0 0 1 2 3\n"), AMPS_ERR_PARSE, "t.ele:2:", "fewer tets than declared");
-    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 2 3\n1 0 1 2 3\n"), AMPS_ERR_PARSE, "t.ele:3:", "more tets than declared");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "2 4 0\n0 0 1 2 3\n"), AMPS_ERR_PARSE,
+             "t.ele:2:", "fewer tets than declared");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 0\n0 0 1 2 3\n1 0 1 2 3\n"), AMPS_ERR_PARSE,
+             "t.ele:3:", "more tets than declared");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "-1 4 0\n"), AMPS_ERR_PARSE, "t.ele:1:", "negative tet count");
-    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 -3\n0 0 1 2 3\n"), AMPS_ERR_PARSE, "t.ele:1:", "negative attribute count");
+    t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "1 4 -3\n0 0 1 2 3\n"), AMPS_ERR_PARSE,
+             "t.ele:1:", "negative attribute count");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "0 4 0\n"), AMPS_ERR_PARSE, "t.ele:1:", "zero tets");
     t_expect(&ctx, t_tetgen(&ctx, T_NODE4, "# x\n1 4 0\n0 0 1 2 2\n"), AMPS_ERR_MESH, "t.ele:3:", "degenerate tet");
-    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 2 0 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_MESH, "t.ele:2:", "flat tet");
+    t_expect(&ctx, t_tetgen(&ctx, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 2 0 0\n3 0 0 1\n", T_ELE1), AMPS_ERR_MESH,
+             "t.ele:2:", "flat tet");
 }
 
 static void test_malformed_gmsh(void) {
@@ -175,32 +219,52 @@ static void test_malformed_gmsh(void) {
     t_expect(&ctx, t_gmsh(&ctx, "\n\n\n"), AMPS_ERR_PARSE, "g.msh:3:", "blank");
     t_expect(&ctx, t_gmsh(&ctx, "hello\n"), AMPS_ERR_PARSE, "g.msh:1:", "garbage");
     t_expect(&ctx, t_gmsh(&ctx, G_NODES), AMPS_ERR_PARSE, "g.msh:1:", "no $MeshFormat");
-    t_expect(&ctx, t_gmsh(&ctx, "$MeshFormat\n2.2 1 8\n\x01\x00\x00\x00\n$EndMeshFormat\n"), AMPS_ERR_PARSE, "g.msh:2:", "binary");
+    t_expect(&ctx, t_gmsh(&ctx, "$MeshFormat\n2.2 1 8\n\x01\x00\x00\x00\n$EndMeshFormat\n"), AMPS_ERR_PARSE,
+             "g.msh:2:", "binary");
     CHECK(strstr(ctx.msg, "binary") != NULL, "binary message: %s", ctx.msg);
     t_expect(&ctx, t_gmsh(&ctx, "$MeshFormat\n3.0 0 8\n$EndMeshFormat\n"), AMPS_ERR_PARSE, "g.msh:2:", "version 3");
     t_expect(&ctx, t_gmsh(&ctx, "$MeshFormat\n4 0 8\n$EndMeshFormat\n"), AMPS_ERR_PARSE, "g.msh:2:", "version 4.0");
-    t_expect(&ctx, t_gmsh(&ctx, "$MeshFormat\n2.2 0 8\n$Nodes\n"), AMPS_ERR_PARSE, "g.msh:3:", "missing $EndMeshFormat");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n3\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:9:", "node count too small");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n5\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:10:", "node count too large");
+    t_expect(&ctx, t_gmsh(&ctx, "$MeshFormat\n2.2 0 8\n$Nodes\n"), AMPS_ERR_PARSE,
+             "g.msh:3:", "missing $EndMeshFormat");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n3\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE,
+             "g.msh:9:", "node count too small");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n5\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE,
+             "g.msh:10:", "node count too large");
     t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n-4\n"), AMPS_ERR_PARSE, "g.msh:5:", "negative node count");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n1000000000\n1 0 0 0\n"), AMPS_ERR_PARSE, "g.msh:5:", "absurd node count");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n4\n1 0 0 0\n1 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:7:", "duplicate tag");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 NaN 0\n4 0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:8:", "NaN");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\r\n4\r\n1 0 0 0\r\n2 1 0 0\r\n3 0 0 0\r\n4 0 0 Infinity\r\n$EndNodes\r\n"), AMPS_ERR_PARSE, "g.msh:9:", "Inf CRLF");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 4 2 0 1 1 2 3 9\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:13:", "undefined tag");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 4 2 0 1 1 2 3\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:13:", "missing node");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n1000000000\n1 0 0 0\n"), AMPS_ERR_PARSE,
+             "g.msh:5:", "absurd node count");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n4\n1 0 0 0\n1 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE,
+             "g.msh:7:", "duplicate tag");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 NaN 0\n4 0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE,
+             "g.msh:8:", "NaN");
+    t_expect(&ctx,
+             t_gmsh(&ctx, G_HEAD "$Nodes\r\n4\r\n1 0 0 0\r\n2 1 0 0\r\n3 0 0 0\r\n4 0 0 Infinity\r\n$EndNodes\r\n"),
+             AMPS_ERR_PARSE, "g.msh:9:", "Inf CRLF");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 4 2 0 1 1 2 3 9\n$EndElements\n"), AMPS_ERR_PARSE,
+             "g.msh:13:", "undefined tag");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 4 2 0 1 1 2 3\n$EndElements\n"), AMPS_ERR_PARSE,
+             "g.msh:13:", "missing node");
     t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n"), AMPS_ERR_PARSE, "g.msh:12:", "truncated elements");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 x 2 0 1 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:13:", "non-numeric type");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n-1\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:12:", "negative element count");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n2\n1 4 2 0 1 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:14:", "element count too large");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 4 -2 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:13:", "negative tag count");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 2 2 0 1 1 2 3\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:14:", "no tetrahedra");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Elements\n1\n1 4 2 0 1 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:4:", "$Elements before $Nodes");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 x 2 0 1 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE,
+             "g.msh:13:", "non-numeric type");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n-1\n$EndElements\n"), AMPS_ERR_PARSE,
+             "g.msh:12:", "negative element count");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n2\n1 4 2 0 1 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE,
+             "g.msh:14:", "element count too large");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 4 -2 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE,
+             "g.msh:13:", "negative tag count");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 2 2 0 1 1 2 3\n$EndElements\n"), AMPS_ERR_PARSE,
+             "g.msh:14:", "no tetrahedra");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Elements\n1\n1 4 2 0 1 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE,
+             "g.msh:4:", "$Elements before $Nodes");
     t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES G_NODES), AMPS_ERR_PARSE, "g.msh:11:", "duplicate $Nodes");
     t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_HEAD), AMPS_ERR_PARSE, "g.msh:4:", "duplicate $MeshFormat");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n0\n$EndElements\n$Elements\n"), AMPS_ERR_PARSE, "g.msh:14:", "duplicate $Elements");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Comments\nhello\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:4:", "unterminated section");
-    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 4 2 0 1 1 2 3 3\n$EndElements\n"), AMPS_ERR_MESH, "g.msh:13:", "degenerate");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n0\n$EndElements\n$Elements\n"), AMPS_ERR_PARSE,
+             "g.msh:14:", "duplicate $Elements");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD "$Comments\nhello\n$EndNodes\n"), AMPS_ERR_PARSE,
+             "g.msh:4:", "unterminated section");
+    t_expect(&ctx, t_gmsh(&ctx, G_HEAD G_NODES "$Elements\n1\n1 4 2 0 1 1 2 3 3\n$EndElements\n"), AMPS_ERR_MESH,
+             "g.msh:13:", "degenerate");
     /* 4.1 */
 #define G4_HEAD "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n"
 #define G4_NODES "$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n"
@@ -209,13 +273,24 @@ static void test_malformed_gmsh(void) {
         CHECK(m != NULL, "4.1 base: %s", ctx.msg);
         amps_mesh_free(&ctx, m);
     }
-    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD "$Nodes\n1 5 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:15:", "4.1 node count mismatch");
-    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD "$Nodes\n1 4 1 4\n3 1 0 5\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n"), AMPS_ERR_PARSE, "g.msh:6:", "4.1 block too large");
-    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD "$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n"), AMPS_ERR_PARSE, "g.msh:13:", "4.1 truncated coordinates");
-    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD G4_NODES "$Elements\n1 1 1 1\n3 1 4 1\n1 1 2 3 5\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:19:", "4.1 undefined tag");
-    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD G4_NODES "$Elements\n1 2 1 2\n3 1 4 1\n1 1 2 3 4\n$EndElements\n"), AMPS_ERR_PARSE, "g.msh:20:", "4.1 element count mismatch");
-    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD G4_NODES "$Elements\n1 3 1 3\n2 1 2 3\n1 1 2 3\n"), AMPS_ERR_PARSE, "g.msh:19:", "4.1 truncated block");
-    snprintf(buf, sizeof(buf), "%s", G4_HEAD "$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n9999999999 1 1 1\n");
+    t_expect(&ctx,
+             t_gmsh(&ctx, G4_HEAD "$Nodes\n1 5 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n"),
+             AMPS_ERR_PARSE, "g.msh:15:", "4.1 node count mismatch");
+    t_expect(&ctx,
+             t_gmsh(&ctx, G4_HEAD "$Nodes\n1 4 1 4\n3 1 0 5\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n"),
+             AMPS_ERR_PARSE, "g.msh:6:", "4.1 block too large");
+    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD "$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n"), AMPS_ERR_PARSE,
+             "g.msh:13:", "4.1 truncated coordinates");
+    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD G4_NODES "$Elements\n1 1 1 1\n3 1 4 1\n1 1 2 3 5\n$EndElements\n"),
+             AMPS_ERR_PARSE, "g.msh:19:", "4.1 undefined tag");
+    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD G4_NODES "$Elements\n1 2 1 2\n3 1 4 1\n1 1 2 3 4\n$EndElements\n"),
+             AMPS_ERR_PARSE, "g.msh:20:", "4.1 element count mismatch");
+    t_expect(&ctx, t_gmsh(&ctx, G4_HEAD G4_NODES "$Elements\n1 3 1 3\n2 1 2 3\n1 1 2 3\n"), AMPS_ERR_PARSE,
+             "g.msh:19:", "4.1 truncated block");
+    snprintf(
+            buf, sizeof(buf), "%s",
+            G4_HEAD
+            "$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n9999999999 1 1 1\n");
     t_expect(&ctx, t_gmsh(&ctx, buf), AMPS_ERR_PARSE, "g.msh:17:", "4.1 absurd block count");
 #undef G_HEAD
 #undef G_NODES
@@ -236,22 +311,36 @@ static void test_malformed_medit(void) {
     t_expect(&ctx, t_medit(&ctx, "MeshVersionFormatted 2\nDimension 2\n"), AMPS_ERR_PARSE, "m.mesh:2:", "2D");
     t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n0 2 3 4 0\nEnd\n"), AMPS_ERR_PARSE, "m.mesh:11:", "index 0");
     t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n1 2 3 5 0\nEnd\n"), AMPS_ERR_PARSE, "m.mesh:11:", "index 5");
-    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n1 2 x 4 0\nEnd\n"), AMPS_ERR_PARSE, "m.mesh:11:", "non-numeric index");
+    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n1 2 x 4 0\nEnd\n"), AMPS_ERR_PARSE,
+             "m.mesh:11:", "non-numeric index");
     t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n1 2 3"), AMPS_ERR_PARSE, "m.mesh:11:", "truncated tet");
-    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n2\n1 2 3 4 0\nEnd\n"), AMPS_ERR_PARSE, "m.mesh:12:", "fewer tets than declared");
-    t_expect(&ctx, t_medit(&ctx, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\nTetrahedra\n1\n1 2 3 4 0\n"), AMPS_ERR_PARSE, "m.mesh:6:", "fewer vertices than declared");
+    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n2\n1 2 3 4 0\nEnd\n"), AMPS_ERR_PARSE,
+             "m.mesh:12:", "fewer tets than declared");
+    t_expect(&ctx, t_medit(&ctx, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\nTetrahedra\n1\n1 2 3 4 0\n"), AMPS_ERR_PARSE,
+             "m.mesh:6:", "fewer vertices than declared");
     t_expect(&ctx, t_medit(&ctx, "Vertices\n4\n0 0 0 0\n1 0 nan 0\n"), AMPS_ERR_PARSE, "m.mesh:4:", "NaN");
-    t_expect(&ctx, t_medit(&ctx, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1e400 0 0\n0 0 1 0\n"), AMPS_ERR_PARSE, "m.mesh:5:", "Inf");
-    t_expect(&ctx, t_medit(&ctx, "Vertices\r\n4\r\n0 0 0 0\r\n\r\n1 0 0 0\r\n0 1 0 0\r\n0 0 1 0\r\nTetrahedra\r\n1\r\n1 2 3 4\r\n"), AMPS_ERR_PARSE, "m.mesh:10:", "missing reference, CRLF");
+    t_expect(&ctx, t_medit(&ctx, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1e400 0 0\n0 0 1 0\n"), AMPS_ERR_PARSE,
+             "m.mesh:5:", "Inf");
+    t_expect(&ctx,
+             t_medit(&ctx,
+                     "Vertices\r\n4\r\n0 0 0 0\r\n\r\n1 0 0 0\r\n0 1 0 0\r\n0 0 1 0\r\nTetrahedra\r\n1\r\n1 2 3 4\r\n"),
+             AMPS_ERR_PARSE, "m.mesh:10:", "missing reference, CRLF");
     t_expect(&ctx, t_medit(&ctx, "Vertices\n-4\n"), AMPS_ERR_PARSE, "m.mesh:2:", "negative count");
     t_expect(&ctx, t_medit(&ctx, "Vertices\n123456789012\n0 0 0 0\n"), AMPS_ERR_PARSE, "m.mesh:2:", "absurd count");
-    t_expect(&ctx, t_medit(&ctx, "Tetrahedra\n1\n1 2 3 4 0\n" M_V), AMPS_ERR_PARSE, "m.mesh:1:", "Tetrahedra before Vertices");
+    t_expect(&ctx, t_medit(&ctx, "Tetrahedra\n1\n1 2 3 4 0\n" M_V), AMPS_ERR_PARSE,
+             "m.mesh:1:", "Tetrahedra before Vertices");
     t_expect(&ctx, t_medit(&ctx, M_V "End\n"), AMPS_ERR_PARSE, "m.mesh:9:", "no Tetrahedra");
-    t_expect(&ctx, t_medit(&ctx, "MeshVersionFormatted 2\n5\n"), AMPS_ERR_PARSE, "m.mesh:2:", "number instead of keyword");
+    t_expect(&ctx, t_medit(&ctx, "MeshVersionFormatted 2\n5\n"), AMPS_ERR_PARSE,
+             "m.mesh:2:", "number instead of keyword");
     t_expect(&ctx, t_medit(&ctx, M_V M_V), AMPS_ERR_PARSE, "m.mesh:11:", "duplicate Vertices");
-    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n0\n\nTetrahedra 0\n"), AMPS_ERR_PARSE, "m.mesh:12:", "duplicate Tetrahedra");
-    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n1 2 3 4 0.5\n"), AMPS_ERR_PARSE, "m.mesh:11:", "fractional reference");
-    t_expect(&ctx, t_medit(&ctx, "Vertices\r\n4\r\n0 0 0 0\r\n1 0 0 0\r\n0 1 0 0\r\n0 0 0 0\r\nTetrahedra\r\n1\r\n1 2 3 4 0\r\n"), AMPS_ERR_MESH, "m.mesh:9:", "degenerate");
+    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n0\n\nTetrahedra 0\n"), AMPS_ERR_PARSE,
+             "m.mesh:12:", "duplicate Tetrahedra");
+    t_expect(&ctx, t_medit(&ctx, M_V "Tetrahedra\n1\n1 2 3 4 0.5\n"), AMPS_ERR_PARSE,
+             "m.mesh:11:", "fractional reference");
+    t_expect(&ctx,
+             t_medit(&ctx,
+                     "Vertices\r\n4\r\n0 0 0 0\r\n1 0 0 0\r\n0 1 0 0\r\n0 0 0 0\r\nTetrahedra\r\n1\r\n1 2 3 4 0\r\n"),
+             AMPS_ERR_MESH, "m.mesh:9:", "degenerate");
 #undef M_V
 }
 
@@ -266,67 +355,122 @@ static void test_messages(void) {
         amps_status st;
         const char *msg;
     } cases[] = {
-        {T_TETGEN, "", "", AMPS_ERR_PARSE, "t.node:1: missing point count"},
-        {T_TETGEN, "x\n", "", AMPS_ERR_PARSE, "t.node:1: invalid integer 'x' for point count"},
-        {T_TETGEN, "4 3\n0 0 0 0\n1 a 0 0\n", "", AMPS_ERR_PARSE, "t.node:3: invalid number 'a' for x coordinate"},
-        {T_TETGEN, "4 3\n0 0 0 0\n1 nan 0 0\n", "", AMPS_ERR_PARSE, "t.node:3: non-finite x coordinate 'nan'"},
-        {T_TETGEN, "-4\n", "", AMPS_ERR_PARSE, "t.node:1: negative point count -4"},
-        {T_TETGEN, "99999999999 3\n0 0 0 0\n", "", AMPS_ERR_PARSE, "t.node:1: point count 99999999999 exceeds what the file can hold"},
-        {T_TETGEN, "0 3 0 0\n", "", AMPS_ERR_PARSE, "t.node:1: the file declares no points"},
-        {T_TETGEN, "4 2 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE, "t.node:1: dimension must be 3, found '2'"},
-        {T_TETGEN, "4 3.0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE, "t.node:1: dimension must be 3, found '3.0'"},
-        {T_TETGEN, "4 3 -1 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE, "t.node:1: invalid attribute count '-1'"},
-        {T_TETGEN, "4 3 0 7\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE, "t.node:1: boundary marker flag must be 0 or 1, found '7'"},
-        {T_TETGEN, "4 3 0 x\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE, "t.node:1: boundary marker flag must be 0 or 1, found 'x'"},
-        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n", "", AMPS_ERR_PARSE, "t.node:3: unexpected end of file: 2 of 4 points read"},
-        {T_TETGEN, "4 3 0 0\n2 0 0 0\n", "", AMPS_ERR_PARSE, "t.node:2: first point number must be 0 or 1, found 2"},
-        {T_TETGEN, "4 3 0 0\n0 0 0 0\n2 1 0 0\n", "", AMPS_ERR_PARSE, "t.node:3: point number 2 out of sequence (expected 1)"},
-        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 1 1 1\n", "", AMPS_ERR_PARSE, "t.node:6: unexpected data '4' after 4 points"},
-        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1 # c\n", "1 6 0\n0 0 1 2 3\n", AMPS_ERR_PARSE, "t.ele:1: nodes per tetrahedron must be 4 or 10, found '6'"},
-        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "1 4 -2\n0 0 1 2 3\n", AMPS_ERR_PARSE, "t.ele:1: invalid attribute count '-2'"},
-        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "2 4 0\n0 0 1 2 3\n", AMPS_ERR_PARSE, "t.ele:2: unexpected end of file: 1 of 2 tetrahedra read"},
-        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "1 4 0\n0 0 1 2 4\n", AMPS_ERR_PARSE, "t.ele:2: node index 4 out of range [0, 3]"},
-        {T_TETGEN, "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n", "1 10 0\n1 1 2 3 4 1 2 3 4 1 5\n", AMPS_ERR_PARSE, "t.ele:2: node index 5 out of range [1, 4]"},
-        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "1 4 0\n0 0 1 2 3\n1 0 1 2 3\n", AMPS_ERR_PARSE, "t.ele:3: unexpected data '1' after 1 tetrahedra"},
-        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "0\n", AMPS_ERR_PARSE, "t.ele:1: no tetrahedra in the file"},
-        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "# d\n1 4 0\n0 0 1 2 2\n", AMPS_ERR_MESH, "t.ele:3: degenerate tetrahedron (file nodes 0 1 2 2, 0-based)"},
-        {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "1\n0 0 1 2\n", AMPS_ERR_PARSE, "t.ele:2: missing node index"},
-        {T_GMSH, "hello\n", "", AMPS_ERR_PARSE, "g.msh:1: expected a section header like $Nodes, found 'hello'"},
-        {T_GMSH, "$Nodes\n", "", AMPS_ERR_PARSE, "g.msh:1: the file must start with $MeshFormat, found '$Nodes'"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$MeshFormat\n", "", AMPS_ERR_PARSE, "g.msh:4: duplicate $MeshFormat"},
-        {T_GMSH, "$MeshFormat\n3.0 0 8\n$EndMeshFormat\n", "", AMPS_ERR_PARSE, "g.msh:2: unsupported .msh version 3.0 (readable: 2.x, 4.1)"},
-        {T_GMSH, "$MeshFormat\n2.2 1 8\n", "", AMPS_ERR_PARSE, "g.msh:2: binary .msh files are not supported; save the mesh as ASCII"},
-        {T_GMSH, "$MeshFormat\n2.2 5 8\n", "", AMPS_ERR_PARSE, "g.msh:2: invalid file type 5 (0 = ASCII)"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n", "", AMPS_ERR_PARSE, "g.msh:2: unexpected end of file, expected $EndMeshFormat"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n3\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n", "", AMPS_ERR_PARSE, "g.msh:9: expected $EndNodes (node count mismatch?), found '4'"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 0\n$EndNodes\n$Nodes\n", "", AMPS_ERR_PARSE, "g.msh:8: duplicate $Nodes section"},
-        {T_GMSH, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 5\n", "", AMPS_ERR_PARSE, "g.msh:6: block node count 5 exceeds the 4 nodes declared"},
-        {T_GMSH, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 5 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n", "", AMPS_ERR_PARSE, "g.msh:15: $Nodes declares 5 nodes, its blocks hold 4"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n2\n7 0 0 0\n7 1 0 0\n$EndNodes\n", "", AMPS_ERR_PARSE, "g.msh:7: duplicate node tag 7 (first on line 6)"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Elements\n", "", AMPS_ERR_PARSE, "g.msh:4: $Elements before $Nodes"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 4 -2 1 2 3 4\n$EndElements\n", "", AMPS_ERR_PARSE, "g.msh:13: negative tag count -2"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 4 2 0 1 1 2 3 9\n$EndElements\n", "", AMPS_ERR_PARSE, "g.msh:13: element refers to undefined node tag 9"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 4 2 0 1 1 2 3 4\n2 4 2 0 1 1 2 3 4\n$EndElements\n", "", AMPS_ERR_PARSE, "g.msh:14: expected $EndElements (element count mismatch?), found '2'"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n0\n$EndElements\n$Elements\n", "", AMPS_ERR_PARSE, "g.msh:14: duplicate $Elements section"},
-        {T_GMSH, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 1 1 1\n3 1 4 2\n", "", AMPS_ERR_PARSE, "g.msh:18: block element count 2 exceeds the 1 elements declared"},
-        {T_GMSH, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 2 1 2\n2 1 2 2\n1 1 2 3\n", "", AMPS_ERR_PARSE, "g.msh:19: unexpected end of file in an element block"},
-        {T_GMSH, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 2 1 2\n3 1 4 1\n1 1 2 3 4\n$EndElements\n", "", AMPS_ERR_PARSE, "g.msh:20: $Elements declares 2 elements, its blocks hold 1"},
-        {T_GMSH, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 1 1 1\n3 1 4 1\n1 1 2 3 3\n$EndElements\n", "", AMPS_ERR_MESH, "g.msh:19: degenerate tetrahedron (file nodes 0 1 2 2, 0-based)"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Comments\nhello\n", "", AMPS_ERR_PARSE, "g.msh:4: section $Comments is not closed by $EndComments"},
-        {T_GMSH, "\n\n", "", AMPS_ERR_PARSE, "g.msh:2: empty file (no $MeshFormat)"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n", "", AMPS_ERR_PARSE, "g.msh:3: no $Nodes section"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 2 2 0 1 1 2 3\n$EndElements\n", "", AMPS_ERR_PARSE, "g.msh:14: no tetrahedra (element type 4) in the file"},
-        {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$ThisSectionNameIsFarTooLongToKeep\n", "", AMPS_ERR_PARSE, "g.msh:4: expected a section header like $Nodes, found '$ThisSectionNameIsFarToo...'"},
-        {T_MEDIT, "Dimension 2\n", "", AMPS_ERR_PARSE, "m.mesh:1: dimension must be 3, found 2"},
-        {T_MEDIT, "Vertices\n1\n0 0 0 0\nVertices\n", "", AMPS_ERR_PARSE, "m.mesh:4: duplicate Vertices section"},
-        {T_MEDIT, "Tetrahedra\n0\n", "", AMPS_ERR_PARSE, "m.mesh:1: Tetrahedra before Vertices"},
-        {T_MEDIT, "Vertices\n1\n0 0 0 0\nTetrahedra\n0\nTetrahedra\n", "", AMPS_ERR_PARSE, "m.mesh:6: duplicate Tetrahedra section"},
-        {T_MEDIT, "Vertices\n1\n0 0 0 0\nTetrahedra\n1\n1 1 1 2 0\n", "", AMPS_ERR_PARSE, "m.mesh:6: vertex index 2 out of range [1, 1]"},
-        {T_MEDIT, "Vertices\n1\n0 0 0 0\n7\n", "", AMPS_ERR_PARSE, "m.mesh:4: expected a keyword, found '7'"},
-        {T_MEDIT, "MeshVersionFormatted 2\nEnd\n", "", AMPS_ERR_PARSE, "m.mesh:2: no Vertices section"},
-        {T_MEDIT, "Vertices\n1\n0 0 0 0\nCorners 1 1\nEnd\n", "", AMPS_ERR_PARSE, "m.mesh:5: no Tetrahedra in the file"},
-        {T_MEDIT, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 0 0\nTetrahedra\n1\n1 2 3 4 0\n", "", AMPS_ERR_MESH, "m.mesh:9: degenerate tetrahedron (file nodes 0 1 2 3, 0-based)"},
-        {T_MEDIT, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\nTetrahedra\n1\n1 2 3 4\n", "", AMPS_ERR_PARSE, "m.mesh:9: missing tetrahedron reference"},
+            {T_TETGEN, "", "", AMPS_ERR_PARSE, "t.node:1: missing point count"},
+            {T_TETGEN, "x\n", "", AMPS_ERR_PARSE, "t.node:1: invalid integer 'x' for point count"},
+            {T_TETGEN, "4 3\n0 0 0 0\n1 a 0 0\n", "", AMPS_ERR_PARSE, "t.node:3: invalid number 'a' for x coordinate"},
+            {T_TETGEN, "4 3\n0 0 0 0\n1 nan 0 0\n", "", AMPS_ERR_PARSE, "t.node:3: non-finite x coordinate 'nan'"},
+            {T_TETGEN, "-4\n", "", AMPS_ERR_PARSE, "t.node:1: negative point count -4"},
+            {T_TETGEN, "99999999999 3\n0 0 0 0\n", "", AMPS_ERR_PARSE,
+             "t.node:1: point count 99999999999 exceeds what the file can hold"},
+            {T_TETGEN, "0 3 0 0\n", "", AMPS_ERR_PARSE, "t.node:1: the file declares no points"},
+            {T_TETGEN, "4 2 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE,
+             "t.node:1: dimension must be 3, found '2'"},
+            {T_TETGEN, "4 3.0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE,
+             "t.node:1: dimension must be 3, found '3.0'"},
+            {T_TETGEN, "4 3 -1 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE,
+             "t.node:1: invalid attribute count '-1'"},
+            {T_TETGEN, "4 3 0 7\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE,
+             "t.node:1: boundary marker flag must be 0 or 1, found '7'"},
+            {T_TETGEN, "4 3 0 x\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "", AMPS_ERR_PARSE,
+             "t.node:1: boundary marker flag must be 0 or 1, found 'x'"},
+            {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n", "", AMPS_ERR_PARSE,
+             "t.node:3: unexpected end of file: 2 of 4 points read"},
+            {T_TETGEN, "4 3 0 0\n2 0 0 0\n", "", AMPS_ERR_PARSE,
+             "t.node:2: first point number must be 0 or 1, found 2"},
+            {T_TETGEN, "4 3 0 0\n0 0 0 0\n2 1 0 0\n", "", AMPS_ERR_PARSE,
+             "t.node:3: point number 2 out of sequence (expected 1)"},
+            {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 1 1 1\n", "", AMPS_ERR_PARSE,
+             "t.node:6: unexpected data '4' after 4 points"},
+            {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1 # c\n", "1 6 0\n0 0 1 2 3\n", AMPS_ERR_PARSE,
+             "t.ele:1: nodes per tetrahedron must be 4 or 10, found '6'"},
+            {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "1 4 -2\n0 0 1 2 3\n", AMPS_ERR_PARSE,
+             "t.ele:1: invalid attribute count '-2'"},
+            {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "2 4 0\n0 0 1 2 3\n", AMPS_ERR_PARSE,
+             "t.ele:2: unexpected end of file: 1 of 2 tetrahedra read"},
+            {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "1 4 0\n0 0 1 2 4\n", AMPS_ERR_PARSE,
+             "t.ele:2: node index 4 out of range [0, 3]"},
+            {T_TETGEN, "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n", "1 10 0\n1 1 2 3 4 1 2 3 4 1 5\n",
+             AMPS_ERR_PARSE, "t.ele:2: node index 5 out of range [1, 4]"},
+            {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "1 4 0\n0 0 1 2 3\n1 0 1 2 3\n", AMPS_ERR_PARSE,
+             "t.ele:3: unexpected data '1' after 1 tetrahedra"},
+            {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "0\n", AMPS_ERR_PARSE,
+             "t.ele:1: no tetrahedra in the file"},
+            {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "# d\n1 4 0\n0 0 1 2 2\n", AMPS_ERR_MESH,
+             "t.ele:3: degenerate tetrahedron (file nodes 0 1 2 2, 0-based)"},
+            {T_TETGEN, "4 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n", "1\n0 0 1 2\n", AMPS_ERR_PARSE,
+             "t.ele:2: missing node index"},
+            {T_GMSH, "hello\n", "", AMPS_ERR_PARSE, "g.msh:1: expected a section header like $Nodes, found 'hello'"},
+            {T_GMSH, "$Nodes\n", "", AMPS_ERR_PARSE, "g.msh:1: the file must start with $MeshFormat, found '$Nodes'"},
+            {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$MeshFormat\n", "", AMPS_ERR_PARSE,
+             "g.msh:4: duplicate $MeshFormat"},
+            {T_GMSH, "$MeshFormat\n3.0 0 8\n$EndMeshFormat\n", "", AMPS_ERR_PARSE,
+             "g.msh:2: unsupported .msh version 3.0 (readable: 2.x, 4.1)"},
+            {T_GMSH, "$MeshFormat\n2.2 1 8\n", "", AMPS_ERR_PARSE,
+             "g.msh:2: binary .msh files are not supported; save the mesh as ASCII"},
+            {T_GMSH, "$MeshFormat\n2.2 5 8\n", "", AMPS_ERR_PARSE, "g.msh:2: invalid file type 5 (0 = ASCII)"},
+            {T_GMSH, "$MeshFormat\n2.2 0 8\n", "", AMPS_ERR_PARSE,
+             "g.msh:2: unexpected end of file, expected $EndMeshFormat"},
+            {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n3\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n",
+             "", AMPS_ERR_PARSE, "g.msh:9: expected $EndNodes (node count mismatch?), found '4'"},
+            {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 0\n$EndNodes\n$Nodes\n", "",
+             AMPS_ERR_PARSE, "g.msh:8: duplicate $Nodes section"},
+            {T_GMSH, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 5\n", "", AMPS_ERR_PARSE,
+             "g.msh:6: block node count 5 exceeds the 4 nodes declared"},
+            {T_GMSH,
+             "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 5 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n",
+             "", AMPS_ERR_PARSE, "g.msh:15: $Nodes declares 5 nodes, its blocks hold 4"},
+            {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n2\n7 0 0 0\n7 1 0 0\n$EndNodes\n", "",
+             AMPS_ERR_PARSE, "g.msh:7: duplicate node tag 7 (first on line 6)"},
+            {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Elements\n", "", AMPS_ERR_PARSE,
+             "g.msh:4: $Elements before $Nodes"},
+            {T_GMSH,
+             "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 4 -2 1 2 3 4\n$EndElements\n",
+             "", AMPS_ERR_PARSE, "g.msh:13: negative tag count -2"},
+            {T_GMSH,
+             "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 4 2 0 1 1 2 3 9\n$EndElements\n",
+             "", AMPS_ERR_PARSE, "g.msh:13: element refers to undefined node tag 9"},
+            {T_GMSH,
+             "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 4 2 0 1 1 2 3 4\n2 4 2 0 1 1 2 3 4\n$EndElements\n",
+             "", AMPS_ERR_PARSE, "g.msh:14: expected $EndElements (element count mismatch?), found '2'"},
+            {T_GMSH,
+             "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n0\n$EndElements\n$Elements\n",
+             "", AMPS_ERR_PARSE, "g.msh:14: duplicate $Elements section"},
+            {T_GMSH,
+             "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 1 1 1\n3 1 4 2\n",
+             "", AMPS_ERR_PARSE, "g.msh:18: block element count 2 exceeds the 1 elements declared"},
+            {T_GMSH,
+             "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 2 1 2\n2 1 2 2\n1 1 2 3\n",
+             "", AMPS_ERR_PARSE, "g.msh:19: unexpected end of file in an element block"},
+            {T_GMSH,
+             "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 2 1 2\n3 1 4 1\n1 1 2 3 4\n$EndElements\n",
+             "", AMPS_ERR_PARSE, "g.msh:20: $Elements declares 2 elements, its blocks hold 1"},
+            {T_GMSH,
+             "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 1 1 1\n3 1 4 1\n1 1 2 3 3\n$EndElements\n",
+             "", AMPS_ERR_MESH, "g.msh:19: degenerate tetrahedron (file nodes 0 1 2 2, 0-based)"},
+            {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Comments\nhello\n", "", AMPS_ERR_PARSE,
+             "g.msh:4: section $Comments is not closed by $EndComments"},
+            {T_GMSH, "\n\n", "", AMPS_ERR_PARSE, "g.msh:2: empty file (no $MeshFormat)"},
+            {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n", "", AMPS_ERR_PARSE, "g.msh:3: no $Nodes section"},
+            {T_GMSH,
+             "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 2 2 0 1 1 2 3\n$EndElements\n",
+             "", AMPS_ERR_PARSE, "g.msh:14: no tetrahedra (element type 4) in the file"},
+            {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$ThisSectionNameIsFarTooLongToKeep\n", "", AMPS_ERR_PARSE,
+             "g.msh:4: expected a section header like $Nodes, found '$ThisSectionNameIsFarToo...'"},
+            {T_MEDIT, "Dimension 2\n", "", AMPS_ERR_PARSE, "m.mesh:1: dimension must be 3, found 2"},
+            {T_MEDIT, "Vertices\n1\n0 0 0 0\nVertices\n", "", AMPS_ERR_PARSE, "m.mesh:4: duplicate Vertices section"},
+            {T_MEDIT, "Tetrahedra\n0\n", "", AMPS_ERR_PARSE, "m.mesh:1: Tetrahedra before Vertices"},
+            {T_MEDIT, "Vertices\n1\n0 0 0 0\nTetrahedra\n0\nTetrahedra\n", "", AMPS_ERR_PARSE,
+             "m.mesh:6: duplicate Tetrahedra section"},
+            {T_MEDIT, "Vertices\n1\n0 0 0 0\nTetrahedra\n1\n1 1 1 2 0\n", "", AMPS_ERR_PARSE,
+             "m.mesh:6: vertex index 2 out of range [1, 1]"},
+            {T_MEDIT, "Vertices\n1\n0 0 0 0\n7\n", "", AMPS_ERR_PARSE, "m.mesh:4: expected a keyword, found '7'"},
+            {T_MEDIT, "MeshVersionFormatted 2\nEnd\n", "", AMPS_ERR_PARSE, "m.mesh:2: no Vertices section"},
+            {T_MEDIT, "Vertices\n1\n0 0 0 0\nCorners 1 1\nEnd\n", "", AMPS_ERR_PARSE,
+             "m.mesh:5: no Tetrahedra in the file"},
+            {T_MEDIT, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 0 0\nTetrahedra\n1\n1 2 3 4 0\n", "", AMPS_ERR_MESH,
+             "m.mesh:9: degenerate tetrahedron (file nodes 0 1 2 3, 0-based)"},
+            {T_MEDIT, "Vertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\nTetrahedra\n1\n1 2 3 4\n", "", AMPS_ERR_PARSE,
+             "m.mesh:9: missing tetrahedron reference"},
     };
     amps_ctx ctx;
     size_t k;
@@ -335,8 +479,9 @@ static void test_messages(void) {
         amps_mesh *m = cases[k].reader == T_TETGEN ? t_tetgen(&ctx, cases[k].in, cases[k].ele)
                        : cases[k].reader == T_GMSH ? t_gmsh(&ctx, cases[k].in)
                                                    : t_medit(&ctx, cases[k].in);
-        CHECK(!m && ctx.status == cases[k].st && !strcmp(ctx.msg, cases[k].msg), "message %d: want %d '%s', got %s (%d: %s)", (int)k,
-              (int)cases[k].st, cases[k].msg, m ? "a mesh" : "NULL", (int)ctx.status, ctx.msg);
+        CHECK(!m && ctx.status == cases[k].st && !strcmp(ctx.msg, cases[k].msg),
+              "message %d: want %d '%s', got %s (%d: %s)", (int)k, (int)cases[k].st, cases[k].msg,
+              m ? "a mesh" : "NULL", (int)ctx.status, ctx.msg);
         amps_mesh_free(&ctx, m);
     }
 }
@@ -345,15 +490,20 @@ static void test_messages(void) {
 /* ---- round trips through files ---- */
 
 static void test_roundtrip(void) {
-    amps_ctx ctx; amps_mesh *m, *r;
+    amps_ctx ctx;
+    amps_mesh *m, *r;
     char p1[700], p2[700];
     double p[3] = {0.5, 0.5, 1.0}, n[3] = {0.3, 0.1, 1};
     amps_int moved[64], nm, vc, v;
     int base, ver;
     amps_ctx_init(&ctx);
     m = amps_mesh_brick(&ctx, 2);
-    if (!m) { CHECK(0, "brick"); return; }
-    for (v = 0; v < m->nnode; v++) if (m->xyz[3 * v + 2] == 1.0) amps_mesh_cut(&ctx, m, v, p, n, &vc, moved, &nm);
+    if (!m) {
+        CHECK(0, "brick");
+        return;
+    }
+    for (v = 0; v < m->nnode; v++)
+        if (m->xyz[3 * v + 2] == 1.0) amps_mesh_cut(&ctx, m, v, p, n, &vc, moved, &nm);
     CHECK(m->nnode > m->nfile, "cuts made copies");
     for (base = 0; base < 2; base++) {
         t_path(p1, base ? "rt1" : "rt0");
@@ -366,7 +516,8 @@ static void test_roundtrip(void) {
         r = amps_mesh_read(&ctx, p2);
         CHECK(t_same_mesh(r, m), "tetgen base %d via .ele: %s", base, ctx.msg);
         amps_mesh_free(&ctx, r);
-        remove(p1); remove(p2);
+        remove(p1);
+        remove(p2);
     }
     for (ver = 2; ver <= 4; ver += 2) {
         t_path(p1, ver == 2 ? "rt22.msh" : "rt41.MSH");
@@ -397,7 +548,8 @@ static void test_roundtrip(void) {
     t_expect(&ctx, amps_mesh_read(&ctx, p1), AMPS_ERR_PARSE, p1, "file message names the path");
     remove(p1);
     t_path(p1, "no_such_dir/x.msh");
-    CHECK(amps_mesh_write_gmsh(&ctx, p1, m, 2) == AMPS_ERR_IO && strstr(ctx.msg, p1), "write to a missing directory: %s", ctx.msg);
+    CHECK(amps_mesh_write_gmsh(&ctx, p1, m, 2) == AMPS_ERR_IO && strstr(ctx.msg, p1),
+          "write to a missing directory: %s", ctx.msg);
     CHECK(amps_mesh_write_gmsh(&ctx, p1, m, 3) == AMPS_ERR_ARG, "gmsh version 3");
     CHECK(amps_mesh_write_tetgen(&ctx, p1, m, 2) == AMPS_ERR_ARG, "tetgen base 2");
     amps_mesh_free(&ctx, m);
@@ -415,9 +567,14 @@ static int t_xml_ok(const char *s, const char *root) {
         const char *e = strchr(p, '>'), *q;
         int quotes = 0, close, n;
         if (!e) return 0;
-        for (q = p; q < e; q++) if (*q == '"') quotes++;
+        for (q = p; q < e; q++)
+            if (*q == '"') quotes++;
         if (quotes % 2) return 0;
-        if (p[1] == '?') { if (e[-1] != '?') return 0; p = e + 1; continue; }
+        if (p[1] == '?') {
+            if (e[-1] != '?') return 0;
+            p = e + 1;
+            continue;
+        }
         close = p[1] == '/';
         q = p + 1 + close;
         for (n = 0; q + n < e && q[n] != ' ' && q[n] != '/' && n < 63; n++) {}
@@ -427,8 +584,13 @@ static int t_xml_ok(const char *s, const char *root) {
             depth--;
         } else if (e[-1] != '/') {
             if (depth == 32) return 0;
-            if (depth == 0) { roots++; if ((int)strlen(root) != n || strncmp(root, q, (size_t)n)) return 0; }
-            memcpy(stack[depth], q, (size_t)n); stack[depth][n] = 0; depth++;
+            if (depth == 0) {
+                roots++;
+                if ((int)strlen(root) != n || strncmp(root, q, (size_t)n)) return 0;
+            }
+            memcpy(stack[depth], q, (size_t)n);
+            stack[depth][n] = 0;
+            depth++;
         }
         p = e + 1;
     }
@@ -449,15 +611,21 @@ static long t_array_count(const char *s, const char *name, double *sum) {
     while (p < e) {
         char *end;
         double v = strtod(p, &end);
-        if (end == p) { p++; continue; }
+        if (end == p) {
+            p++;
+            continue;
+        }
         if (end > e) break;
-        n++; *sum += v; p = end;
+        n++;
+        *sum += v;
+        p = end;
     }
     return n;
 }
 
 static void test_vtu(void) {
-    amps_ctx ctx; amps_mesh *m;
+    amps_ctx ctx;
+    amps_mesh *m;
     char path[700], script[700], cmd[2200];
     double p[3] = {0, 0, 2}, n[3] = {0, 0, 1}, *disp, *vm, *pr, sum;
     amps_int moved[64], nm, vc, v, t, ncut = 0;
@@ -465,7 +633,10 @@ static void test_vtu(void) {
     char *txt;
     amps_ctx_init(&ctx);
     m = amps_mesh_beam(&ctx, 4);
-    if (!m) { CHECK(0, "beam"); return; }
+    if (!m) {
+        CHECK(0, "beam");
+        return;
+    }
     for (v = 50; v < 55; v++) amps_mesh_cut(&ctx, m, v, p, n, &vc, moved, &nm);
     for (t = 0; t < m->ntet; t++) {
         int k, c = 0;
@@ -475,7 +646,11 @@ static void test_vtu(void) {
     disp = (double *)malloc(sizeof(double) * 3 * m->nnode);
     vm = (double *)malloc(sizeof(double) * m->ntet);
     pr = (double *)malloc(sizeof(double) * 3 * m->ntet);
-    for (v = 0; v < m->nnode; v++) { disp[3 * v] = 0.01 * m->xyz[3 * v + 2]; disp[3 * v + 1] = 0; disp[3 * v + 2] = v >= m->nfile ? -0.1 : 0; }
+    for (v = 0; v < m->nnode; v++) {
+        disp[3 * v] = 0.01 * m->xyz[3 * v + 2];
+        disp[3 * v + 1] = 0;
+        disp[3 * v + 2] = v >= m->nfile ? -0.1 : 0;
+    }
     CHECK(amps_mesh_stress(&ctx, m, disp, NULL, vm, pr) == AMPS_OK, "stress");
     t_path(path, "out.vtu");
     CHECK(amps_mesh_write_vtu(&ctx, path, m, disp, vm, pr) == AMPS_OK, "write vtu: %s", ctx.msg);
@@ -493,7 +668,8 @@ static void test_vtu(void) {
         CHECK(t_array_count(txt, "origin", &sum) == m->nnode, "origin");
         CHECK(t_array_count(txt, "von_mises", &sum) == m->ntet, "von_mises");
         CHECK(t_array_count(txt, "principal_stress", &sum) == 3 * m->ntet, "principal");
-        CHECK(t_array_count(txt, "cut", &sum) == m->ntet && sum == (double)ncut && ncut > 0, "cut flags %g vs %d", sum, (int)ncut);
+        CHECK(t_array_count(txt, "cut", &sum) == m->ntet && sum == (double)ncut && ncut > 0, "cut flags %g vs %d", sum,
+              (int)ncut);
         free(txt);
     }
     /* python3's XML parser, when available (the test passes without it) */
@@ -523,10 +699,13 @@ static void test_vtu(void) {
     /* without optional arrays */
     CHECK(amps_mesh_write_vtu(&ctx, path, m, NULL, NULL, NULL) == AMPS_OK, "vtu without data");
     txt = t_slurp(path, &len);
-    CHECK(txt && t_xml_ok(txt, "VTKFile") && !strstr(txt, "displacement") && strstr(txt, "Name=\"cut\""), "minimal vtu");
+    CHECK(txt && t_xml_ok(txt, "VTKFile") && !strstr(txt, "displacement") && strstr(txt, "Name=\"cut\""),
+          "minimal vtu");
     free(txt);
     remove(path);
-    free(disp); free(vm); free(pr);
+    free(disp);
+    free(vm);
+    free(pr);
     amps_mesh_free(&ctx, m);
 }
 #endif /* AMPS_NO_STDIO */
@@ -540,7 +719,8 @@ static void t_contract(amps_ctx *ctx, amps_mesh *m, const char *name, int *bad) 
     } else {
         /* TetGen reports element errors in the .ele file */
         int named = !strncmp(ctx->msg, name, strlen(name)) || (name[0] == 't' && !strncmp(ctx->msg, "t.ele:", 6));
-        if (ctx->status == AMPS_OK || !ctx->msg[0] || ((ctx->status == AMPS_ERR_PARSE || ctx->status == AMPS_ERR_MESH) && !named)) {
+        if (ctx->status == AMPS_OK || !ctx->msg[0] ||
+            ((ctx->status == AMPS_ERR_PARSE || ctx->status == AMPS_ERR_MESH) && !named)) {
             (*bad)++;
             if (getenv("T_VERBOSE")) fprintf(stderr, "contract: %s %d %s\n", name, (int)ctx->status, ctx->msg);
         }
@@ -548,12 +728,16 @@ static void t_contract(amps_ctx *ctx, amps_mesh *m, const char *name, int *bad) 
 }
 
 static void test_corruption(void) {
-    static const char *pieces[] = {"\n", " ", "\r\n", "0", "-1", "4", "9", "nan", "1e999", "$EndNodes", "$Nodes", "Vertices", "Tetrahedra", "#", "x", "\0", "99999999999"};
+    static const char *pieces[] = {"\n",         " ",   "\r\n",  "0",         "-1",         "4",
+                                   "9",          "nan", "1e999", "$EndNodes", "$Nodes",     "Vertices",
+                                   "Tetrahedra", "#",   "x",     "\0",        "99999999999"};
     const char *src[3];
     int f, trial, bad = 0, parsed = 0;
     amps_ctx ctx;
     amps_ctx_init(&ctx);
-    src[0] = G41_MIXED; src[1] = G22_MIXED; src[2] = M_MIXED;
+    src[0] = G41_MIXED;
+    src[1] = G22_MIXED;
+    src[2] = M_MIXED;
     t_seed(7);
     for (f = 0; f < 4; f++) {
         const char *s = f < 3 ? src[f] : T_NODE4;
@@ -567,11 +751,14 @@ static void test_corruption(void) {
             for (e = 0; e < edits; e++) {
                 int kind = t_unif() < 0.3 ? 0 : 1 + t_int(3);
                 size_t at = n ? (size_t)t_int((int)n) : 0;
-                if (kind == 0 && n) b[at] = (char)t_int(256);                          /* flip a byte */
-                else if (kind == 1 && n) { memmove(b + at, b + at + 1, n - at - 1); n--; } /* delete */
-                else if (kind == 2) n = at;                                            /* truncate */
-                else {                                                                 /* insert a token */
-                    const char *pc = pieces[t_int((int)(sizeof(pieces) / sizeof(pieces[0])))];
+                if (kind == 0 && n) b[at] = (char)t_int(256); /* flip a byte */
+                else if (kind == 1 && n) {
+                    memmove(b + at, b + at + 1, n - at - 1);
+                    n--;
+                } /* delete */
+                else if (kind == 2)
+                    n = at; /* truncate */
+                else { /* insert a token */ const char *pc = pieces[t_int((int)(sizeof(pieces) / sizeof(pieces[0])))];
                     size_t l = pc[0] ? strlen(pc) : 1;
                     if (n + l > n0 + 60) continue;
                     memmove(b + at + l, b + at, n - at);
@@ -628,7 +815,10 @@ static void test_reader_oom(void) {
             t_al.fail_at = -1;
             if (m) break;
             fails++;
-            if (ctx.status != AMPS_ERR_OOM || t_al.live != base) { CHECK(0, "reader %d, failure %d: status %d leak %ld", f, k, (int)ctx.status, t_al.live - base); break; }
+            if (ctx.status != AMPS_ERR_OOM || t_al.live != base) {
+                CHECK(0, "reader %d, failure %d: status %d leak %ld", f, k, (int)ctx.status, t_al.live - base);
+                break;
+            }
         }
         CHECK(m && fails >= 3, "reader %d: %d failure paths", f, fails);
         amps_mesh_free(&ctx, m);

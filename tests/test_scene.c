@@ -15,14 +15,16 @@ static double worst_err = 0, worst_res = 0;
 static void compare(amps_ctx *ctx, amps_scene *S, const shadow *w, const char *what, int step) {
     const amps_mesh *m = amps_scene_mesh(S);
     double *u = (double *)malloc(sizeof(double) * 3 * m->nnode), err, res, rref;
-    double *rf = (double *)malloc(sizeof(double) * 3 * m->nnode), *uw = (double *)malloc(sizeof(double) * 3 * (w->nwatch + 1));
+    double *rf = (double *)malloc(sizeof(double) * 3 * m->nnode),
+           *uw = (double *)malloc(sizeof(double) * 3 * (w->nwatch + 1));
     amps_status s;
     int k, d;
     /* the haptic path (reactions from the dense system) and the watched solve, before the full solve */
     CHECK(amps_scene_solve_reactions(ctx, S) == AMPS_OK, "%s step %d: forces-only solve: %s", what, step, ctx->msg);
     for (k = 0; k < m->nnode; k++) amps_scene_reaction(ctx, S, k, rf + 3 * k);
     CHECK(amps_scene_solve_watched(ctx, S) == AMPS_OK, "%s step %d: watched solve: %s", what, step, ctx->msg);
-    for (k = 0; k < w->nwatch; k++) memcpy(uw + 3 * k, amps_scene_displacements(S) + 3 * w->watch[k], 3 * sizeof(double));
+    for (k = 0; k < w->nwatch; k++)
+        memcpy(uw + 3 * k, amps_scene_displacements(S) + 3 * w->watch[k], 3 * sizeof(double));
     s = amps_scene_solve(ctx, S);
     CHECK(s == AMPS_OK, "%s step %d: solve: %s", what, step, ctx->msg);
     rref = scene_reference(ctx, m, w, 0, NULL, u, NULL, 0);
@@ -33,25 +35,30 @@ static void compare(amps_ctx *ctx, amps_scene *S, const shadow *w, const char *w
         if (res > worst_res) worst_res = res;
     }
     if (err > worst_err) worst_err = err;
-    {   /* deformed positions = reference + displacement, all nodes and a subset */
+    { /* deformed positions = reference + displacement, all nodes and a subset */
         double *pos = (double *)malloc(sizeof(double) * 3 * m->nnode), q[3];
         amps_int last = m->nnode - 1;
         CHECK(amps_scene_positions(ctx, S, 0, NULL, pos) == AMPS_OK, "positions");
-        CHECK(pos[3 * last + 2] == m->xyz[3 * last + 2] + amps_scene_displacements(S)[3 * last + 2], "%s: position of the last node", what);
-        CHECK(amps_scene_positions(ctx, S, 1, &last, q) == AMPS_OK && q[0] == pos[3 * last] && q[2] == pos[3 * last + 2], "%s: subset positions", what);
+        CHECK(pos[3 * last + 2] == m->xyz[3 * last + 2] + amps_scene_displacements(S)[3 * last + 2],
+              "%s: position of the last node", what);
+        CHECK(amps_scene_positions(ctx, S, 1, &last, q) == AMPS_OK && q[0] == pos[3 * last] &&
+                      q[2] == pos[3 * last + 2],
+              "%s: subset positions", what);
         last = m->nnode;
         CHECK(amps_scene_positions(ctx, S, 1, &last, q) == AMPS_ERR_INDEX, "%s: position out of range accepted", what);
         free(pos);
     }
-    {   /* reactions at pins: nonzero somewhere when a pin moves the model */
+    { /* reactions at pins: nonzero somewhere when a pin moves the model */
         amps_int v;
         for (v = 0; v < m->nnode; v++) {
             double r[3];
             amps_scene_reaction(ctx, S, v, r);
-            if (!w->pinned[v]) CHECK(r[0] == 0 && r[1] == 0 && r[2] == 0, "%s: reaction at unpinned node %ld", what, (long)v);
+            if (!w->pinned[v])
+                CHECK(r[0] == 0 && r[1] == 0 && r[2] == 0, "%s: reaction at unpinned node %ld", what, (long)v);
             for (d = 0; d < 3; d++)
-                CHECK(fabs(r[d] - rf[3 * v + d]) <= 1e-8 * (1 + fabs(r[d])), "%s step %d: reaction at node %ld: forces-only %.6e vs full %.6e",
-                      what, step, (long)v, rf[3 * v + d], r[d]);
+                CHECK(fabs(r[d] - rf[3 * v + d]) <= 1e-8 * (1 + fabs(r[d])),
+                      "%s step %d: reaction at node %ld: forces-only %.6e vs full %.6e", what, step, (long)v,
+                      rf[3 * v + d], r[d]);
         }
     }
     {
@@ -62,12 +69,15 @@ static void compare(amps_ctx *ctx, amps_scene *S, const shadow *w, const char *w
                       "%s step %d: watched node %d: %.6e vs full %.6e", what, step, w->watch[k], uw[3 * k + d],
                       amps_scene_displacements(S)[3 * w->watch[k] + d]);
     }
-    free(u); free(rf); free(uw);
+    free(u);
+    free(rf);
+    free(uw);
 }
 
 /* Random cuts (random planes through nodes, copies included), pins (new, moved, released, on
    copies), forces; fixed nodes cut too. */
-static void random_scene(amps_mesh *m0, int fix_axis, double fix_below, int steps, unsigned long long seed, int before, const char *what) {
+static void random_scene(amps_mesh *m0, int fix_axis, double fix_below, int steps, unsigned long long seed, int before,
+                         const char *what) {
     amps_ctx ctx;
     amps_scene *S;
     shadow w;
@@ -85,9 +95,13 @@ static void random_scene(amps_mesh *m0, int fix_axis, double fix_below, int step
     w.watch = (int *)malloc(sizeof(int) * (m0->nnode + steps));
     {
         amps_int *wl = (amps_int *)malloc(sizeof(amps_int) * m0->nnode);
-        for (v = 0; v < m0->nnode; v += 5) { w.watch[w.nwatch] = v; wl[w.nwatch++] = v; }
+        for (v = 0; v < m0->nnode; v += 5) {
+            w.watch[w.nwatch] = v;
+            wl[w.nwatch++] = v;
+        }
         CHECK(amps_scene_watch(&ctx, S, w.nwatch, wl) == AMPS_OK, "watch: %s", ctx.msg);
-        v = m0->nnode; CHECK(amps_scene_watch(&ctx, S, 1, &v) == AMPS_ERR_INDEX, "watch out of range accepted");
+        v = m0->nnode;
+        CHECK(amps_scene_watch(&ctx, S, 1, &v) == AMPS_ERR_INDEX, "watch out of range accepted");
         free(wl);
     }
     for (st = 0; st < steps; st++) {
@@ -99,15 +113,22 @@ static void random_scene(amps_mesh *m0, int fix_axis, double fix_below, int step
             amps_int vc;
             amps_status s;
             int d;
-            for (d = 0; d < 3; d++) { p[d] = m->xyz[3 * v + d]; nrm[d] = t_unif() - 0.5; }
+            for (d = 0; d < 3; d++) {
+                p[d] = m->xyz[3 * v + d];
+                nrm[d] = t_unif() - 0.5;
+            }
             s = amps_scene_cut(&ctx, S, v, p, nrm, &vc);
             CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP || s == AMPS_ERR_SINGULAR_UPDATE, "%s: cut: %s", what, ctx.msg);
             if (s == AMPS_OK) {
                 int k, nw = w.nwatch;
-                shadow_grow(&w, (int)vc + 1); ncut++; CHECK(vc == nn, "copy index %ld vs %d", (long)vc, nn);
-                for (k = 0; k < nw; k++) if (w.watch[k] == v) w.watch[w.nwatch++] = (int)vc;
+                shadow_grow(&w, (int)vc + 1);
+                ncut++;
+                CHECK(vc == nn, "copy index %ld vs %d", (long)vc, nn);
+                for (k = 0; k < nw; k++)
+                    if (w.watch[k] == v) w.watch[w.nwatch++] = (int)vc;
             }
-            if (s == AMPS_ERR_SINGULAR_UPDATE) CHECK(amps_scene_mesh(S)->nnode == nn, "%s: detached cut not undone", what);
+            if (s == AMPS_ERR_SINGULAR_UPDATE)
+                CHECK(amps_scene_mesh(S)->nnode == nn, "%s: detached cut not undone", what);
         } else if (op < 6) {
             double u[3];
             int d;
@@ -116,7 +137,8 @@ static void random_scene(amps_mesh *m0, int fix_axis, double fix_below, int step
                 CHECK(amps_scene_pin(&ctx, S, v, u) == AMPS_ERR_ARG, "%s: pinning a fixed node accepted", what);
             } else if (amps_mesh_degree(m, v) > 0) {
                 CHECK(amps_scene_pin(&ctx, S, v, u) == AMPS_OK, "%s: pin: %s", what, ctx.msg);
-                w.pinned[v] = 1; memcpy(w.pinval + 3 * v, u, sizeof(u));
+                w.pinned[v] = 1;
+                memcpy(w.pinval + 3 * v, u, sizeof(u));
             }
         } else if (op == 6) {
             amps_status s = amps_scene_release(&ctx, S, v);
@@ -135,7 +157,8 @@ static void random_scene(amps_mesh *m0, int fix_axis, double fix_below, int step
     printf("  %-22s steps %d, cuts %d, nodes %ld, worst error %.2e, worst residual %.2e\n", what, steps, ncut,
            (long)amps_scene_mesh(S)->nnode, worst_err, worst_res);
     amps_scene_free(&ctx, S);
-    free(w.watch); shadow_free(&w);
+    free(w.watch);
+    shadow_free(&w);
 }
 
 /* Two stacked cells held at the bottom: cutting the middle layer along z = 1 detaches the top. */
@@ -162,7 +185,8 @@ static void test_detach(void) {
         s = amps_scene_cut(&ctx, S, v[k], p, nrm, &vc);
         if (s == AMPS_ERR_SINGULAR_UPDATE) {
             singular = 1;
-            CHECK(strstr(ctx.msg, "held by nothing") != NULL || strstr(ctx.msg, "on one line") != NULL, "detach message: %s", ctx.msg);
+            CHECK(strstr(ctx.msg, "held by nothing") != NULL || strstr(ctx.msg, "on one line") != NULL,
+                  "detach message: %s", ctx.msg);
             CHECK(amps_scene_mesh(S)->nnode == nn, "detach: node count not restored");
             CHECK(amps_mesh_check(&ctx, amps_scene_mesh(S)) == AMPS_OK, "detach: mesh invariants: %s", ctx.msg);
             CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "detach: solve after undo: %s", ctx.msg);
@@ -181,12 +205,18 @@ static void test_detach(void) {
 static int grid_collinear(int n, const int (*p)[3]) {
     int a, b = -1, k, d;
     if (n <= 1) return 1;
-    for (k = 1; k < n && b < 0; k++) if (p[k][0] != p[0][0] || p[k][1] != p[0][1] || p[k][2] != p[0][2]) b = k;
+    for (k = 1; k < n && b < 0; k++)
+        if (p[k][0] != p[0][0] || p[k][1] != p[0][1] || p[k][2] != p[0][2]) b = k;
     if (b < 0) return 1;
     for (a = 1; a < n; a++) {
         long u[3], w[3], c[3];
-        for (d = 0; d < 3; d++) { u[d] = p[b][d] - p[0][d]; w[d] = p[a][d] - p[0][d]; }
-        c[0] = u[1] * w[2] - u[2] * w[1]; c[1] = u[2] * w[0] - u[0] * w[2]; c[2] = u[0] * w[1] - u[1] * w[0];
+        for (d = 0; d < 3; d++) {
+            u[d] = p[b][d] - p[0][d];
+            w[d] = p[a][d] - p[0][d];
+        }
+        c[0] = u[1] * w[2] - u[2] * w[1];
+        c[1] = u[2] * w[0] - u[0] * w[2];
+        c[2] = u[0] * w[1] - u[1] * w[0];
         if (c[0] || c[1] || c[2]) return 0;
     }
     return 1;
@@ -219,29 +249,44 @@ static void test_mechanism(int npin, const int *pins) {
         amps_int vc;
         amps_status s;
         uncut[row * 4 + col] = 0;
-        for (i = 0; i < 16; i++) if (uncut[i]) { pt[npt][0] = i % 4; pt[npt][1] = i / 4; pt[npt][2] = 2; npt++; }
-        for (i = 0; i < npin; i++) { pt[npt][0] = pins[i] % 4; pt[npt][1] = (pins[i] / 4) % 4; pt[npt][2] = pins[i] / 16; npt++; }
-        expect = grid_collinear(npt, (const int (*)[3])pt);
+        for (i = 0; i < 16; i++)
+            if (uncut[i]) {
+                pt[npt][0] = i % 4;
+                pt[npt][1] = i / 4;
+                pt[npt][2] = 2;
+                npt++;
+            }
+        for (i = 0; i < npin; i++) {
+            pt[npt][0] = pins[i] % 4;
+            pt[npt][1] = (pins[i] / 4) % 4;
+            pt[npt][2] = pins[i] / 16;
+            npt++;
+        }
+        expect = grid_collinear(npt, (const int(*)[3])pt);
         nn = (int)amps_scene_mesh(S)->nnode;
         memcpy(u0, amps_scene_displacements(S), sizeof(double) * 3 * (size_t)nn);
         memcpy(p, amps_scene_mesh(S)->xyz + 3 * v, sizeof(p));
         s = amps_scene_cut(&ctx, S, v, p, nrm, &vc);
         if (expect) {
-            CHECK(s == AMPS_ERR_SINGULAR_UPDATE, "mechanism (%d pins): cut %d of node %d accepted (%s), leaving the top loose", npin, k, v, ctx.msg);
+            CHECK(s == AMPS_ERR_SINGULAR_UPDATE,
+                  "mechanism (%d pins): cut %d of node %d accepted (%s), leaving the top loose", npin, k, v, ctx.msg);
             if (s != AMPS_ERR_SINGULAR_UPDATE) break;
             nref++;
             uncut[row * 4 + col] = 1;
-            CHECK(strstr(ctx.msg, "on one line") != NULL || strstr(ctx.msg, "held by nothing") != NULL, "mechanism message: %s", ctx.msg);
+            CHECK(strstr(ctx.msg, "on one line") != NULL || strstr(ctx.msg, "held by nothing") != NULL,
+                  "mechanism message: %s", ctx.msg);
             CHECK(amps_scene_mesh(S)->nnode == nn, "mechanism: node count not restored");
             CHECK(amps_mesh_check(&ctx, amps_scene_mesh(S)) == AMPS_OK, "mechanism: mesh invariants: %s", ctx.msg);
             CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "mechanism: solve after undo: %s", ctx.msg);
-            CHECK(t_reldiff(3 * nn, amps_scene_displacements(S), u0) < 1e-12, "mechanism: a refused cut changed the solution");
+            CHECK(t_reldiff(3 * nn, amps_scene_displacements(S), u0) < 1e-12,
+                  "mechanism: a refused cut changed the solution");
         } else {
             CHECK(s == AMPS_OK, "mechanism (%d pins): cut %d of node %d refused: %s", npin, k, v, ctx.msg);
             if (s != AMPS_OK) break;
             nacc++;
             CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "mechanism: solve: %s", ctx.msg);
-            CHECK(amps_scene_residual(&ctx, S, &res) == AMPS_OK && res <= 1e-9, "mechanism (%d pins): cut %d: residual %.2e", npin, k, res);
+            CHECK(amps_scene_residual(&ctx, S, &res) == AMPS_OK && res <= 1e-9,
+                  "mechanism (%d pins): cut %d: residual %.2e", npin, k, res);
         }
     }
     printf("  mechanism, %d pins on the top: %d cuts accepted, %d refused\n", npin, nacc, nref);
@@ -278,7 +323,8 @@ int main(void) {
     test_args();
     test_detach();
     {
-        static const int pins1[1] = {4 * 16 + 5}, pins2[2] = {4 * 16 + 0, 4 * 16 + 15}, pins3[3] = {4 * 16 + 0, 4 * 16 + 3, 4 * 16 + 12};
+        static const int pins1[1] = {4 * 16 + 5}, pins2[2] = {4 * 16 + 0, 4 * 16 + 15},
+                         pins3[3] = {4 * 16 + 0, 4 * 16 + 3, 4 * 16 + 12};
         test_mechanism(0, NULL);
         test_mechanism(1, pins1);
         test_mechanism(2, pins2);

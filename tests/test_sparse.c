@@ -5,7 +5,8 @@
 #include <string.h>
 
 /* Expects status s from amps_csc_check and a message containing the strings a and b (may be NULL). */
-static void expect_check(const char *what, const amps_csc *A, amps_stype st, amps_status s, const char *a, const char *b) {
+static void expect_check(const char *what, const amps_csc *A, amps_stype st, amps_status s, const char *a,
+                         const char *b) {
     amps_ctx ctx;
     amps_status r;
     amps_ctx_init(&ctx);
@@ -51,7 +52,10 @@ int main(void) {
         int p[5], i[6];
         double x[6];
         amps_csc M;
-        M.nrow = M.ncol = 4; M.p = p; M.i = i; M.x = x;
+        M.nrow = M.ncol = 4;
+        M.p = p;
+        M.i = i;
+        M.x = x;
 #define RESET() (memcpy(p, p0, sizeof(p)), memcpy(i, i0, sizeof(i)), memcpy(x, x0, sizeof(x)), M.nrow = M.ncol = 4)
         RESET();
         expect_check("valid upper", &M, AMPS_UPPER, AMPS_OK, NULL, NULL);
@@ -59,41 +63,59 @@ int main(void) {
         expect_check("upper as lower", &M, AMPS_LOWER, AMPS_ERR_PATTERN, "column 1", "row 0");
         expect_check("bad stype", &M, (amps_stype)5, AMPS_ERR_ARG, "stype", NULL);
         expect_check("NULL matrix", NULL, AMPS_UPPER, AMPS_ERR_ARG, NULL, NULL);
-        M.nrow = -1; M.ncol = -1;
+        M.nrow = -1;
+        M.ncol = -1;
         expect_check("negative dims", &M, AMPS_UPPER, AMPS_ERR_ARG, "negative", NULL);
-        RESET(); M.nrow = 5;
+        RESET();
+        M.nrow = 5;
         expect_check("non-square", &M, AMPS_UPPER, AMPS_ERR_ARG, "not square", NULL);
-        RESET(); p[0] = 1;
+        RESET();
+        p[0] = 1;
         expect_check("p[0] != 0", &M, AMPS_UPPER, AMPS_ERR_PATTERN, "p[0]", NULL);
-        RESET(); p[2] = 0;
+        RESET();
+        p[2] = 0;
         expect_check("decreasing p", &M, AMPS_UPPER, AMPS_ERR_PATTERN, "column 1", NULL);
-        RESET(); i[2] = 7;
+        RESET();
+        i[2] = 7;
         expect_check("row out of range", &M, AMPS_UPPER, AMPS_ERR_INDEX, "column 1", "row 7");
-        RESET(); i[0] = -2;
+        RESET();
+        i[0] = -2;
         expect_check("negative row", &M, AMPS_UPPER, AMPS_ERR_INDEX, "column 0", "row -2");
-        RESET(); i[4] = 3; i[5] = 1;
+        RESET();
+        i[4] = 3;
+        i[5] = 1;
         expect_check("unsorted rows", &M, AMPS_UPPER, AMPS_ERR_PATTERN, "column 3", "row 1");
-        RESET(); i[4] = 3;
+        RESET();
+        i[4] = 3;
         expect_check("duplicate rows", &M, AMPS_UPPER, AMPS_ERR_PATTERN, "column 3", "row 3");
-        RESET(); i[3] = 3;
+        RESET();
+        i[3] = 3;
         expect_check("below diagonal in upper", &M, AMPS_UPPER, AMPS_ERR_PATTERN, "column 2", "row 3");
-        RESET(); x[3] = NAN;
+        RESET();
+        x[3] = NAN;
         expect_check("NaN", &M, AMPS_UPPER, AMPS_ERR_VALUE, "column 2", "row 2");
-        RESET(); x[5] = -INFINITY;
+        RESET();
+        x[5] = -INFINITY;
         expect_check("-Inf", &M, AMPS_UPPER, AMPS_ERR_VALUE, "column 3", "row 3");
-        RESET(); M.x = NULL;
+        RESET();
+        M.x = NULL;
         expect_check("pattern only", &M, AMPS_UPPER, AMPS_OK, NULL, NULL);
         M.x = x;
-        RESET(); M.p = NULL;
+        RESET();
+        M.p = NULL;
         expect_check("NULL p", &M, AMPS_UPPER, AMPS_ERR_ARG, NULL, NULL);
         M.p = p;
-        RESET(); M.nrow = M.ncol = 0;
+        RESET();
+        M.nrow = M.ncol = 0;
         expect_check("empty", &M, AMPS_UPPER, AMPS_OK, NULL, NULL);
         /* lower: the transpose */
         {
             int pl[5] = {0, 2, 4, 5, 6}, il[6] = {0, 1, 1, 3, 2, 3};
             amps_csc Lm;
-            Lm.nrow = Lm.ncol = 4; Lm.p = pl; Lm.i = il; Lm.x = x0;
+            Lm.nrow = Lm.ncol = 4;
+            Lm.p = pl;
+            Lm.i = il;
+            Lm.x = x0;
             expect_check("valid lower", &Lm, AMPS_LOWER, AMPS_OK, NULL, NULL);
             expect_check("lower as upper", &Lm, AMPS_UPPER, AMPS_ERR_PATTERN, "column 0", "row 1");
         }
@@ -109,14 +131,22 @@ int main(void) {
         double *R = (double *)malloc(sizeof(double) * n * n), *x = (double *)malloc(sizeof(double) * n);
         double *y = (double *)malloc(sizeof(double) * n), *yr = (double *)malloc(sizeof(double) * n);
         t_seed(3);
-        for (k = 0; k < nz; k++) { ti[k] = t_int(n); tj[k] = t_int(n); tx[k] = t_unif() - 0.5; }
+        for (k = 0; k < nz; k++) {
+            ti[k] = t_int(n);
+            tj[k] = t_int(n);
+            tx[k] = t_unif() - 0.5;
+        }
         memset(R, 0, sizeof(double) * n * n);
         for (k = 0; k < nz; k++) {
             R[ti[k] + n * tj[k]] += tx[k];
             if (ti[k] != tj[k]) R[tj[k] + n * ti[k]] += tx[k];
         }
         for (k = 0; k < n; k++) x[k] = t_unif();
-        for (k = 0; k < n; k++) { int j; yr[k] = 0; for (j = 0; j < n; j++) yr[k] += R[k + n * j] * x[j]; }
+        for (k = 0; k < n; k++) {
+            int j;
+            yr[k] = 0;
+            for (j = 0; j < n; j++) yr[k] += R[k + n * j] * x[j];
+        }
         for (s = 0; s < 3; s++) {
             A = amps_csc_from_triplets(&ctx, n, nz, ti, tj, tx, sts[s]);
             CHECK(A != NULL, "from_triplets stype %d: %s", sts[s], ctx.msg);
@@ -150,21 +180,37 @@ int main(void) {
         /* rejections */
         ti[5] = n;
         CHECK(!amps_csc_from_triplets(&ctx, n, nz, ti, tj, tx, AMPS_UPPER) && ctx.status == AMPS_ERR_INDEX &&
-              strstr(ctx.msg, "triplet 5") && strstr(ctx.msg, "row 23"), "row out of range: %s", ctx.msg);
-        ti[5] = 0; tj[7] = -1;
+                      strstr(ctx.msg, "triplet 5") && strstr(ctx.msg, "row 23"),
+              "row out of range: %s", ctx.msg);
+        ti[5] = 0;
+        tj[7] = -1;
         CHECK(!amps_csc_from_triplets(&ctx, n, nz, ti, tj, tx, AMPS_FULL) && ctx.status == AMPS_ERR_INDEX &&
-              strstr(ctx.msg, "column -1"), "negative column: %s", ctx.msg);
-        tj[7] = 0; tx[9] = NAN;
+                      strstr(ctx.msg, "column -1"),
+              "negative column: %s", ctx.msg);
+        tj[7] = 0;
+        tx[9] = NAN;
         CHECK(!amps_csc_from_triplets(&ctx, n, nz, ti, tj, tx, AMPS_UPPER) && ctx.status == AMPS_ERR_VALUE &&
-              strstr(ctx.msg, "triplet 9"), "NaN value: %s", ctx.msg);
+                      strstr(ctx.msg, "triplet 9"),
+              "NaN value: %s", ctx.msg);
         tx[9] = INFINITY;
-        CHECK(!amps_csc_from_triplets(&ctx, n, nz, ti, tj, tx, AMPS_UPPER) && ctx.status == AMPS_ERR_VALUE, "Inf value");
+        CHECK(!amps_csc_from_triplets(&ctx, n, nz, ti, tj, tx, AMPS_UPPER) && ctx.status == AMPS_ERR_VALUE,
+              "Inf value");
         tx[9] = 0;
-        CHECK(!amps_csc_from_triplets(&ctx, -1, nz, ti, tj, tx, AMPS_UPPER) && ctx.status == AMPS_ERR_ARG, "negative n");
-        CHECK(!amps_csc_from_triplets(&ctx, n, -2, ti, tj, tx, AMPS_UPPER) && ctx.status == AMPS_ERR_ARG, "negative nz");
+        CHECK(!amps_csc_from_triplets(&ctx, -1, nz, ti, tj, tx, AMPS_UPPER) && ctx.status == AMPS_ERR_ARG,
+              "negative n");
+        CHECK(!amps_csc_from_triplets(&ctx, n, -2, ti, tj, tx, AMPS_UPPER) && ctx.status == AMPS_ERR_ARG,
+              "negative nz");
         CHECK(!amps_csc_from_triplets(&ctx, n, nz, NULL, tj, tx, AMPS_UPPER) && ctx.status == AMPS_ERR_ARG, "NULL ti");
-        CHECK(!amps_csc_from_triplets(&ctx, n, nz, ti, tj, tx, (amps_stype)3) && ctx.status == AMPS_ERR_ARG, "bad stype");
-        free(ti); free(tj); free(tx); free(M); free(R); free(x); free(y); free(yr);
+        CHECK(!amps_csc_from_triplets(&ctx, n, nz, ti, tj, tx, (amps_stype)3) && ctx.status == AMPS_ERR_ARG,
+              "bad stype");
+        free(ti);
+        free(tj);
+        free(tx);
+        free(M);
+        free(R);
+        free(x);
+        free(y);
+        free(yr);
     }
     return amps_t_end("test_sparse");
 }

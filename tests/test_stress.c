@@ -23,7 +23,7 @@
 #include <string.h>
 
 static int long_mode = 0;
-static const char *only = NULL;   /* AMPS_STRESS_ONLY: run the cases whose name contains it */
+static const char *only = NULL; /* AMPS_STRESS_ONLY: run the cases whose name contains it */
 static int selected(const char *name) { return !only || strstr(name, only) != NULL; }
 static const double EPS = 2.220446049250313e-16;
 
@@ -64,13 +64,13 @@ static double min_pivot_ratio(const amps_update *U) {
 typedef struct stats {
     char name[48];
     int neq, steps, checks, cuts, noop, singular, false_singular, pins, releases, fails;
-    double cond0, cond_end;                 /* condition estimates, first and last check */
-    double res, err, res_chol, err_chol;    /* worst over the checks */
-    double be, be_chol;                     /* worst normwise backward errors */
-    double res_engine;                      /* worst amps_scene_residual */
-    double err_over_cond;                   /* worst err / (eps cond) */
-    double piv_min;                         /* smallest pivot ratio of a successful commit */
-    double be_q1, be_q4;                    /* drift: worst backward error over the first and last quarter of the steps */
+    double cond0, cond_end;              /* condition estimates, first and last check */
+    double res, err, res_chol, err_chol; /* worst over the checks */
+    double be, be_chol;                  /* worst normwise backward errors */
+    double res_engine;                   /* worst amps_scene_residual */
+    double err_over_cond;                /* worst err / (eps cond) */
+    double piv_min;                      /* smallest pivot ratio of a successful commit */
+    double be_q1, be_q4;                 /* drift: worst backward error over the first and last quarter of the steps */
     double seconds;
 } stats;
 
@@ -79,9 +79,9 @@ static int ntable = 0;
 
 typedef struct cfg {
     int steps, check_every;
-    double p_cut, p_pin, p_release;   /* the rest of the steps change a force */
-    int move_pins;                    /* move one existing pin every step */
-    int csv;                          /* write build/stress/<name>.csv */
+    double p_cut, p_pin, p_release; /* the rest of the steps change a force */
+    int move_pins;                  /* move one existing pin every step */
+    int csv;                        /* write build/stress/<name>.csv */
     unsigned long long seed;
 } cfg;
 
@@ -89,13 +89,17 @@ static double bbox_len(const amps_mesh *m, double lo[3], double hi[3]) {
     amps_int v;
     int d;
     double L = 0;
-    for (d = 0; d < 3; d++) { lo[d] = 1e300; hi[d] = -1e300; }
+    for (d = 0; d < 3; d++) {
+        lo[d] = 1e300;
+        hi[d] = -1e300;
+    }
     for (v = 0; v < m->nnode; v++)
         for (d = 0; d < 3; d++) {
             if (m->xyz[3 * v + d] < lo[d]) lo[d] = m->xyz[3 * v + d];
             if (m->xyz[3 * v + d] > hi[d]) hi[d] = m->xyz[3 * v + d];
         }
-    for (d = 0; d < 3; d++) if (hi[d] - lo[d] > L) L = hi[d] - lo[d];
+    for (d = 0; d < 3; d++)
+        if (hi[d] - lo[d] > L) L = hi[d] - lo[d];
     return L;
 }
 
@@ -119,14 +123,19 @@ static void check_step(amps_ctx *ctx, amps_scene *S, const shadow *w, stats *st,
     err = t_reldiff(3 * m->nnode, amps_scene_displacements(S), u);
     amps_scene_residual(ctx, S, &reng);
     st->checks++;
-    if (want_cond && inf.cond > 0) { if (st->checks == 1) st->cond0 = inf.cond; st->cond_end = inf.cond; }
+    if (want_cond && inf.cond > 0) {
+        if (st->checks == 1) st->cond0 = inf.cond;
+        st->cond_end = inf.cond;
+    }
     cond = st->cond_end > st->cond0 ? st->cond_end : st->cond0;
     if (cond <= 0) cond = 1;
     bres = BOUND_BE_FACTOR * EPS * (cond > 1 ? sqrt(cond) : 1.0);
     berr = BOUND_ERR_FACTOR * EPS * cond + inf.err_chol;
     CHECK(inf.res_ref >= 0, "%s step %d: CHOLMOD failed", st->name, step);
-    CHECK(inf.be_disp <= bres, "%s step %d: backward error %.3e > bound %.3e (CHOLMOD %.3e)", st->name, step, inf.be_disp, bres, inf.be_chol);
-    CHECK(err <= berr, "%s step %d: error %.3e > bound %.3e (cond %.2e, CHOLMOD %.3e, CHOLMOD residual %.2e, smallest pivot ratio %.2e)",
+    CHECK(inf.be_disp <= bres, "%s step %d: backward error %.3e > bound %.3e (CHOLMOD %.3e)", st->name, step,
+          inf.be_disp, bres, inf.be_chol);
+    CHECK(err <= berr,
+          "%s step %d: error %.3e > bound %.3e (cond %.2e, CHOLMOD %.3e, CHOLMOD residual %.2e, smallest pivot ratio %.2e)",
           st->name, step, err, berr, cond, inf.err_chol, inf.res_chol, min_pivot_ratio(amps_scene_engine(S)));
     if (inf.be_disp > bres || err > berr) st->fails++;
     if (inf.be_disp > st->be) st->be = inf.be_disp;
@@ -142,27 +151,31 @@ static void check_step(amps_ctx *ctx, amps_scene *S, const shadow *w, stats *st,
     st->neq = inf.n;
     if (!long_mode || st->checks % 10 == 1)
         printf("    %-22s step %5d  n %6d  residual %.2e (CHOLMOD %.2e)  backward error %.1f eps (%.1f)  error %.2e (CHOLMOD %.2e)\n",
-               st->name, step, inf.n, inf.res_disp, inf.res_chol, inf.be_disp / EPS, inf.be_chol / EPS, err, inf.err_chol);
-    if (csv) fprintf(csv, "%d,%d,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e\n", step, inf.n, inf.res_disp, reng, err, inf.res_chol, inf.err_chol,
-                     inf.be_disp, inf.be_chol);
+               st->name, step, inf.n, inf.res_disp, inf.res_chol, inf.be_disp / EPS, inf.be_chol / EPS, err,
+               inf.err_chol);
+    if (csv)
+        fprintf(csv, "%d,%d,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e\n", step, inf.n, inf.res_disp, reng, err, inf.res_chol,
+                inf.err_chol, inf.be_disp, inf.be_chol);
     free(u);
 }
 
 static void plot_csv(const char *name) {
     char cmd[1024];
     if (system("command -v gnuplot >/dev/null 2>&1") != 0) return;
-    snprintf(cmd, sizeof(cmd),
-             "gnuplot -e \"set terminal png size 900,500; set output 'build/stress/%s.png'; set datafile separator ','; "
-             "set logscale y; set key top left; set xlabel 'step'; set ylabel 'relative residual'; set title '%s'; "
-             "plot 'build/stress/%s.csv' using 1:3 skip 1 with lines title 'AMPS (explicit)', "
-             "'' using 1:6 skip 1 with lines title 'CHOLMOD'\" 2>/dev/null",
-             name, name, name);
+    snprintf(
+            cmd, sizeof(cmd),
+            "gnuplot -e \"set terminal png size 900,500; set output 'build/stress/%s.png'; set datafile separator ','; "
+            "set logscale y; set key top left; set xlabel 'step'; set ylabel 'relative residual'; set title '%s'; "
+            "plot 'build/stress/%s.csv' using 1:3 skip 1 with lines title 'AMPS (explicit)', "
+            "'' using 1:6 skip 1 with lines title 'CHOLMOD'\" 2>/dev/null",
+            name, name, name);
     if (system(cmd) != 0) printf("    (gnuplot failed for %s)\n", name);
 }
 
 /* Was a cut the scene refused as singular really singular? The same cut on a copy of the mesh,
    solved by CHOLMOD (refined): 1 if the refined residual stays above 1e-6 (or CHOLMOD fails). */
-static int cut_really_singular(amps_ctx *ctx, const amps_mesh *m, const shadow *w, amps_int v, const double p[3], const double nrm[3]) {
+static int cut_really_singular(amps_ctx *ctx, const amps_mesh *m, const shadow *w, amps_int v, const double p[3],
+                               const double nrm[3]) {
     amps_mesh *c = amps_mesh_create(ctx, m->nnode, m->xyz, m->ntet, m->tet);
     shadow w2;
     amps_int k, vc = -1;
@@ -177,7 +190,11 @@ static int cut_really_singular(amps_ctx *ctx, const amps_mesh *m, const shadow *
         memcpy(w2.pinval + 3 * k, w->pinval + 3 * k, 3 * sizeof(double));
         memcpy(w2.force + 3 * k, w->force + 3 * k, 3 * sizeof(double));
     }
-    if (amps_mesh_cut(ctx, c, v, p, nrm, &vc, NULL, NULL) != AMPS_OK) { amps_mesh_free(ctx, c); shadow_free(&w2); return -1; }
+    if (amps_mesh_cut(ctx, c, v, p, nrm, &vc, NULL, NULL) != AMPS_OK) {
+        amps_mesh_free(ctx, c);
+        shadow_free(&w2);
+        return -1;
+    }
     w2.fixed0[vc] = w2.fixed0[v];
     u = (double *)malloc(sizeof(double) * 3 * c->nnode);
     rr = scene_reference(ctx, c, &w2, 2, NULL, u, NULL, 0);
@@ -201,9 +218,14 @@ static stats *run_case(const char *name, amps_mesh *m0, int axis, double frac, d
     int npins = 0;
     FILE *csv = NULL;
     amps_ctx_init(&ctx);
-    if (!selected(name)) { ntable--; amps_mesh_free(&ctx, m0); return NULL; }
+    if (!selected(name)) {
+        ntable--;
+        amps_mesh_free(&ctx, m0);
+        return NULL;
+    }
     memset(st, 0, sizeof(*st));
-    snprintf(st->name, sizeof(st->name), "%s", name); st->piv_min = 1.0;
+    snprintf(st->name, sizeof(st->name), "%s", name);
+    st->piv_min = 1.0;
     memset(&w, 0, sizeof(w));
     t_seed(c->seed);
     L = bbox_len(m0, lo, hi);
@@ -214,7 +236,8 @@ static stats *run_case(const char *name, amps_mesh *m0, int axis, double frac, d
     {
         double emax = 0;
         amps_int t;
-        for (t = 0; t < m0->ntet; t++) if (m0->E[t] > emax) emax = m0->E[t];
+        for (t = 0; t < m0->ntet; t++)
+            if (m0->E[t] > emax) emax = m0->E[t];
         fscale = 1e-3 * emax * hsp * L;
     }
     amps_scene_opts_default(&so);
@@ -225,7 +248,10 @@ static stats *run_case(const char *name, amps_mesh *m0, int axis, double frac, d
     {
         amps_int *fl = (amps_int *)malloc(sizeof(amps_int) * nfile), nf = 0;
         for (v = 0; v < nfile; v++)
-            if (amps_scene_mesh(S)->xyz[3 * v + axis] < lo[axis] + frac * (hi[axis] - lo[axis]) + 1e-9) { fl[nf++] = v; w.fixed0[v] = 1; }
+            if (amps_scene_mesh(S)->xyz[3 * v + axis] < lo[axis] + frac * (hi[axis] - lo[axis]) + 1e-9) {
+                fl[nf++] = v;
+                w.fixed0[v] = 1;
+            }
         CHECK(amps_scene_fix(&ctx, S, nf, fl) == AMPS_OK, "%s: fix", name);
         free(fl);
     }
@@ -238,7 +264,7 @@ static stats *run_case(const char *name, amps_mesh *m0, int axis, double frac, d
         csv = fopen(path, "w");
         if (csv) fprintf(csv, "step,n,res_amps,res_engine,err_amps,res_cholmod,err_cholmod,be_amps,be_cholmod\n");
     }
-    {   /* a load at the far end, then the first solve (the factorization) */
+    { /* a load at the far end, then the first solve (the factorization) */
         double f[3] = {0, 0, 0};
         int cnt = 0;
         for (v = 0; v < nfile && cnt < 20; v++)
@@ -248,7 +274,7 @@ static stats *run_case(const char *name, amps_mesh *m0, int axis, double frac, d
                 memcpy(w.force + 3 * v, f, sizeof(f));
                 cnt++;
             }
-        CHECK(amps_scene_solve(&ctx, S) >= 0, "%s: first solve: %s", name, ctx.msg);   /* a guard's warning gives x too */
+        CHECK(amps_scene_solve(&ctx, S) >= 0, "%s: first solve: %s", name, ctx.msg); /* a guard's warning gives x too */
         check_step(&ctx, S, &w, st, 0, csv, 1);
     }
     for (step = 1; step <= c->steps; step++) {
@@ -257,7 +283,7 @@ static stats *run_case(const char *name, amps_mesh *m0, int axis, double frac, d
         double r = t_unif();
         amps_status s;
         v = t_int(nn);
-        if (c->move_pins && npins > 0) {   /* move an existing pin */
+        if (c->move_pins && npins > 0) { /* move an existing pin */
             amps_int pv = pins[t_int(npins)];
             double u[3];
             if (w.pinned[pv]) {
@@ -269,11 +295,16 @@ static stats *run_case(const char *name, amps_mesh *m0, int axis, double frac, d
         if (r < c->p_cut) {
             double p[3], nrm[3];
             amps_int vc;
-            for (d = 0; d < 3; d++) { p[d] = m->xyz[3 * v + d]; nrm[d] = t_unif() - 0.5; }
+            for (d = 0; d < 3; d++) {
+                p[d] = m->xyz[3 * v + d];
+                nrm[d] = t_unif() - 0.5;
+            }
             s = amps_scene_cut(&ctx, S, v, p, nrm, &vc);
             CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP || s == AMPS_ERR_SINGULAR_UPDATE, "%s: cut: %s", name, ctx.msg);
-            if (s == AMPS_OK) { st->cuts++; shadow_grow(&w, (int)vc + 1); }
-            else if (s == AMPS_WARN_NOOP) st->noop++;
+            if (s == AMPS_OK) {
+                st->cuts++;
+                shadow_grow(&w, (int)vc + 1);
+            } else if (s == AMPS_WARN_NOOP) st->noop++;
             else if (s == AMPS_ERR_SINGULAR_UPDATE) {
                 st->singular++;
                 CHECK(amps_scene_mesh(S)->nnode == nn, "%s: detach not undone", name);
@@ -289,7 +320,8 @@ static stats *run_case(const char *name, amps_mesh *m0, int axis, double frac, d
             if (!w.fixed0[m->origin[v]] && amps_mesh_degree(m, v) > 0) {
                 CHECK(amps_scene_pin(&ctx, S, v, u) == AMPS_OK, "%s: pin: %s", name, ctx.msg);
                 if (!w.pinned[v]) pins[npins++] = v;
-                w.pinned[v] = 1; memcpy(w.pinval + 3 * v, u, sizeof(u));
+                w.pinned[v] = 1;
+                memcpy(w.pinval + 3 * v, u, sizeof(u));
                 st->pins++;
             }
         } else if (r < c->p_cut + c->p_pin + c->p_release) {
@@ -298,8 +330,11 @@ static stats *run_case(const char *name, amps_mesh *m0, int axis, double frac, d
                 amps_int pv = pins[k];
                 s = amps_scene_release(&ctx, S, pv);
                 CHECK(s == AMPS_OK || s == AMPS_ERR_SINGULAR_UPDATE, "%s: release: %s", name, ctx.msg);
-                if (s == AMPS_OK) { w.pinned[pv] = 0; pins[k] = pins[--npins]; st->releases++; }
-                else st->singular++;
+                if (s == AMPS_OK) {
+                    w.pinned[pv] = 0;
+                    pins[k] = pins[--npins];
+                    st->releases++;
+                } else st->singular++;
             }
         } else {
             double f[3];
@@ -326,9 +361,10 @@ static stats *run_case(const char *name, amps_mesh *m0, int axis, double frac, d
     if (csv) {
         /* no drift: the backward error late in the run stays at the level of its start (measured:
            the same to a factor 2-3 over 10,000 steps on the brick) */
-        printf("  %s: worst backward error over the first quarter %.1f eps, over the last quarter %.1f eps\n", name, st->be_q1 / EPS,
-               st->be_q4 / EPS);
-        CHECK(st->be_q4 <= 30 * st->be_q1 + 10 * EPS, "%s: backward error drifts from %.2e to %.2e", name, st->be_q1, st->be_q4);
+        printf("  %s: worst backward error over the first quarter %.1f eps, over the last quarter %.1f eps\n", name,
+               st->be_q1 / EPS, st->be_q4 / EPS);
+        CHECK(st->be_q4 <= 30 * st->be_q1 + 10 * EPS, "%s: backward error drifts from %.2e to %.2e", name, st->be_q1,
+              st->be_q4);
         fclose(csv);
         plot_csv(name);
     }
@@ -366,11 +402,12 @@ static double worst_shape(const amps_mesh *m) {
         int a, b, d;
         amps_mesh_tet_coords(m, t, X);
         V = fabs(amps_tet_gradients(X, G));
-        for (a = 0; a < 4; a++) for (b = a + 1; b < 4; b++) {
-            double l = 0;
-            for (d = 0; d < 3; d++) l += (X[3 * a + d] - X[3 * b + d]) * (X[3 * a + d] - X[3 * b + d]);
-            if (sqrt(l) > lmax) lmax = sqrt(l);
-        }
+        for (a = 0; a < 4; a++)
+            for (b = a + 1; b < 4; b++) {
+                double l = 0;
+                for (d = 0; d < 3; d++) l += (X[3 * a + d] - X[3 * b + d]) * (X[3 * a + d] - X[3 * b + d]);
+                if (sqrt(l) > lmax) lmax = sqrt(l);
+            }
         qq = 6 * sqrt(2.0) * V / (lmax * lmax * lmax);
         if (qq < q) q = qq;
     }
@@ -388,8 +425,10 @@ static amps_mesh *perturbed_brick(amps_ctx *ctx, int R, double amp, unsigned lon
     memcpy(xyz, m->xyz, sizeof(double) * 3 * m->nnode);
     for (v = 0; v < m->nnode; v++) {
         double *x = xyz + 3 * v;
-        int d, inner = x[0] > 1e-9 && x[0] < 1 - 1e-9 && x[1] > 1e-9 && x[1] < 1 - 1e-9 && x[2] > 1e-9 && x[2] < 2 - 1e-9;
-        if (inner) for (d = 0; d < 3; d++) x[d] += amp * h * (2 * t_unif() - 1);
+        int d, inner = x[0] > 1e-9 && x[0] < 1 - 1e-9 && x[1] > 1e-9 && x[1] < 1 - 1e-9 && x[2] > 1e-9 &&
+                       x[2] < 2 - 1e-9;
+        if (inner)
+            for (d = 0; d < 3; d++) x[d] += amp * h * (2 * t_unif() - 1);
     }
     p = amps_mesh_create(ctx, m->nnode, xyz, m->ntet, m->tet);
     amps_mesh_free(ctx, m);
@@ -426,47 +465,59 @@ static void conditioning(void) {
     char nm[64];
     amps_ctx_init(&ctx);
     memset(&c, 0, sizeof(c));
-    c.p_cut = 0.3; c.p_pin = 0.15; c.p_release = 0.1; c.move_pins = 1;
+    c.p_cut = 0.3;
+    c.p_pin = 0.15;
+    c.p_release = 0.1;
+    c.move_pins = 1;
     printf("conditioning\n");
-    {   /* beams 5 x 5 x h fixed at one end */
+    { /* beams 5 x 5 x h fixed at one end */
         static const int hs_short[] = {64, 256}, hs_long[] = {64, 256, 1024, 4096};
         const int *hs = long_mode ? hs_long : hs_short;
         int nh = long_mode ? 4 : 2;
         for (k = 0; k < nh; k++) {
             snprintf(nm, sizeof(nm), "beam_5x5x%d", hs[k]);
-            c.steps = long_mode ? 60 : 16; c.check_every = hs[k] >= 4096 ? 10 : (long_mode ? 2 : 1); c.seed = 100 + k;
+            c.steps = long_mode ? 60 : 16;
+            c.check_every = hs[k] >= 4096 ? 10 : (long_mode ? 2 : 1);
+            c.seed = 100 + k;
             run_case(nm, amps_mesh_beam(&ctx, hs[k]), 2, 0.0, 1000.0, 0.3, &c);
         }
     }
-    {   /* nearly incompressible */
+    { /* nearly incompressible */
         static const double nus[] = {0.49, 0.499, 0.4999};
         for (k = long_mode ? 0 : 2; k < 3; k++) {
             snprintf(nm, sizeof(nm), "brick_nu_%g", nus[k]);
-            c.steps = long_mode ? 60 : 16; c.check_every = 1; c.seed = 200 + k;
+            c.steps = long_mode ? 60 : 16;
+            c.check_every = 1;
+            c.seed = 200 + k;
             run_case(nm, amps_mesh_brick(&ctx, long_mode ? 8 : 5), 2, 0.0, 1000.0, nus[k], &c);
         }
     }
-    {   /* soft layer: Young's modulus contrast 1e3, 1e6 */
+    { /* soft layer: Young's modulus contrast 1e3, 1e6 */
         static const double con[] = {1e3, 1e6};
         for (k = 0; k < 2; k++) {
             snprintf(nm, sizeof(nm), "soft_layer_%g", con[k]);
-            c.steps = long_mode ? 60 : 16; c.check_every = 1; c.seed = 300 + k;
+            c.steps = long_mode ? 60 : 16;
+            c.check_every = 1;
+            c.seed = 300 + k;
             run_case(nm, soft_layer(&ctx, long_mode ? 10 : 5, 1000.0, con[k], 0.3), 2, 0.0, -1, 0, &c);
         }
     }
-    {   /* badly shaped tets */
+    { /* badly shaped tets */
         double q = 1;
         amps_mesh *m = perturbed_brick(&ctx, long_mode ? 8 : 5, 0.45, 7, &q);
         CHECK(m != NULL, "perturbed brick: %s", ctx.msg);
         if (m) {
             printf("  perturbed brick: worst shape ratio %.2e\n", q);
-            c.steps = long_mode ? 60 : 16; c.check_every = 1; c.seed = 400;
+            c.steps = long_mode ? 60 : 16;
+            c.check_every = 1;
+            c.seed = 400;
             run_case("perturbed_brick", m, 2, 0.0, 1000.0, 0.3, &c);
         }
         m = tetgen_slivers(&ctx, long_mode ? 3000 : 600, 8);
         if (m) {
             double qmin = worst_shape(m);
-            printf("  tetgen Delaunay of random points: %ld nodes, %ld tets, worst shape ratio %.2e\n", (long)m->nnode, (long)m->ntet, qmin);
+            printf("  tetgen Delaunay of random points: %ld nodes, %ld tets, worst shape ratio %.2e\n", (long)m->nnode,
+                   (long)m->ntet, qmin);
             run_case("tetgen_slivers", m, 2, 0.1, 1000.0, 0.3, &c);
         } else printf("  tetgen not available or failed: sliver mesh skipped\n");
     }
@@ -482,8 +533,14 @@ static void long_runs(void) {
     memset(&c, 0, sizeof(c));
     printf("long runs\n");
     /* cuts are rarer than pins and forces: every cut grows the dense system for good */
-    c.p_cut = 0.03; c.p_pin = 0.1; c.p_release = 0.1; c.move_pins = 1; c.csv = 1;
-    c.steps = long_mode ? 10000 : 300; c.check_every = long_mode ? 50 : 5; c.seed = 500;
+    c.p_cut = 0.03;
+    c.p_pin = 0.1;
+    c.p_release = 0.1;
+    c.move_pins = 1;
+    c.csv = 1;
+    c.steps = long_mode ? 10000 : 300;
+    c.check_every = long_mode ? 50 : 5;
+    c.seed = 500;
     run_case("long_brick", amps_mesh_brick(&ctx, long_mode ? 6 : 4), 2, 0.0, 1000.0, 0.3, &c);
     if (!bunny) bunny = "bench/data/bunny20k.1.node";
     f = fopen(bunny, "r");
@@ -493,7 +550,9 @@ static void long_runs(void) {
         m = amps_mesh_read(&ctx, bunny);
         CHECK(m != NULL, "bunny: %s", ctx.msg);
         if (m) {
-            c.steps = long_mode ? 10000 : 100; c.check_every = long_mode ? 250 : 25; c.seed = 501;
+            c.steps = long_mode ? 10000 : 100;
+            c.check_every = long_mode ? 250 : 25;
+            c.seed = 501;
             run_case("long_bunny", m, 1, 0.04, 1000.0, 0.3, &c);
         }
     } else printf("  %s not found (bench/get_bunny.sh or AMPS_BUNNY): bunny run skipped\n", bunny);
@@ -522,7 +581,10 @@ static amps_scene *adv_scene(amps_ctx *ctx, int R, double tol, shadow *w, stats 
     amps_scene_fix_where(ctx, S, 2, AMPS_LT, 1e-9, NULL);
     for (v = 0; v < nn; v++) {
         w->fixed0[v] = amps_scene_mesh(S)->xyz[3 * v + 2] < 1e-9;
-        if (amps_scene_mesh(S)->xyz[3 * v + 2] > 2 - 1e-9) { amps_scene_force(ctx, S, v, f); memcpy(w->force + 3 * v, f, sizeof(f)); }
+        if (amps_scene_mesh(S)->xyz[3 * v + 2] > 2 - 1e-9) {
+            amps_scene_force(ctx, S, v, f);
+            memcpy(w->force + 3 * v, f, sizeof(f));
+        }
     }
     CHECK(amps_scene_solve(ctx, S) == AMPS_OK, "%s: first solve: %s", name, ctx->msg);
     return S;
@@ -547,7 +609,7 @@ static void adv_same_node(void) {
     stats *st;
     amps_scene *S;
     int k, R = 4;
-    amps_int v = (R / 2) + (R + 1) * ((R / 2) + (R + 1) * R);   /* centre node, z = 1 */
+    amps_int v = (R / 2) + (R + 1) * ((R / 2) + (R + 1) * R); /* centre node, z = 1 */
     amps_ctx_init(&ctx);
     S = adv_scene(&ctx, R, 1e-15, &w, &st, "adv_same_node");
     t_seed(600);
@@ -556,16 +618,21 @@ static void adv_same_node(void) {
         amps_int vc;
         amps_status s;
         int d;
-        for (d = 0; d < 3; d++) { p[d] = amps_scene_mesh(S)->xyz[3 * v + d]; nrm[d] = t_unif() - 0.5; }
+        for (d = 0; d < 3; d++) {
+            p[d] = amps_scene_mesh(S)->xyz[3 * v + d];
+            nrm[d] = t_unif() - 0.5;
+        }
         s = amps_scene_cut(&ctx, S, v, p, nrm, &vc);
         CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP || s == AMPS_ERR_SINGULAR_UPDATE, "same node cut %d: %s", k, ctx.msg);
-        if (s == AMPS_OK) { st->cuts++; shadow_grow(&w, (int)vc + 1); }
-        else if (s == AMPS_WARN_NOOP) st->noop++;
+        if (s == AMPS_OK) {
+            st->cuts++;
+            shadow_grow(&w, (int)vc + 1);
+        } else if (s == AMPS_WARN_NOOP) st->noop++;
         else st->singular++;
         adv_solve_check(&ctx, S, &w, st, k + 1);
     }
-    printf("  same node: %d cuts, %d no-ops, %d singular; node %ld keeps %ld tets\n", st->cuts, st->noop, st->singular, (long)v,
-           (long)amps_mesh_degree(amps_scene_mesh(S), v));
+    printf("  same node: %d cuts, %d no-ops, %d singular; node %ld keeps %ld tets\n", st->cuts, st->noop, st->singular,
+           (long)v, (long)amps_mesh_degree(amps_scene_mesh(S), v));
     CHECK(st->cuts >= 3, "same node: only %d cuts", st->cuts);
     amps_scene_free(&ctx, S);
     shadow_free(&w);
@@ -599,7 +666,8 @@ static void adv_fall_off(double tol, double *detach_ratio) {
             if (tol == 0) CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "fall off: solve: %s", ctx.msg);
             memcpy(u0, amps_scene_displacements(S), sizeof(double) * 3 * nn);
             s = amps_scene_cut(&ctx, S, v, p, nrm, &vc);
-            CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP || s == AMPS_ERR_SINGULAR_UPDATE, "fall off: cut %ld: %s", (long)v, ctx.msg);
+            CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP || s == AMPS_ERR_SINGULAR_UPDATE, "fall off: cut %ld: %s",
+                  (long)v, ctx.msg);
             pr = min_pivot_ratio(amps_scene_engine(S));
             if (s == AMPS_OK) {
                 scene_ref_info inf;
@@ -608,10 +676,11 @@ static void adv_fall_off(double tol, double *detach_ratio) {
                 shadow_grow(&w, (int)vc + 1);
                 rr = scene_reference(&ctx, amps_scene_mesh(S), &w, 2, NULL, u, &inf, 0);
                 free(u);
-                if (rr < 0 || rr > 1e-6) {   /* the committed cut left the system singular */
+                if (rr < 0 || rr > 1e-6) { /* the committed cut left the system singular */
                     done = 1;
                     *detach_ratio = pr;
-                    CHECK(0, "fall off: the cut at node %ld left the top half hanging (CHOLMOD residual %.1e) and was committed; pivot ratio %.2e",
+                    CHECK(0,
+                          "fall off: the cut at node %ld left the top half hanging (CHOLMOD residual %.1e) and was committed; pivot ratio %.2e",
                           (long)v, rr, pr);
                 } else {
                     if (pr < st->piv_min) st->piv_min = pr;
@@ -621,17 +690,19 @@ static void adv_fall_off(double tol, double *detach_ratio) {
                 double dd;
                 memcpy(msg, ctx.msg, sizeof(msg));
                 if (nsing == 0) printf("  fall off: %s\n", msg);
-                nsing++; st->singular++;
+                nsing++;
+                st->singular++;
                 CHECK(amps_scene_mesh(S)->nnode == nn, "fall off: node count changed by the undone cut");
                 CHECK(amps_mesh_check(&ctx, amps_scene_mesh(S)) == AMPS_OK, "fall off: mesh invariants: %s", ctx.msg);
                 CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "fall off: solve after the undone cut: %s", ctx.msg);
                 dd = t_reldiff(3 * (int)nn, amps_scene_displacements(S), u0);
                 CHECK(dd <= 1e-13, "fall off: the undone cut changed the solution by %.2e (%s)", dd, msg);
-                {   /* and it goes on: a pin on the top half and a new force */
+                { /* and it goes on: a pin on the top half and a new force */
                     double u[3] = {0.001, 0, 0}, f[3] = {0, 2, 0};
                     amps_int top = (R + 1) * (R + 1) * (2 * R + 1) - 1;
                     CHECK(amps_scene_pin(&ctx, S, top, u) == AMPS_OK, "fall off: pin after singular: %s", ctx.msg);
-                    w.pinned[top] = 1; memcpy(w.pinval + 3 * top, u, sizeof(u));
+                    w.pinned[top] = 1;
+                    memcpy(w.pinval + 3 * top, u, sizeof(u));
                     CHECK(amps_scene_force(&ctx, S, top - 1, f) == AMPS_OK, "fall off: force");
                     memcpy(w.force + 3 * (top - 1), f, sizeof(f));
                 }
@@ -639,10 +710,10 @@ static void adv_fall_off(double tol, double *detach_ratio) {
             free(u0);
             if (tol > 0 && !done) adv_solve_check(&ctx, S, &w, st, ++step);
         }
-    printf("  fall off%s: %d cuts, %d refused as singular, smallest pivot ratio of a committed cut %.2e\n", tol > 0 ? "" : " (pivot test off)",
-           st->cuts, nsing, st->piv_min);
+    printf("  fall off%s: %d cuts, %d refused as singular, smallest pivot ratio of a committed cut %.2e\n",
+           tol > 0 ? "" : " (pivot test off)", st->cuts, nsing, st->piv_min);
     CHECK(nsing >= 1, "cutting through the layer z = 1 never refused a cut (pivot test %s)", tol > 0 ? "on" : "off");
-    if (tol == 0) ntable--;   /* not a case of the table */
+    if (tol == 0) ntable--; /* not a case of the table */
     amps_scene_free(&ctx, S);
     shadow_free(&w);
 }
@@ -666,18 +737,24 @@ static void adv_pin_face(void) {
         if (x[0] < 1e-9 && !w.fixed0[v]) {
             double u[3] = {0, 0.01 * x[2], 0};
             CHECK(amps_scene_pin(&ctx, S, v, u) == AMPS_OK, "pin face: %s", ctx.msg);
-            w.pinned[v] = 1; memcpy(w.pinval + 3 * v, u, sizeof(u));
-            pinned[npin++] = v; st->pins++;
+            w.pinned[v] = 1;
+            memcpy(w.pinval + 3 * v, u, sizeof(u));
+            pinned[npin++] = v;
+            st->pins++;
         }
     }
     adv_solve_check(&ctx, S, &w, st, ++step);
     for (k = 0; k < npin; k++) {
         CHECK(amps_scene_release(&ctx, S, pinned[k]) == AMPS_OK, "release face: %s", ctx.msg);
-        w.pinned[pinned[k]] = 0; st->releases++;
+        w.pinned[pinned[k]] = 0;
+        st->releases++;
         if (k % 4 == 3 || k == npin - 1) adv_solve_check(&ctx, S, &w, st, ++step);
     }
     /* pin again and release everything at once before one solve */
-    for (k = 0; k < npin; k++) { double u[3] = {0.001, 0, 0}; amps_scene_pin(&ctx, S, pinned[k], u); }
+    for (k = 0; k < npin; k++) {
+        double u[3] = {0.001, 0, 0};
+        amps_scene_pin(&ctx, S, pinned[k], u);
+    }
     for (k = 0; k < npin; k++) amps_scene_release(&ctx, S, pinned[k]);
     adv_solve_check(&ctx, S, &w, st, ++step);
     printf("  pin face: %d pins, %d releases\n", npin, st->releases);
@@ -709,15 +786,22 @@ static void adv_near_cancel(void) {
     K = t_fixed_stiffness(&ctx, m, &fixed, &dof, &n);
     F = amps_analyze(&ctx, K, AMPS_UPPER, NULL);
     CHECK(F && amps_factorize(&ctx, F, K) == AMPS_OK, "near cancel: factor: %s", ctx.msg);
-    z = (double *)calloc(n, sizeof(double)); f = (double *)malloc(sizeof(double) * n); w = (double *)malloc(sizeof(double) * 3 * n);
-    x = (double *)malloc(sizeof(double) * n); xr = (double *)malloc(sizeof(double) * n);
+    z = (double *)calloc(n, sizeof(double));
+    f = (double *)malloc(sizeof(double) * n);
+    w = (double *)malloc(sizeof(double) * 3 * n);
+    x = (double *)malloc(sizeof(double) * n);
+    xr = (double *)malloc(sizeof(double) * n);
     amps_condest(&ctx, K, AMPS_UPPER, F, w, &condK);
     for (k = 0; k < n; k++) w[k] = 0;
     for (k = 0; k < n; k++) {
         amps_int p;
-        for (p = K->p[k]; p < K->p[k + 1]; p++) { w[k] += fabs(K->x[p]); if (K->i[p] != k) w[K->i[p]] += fabs(K->x[p]); }
+        for (p = K->p[k]; p < K->p[k + 1]; p++) {
+            w[k] += fabs(K->x[p]);
+            if (K->i[p] != k) w[K->i[p]] += fabs(K->x[p]);
+        }
     }
-    for (k = 0; k < n; k++) if (w[k] > knorm) knorm = w[k];
+    for (k = 0; k < n; k++)
+        if (w[k] > knorm) knorm = w[k];
     kinv1 = condK / knorm;
     i = n / 2;
     z[i] = 1;
@@ -742,7 +826,10 @@ static void adv_near_cancel(void) {
             CHECK(amps_update_add(&ctx, U, 1, &i, &i, &mt) == AMPS_OK, "near cancel add: %s", ctx.msg);
         }
         s = amps_update_solve(&ctx, U, x);
-        for (k = 0; k < n; k++) { z1 += fabs(z[k]); if (fabs(z[k]) > zi) zi = fabs(z[k]); }
+        for (k = 0; k < n; k++) {
+            z1 += fabs(z[k]);
+            if (fabs(z[k]) > zi) zi = fabs(z[k]);
+        }
         /* ||K^{-1}||_1 grows by ||z||_1 ||z||_inf (1 - delta) / (cii delta) (Sherman-Morrison) */
         cond = delta > 0 ? knorm * (kinv1 + z1 * zi * (1 - delta) / (cii * delta)) : INFINITY;
         if (s == AMPS_OK) {
@@ -759,8 +846,8 @@ static void adv_near_cancel(void) {
             if (pr < st->piv_min) st->piv_min = pr;
             if (be > st->be) st->be = be;
             if (err > st->err) st->err = err;
-            printf("  near cancel delta %.0e: solved, cond %.1e, pivot ratio %.1e, backward error %.1f eps, error %.2e%s\n", delta, cond, pr,
-                   be / EPS, err, err < 0 ? " (CHOLMOD failed)" : "");
+            printf("  near cancel delta %.0e: solved, cond %.1e, pivot ratio %.1e, backward error %.1f eps, error %.2e%s\n",
+                   delta, cond, pr, be / EPS, err, err < 0 ? " (CHOLMOD failed)" : "");
             CHECK(be <= BOUND_BE_FACTOR * EPS * sqrt(cond), "near cancel delta %.0e: backward error %.3e", delta, be);
             CHECK(err < 0 ? delta < 1e-12 : err <= BOUND_ERR_FACTOR * EPS * cond + 1e-15,
                   "near cancel delta %.0e: error %.3e for cond %.2e (silent garbage)", delta, err, cond);
@@ -775,13 +862,23 @@ static void adv_near_cancel(void) {
             amps_solve(&ctx, F, f, xr, w);
             CHECK(t_reldiff((int)n, x, xr) <= 1e-12, "near cancel: the rejected update changed the solution");
         }
-        st->steps++; st->checks++;
+        st->steps++;
+        st->checks++;
         amps_update_free(&ctx, U);
     }
     CHECK(nsing >= 1, "near cancel: delta = 0 never declared singular");
-    st->neq = (int)n; st->cond0 = condK;
-    amps_factor_free(&ctx, F); amps_csc_free(&ctx, K); amps_mesh_free(&ctx, m);
-    free(fixed); free(dof); free(z); free(f); free(w); free(x); free(xr);
+    st->neq = (int)n;
+    st->cond0 = condK;
+    amps_factor_free(&ctx, F);
+    amps_csc_free(&ctx, K);
+    amps_mesh_free(&ctx, m);
+    free(fixed);
+    free(dof);
+    free(z);
+    free(f);
+    free(w);
+    free(x);
+    free(xr);
 }
 
 static void adversarial(void) {
@@ -798,7 +895,8 @@ static void adversarial(void) {
 int main(int argc, char **argv) {
     int k;
     const char *env = getenv("AMPS_STRESS");
-    for (k = 1; k < argc; k++) if (!strcmp(argv[k], "--long")) long_mode = 1;
+    for (k = 1; k < argc; k++)
+        if (!strcmp(argv[k], "--long")) long_mode = 1;
     if (env && !strcmp(env, "long")) long_mode = 1;
     only = getenv("AMPS_STRESS_ONLY");
     if (getenv("AMPS_STRESS_VARIANT")) variant = getenv("AMPS_STRESS_VARIANT");
@@ -806,21 +904,24 @@ int main(int argc, char **argv) {
     adversarial();
     conditioning();
     long_runs();
-    printf("\nsing/f: commits refused as singular / of those, cuts CHOLMOD solves (false alarms)\n%-20s %6s %5s %5s %4s %5s %8s %8s | %8s %8s | %6s %6s | %8s %8s %8s | %8s %5s\n", "case", "n", "steps", "check", "cuts",
-           "sing/f", "cond0", "cond_end", "res", "res_chol", "be/eps", "chol", "err", "err_chol", "err/epsc", "min_piv", "sec");
+    printf("\nsing/f: commits refused as singular / of those, cuts CHOLMOD solves (false alarms)\n%-20s %6s %5s %5s %4s %5s %8s %8s | %8s %8s | %6s %6s | %8s %8s %8s | %8s %5s\n",
+           "case", "n", "steps", "check", "cuts", "sing/f", "cond0", "cond_end", "res", "res_chol", "be/eps", "chol",
+           "err", "err_chol", "err/epsc", "min_piv", "sec");
     for (k = 0; k < ntable; k++) {
         stats *s = table + k;
-        printf("%-20s %6d %5d %5d %4d %2d/%-2d %8.2e %8.2e | %8.2e %8.2e | %6.1f %6.1f | %8.2e %8.2e %8.2e | %8.2e %5.1f\n", s->name,
-               s->neq, s->steps, s->checks, s->cuts, s->singular, s->false_singular, s->cond0, s->cond_end, s->res, s->res_chol, s->be / EPS, s->be_chol / EPS, s->err,
-               s->err_chol, s->err_over_cond, s->piv_min, s->seconds);
+        printf("%-20s %6d %5d %5d %4d %2d/%-2d %8.2e %8.2e | %8.2e %8.2e | %6.1f %6.1f | %8.2e %8.2e %8.2e | %8.2e %5.1f\n",
+               s->name, s->neq, s->steps, s->checks, s->cuts, s->singular, s->false_singular, s->cond0, s->cond_end,
+               s->res, s->res_chol, s->be / EPS, s->be_chol / EPS, s->err, s->err_chol, s->err_over_cond, s->piv_min,
+               s->seconds);
     }
-    if (getenv("AMPS_STRESS_TABLE")) {   /* one row per case, appended (bench/accuracy.sh) */
+    if (getenv("AMPS_STRESS_TABLE")) { /* one row per case, appended (bench/accuracy.sh) */
         FILE *tf = fopen(getenv("AMPS_STRESS_TABLE"), "a");
         if (tf) {
             for (k = 0; k < ntable; k++) {
                 stats *s = table + k;
-                fprintf(tf, "%s,%s,%d,%d,%d,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%d\n", variant, s->name, s->neq, s->steps, s->cuts, s->cond0,
-                        s->res, s->res_chol, s->be / EPS, s->be_chol / EPS, s->err, s->err_chol, s->piv_min, s->fails);
+                fprintf(tf, "%s,%s,%d,%d,%d,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%d\n", variant, s->name, s->neq,
+                        s->steps, s->cuts, s->cond0, s->res, s->res_chol, s->be / EPS, s->be_chol / EPS, s->err,
+                        s->err_chol, s->piv_min, s->fails);
             }
             fclose(tf);
         }

@@ -13,7 +13,11 @@ static int t_bg_fault = 0;
 #include <string.h>
 
 /* ---- explicit current system: triplets (i <= j, summed on assembly) ---- */
-typedef struct trip { int nz, cap; int *i, *j; double *x; } trip;
+typedef struct trip {
+    int nz, cap;
+    int *i, *j;
+    double *x;
+} trip;
 
 static void trip_add(trip *T, int i, int j, double v) {
     if (T->nz == T->cap) {
@@ -22,13 +26,22 @@ static void trip_add(trip *T, int i, int j, double v) {
         T->j = (int *)realloc(T->j, sizeof(int) * T->cap);
         T->x = (double *)realloc(T->x, sizeof(double) * T->cap);
     }
-    T->i[T->nz] = i < j ? i : j; T->j[T->nz] = i < j ? j : i; T->x[T->nz] = v; T->nz++;
+    T->i[T->nz] = i < j ? i : j;
+    T->j[T->nz] = i < j ? j : i;
+    T->x[T->nz] = v;
+    T->nz++;
 }
-static void trip_free(trip *T) { free(T->i); free(T->j); free(T->x); memset(T, 0, sizeof(*T)); }
+static void trip_free(trip *T) {
+    free(T->i);
+    free(T->j);
+    free(T->x);
+    memset(T, 0, sizeof(*T));
+}
 
 /* Reference solution of K x = f with x_C = g (con[i] != 0) by CHOLMOD on the reduced system.
    Returns CHOLMOD's relative residual (reduced system), or -1 if it failed. */
-static double ref_constrained(amps_ctx *ctx, const trip *T, int N, const int *con, const double *g, const double *f, double *x) {
+static double ref_constrained(amps_ctx *ctx, const trip *T, int N, const int *con, const double *g, const double *f,
+                              double *x) {
     int *map = (int *)malloc(sizeof(int) * (N + 1)), nf = 0, k, c;
     double *rhs, *xf, num = 0, den = 0, res;
     trip R = {0, 0, NULL, NULL, NULL};
@@ -36,7 +49,8 @@ static double ref_constrained(amps_ctx *ctx, const trip *T, int N, const int *co
     for (k = 0; k < N; k++) map[k] = con[k] ? -1 : nf++;
     rhs = (double *)calloc(nf + 1, sizeof(double));
     xf = (double *)calloc(nf + 1, sizeof(double));
-    for (k = 0; k < N; k++) if (map[k] >= 0) rhs[map[k]] = f[k];
+    for (k = 0; k < N; k++)
+        if (map[k] >= 0) rhs[map[k]] = f[k];
     for (k = 0; k < T->nz; k++) {
         int i = T->i[k], j = T->j[k];
         double v = T->x[k];
@@ -49,30 +63,43 @@ static double ref_constrained(amps_ctx *ctx, const trip *T, int N, const int *co
     if (A && (nf == 0 || ref_solve(nf, A->p, A->i, A->x, NULL, 0, rhs, xf) == 0)) {
         double *y = (double *)calloc(nf + 1, sizeof(double));
         if (nf) amps_csc_symv(A, AMPS_UPPER, xf, y);
-        for (k = 0; k < nf; k++) { num += (y[k] - rhs[k]) * (y[k] - rhs[k]); den += rhs[k] * rhs[k]; }
+        for (k = 0; k < nf; k++) {
+            num += (y[k] - rhs[k]) * (y[k] - rhs[k]);
+            den += rhs[k] * rhs[k];
+        }
         res = den > 0 ? sqrt(num / den) : sqrt(num);
         free(y);
         for (k = 0; k < N; k++) x[k] = map[k] >= 0 ? xf[map[k]] : g[k];
     }
     (void)c;
-    amps_csc_free(ctx, A); trip_free(&R);
-    free(map); free(rhs); free(xf);
+    amps_csc_free(ctx, A);
+    trip_free(&R);
+    free(map);
+    free(rhs);
+    free(xf);
     return res;
 }
 
 /* Relative residual of the reduced system for x, from the explicit triplets. */
-static double explicit_residual(const trip *T, int N, const int *con, const double *g, const double *f, const double *x) {
+static double explicit_residual(const trip *T, int N, const int *con, const double *g, const double *f,
+                                const double *x) {
     double *y = (double *)calloc(N, sizeof(double)), *kg = (double *)calloc(N, sizeof(double)), num = 0, den = 0;
     int k;
     for (k = 0; k < T->nz; k++) {
         int i = T->i[k], j = T->j[k];
         double v = T->x[k];
-        y[i] += v * x[j]; if (i != j) y[j] += v * x[i];
+        y[i] += v * x[j];
+        if (i != j) y[j] += v * x[i];
         if (con[j]) kg[i] += v * g[j];
         if (i != j && con[i]) kg[j] += v * g[i];
     }
-    for (k = 0; k < N; k++) if (!con[k]) { num += (y[k] - f[k]) * (y[k] - f[k]); den += (f[k] - kg[k]) * (f[k] - kg[k]); }
-    free(y); free(kg);
+    for (k = 0; k < N; k++)
+        if (!con[k]) {
+            num += (y[k] - f[k]) * (y[k] - f[k]);
+            den += (f[k] - kg[k]) * (f[k] - kg[k]);
+        }
+    free(y);
+    free(kg);
     return den > 0 ? sqrt(num / den) : sqrt(num);
 }
 
@@ -95,14 +122,15 @@ typedef struct model {
     amps_csc *K;
     trip T;
     int N, cap;
-    int *con; double *g, *f;
+    int *con;
+    double *g, *f;
     double worst_err, worst_res, worst_ref;
     int steps, fails;
-    int bgmode;                 /* 1: start, wait for and cancel re-factorizations at random steps */
+    int bgmode; /* 1: start, wait for and cancel re-factorizations at random steps */
     unsigned long long bgrng;
-    int extra;                  /* 1: also check the reactions-only and watched solves; 2: and the
+    int extra;     /* 1: also check the reactions-only and watched solves; 2: and the
                                    L entries the watched solve reads (engine made with refine = 0) */
-    double res_ok;              /* a residual at most this passes too (the guard's tolerance) */
+    double res_ok; /* a residual at most this passes too (the guard's tolerance) */
 } model;
 
 static void model_grow(model *m, int N) {
@@ -119,7 +147,8 @@ static void model_grow(model *m, int N) {
     m->N = N;
 }
 
-static int model_init(model *m, int n, int nz, const int *ti, const int *tj, const double *tx, const amps_update_opts *o) {
+static int model_init(model *m, int n, int nz, const int *ti, const int *tj, const double *tx,
+                      const amps_update_opts *o) {
     int k;
     memset(m, 0, sizeof(*m));
     amps_ctx_init(&m->ctx);
@@ -135,8 +164,13 @@ static int model_init(model *m, int n, int nz, const int *ti, const int *tj, con
 }
 
 static void model_free(model *m) {
-    amps_update_free(&m->ctx, m->U); amps_factor_free(&m->ctx, m->F); amps_csc_free(&m->ctx, m->K);
-    trip_free(&m->T); free(m->con); free(m->g); free(m->f);
+    amps_update_free(&m->ctx, m->U);
+    amps_factor_free(&m->ctx, m->F);
+    amps_csc_free(&m->ctx, m->K);
+    trip_free(&m->T);
+    free(m->con);
+    free(m->g);
+    free(m->f);
 }
 
 /* Before the full solve: reactions from the dense system alone (into r1) and a watched solve
@@ -160,22 +194,28 @@ static int model_partial(model *m, double *r1, amps_int *wi, double *xw, const c
     s = amps_update_solve_watched(&m->ctx, m->U, xw);
     CHECK(s == AMPS_OK, "%s step %d: watched solve: %s", what, m->steps, m->ctx.msg);
     if (m->extra == 2) {
-        amps_marker mk; amps_int *req = (amps_int *)malloc(sizeof(amps_int) * (m->F->n + 1));
+        amps_marker mk;
+        amps_int *req = (amps_int *)malloc(sizeof(amps_int) * (m->F->n + 1));
         amps_int *clo = (amps_int *)malloc(sizeof(amps_int) * (m->F->n + 1)), nb = 0, ncl;
         double bound = 0;
         amps_marker_init(&m->ctx, &mk, m->F->n);
-        for (k = 0; k < nw; k++) if (wi[k] < m->F->n) req[nb++] = m->F->iperm[wi[k]];
+        for (k = 0; k < nw; k++)
+            if (wi[k] < m->F->n) req[nb++] = m->F->iperm[wi[k]];
         ncl = amps_closure(m->F, nb, req, clo, &mk);
         for (k = 0; k < ncl; k++) bound += (double)(m->F->Lp[clo[k] + 1] - m->F->Lp[clo[k]]);
         CHECK(amps_touch_count(m->F) <= bound, "%s step %d: watched solve read %.0f entries of L, closure has %.0f",
               what, m->steps, amps_touch_count(m->F), bound);
-        amps_marker_free(&m->ctx, &mk); free(req); free(clo);
+        amps_marker_free(&m->ctx, &mk);
+        free(req);
+        free(clo);
     }
-    {   /* the two-phase job gives the same values */
+    { /* the two-phase job gives the same values */
         amps_update_job job;
         double *y = (double *)malloc(sizeof(double) * (amps_update_dim(m->U) + 1)), xj[12];
         CHECK(amps_update_set_force(&m->ctx, m->U, 0, NULL, NULL) == AMPS_OK, "empty force change");
-        CHECK(amps_update_watched_begin(&m->ctx, m->U, &job, y, 0, xj) == AMPS_ERR_CAPACITY || amps_update_base_order(m->U) == 0, "short y accepted");
+        CHECK(amps_update_watched_begin(&m->ctx, m->U, &job, y, 0, xj) == AMPS_ERR_CAPACITY ||
+                      amps_update_base_order(m->U) == 0,
+              "short y accepted");
         s = amps_update_watched_begin(&m->ctx, m->U, &job, y, amps_update_dim(m->U), xj);
         CHECK(s == AMPS_OK, "%s step %d: job begin: %s", what, m->steps, m->ctx.msg);
         CHECK(amps_update_watch(&m->ctx, m->U, nw, wi) == AMPS_ERR_STATE, "watch set changed during a job");
@@ -183,7 +223,8 @@ static int model_partial(model *m, double *r1, amps_int *wi, double *xw, const c
         amps_update_watched_end(m->U, &job);
         /* equal up to rounding (a re-factorization may have been swapped in by the job's commit) */
         for (k = 0; k < nw; k++)
-            CHECK(fabs(xj[k] - xw[k]) <= 1e-12 * (t_norm(nw, xw) + 1e-300), "%s step %d: job x[%d] = %.17e vs %.17e", what, m->steps, (int)wi[k], xj[k], xw[k]);
+            CHECK(fabs(xj[k] - xw[k]) <= 1e-12 * (t_norm(nw, xw) + 1e-300), "%s step %d: job x[%d] = %.17e vs %.17e",
+                  what, m->steps, (int)wi[k], xj[k], xw[k]);
         free(y);
     }
     return nw;
@@ -200,16 +241,29 @@ static void model_check(model *m, double tol_err, const char *what) {
         int r;
         m->bgrng = m->bgrng * 6364136223846793005ULL + 1442695040888963407ULL;
         r = (int)((m->bgrng >> 33) % 20);
-        if (r < 3) { s = amps_update_refactor_start(&m->ctx, m->U); CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP, "%s: refactor start: %s", what, m->ctx.msg); }
-        else if (r < 5) { s = amps_update_refactor_wait(&m->ctx, m->U); CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP, "%s: refactor wait: %s", what, m->ctx.msg); }
-        else if (r == 5) amps_update_refactor_cancel(&m->ctx, m->U);
-        else if (r == 6) { s = amps_update_refactor(&m->ctx, m->U); CHECK(s == AMPS_OK, "%s: synchronous refactor: %s", what, m->ctx.msg); }
+        if (r < 3) {
+            s = amps_update_refactor_start(&m->ctx, m->U);
+            CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP, "%s: refactor start: %s", what, m->ctx.msg);
+        } else if (r < 5) {
+            s = amps_update_refactor_wait(&m->ctx, m->U);
+            CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP, "%s: refactor wait: %s", what, m->ctx.msg);
+        } else if (r == 5) amps_update_refactor_cancel(&m->ctx, m->U);
+        else if (r == 6) {
+            s = amps_update_refactor(&m->ctx, m->U);
+            CHECK(s == AMPS_OK, "%s: synchronous refactor: %s", what, m->ctx.msg);
+        }
     }
     if (m->extra) nw = model_partial(m, r1, wi, xw, what);
     s = amps_update_solve(&m->ctx, m->U, x);
     m->steps++;
     CHECK(s == AMPS_OK, "%s step %d: solve failed: %s", what, m->steps, m->ctx.msg);
-    if (s != AMPS_OK) { free(x); free(xr); free(r1); m->fails++; return; }
+    if (s != AMPS_OK) {
+        free(x);
+        free(xr);
+        free(r1);
+        m->fails++;
+        return;
+    }
     CHECK(amps_update_dim(m->U) == N, "%s: dim %d vs %d", what, (int)amps_update_dim(m->U), N);
     rref = ref_constrained(&m->ctx, &m->T, N, m->con, m->g, m->f, xr);
     CHECK(rref >= 0, "%s step %d: CHOLMOD failed", what, m->steps);
@@ -220,42 +274,54 @@ static void model_check(model *m, double tol_err, const char *what) {
     if (res > m->worst_res) m->worst_res = res;
     if (rref > m->worst_ref) m->worst_ref = rref;
     CHECK(err <= tol_err, "%s step %d: relative error %.3e > %.1e", what, m->steps, err, tol_err);
-    CHECK(res <= 10 * rref + 1e-14 || res <= m->res_ok, "%s step %d: residual %.3e vs CHOLMOD %.3e", what, m->steps, res, rref);
+    CHECK(res <= 10 * rref + 1e-14 || res <= m->res_ok, "%s step %d: residual %.3e vs CHOLMOD %.3e", what, m->steps,
+          res, rref);
     /* two evaluations of a rounding-level residual agree to a factor, or both meet the bound */
     CHECK(fabs(eres - res) <= 0.5 * (eres > res ? eres : res) + 1e-14 || eres <= 10 * rref + 1e-14 || eres <= m->res_ok,
           "%s step %d: engine residual %.3e vs explicit %.3e", what, m->steps, eres, res);
     for (k = 0; k < N; k++)
         if (m->con[k]) {
             double re = explicit_reaction(&m->T, x, m->f, k), ra = amps_update_reaction(m->U, k);
-            CHECK(fabs(re - ra) <= 1e-8 * (1 + fabs(re)), "%s step %d: reaction at %d: %.6e vs %.6e", what, m->steps, k, ra, re);
+            CHECK(fabs(re - ra) <= 1e-8 * (1 + fabs(re)), "%s step %d: reaction at %d: %.6e vs %.6e", what, m->steps, k,
+                  ra, re);
             if (m->extra)
-                CHECK(fabs(r1[k] - ra) <= 1e-8 * (1 + fabs(ra)), "%s step %d: reaction at %d from the dense system %.6e vs full solve %.6e",
-                      what, m->steps, k, r1[k], ra);
+                CHECK(fabs(r1[k] - ra) <= 1e-8 * (1 + fabs(ra)),
+                      "%s step %d: reaction at %d from the dense system %.6e vs full solve %.6e", what, m->steps, k,
+                      r1[k], ra);
         }
     {
         double xn = t_norm(N, x);
         for (k = 0; k < nw; k++)
-            CHECK(fabs(xw[k] - x[wi[k]]) <= 1e-10 * xn, "%s step %d: watched x[%d] = %.6e vs full %.6e", what, m->steps, (int)wi[k], xw[k], x[wi[k]]);
+            CHECK(fabs(xw[k] - x[wi[k]]) <= 1e-10 * xn, "%s step %d: watched x[%d] = %.6e vs full %.6e", what, m->steps,
+                  (int)wi[k], xw[k], x[wi[k]]);
     }
-    free(x); free(xr); free(r1);
+    free(x);
+    free(xr);
+    free(r1);
 }
 
 /* m->T and the engine get the same symmetric change alpha v v^T on idx[0..k-1]; via set_rows
    when use_rows (current rows from the explicit triplets plus the change). */
 static void change_term(model *m, int k, const int *idx, const double *v, double alpha, int use_rows) {
     int a, b, nz = 0;
-    int r[64], c[64]; double x[64];
-    for (a = 0; a < k; a++) for (b = a; b < k; b++) {
-        r[nz] = idx[a]; c[nz] = idx[b]; x[nz] = alpha * v[a] * v[b]; nz++;
-        trip_add(&m->T, idx[a], idx[b], alpha * v[a] * v[b]);
-    }
+    int r[64], c[64];
+    double x[64];
+    for (a = 0; a < k; a++)
+        for (b = a; b < k; b++) {
+            r[nz] = idx[a];
+            c[nz] = idx[b];
+            x[nz] = alpha * v[a] * v[b];
+            nz++;
+            trip_add(&m->T, idx[a], idx[b], alpha * v[a] * v[b]);
+        }
     if (!use_rows) {
         CHECK(amps_update_add(&m->ctx, m->U, nz, r, c, x) == AMPS_OK, "add: %s", m->ctx.msg);
     } else {
         /* full new rows: sum the explicit triplets of each row */
         int *cp = (int *)calloc(k + 1, sizeof(int)), *ci, t, q, cnt = 0;
         double *cx, *dense = (double *)calloc(m->N, sizeof(double));
-        ci = (int *)malloc(sizeof(int) * k * m->N); cx = (double *)malloc(sizeof(double) * k * m->N);
+        ci = (int *)malloc(sizeof(int) * k * m->N);
+        cx = (double *)malloc(sizeof(double) * k * m->N);
         for (a = 0; a < k; a++) {
             int i0 = idx[a];
             memset(dense, 0, sizeof(double) * m->N);
@@ -263,65 +329,101 @@ static void change_term(model *m, int k, const int *idx, const double *v, double
                 if (m->T.i[t] == i0) dense[m->T.j[t]] += m->T.x[t];
                 else if (m->T.j[t] == i0) dense[m->T.i[t]] += m->T.x[t];
             }
-            for (q = 0; q < m->N; q++) if (dense[q] != 0.0) { ci[cnt] = q; cx[cnt] = dense[q]; cnt++; }
+            for (q = 0; q < m->N; q++)
+                if (dense[q] != 0.0) {
+                    ci[cnt] = q;
+                    cx[cnt] = dense[q];
+                    cnt++;
+                }
             cp[a + 1] = cnt;
         }
         CHECK(amps_update_set_rows(&m->ctx, m->U, k, idx, cp, ci, cx) == AMPS_OK, "set_rows: %s", m->ctx.msg);
-        free(cp); free(ci); free(cx); free(dense);
+        free(cp);
+        free(ci);
+        free(cx);
+        free(dense);
     }
 }
 
 /* Random sequence on model m: stiffness terms added and removed, new DOFs joined by springs,
    constraints added, moved and released, sparse force changes. */
 static void random_sequence(model *m, int steps, unsigned long long seed, double tol, const char *what) {
-    typedef struct term { int k; int idx[4]; double v[4]; double alpha; } term;
+    typedef struct term {
+        int k;
+        int idx[4];
+        double v[4];
+        double alpha;
+    } term;
     term *terms = (term *)malloc(sizeof(term) * (steps + 1));
     int nterms = 0, st, scale_i;
     double scale = 0;
     t_seed(seed);
-    for (scale_i = 0; scale_i < m->T.nz; scale_i++) if (m->T.i[scale_i] == m->T.j[scale_i]) scale += m->T.x[scale_i];
+    for (scale_i = 0; scale_i < m->T.nz; scale_i++)
+        if (m->T.i[scale_i] == m->T.j[scale_i]) scale += m->T.x[scale_i];
     scale /= m->N;
     for (st = 0; st < steps; st++) {
         int op = t_int(10), N = m->N;
-        if (op <= 2) {                                   /* add a stiffness term */
+        if (op <= 2) { /* add a stiffness term */
             term *t = terms + nterms++;
             int a;
-            t->k = 2 + t_int(3); t->alpha = scale * (0.1 + t_unif());
+            t->k = 2 + t_int(3);
+            t->alpha = scale * (0.1 + t_unif());
             for (a = 0; a < t->k; a++) {
                 int dup, b;
-                do { t->idx[a] = t_int(N); dup = 0; for (b = 0; b < a; b++) dup |= t->idx[b] == t->idx[a]; } while (dup);
+                do {
+                    t->idx[a] = t_int(N);
+                    dup = 0;
+                    for (b = 0; b < a; b++) dup |= t->idx[b] == t->idx[a];
+                } while (dup);
                 t->v[a] = t_unif() - 0.5;
             }
             change_term(m, t->k, t->idx, t->v, t->alpha, t_int(3) == 0);
-        } else if (op == 3 && nterms > 0) {              /* remove one */
+        } else if (op == 3 && nterms > 0) { /* remove one */
             int which = t_int(nterms);
             term t = terms[which];
             terms[which] = terms[--nterms];
             change_term(m, t.k, t.idx, t.v, -t.alpha, t_int(3) == 0);
-        } else if (op == 4) {                            /* a new DOF hung on a spring */
-            amps_int first; int i0 = t_int(N), idx[2]; double v[2] = {1, -1};
+        } else if (op == 4) { /* a new DOF hung on a spring */
+            amps_int first;
+            int i0 = t_int(N), idx[2];
+            double v[2] = {1, -1};
             CHECK(amps_update_add_dofs(&m->ctx, m->U, 1, &first) == AMPS_OK, "add_dofs: %s", m->ctx.msg);
             CHECK(first == N, "new DOF index %d vs %d", (int)first, N);
             model_grow(m, N + 1);
-            idx[0] = i0; idx[1] = N;
+            idx[0] = i0;
+            idx[1] = N;
             change_term(m, 2, idx, v, scale * (0.5 + t_unif()), 0);
-            if (t_int(2)) { double fv = t_unif() - 0.5; amps_int ii = N; m->f[N] = fv; amps_update_set_force(&m->ctx, m->U, 1, &ii, &fv); }
-        } else if (op == 5) {                            /* constrain or move */
-            amps_int i0 = t_int(N); double v = 0.1 * (t_unif() - 0.5);
-            m->con[i0] = 1; m->g[i0] = v;
+            if (t_int(2)) {
+                double fv = t_unif() - 0.5;
+                amps_int ii = N;
+                m->f[N] = fv;
+                amps_update_set_force(&m->ctx, m->U, 1, &ii, &fv);
+            }
+        } else if (op == 5) { /* constrain or move */
+            amps_int i0 = t_int(N);
+            double v = 0.1 * (t_unif() - 0.5);
+            m->con[i0] = 1;
+            m->g[i0] = v;
             CHECK(amps_update_constrain(&m->ctx, m->U, 1, &i0, &v) == AMPS_OK, "constrain: %s", m->ctx.msg);
-        } else if (op == 6) {                            /* release a constrained index */
+        } else if (op == 6) { /* release a constrained index */
             amps_int i0, tries = 0;
             do { i0 = t_int(N); } while (!m->con[i0] && ++tries < 50);
-            m->con[i0] = 0; m->g[i0] = 0;
+            m->con[i0] = 0;
+            m->g[i0] = 0;
             CHECK(amps_update_release(&m->ctx, m->U, 1, &i0) == AMPS_OK, "release: %s", m->ctx.msg);
-        } else {                                         /* sparse force change */
+        } else { /* sparse force change */
             int nf = 1 + t_int(4), a;
-            amps_int idx[5]; double v[5];
+            amps_int idx[5];
+            double v[5];
             for (a = 0; a < nf; a++) {
                 int dup, b;
-                do { idx[a] = t_int(N); dup = 0; for (b = 0; b < a; b++) dup |= idx[b] == idx[a]; } while (dup);
-                v[a] = t_unif() - 0.5; m->f[idx[a]] = v[a];
+                do {
+                    idx[a] = t_int(N);
+                    dup = 0;
+                    for (b = 0; b < a; b++) dup |= idx[b] == idx[a];
+                } while (dup);
+                v[a] = t_unif() - 0.5;
+                m->f[idx[a]] = v[a];
             }
             CHECK(amps_update_set_force(&m->ctx, m->U, nf, idx, v) == AMPS_OK, "force: %s", m->ctx.msg);
         }
@@ -333,41 +435,70 @@ static void random_sequence(model *m, int steps, unsigned long long seed, double
 static void random_spd(int n, unsigned long long seed, int *nz, int **ti, int **tj, double **tx) {
     int k, cap = n * 13 + 8, c = 0;
     t_seed(seed);
-    *ti = (int *)malloc(sizeof(int) * cap); *tj = (int *)malloc(sizeof(int) * cap); *tx = (double *)malloc(sizeof(double) * cap);
-    for (k = 0; k < n; k++) { (*ti)[c] = k; (*tj)[c] = k; (*tx)[c] = 4.0 + t_unif(); c++; }
+    *ti = (int *)malloc(sizeof(int) * cap);
+    *tj = (int *)malloc(sizeof(int) * cap);
+    *tx = (double *)malloc(sizeof(double) * cap);
+    for (k = 0; k < n; k++) {
+        (*ti)[c] = k;
+        (*tj)[c] = k;
+        (*tx)[c] = 4.0 + t_unif();
+        c++;
+    }
     for (k = 0; k < 4 * n; k++) {
         int i = t_int(n), j = t_int(n);
         double v = 0.4 * (t_unif() - 0.5);
         if (i == j) continue;
-        (*ti)[c] = i < j ? i : j; (*tj)[c] = i < j ? j : i; (*tx)[c] = v; c++;
-        (*ti)[c] = i; (*tj)[c] = i; (*tx)[c] = fabs(v); c++;
-        (*ti)[c] = j; (*tj)[c] = j; (*tx)[c] = fabs(v); c++;
+        (*ti)[c] = i < j ? i : j;
+        (*tj)[c] = i < j ? j : i;
+        (*tx)[c] = v;
+        c++;
+        (*ti)[c] = i;
+        (*tj)[c] = i;
+        (*tx)[c] = fabs(v);
+        c++;
+        (*ti)[c] = j;
+        (*tj)[c] = j;
+        (*tx)[c] = fabs(v);
+        c++;
     }
     *nz = c;
 }
 
 static void fe_model(model *m, fe_mesh *mesh, int fixed_axis_end, const amps_update_opts *o) {
     int *fixed = (int *)calloc(mesh->nn, sizeof(int)), *dof = (int *)malloc(sizeof(int) * 3 * mesh->nn), v, n, nz;
-    int *ti, *tj; double *tx;
+    int *ti, *tj;
+    double *tx;
     (void)fixed_axis_end;
     for (v = 0; v < mesh->nn; v++) fixed[v] = mesh->xyz[3 * v + 2] < 1e-9;
     n = fe_number(mesh, fixed, dof);
     nz = fe_assemble(mesh, dof, 1000.0, 0.3, &ti, &tj, &tx);
     CHECK(model_init(m, n, nz, ti, tj, tx, o) == 0, "fe model init: %s", m->ctx.msg);
-    free(fixed); free(dof); free(ti); free(tj); free(tx);
+    free(fixed);
+    free(dof);
+    free(ti);
+    free(tj);
+    free(tx);
 }
 
 /* ---- node-duplicating cuts on an FE mesh, reference assembled from scratch ---- */
-typedef struct cutmesh { fe_mesh m; int *dof; int nn, cap; } cutmesh;
+typedef struct cutmesh {
+    fe_mesh m;
+    int *dof;
+    int nn, cap;
+} cutmesh;
 
 static void cut_sequence(model *md, fe_mesh *mesh0, int steps, unsigned long long seed, double tol) {
-    cutmesh cm; int v, st, ncut = 0;
+    cutmesh cm;
+    int v, st, ncut = 0;
     double E = 1000.0, nu = 0.3;
     t_seed(seed);
     cm.cap = mesh0->nn + steps + 1;
-    cm.m.nn = mesh0->nn; cm.m.nt = mesh0->nt;
-    cm.m.xyz = (double *)malloc(sizeof(double) * 3 * cm.cap); memcpy(cm.m.xyz, mesh0->xyz, sizeof(double) * 3 * mesh0->nn);
-    cm.m.tet = (int *)malloc(sizeof(int) * 4 * mesh0->nt); memcpy(cm.m.tet, mesh0->tet, sizeof(int) * 4 * mesh0->nt);
+    cm.m.nn = mesh0->nn;
+    cm.m.nt = mesh0->nt;
+    cm.m.xyz = (double *)malloc(sizeof(double) * 3 * cm.cap);
+    memcpy(cm.m.xyz, mesh0->xyz, sizeof(double) * 3 * mesh0->nn);
+    cm.m.tet = (int *)malloc(sizeof(int) * 4 * mesh0->nt);
+    memcpy(cm.m.tet, mesh0->tet, sizeof(int) * 4 * mesh0->nt);
     cm.dof = (int *)malloc(sizeof(int) * 3 * cm.cap);
     {
         int *fixed = (int *)calloc(mesh0->nn, sizeof(int));
@@ -378,86 +509,149 @@ static void cut_sequence(model *md, fe_mesh *mesh0, int steps, unsigned long lon
     /* pull the free end apart so cuts open */
     for (v = 0; v < mesh0->nn; v++)
         if (cm.dof[3 * v] >= 0 && mesh0->xyz[3 * v + 2] > 0) {
-            amps_int i = cm.dof[3 * v]; double fx = mesh0->xyz[3 * v] < 2 ? -1.0 : 1.0;
-            if (t_int(4) == 0) { md->f[i] = fx; amps_update_set_force(&md->ctx, md->U, 1, &i, &fx); }
+            amps_int i = cm.dof[3 * v];
+            double fx = mesh0->xyz[3 * v] < 2 ? -1.0 : 1.0;
+            if (t_int(4) == 0) {
+                md->f[i] = fx;
+                amps_update_set_force(&md->ctx, md->U, 1, &i, &fx);
+            }
         }
     for (st = 0; st < steps; st++) {
         int t, a, b, nmoved = 0, vnew = cm.m.nn, *moved = (int *)malloc(sizeof(int) * cm.m.nt);
         double p[3], nrm[3], X[12], Ke[144];
-        int nzd = 0, capd = 144 * 64; int *ri = (int *)malloc(sizeof(int) * capd), *ci = (int *)malloc(sizeof(int) * capd); double *vx = (double *)malloc(sizeof(double) * capd);
+        int nzd = 0, capd = 144 * 64;
+        int *ri = (int *)malloc(sizeof(int) * capd), *ci = (int *)malloc(sizeof(int) * capd);
+        double *vx = (double *)malloc(sizeof(double) * capd);
         v = t_int(mesh0->nn);
-        if (cm.dof[3 * v] < 0) { free(moved); free(ri); free(ci); free(vx); continue; }
-        for (a = 0; a < 3; a++) { p[a] = cm.m.xyz[3 * v + a]; nrm[a] = t_unif() - 0.5; }
+        if (cm.dof[3 * v] < 0) {
+            free(moved);
+            free(ri);
+            free(ci);
+            free(vx);
+            continue;
+        }
+        for (a = 0; a < 3; a++) {
+            p[a] = cm.m.xyz[3 * v + a];
+            nrm[a] = t_unif() - 0.5;
+        }
         for (t = 0; t < cm.m.nt; t++) {
-            int has = 0; double c[3] = {0, 0, 0}, s = 0;
-            for (a = 0; a < 4; a++) { has |= cm.m.tet[4 * t + a] == v; for (b = 0; b < 3; b++) c[b] += 0.25 * cm.m.xyz[3 * cm.m.tet[4 * t + a] + b]; }
+            int has = 0;
+            double c[3] = {0, 0, 0}, s = 0;
+            for (a = 0; a < 4; a++) {
+                has |= cm.m.tet[4 * t + a] == v;
+                for (b = 0; b < 3; b++) c[b] += 0.25 * cm.m.xyz[3 * cm.m.tet[4 * t + a] + b];
+            }
             if (!has) continue;
             for (b = 0; b < 3; b++) s += (c[b] - p[b]) * nrm[b];
             if (s < 0) moved[nmoved++] = t;
         }
-        {   /* no-op unless both sides keep a tet */
+        { /* no-op unless both sides keep a tet */
             int deg = 0;
-            for (t = 0; t < cm.m.nt; t++) for (a = 0; a < 4; a++) deg += cm.m.tet[4 * t + a] == v;
-            if (nmoved == 0 || nmoved == deg) { free(moved); free(ri); free(ci); free(vx); continue; }
+            for (t = 0; t < cm.m.nt; t++)
+                for (a = 0; a < 4; a++) deg += cm.m.tet[4 * t + a] == v;
+            if (nmoved == 0 || nmoved == deg) {
+                free(moved);
+                free(ri);
+                free(ci);
+                free(vx);
+                continue;
+            }
         }
-        {   /* new node v' with 3 new DOFs */
+        { /* new node v' with 3 new DOFs */
             amps_int first;
             CHECK(amps_update_add_dofs(&md->ctx, md->U, 3, &first) == AMPS_OK, "cut add_dofs: %s", md->ctx.msg);
             model_grow(md, md->N + 3);
-            for (b = 0; b < 3; b++) { cm.m.xyz[3 * vnew + b] = cm.m.xyz[3 * v + b]; cm.dof[3 * vnew + b] = (int)first + b; }
+            for (b = 0; b < 3; b++) {
+                cm.m.xyz[3 * vnew + b] = cm.m.xyz[3 * v + b];
+                cm.dof[3 * vnew + b] = (int)first + b;
+            }
             cm.m.nn++;
         }
         /* delta = sum over moved tets of Ke(new numbering) - Ke(old numbering) */
         for (t = 0; t < nmoved; t++) {
             int e = moved[t], pass;
-            for (a = 0; a < 4; a++) for (b = 0; b < 3; b++) X[3 * a + b] = cm.m.xyz[3 * cm.m.tet[4 * e + a] + b];
+            for (a = 0; a < 4; a++)
+                for (b = 0; b < 3; b++) X[3 * a + b] = cm.m.xyz[3 * cm.m.tet[4 * e + a] + b];
             fe_tet_K(X, E, nu, Ke);
             for (pass = 0; pass < 2; pass++) {
                 double sg = pass == 0 ? -1.0 : 1.0;
-                if (pass == 1) for (a = 0; a < 4; a++) if (cm.m.tet[4 * e + a] == v) cm.m.tet[4 * e + a] = vnew;
-                for (a = 0; a < 12; a++) for (b = 0; b < 12; b++) {
-                    int r = cm.dof[3 * cm.m.tet[4 * e + a / 3] + a % 3], c = cm.dof[3 * cm.m.tet[4 * e + b / 3] + b % 3], q, found = 0;
-                    if (r < 0 || c < 0 || r > c) continue;
-                    for (q = 0; q < nzd; q++) if (ri[q] == r && ci[q] == c) { vx[q] += sg * Ke[12 * a + b]; found = 1; break; }
-                    if (!found) { ri[nzd] = r; ci[nzd] = c; vx[nzd] = sg * Ke[12 * a + b]; nzd++; }
-                }
+                if (pass == 1)
+                    for (a = 0; a < 4; a++)
+                        if (cm.m.tet[4 * e + a] == v) cm.m.tet[4 * e + a] = vnew;
+                for (a = 0; a < 12; a++)
+                    for (b = 0; b < 12; b++) {
+                        int r = cm.dof[3 * cm.m.tet[4 * e + a / 3] + a % 3],
+                            c = cm.dof[3 * cm.m.tet[4 * e + b / 3] + b % 3], q, found = 0;
+                        if (r < 0 || c < 0 || r > c) continue;
+                        for (q = 0; q < nzd; q++)
+                            if (ri[q] == r && ci[q] == c) {
+                                vx[q] += sg * Ke[12 * a + b];
+                                found = 1;
+                                break;
+                            }
+                        if (!found) {
+                            ri[nzd] = r;
+                            ci[nzd] = c;
+                            vx[nzd] = sg * Ke[12 * a + b];
+                            nzd++;
+                        }
+                    }
             }
         }
         CHECK(amps_update_add(&md->ctx, md->U, nzd, ri, ci, vx) == AMPS_OK, "cut add: %s", md->ctx.msg);
         /* reference matrix: reassemble the cut mesh from scratch */
         {
-            int *ti, *tj, nz, k; double *tx;
+            int *ti, *tj, nz, k;
+            double *tx;
             nz = fe_assemble(&cm.m, cm.dof, E, nu, &ti, &tj, &tx);
             trip_free(&md->T);
             for (k = 0; k < nz; k++) trip_add(&md->T, ti[k], tj[k], tx[k]);
-            free(ti); free(tj); free(tx);
+            free(ti);
+            free(tj);
+            free(tx);
         }
         ncut++;
-        if (t_int(3) == 0) {   /* pin a node (maybe the new copy) */
-            amps_int i0 = cm.dof[3 * (t_int(2) ? vnew : v) + t_int(3)]; double gv = 0.01 * (t_unif() - 0.5);
-            md->con[i0] = 1; md->g[i0] = gv;
+        if (t_int(3) == 0) { /* pin a node (maybe the new copy) */
+            amps_int i0 = cm.dof[3 * (t_int(2) ? vnew : v) + t_int(3)];
+            double gv = 0.01 * (t_unif() - 0.5);
+            md->con[i0] = 1;
+            md->g[i0] = gv;
             CHECK(amps_update_constrain(&md->ctx, md->U, 1, &i0, &gv) == AMPS_OK, "pin: %s", md->ctx.msg);
         }
         model_check(md, tol, "fe cut");
-        free(moved); free(ri); free(ci); free(vx);
+        free(moved);
+        free(ri);
+        free(ci);
+        free(vx);
     }
     CHECK(ncut > steps / 4, "only %d of %d cuts happened", ncut, steps);
-    free(cm.m.xyz); free(cm.m.tet); free(cm.dof);
+    free(cm.m.xyz);
+    free(cm.m.tet);
+    free(cm.dof);
 }
 
 static void report(const char *what, const model *m) {
     amps_update_stats st;
     amps_update_get_stats(m->U, &st);
-    printf("  %-28s steps %4d  worst error %.2e  worst residual %.2e (CHOLMOD %.2e)  re-factorizations %d\n", what, m->steps,
-           m->worst_err, m->worst_res, m->worst_ref, (int)st.nrefactor);
+    printf("  %-28s steps %4d  worst error %.2e  worst residual %.2e (CHOLMOD %.2e)  re-factorizations %d\n", what,
+           m->steps, m->worst_err, m->worst_res, m->worst_ref, (int)st.nrefactor);
 }
 
 static void test_random_sequences(void) {
     int seed;
     for (seed = 1; seed <= 4; seed++) {
-        model m; amps_update_opts o; int nz, *ti, *tj; double *tx;
-        const char *what = seed == 3 ? "random spd (dual)" : seed == 4 ? "random spd (refine 0, touch counts)" : "random spd";
-        amps_update_opts_default(&o); o.grow = 1; o.cap_mod = 8; o.cap_new = 4; o.cap_pending = 8;
+        model m;
+        amps_update_opts o;
+        int nz, *ti, *tj;
+        double *tx;
+        const char *what = seed == 3   ? "random spd (dual)"
+                           : seed == 4 ? "random spd (refine 0, touch counts)"
+                                       : "random spd";
+        amps_update_opts_default(&o);
+        o.grow = 1;
+        o.cap_mod = 8;
+        o.cap_new = 4;
+        o.cap_pending = 8;
         o.formulation = seed == 3 ? AMPS_FORM_DUAL : AMPS_FORM_PRIMAL;
         if (seed == 4) o.refine = 0;
         random_spd(60 + 40 * seed, 100 + seed, &nz, &ti, &tj, &tx);
@@ -465,56 +659,87 @@ static void test_random_sequences(void) {
         m.extra = seed == 4 ? 2 : 1;
         random_sequence(&m, 220, 1000 + seed, 1e-10, what);
         report(what, &m);
-        model_free(&m); free(ti); free(tj); free(tx);
+        model_free(&m);
+        free(ti);
+        free(tj);
+        free(tx);
     }
 }
 
 static void test_fe_sequences(void) {
     int kind;
     for (kind = 0; kind < 2; kind++) {
-        model m; amps_update_opts o; fe_mesh mesh = kind == 0 ? fe_beam(6) : fe_brick(3);
-        amps_update_opts_default(&o); o.grow = 1;
+        model m;
+        amps_update_opts o;
+        fe_mesh mesh = kind == 0 ? fe_beam(6) : fe_brick(3);
+        amps_update_opts_default(&o);
+        o.grow = 1;
         fe_model(&m, &mesh, 2, &o);
         random_sequence(&m, 200, 77 + kind, 1e-9, kind == 0 ? "beam 5x5x6 random" : "brick R=3 random");
         report(kind == 0 ? "beam 5x5x6 random" : "brick R=3 random", &m);
-        model_free(&m); fe_free(&mesh);
+        model_free(&m);
+        fe_free(&mesh);
     }
     for (kind = 0; kind < 3; kind++) {
-        model m; amps_update_opts o; fe_mesh mesh = kind == 1 ? fe_brick(3) : fe_beam(8);
-        amps_update_opts_default(&o); o.grow = 1;
+        model m;
+        amps_update_opts o;
+        fe_mesh mesh = kind == 1 ? fe_brick(3) : fe_beam(8);
+        amps_update_opts_default(&o);
+        o.grow = 1;
         o.formulation = kind == 2 ? AMPS_FORM_DUAL : AMPS_FORM_PRIMAL;
         fe_model(&m, &mesh, 2, &o);
         m.extra = 1;
         cut_sequence(&m, &mesh, 60, 5 + kind, 1e-9);
         report(kind == 0 ? "beam 5x5x8 cuts" : kind == 1 ? "brick R=3 cuts" : "beam 5x5x8 cuts (dual)", &m);
-        model_free(&m); fe_free(&mesh);
+        model_free(&m);
+        fe_free(&mesh);
     }
 }
 
 /* Bad input and a singular update: each fails cleanly, the solution stays, a valid update works. */
 static void test_errors(void) {
-    model m; amps_update_opts o; int nz, *ti, *tj; double *tx, *x0, *x1;
-    amps_int idx[2], first; double val[2];
+    model m;
+    amps_update_opts o;
+    int nz, *ti, *tj;
+    double *tx, *x0, *x1;
+    amps_int idx[2], first;
+    double val[2];
     int N;
-    amps_update_opts_default(&o); o.grow = 1;
+    amps_update_opts_default(&o);
+    o.grow = 1;
     random_spd(40, 9, &nz, &ti, &tj, &tx);
     CHECK(model_init(&m, 40, nz, ti, tj, tx, &o) == 0, "init: %s", m.ctx.msg);
     N = 40;
-    x0 = (double *)malloc(sizeof(double) * 64); x1 = (double *)malloc(sizeof(double) * 64);
-    idx[0] = 3; val[0] = 1.0; m.f[3] = 1.0;
+    x0 = (double *)malloc(sizeof(double) * 64);
+    x1 = (double *)malloc(sizeof(double) * 64);
+    idx[0] = 3;
+    val[0] = 1.0;
+    m.f[3] = 1.0;
     amps_update_set_force(&m.ctx, m.U, 1, idx, val);
     model_check(&m, 1e-10, "errors");
     amps_update_solve(&m.ctx, m.U, x0);
-    idx[0] = 40; CHECK(amps_update_constrain(&m.ctx, m.U, 1, idx, val) == AMPS_ERR_INDEX, "index out of range accepted");
-    idx[0] = -1; CHECK(amps_update_set_force(&m.ctx, m.U, 1, idx, val) == AMPS_ERR_INDEX, "negative index accepted");
-    idx[0] = 2; idx[1] = 2; val[1] = 0;
+    idx[0] = 40;
+    CHECK(amps_update_constrain(&m.ctx, m.U, 1, idx, val) == AMPS_ERR_INDEX, "index out of range accepted");
+    idx[0] = -1;
+    CHECK(amps_update_set_force(&m.ctx, m.U, 1, idx, val) == AMPS_ERR_INDEX, "negative index accepted");
+    idx[0] = 2;
+    idx[1] = 2;
+    val[1] = 0;
     CHECK(amps_update_constrain(&m.ctx, m.U, 2, idx, val) == AMPS_ERR_ARG, "duplicate index accepted");
-    val[0] = NAN; CHECK(amps_update_set_force(&m.ctx, m.U, 1, idx, val) == AMPS_ERR_VALUE, "NaN accepted");
-    val[0] = INFINITY; CHECK(amps_update_constrain(&m.ctx, m.U, 1, idx, val) == AMPS_ERR_VALUE, "Inf accepted");
-    { amps_int r[2] = {1, 2}, c[2] = {2, 1}; double v[2] = {0.1, 0.1};
-      CHECK(amps_update_add(&m.ctx, m.U, 2, r, c, v) == AMPS_ERR_ARG, "duplicate pair accepted");
-      v[0] = NAN; CHECK(amps_update_add(&m.ctx, m.U, 1, r, c, v) == AMPS_ERR_VALUE, "NaN change accepted");
-      r[0] = 99; v[0] = 1; CHECK(amps_update_add(&m.ctx, m.U, 1, r, c, v) == AMPS_ERR_INDEX, "bad change index accepted"); }
+    val[0] = NAN;
+    CHECK(amps_update_set_force(&m.ctx, m.U, 1, idx, val) == AMPS_ERR_VALUE, "NaN accepted");
+    val[0] = INFINITY;
+    CHECK(amps_update_constrain(&m.ctx, m.U, 1, idx, val) == AMPS_ERR_VALUE, "Inf accepted");
+    {
+        amps_int r[2] = {1, 2}, c[2] = {2, 1};
+        double v[2] = {0.1, 0.1};
+        CHECK(amps_update_add(&m.ctx, m.U, 2, r, c, v) == AMPS_ERR_ARG, "duplicate pair accepted");
+        v[0] = NAN;
+        CHECK(amps_update_add(&m.ctx, m.U, 1, r, c, v) == AMPS_ERR_VALUE, "NaN change accepted");
+        r[0] = 99;
+        v[0] = 1;
+        CHECK(amps_update_add(&m.ctx, m.U, 1, r, c, v) == AMPS_ERR_INDEX, "bad change index accepted");
+    }
     CHECK(amps_update_add_dofs(&m.ctx, m.U, -1, &first) == AMPS_ERR_ARG, "negative DOF count accepted");
     amps_update_solve(&m.ctx, m.U, x1);
     CHECK(t_reldiff(N, x1, x0) == 0.0, "rejected calls changed the solution");
@@ -525,34 +750,57 @@ static void test_errors(void) {
     amps_update_solve(&m.ctx, m.U, x1);
     CHECK(t_reldiff(N, x1, x0) < 1e-14, "singular update changed the solution");
     /* singular: remove all stiffness of a base index (set its row to zero) */
-    { amps_int r0 = 5, cp[2] = {0, 0}, ci[1] = {0}; double cx[1] = {0};
-      CHECK(amps_update_set_rows(&m.ctx, m.U, 1, &r0, cp, ci, cx) == AMPS_OK, "set_rows zero");
-      CHECK(amps_update_commit(&m.ctx, m.U) == AMPS_ERR_SINGULAR_UPDATE, "zeroed row not detected"); }
+    {
+        amps_int r0 = 5, cp[2] = {0, 0}, ci[1] = {0};
+        double cx[1] = {0};
+        CHECK(amps_update_set_rows(&m.ctx, m.U, 1, &r0, cp, ci, cx) == AMPS_OK, "set_rows zero");
+        CHECK(amps_update_commit(&m.ctx, m.U) == AMPS_ERR_SINGULAR_UPDATE, "zeroed row not detected");
+    }
     amps_update_solve(&m.ctx, m.U, x1);
     CHECK(t_reldiff(N, x1, x0) < 1e-14, "state changed after singular update");
     /* a valid update afterwards */
-    { int idx2[2] = {4, 7}; double v[2] = {1, -1}; change_term(&m, 2, idx2, v, 2.0, 0); }
+    {
+        int idx2[2] = {4, 7};
+        double v[2] = {1, -1};
+        change_term(&m, 2, idx2, v, 2.0, 0);
+    }
     model_check(&m, 1e-10, "after errors");
     /* capacity without growth */
     {
-        model m2; amps_update_opts o2;
-        amps_update_opts_default(&o2); o2.grow = 0; o2.cap_mod = 2; o2.cap_new = 0;
+        model m2;
+        amps_update_opts o2;
+        amps_update_opts_default(&o2);
+        o2.grow = 0;
+        o2.cap_mod = 2;
+        o2.cap_new = 0;
         CHECK(model_init(&m2, 40, nz, ti, tj, tx, &o2) == 0, "init2");
         CHECK(amps_update_add_dofs(&m2.ctx, m2.U, 1, &first) == AMPS_ERR_CAPACITY, "cap_new not enforced");
-        { int idx2[3] = {4, 7, 9}; double v[3] = {1, -1, 1}; change_term(&m2, 3, idx2, v, 2.0, 0); }
+        {
+            int idx2[3] = {4, 7, 9};
+            double v[3] = {1, -1, 1};
+            change_term(&m2, 3, idx2, v, 2.0, 0);
+        }
         CHECK(amps_update_commit(&m2.ctx, m2.U) == AMPS_ERR_CAPACITY, "cap_mod not enforced: %s", m2.ctx.msg);
-        {   /* the failed commit restored the system and discarded the recorded changes */
+        { /* the failed commit restored the system and discarded the recorded changes */
             amps_update_stats st2;
             amps_update_get_stats(m2.U, &st2);
             CHECK(st2.nsys == 0 && st2.ncommit == 0 && amps_update_dim(m2.U) == 40, "failed commit changed the system");
             CHECK(amps_update_commit(&m2.ctx, m2.U) == AMPS_OK, "failed commit kept its changes: %s", m2.ctx.msg);
         }
         trip_free(&m2.T);
-        { int k; for (k = 0; k < nz; k++) trip_add(&m2.T, ti[k], tj[k], tx[k]); }
+        {
+            int k;
+            for (k = 0; k < nz; k++) trip_add(&m2.T, ti[k], tj[k], tx[k]);
+        }
         model_check(&m2, 1e-10, "after capacity error");
         model_free(&m2);
     }
-    model_free(&m); free(ti); free(tj); free(tx); free(x0); free(x1);
+    model_free(&m);
+    free(ti);
+    free(tj);
+    free(tx);
+    free(x0);
+    free(x1);
 }
 
 /* The accuracy guard on an elongated, badly conditioned beam: residuals stay within 10x of
@@ -560,31 +808,40 @@ static void test_errors(void) {
    model_check; without threads no AUTO re-factorization keeps the residual at CHOLMOD's level),
    and the guard reports the residual it reached. */
 static void test_guard(void) {
-    model m; amps_update_opts o; fe_mesh mesh = fe_beam(96);
+    model m;
+    amps_update_opts o;
+    fe_mesh mesh = fe_beam(96);
     amps_update_stats st;
     double res;
-    amps_update_opts_default(&o); o.grow = 1; o.guard_tol = 1e-8;
+    amps_update_opts_default(&o);
+    o.grow = 1;
+    o.guard_tol = 1e-8;
     fe_model(&m, &mesh, 2, &o);
     m.res_ok = o.guard_tol;
     cut_sequence(&m, &mesh, 40, 17, 1e-7);
     amps_update_get_stats(m.U, &st);
     amps_update_residual(&m.ctx, m.U, &res);
     CHECK(st.relres >= 0 && fabs(st.relres - res) <= 0.5 * res + 1e-15, "guard residual %.3e vs %.3e", st.relres, res);
-    CHECK(st.guard_result >= AMPS_GUARD_MET && st.guard_result <= AMPS_GUARD_REFACTORED && st.relres <= 1e-8, "guard: result %d, residual %.3e", (int)st.guard_result, st.relres);
-    {   /* an unreachable tolerance: refinement, a re-factorization, then the warning */
+    CHECK(st.guard_result >= AMPS_GUARD_MET && st.guard_result <= AMPS_GUARD_REFACTORED && st.relres <= 1e-8,
+          "guard: result %d, residual %.3e", (int)st.guard_result, st.relres);
+    { /* an unreachable tolerance: refinement, a re-factorization, then the warning */
         amps_update *U = m.U;
         double *x = (double *)malloc(sizeof(double) * m.N);
-        int idx = 0; double fv = 1.0;
+        int idx = 0;
+        double fv = 1.0;
         U->guard.tol = 1e-30;
         amps_update_set_force(&m.ctx, U, 1, &idx, &fv);
-        CHECK(amps_update_solve(&m.ctx, U, x) == AMPS_WARN_INACCURATE, "unreachable guard tolerance not reported: %s", m.ctx.msg);
+        CHECK(amps_update_solve(&m.ctx, U, x) == AMPS_WARN_INACCURATE, "unreachable guard tolerance not reported: %s",
+              m.ctx.msg);
         amps_update_get_stats(U, &st);
-        CHECK(st.guard_result == AMPS_GUARD_NOT_MET && st.nrefactor >= 1, "guard: result %d, re-factorizations %d", (int)st.guard_result, (int)st.nrefactor);
+        CHECK(st.guard_result == AMPS_GUARD_NOT_MET && st.nrefactor >= 1, "guard: result %d, re-factorizations %d",
+              (int)st.guard_result, (int)st.nrefactor);
         U->guard.tol = 1e-8;
         free(x);
     }
     report("beam 5x5x96 cuts, guard", &m);
-    model_free(&m); fe_free(&mesh);
+    model_free(&m);
+    fe_free(&mesh);
 }
 
 /* Re-factorizations started, awaited and cancelled at random steps of random and cut sequences
@@ -593,69 +850,120 @@ static void test_guard(void) {
 static void test_refactor(void) {
     int seed, ph;
     for (seed = 1; seed <= 3; seed++) {
-        model m; amps_update_opts o; int nz, *ti, *tj; double *tx;
+        model m;
+        amps_update_opts o;
+        int nz, *ti, *tj;
+        double *tx;
         amps_update_stats st;
         const char *what = seed == 2 ? "refactor: random spd (dual)" : "refactor: random spd";
-        amps_update_opts_default(&o); o.grow = 1; o.cap_mod = 8; o.cap_new = 4; o.cap_pending = 8;
+        amps_update_opts_default(&o);
+        o.grow = 1;
+        o.cap_mod = 8;
+        o.cap_new = 4;
+        o.cap_pending = 8;
         o.refactor = seed == 3 ? AMPS_REFACTOR_AUTO : AMPS_REFACTOR_MANUAL;
         o.formulation = seed == 2 ? AMPS_FORM_DUAL : AMPS_FORM_PRIMAL;
         random_spd(80, 300 + seed, &nz, &ti, &tj, &tx);
         CHECK(model_init(&m, 80, nz, ti, tj, tx, &o) == 0, "init: %s", m.ctx.msg);
-        m.bgmode = 1; m.bgrng = (unsigned long long)seed; m.extra = 1;
+        m.bgmode = 1;
+        m.bgrng = (unsigned long long)seed;
+        m.extra = 1;
         random_sequence(&m, 200, 2000 + seed, 1e-10, what);
         amps_update_get_stats(m.U, &st);
         CHECK(st.nrefactor >= 5, "%s: only %d re-factorizations swapped in", what, (int)st.nrefactor);
         report(what, &m);
-        model_free(&m); free(ti); free(tj); free(tx);
+        model_free(&m);
+        free(ti);
+        free(tj);
+        free(tx);
     }
     for (ph = 0; ph < 2; ph++) {
         /* ph 1: node blocks given, so the new bases also drop the couplings cuts cancelled */
-        model m; amps_update_opts o; fe_mesh mesh = fe_brick(3);
-        amps_update_opts_default(&o); o.grow = 1; o.refactor = AMPS_REFACTOR_MANUAL;
-        if (ph) { o.refactor_order.block = 3; o.refactor_order.method = AMPS_ORDER_AMD; }
+        model m;
+        amps_update_opts o;
+        fe_mesh mesh = fe_brick(3);
+        amps_update_opts_default(&o);
+        o.grow = 1;
+        o.refactor = AMPS_REFACTOR_MANUAL;
+        if (ph) {
+            o.refactor_order.block = 3;
+            o.refactor_order.method = AMPS_ORDER_AMD;
+        }
         fe_model(&m, &mesh, 2, &o);
-        m.bgmode = 1; m.bgrng = 7 + (unsigned long long)ph; m.extra = 1;
+        m.bgmode = 1;
+        m.bgrng = 7 + (unsigned long long)ph;
+        m.extra = 1;
         cut_sequence(&m, &mesh, 60, 99, 1e-9);
         report(ph ? "refactor: brick R=3 cuts, node blocks" : "refactor: brick R=3 cuts", &m);
-        model_free(&m); fe_free(&mesh);
+        model_free(&m);
+        fe_free(&mesh);
     }
     for (ph = 1; ph <= 3; ph++) {
-        model m; amps_update_opts o; int nz, *ti, *tj; double *tx, *x0, *x1;
+        model m;
+        amps_update_opts o;
+        int nz, *ti, *tj;
+        double *tx, *x0, *x1;
         amps_update_stats st;
         amps_status s;
-        int idx[3] = {3, 9, 17}; double v[3] = {1, -1, 2};
-        amps_update_opts_default(&o); o.grow = 1; o.refactor = AMPS_REFACTOR_MANUAL;
+        int idx[3] = {3, 9, 17};
+        double v[3] = {1, -1, 2};
+        amps_update_opts_default(&o);
+        o.grow = 1;
+        o.refactor = AMPS_REFACTOR_MANUAL;
         random_spd(60, 400 + ph, &nz, &ti, &tj, &tx);
         CHECK(model_init(&m, 60, nz, ti, tj, tx, &o) == 0, "init: %s", m.ctx.msg);
-        x0 = (double *)malloc(sizeof(double) * 60); x1 = (double *)malloc(sizeof(double) * 60);
+        x0 = (double *)malloc(sizeof(double) * 60);
+        x1 = (double *)malloc(sizeof(double) * 60);
         change_term(&m, 3, idx, v, 3.0, 0);
         model_check(&m, 1e-10, "fault");
         amps_update_solve(&m.ctx, m.U, x0);
         t_bg_fault = ph;
         CHECK(amps_update_refactor_start(&m.ctx, m.U) == AMPS_OK, "start: %s", m.ctx.msg);
-        if (ph == 3) {   /* a catch-up needs a log: changes while it runs */
+        if (ph == 3) { /* a catch-up needs a log: changes while it runs */
             int k;
-            for (k = 0; k < 40; k++) { int i2[2] = {k % 60, (k * 7 + 1) % 60}; double v2[2] = {0.5, -0.5}; change_term(&m, 2, i2, v2, 0.1, 0); amps_update_commit(&m.ctx, m.U); }
+            for (k = 0; k < 40; k++) {
+                int i2[2] = {k % 60, (k * 7 + 1) % 60};
+                double v2[2] = {0.5, -0.5};
+                change_term(&m, 2, i2, v2, 0.1, 0);
+                amps_update_commit(&m.ctx, m.U);
+            }
         }
         s = amps_update_refactor_wait(&m.ctx, m.U);
         t_bg_fault = 0;
         if (ph < 3) CHECK(s != AMPS_OK && s != AMPS_WARN_NOOP, "phase %d: injected failure not reported", ph);
         amps_update_get_stats(m.U, &st);
-        CHECK(ph == 3 || (st.nrefactor == 0 && st.refactor_failed == 1 && !st.refactor_running), "phase %d: stats after a failure", ph);
+        CHECK(ph == 3 || (st.nrefactor == 0 && st.refactor_failed == 1 && !st.refactor_running),
+              "phase %d: stats after a failure", ph);
         model_check(&m, 1e-10, "after an injected failure");
-        if (ph < 3) { amps_update_solve(&m.ctx, m.U, x1); CHECK(t_reldiff(60, x0, x1) < 1e-14, "phase %d: solution changed by a failed re-factorization", ph); }
-        CHECK(amps_update_refactor(&m.ctx, m.U) == AMPS_OK, "phase %d: re-factorization after a failure: %s", ph, m.ctx.msg);
+        if (ph < 3) {
+            amps_update_solve(&m.ctx, m.U, x1);
+            CHECK(t_reldiff(60, x0, x1) < 1e-14, "phase %d: solution changed by a failed re-factorization", ph);
+        }
+        CHECK(amps_update_refactor(&m.ctx, m.U) == AMPS_OK, "phase %d: re-factorization after a failure: %s", ph,
+              m.ctx.msg);
         model_check(&m, 1e-10, "after a re-factorization");
-        model_free(&m); free(ti); free(tj); free(tx); free(x0); free(x1);
+        model_free(&m);
+        free(ti);
+        free(tj);
+        free(tx);
+        free(x0);
+        free(x1);
     }
-    {   /* OFF: explicit calls are refused */
-        model m; amps_update_opts o; int nz, *ti, *tj; double *tx;
-        amps_update_opts_default(&o); o.refactor = AMPS_REFACTOR_OFF;
+    { /* OFF: explicit calls are refused */
+        model m;
+        amps_update_opts o;
+        int nz, *ti, *tj;
+        double *tx;
+        amps_update_opts_default(&o);
+        o.refactor = AMPS_REFACTOR_OFF;
         random_spd(30, 9, &nz, &ti, &tj, &tx);
         CHECK(model_init(&m, 30, nz, ti, tj, tx, &o) == 0, "init: %s", m.ctx.msg);
         CHECK(amps_update_refactor_start(&m.ctx, m.U) == AMPS_ERR_STATE, "refactor with policy OFF accepted");
         CHECK(amps_update_refactor_wait(&m.ctx, m.U) == AMPS_WARN_NOOP, "wait with nothing running");
-        model_free(&m); free(ti); free(tj); free(tx);
+        model_free(&m);
+        free(ti);
+        free(tj);
+        free(tx);
     }
 }
 
@@ -665,24 +973,33 @@ static void test_refactor(void) {
 static void test_lu_drop(void) {
     int ph;
     for (ph = 0; ph < 2; ph++) {
-        model m; amps_update_opts o; amps_update_stats st;
+        model m;
+        amps_update_opts o;
+        amps_update_stats st;
         const char *what = ph ? "column removal: random spd" : "column removal: brick R=3 cuts";
-        amps_update_opts_default(&o); o.grow = 1; o.refactor = AMPS_REFACTOR_OFF;
+        amps_update_opts_default(&o);
+        o.grow = 1;
+        o.refactor = AMPS_REFACTOR_OFF;
         if (ph == 0) {
             fe_mesh mesh = fe_brick(3);
             fe_model(&m, &mesh, 2, &o);
             cut_sequence(&m, &mesh, 80, 6, 1e-9);
             fe_free(&mesh);
         } else {
-            int nz, *ti, *tj; double *tx;
+            int nz, *ti, *tj;
+            double *tx;
             random_spd(120, 77, &nz, &ti, &tj, &tx);
             CHECK(model_init(&m, 120, nz, ti, tj, tx, &o) == 0, "init: %s", m.ctx.msg);
             random_sequence(&m, 150, 4242, 1e-10, what);
-            free(ti); free(tj); free(tx);
+            free(ti);
+            free(tj);
+            free(tx);
         }
         amps_update_get_stats(m.U, &st);
-        printf("  %s: %d commits, %d with column removal, %d of them fell back\n", what, (int)st.ncommit, (int)st.lu_drops, (int)st.lu_drop_fails);
-        CHECK(st.lu_drops > 10 && st.lu_drop_fails < st.lu_drops, "%s: column removal used %d times, %d fell back", what, (int)st.lu_drops, (int)st.lu_drop_fails);
+        printf("  %s: %d commits, %d with column removal, %d of them fell back\n", what, (int)st.ncommit,
+               (int)st.lu_drops, (int)st.lu_drop_fails);
+        CHECK(st.lu_drops > 10 && st.lu_drop_fails < st.lu_drops, "%s: column removal used %d times, %d fell back",
+              what, (int)st.lu_drops, (int)st.lu_drop_fails);
         report(what, &m);
         model_free(&m);
     }
@@ -691,20 +1008,27 @@ static void test_lu_drop(void) {
 /* 1 and 2 threads give the same results. */
 static void test_threads(void) {
 #ifdef _OPENMP
-    double *x[2]; int th, N = 0;
+    double *x[2];
+    int th, N = 0;
     for (th = 1; th <= 2; th++) {
-        model m; amps_update_opts o; fe_mesh mesh = fe_beam(8);
-        amps_update_opts_default(&o); o.grow = 1; o.refactor = AMPS_REFACTOR_MANUAL;
+        model m;
+        amps_update_opts o;
+        fe_mesh mesh = fe_beam(8);
+        amps_update_opts_default(&o);
+        o.grow = 1;
+        o.refactor = AMPS_REFACTOR_MANUAL;
         omp_set_num_threads(th);
         fe_model(&m, &mesh, 2, &o);
         cut_sequence(&m, &mesh, 30, 42, 1e-9);
         N = m.N;
         x[th - 1] = (double *)malloc(sizeof(double) * N);
         amps_update_solve(&m.ctx, m.U, x[th - 1]);
-        model_free(&m); fe_free(&mesh);
+        model_free(&m);
+        fe_free(&mesh);
     }
     CHECK(t_reldiff(N, x[0], x[1]) <= 1e-14, "1 vs 2 threads differ: %.3e", t_reldiff(N, x[0], x[1]));
-    free(x[0]); free(x[1]);
+    free(x[0]);
+    free(x[1]);
     omp_set_num_threads(2);
 #endif
 }

@@ -42,7 +42,7 @@ typedef struct replay {
     char last_cmd[64];
     double E, nu;
     int have_material;
-    int sandbox;         /* fuzzing: no file access (mesh files, dump, write), small meshes only */
+    int sandbox; /* fuzzing: no file access (mesh files, dump, write), small meshes only */
 } replay;
 
 
@@ -67,12 +67,15 @@ static int parse_node(const char *s, amps_int *v) {
     return 1;
 }
 
-typedef struct face { amps_int v[3], t; } face;
+typedef struct face {
+    amps_int v[3], t;
+} face;
 
 static int cmp_face(const void *a, const void *b) {
     const face *x = (const face *)a, *y = (const face *)b;
     int k;
-    for (k = 0; k < 3; k++) if (x->v[k] != y->v[k]) return x->v[k] < y->v[k] ? -1 : 1;
+    for (k = 0; k < 3; k++)
+        if (x->v[k] != y->v[k]) return x->v[k] < y->v[k] ? -1 : 1;
     return 0;
 }
 
@@ -84,14 +87,35 @@ static int write_surface(replay *R, const char *path) {
     face *f = (face *)malloc(sizeof(face) * 4 * (size_t)m->ntet);
     amps_int t, k, n = 0;
     FILE *o = fopen(path, "w");
-    if (!f || !o) { free(f); if (o) fclose(o); fprintf(stderr, "%s: cannot write\n", path); return 1; }
+    if (!f || !o) {
+        free(f);
+        if (o) fclose(o);
+        fprintf(stderr, "%s: cannot write\n", path);
+        return 1;
+    }
     for (t = 0; t < m->ntet; t++)
         for (k = 0; k < 4; k++) {
             amps_int a = m->tet[4 * t + fv[k][0]], b = m->tet[4 * t + fv[k][1]], c = m->tet[4 * t + fv[k][2]], x;
-            if (a > b) { x = a; a = b; b = x; }
-            if (b > c) { x = b; b = c; c = x; }
-            if (a > b) { x = a; a = b; b = x; }
-            f[n].v[0] = a; f[n].v[1] = b; f[n].v[2] = c; f[n].t = t; n++;
+            if (a > b) {
+                x = a;
+                a = b;
+                b = x;
+            }
+            if (b > c) {
+                x = b;
+                b = c;
+                c = x;
+            }
+            if (a > b) {
+                x = a;
+                a = b;
+                b = x;
+            }
+            f[n].v[0] = a;
+            f[n].v[1] = b;
+            f[n].v[2] = c;
+            f[n].t = t;
+            n++;
         }
     qsort(f, (size_t)n, sizeof(face), cmp_face);
     for (k = 0; k < n; k++) {
@@ -100,7 +124,8 @@ static int write_surface(replay *R, const char *path) {
         for (q = 0; q <= 3; q++) {
             amps_int v = f[k].v[q % 3];
             double d = sqrt(u[3 * v] * u[3 * v] + u[3 * v + 1] * u[3 * v + 1] + u[3 * v + 2] * u[3 * v + 2]);
-            fprintf(o, "%g %g %g %g\n", m->xyz[3 * v] + u[3 * v], m->xyz[3 * v + 1] + u[3 * v + 1], m->xyz[3 * v + 2] + u[3 * v + 2], d);
+            fprintf(o, "%g %g %g %g\n", m->xyz[3 * v] + u[3 * v], m->xyz[3 * v + 1] + u[3 * v + 1],
+                    m->xyz[3 * v + 2] + u[3 * v + 2], d);
         }
         fprintf(o, "\n");
     }
@@ -122,7 +147,10 @@ static int lib_fail(replay *R, const char *what) {
 }
 
 static int need_scene(replay *R) {
-    if (!R->S) { fail(R, "%s", "no mesh yet (the first command must be 'mesh')"); return 0; }
+    if (!R->S) {
+        fail(R, "%s", "no mesh yet (the first command must be 'mesh')");
+        return 0;
+    }
     return 1;
 }
 
@@ -143,7 +171,10 @@ static int cmd_mesh(replay *R, int nt, char **t) {
     } else return fail(R, "%s", "usage: mesh <file> | mesh beam <h> | mesh brick <R>");
     if (!m) return lib_fail(R, "mesh");
     R->S = amps_scene_create(&R->ctx, m, &R->opts);
-    if (!R->S) { amps_mesh_free(&R->ctx, m); return lib_fail(R, "mesh"); }
+    if (!R->S) {
+        amps_mesh_free(&R->ctx, m);
+        return lib_fail(R, "mesh");
+    }
     if (!R->quiet) printf("mesh: %ld nodes, %ld tetrahedra\n", (long)m->nnode, (long)m->ntet);
     return 0;
 }
@@ -164,7 +195,8 @@ static int run_line(replay *R, int nt, char **t) {
     if (!strcmp(c, "mesh")) return cmd_mesh(R, nt, t);
     if (!need_scene(R)) return 1;
     if (!strcmp(c, "material")) {
-        if (nt != 3 || !parse_num(t[1], &x[0]) || !parse_num(t[2], &x[1])) return fail(R, "%s", "usage: material <E> <nu>");
+        if (nt != 3 || !parse_num(t[1], &x[0]) || !parse_num(t[2], &x[1]))
+            return fail(R, "%s", "usage: material <E> <nu>");
         if (R->solved) return fail(R, "%s", "material is allowed only before the first solve");
         if (amps_scene_set_material(&R->ctx, R->S, x[0], x[1])) return lib_fail(R, "material");
         return 0;
@@ -173,18 +205,22 @@ static int run_line(replay *R, int nt, char **t) {
         int axis;
         amps_int cnt;
         if (nt != 4) return fail(R, "%s", "usage: fix <x|y|z> <lt|gt> <value>");
-        if (!strcmp(t[1], "x")) axis = 0; else if (!strcmp(t[1], "y")) axis = 1; else if (!strcmp(t[1], "z")) axis = 2;
+        if (!strcmp(t[1], "x")) axis = 0;
+        else if (!strcmp(t[1], "y")) axis = 1;
+        else if (!strcmp(t[1], "z")) axis = 2;
         else return fail(R, "bad axis '%s' (x, y or z)", t[1]);
         if (strcmp(t[2], "lt") && strcmp(t[2], "gt")) return fail(R, "bad comparison '%s' (lt or gt)", t[2]);
         if (!parse_num(t[3], &x[0])) return fail(R, "bad value '%s'", t[3]);
-        if (amps_scene_fix_where(&R->ctx, R->S, axis, !strcmp(t[2], "lt") ? AMPS_LT : AMPS_GT, x[0], &cnt)) return lib_fail(R, "fix");
+        if (amps_scene_fix_where(&R->ctx, R->S, axis, !strcmp(t[2], "lt") ? AMPS_LT : AMPS_GT, x[0], &cnt))
+            return lib_fail(R, "fix");
         if (!R->quiet) printf("fix: %ld nodes\n", (long)cnt);
         return 0;
     }
     if (!strcmp(c, "force") || !strcmp(c, "pin")) {
         amps_status s;
         if (nt != 5 || !parse_node(t[1], &v)) return fail(R, "usage: %s <node> <x> <y> <z>", c);
-        for (k = 0; k < 3; k++) if (!parse_num(t[2 + k], &x[k])) return fail(R, "bad number '%s'", t[2 + k]);
+        for (k = 0; k < 3; k++)
+            if (!parse_num(t[2 + k], &x[k])) return fail(R, "bad number '%s'", t[2 + k]);
         if (v >= amps_scene_mesh(R->S)->nnode) return fail(R, "node %s out of range", t[1]);
         s = !strcmp(c, "force") ? amps_scene_force(&R->ctx, R->S, v, x) : amps_scene_pin(&R->ctx, R->S, v, x);
         if (s != AMPS_OK) return lib_fail(R, c);
@@ -207,12 +243,15 @@ static int run_line(replay *R, int nt, char **t) {
         amps_int vn;
         amps_status s;
         if (nt != 8 || !parse_node(t[1], &v)) return fail(R, "%s", "usage: cut <node> <px> <py> <pz> <nx> <ny> <nz>");
-        for (k = 0; k < 6; k++) if (!parse_num(t[2 + k], &x[k])) return fail(R, "bad number '%s'", t[2 + k]);
+        for (k = 0; k < 6; k++)
+            if (!parse_num(t[2 + k], &x[k])) return fail(R, "bad number '%s'", t[2 + k]);
         if (v >= amps_scene_mesh(R->S)->nnode) return fail(R, "node %s out of range", t[1]);
         if (x[3] == 0 && x[4] == 0 && x[5] == 0) return fail(R, "%s", "zero plane normal");
         s = amps_scene_cut(&R->ctx, R->S, v, x, x + 3, &vn);
-        if (s == AMPS_WARN_NOOP) { if (!R->quiet) printf("%s:%d: cut %ld is a no-op: %s\n", R->file, R->line, (long)v, R->ctx.msg); }
-        else if (s == AMPS_ERR_SINGULAR_UPDATE) printf("%s:%d: cut %ld undone: %s\n", R->file, R->line, (long)v, R->ctx.msg);
+        if (s == AMPS_WARN_NOOP) {
+            if (!R->quiet) printf("%s:%d: cut %ld is a no-op: %s\n", R->file, R->line, (long)v, R->ctx.msg);
+        } else if (s == AMPS_ERR_SINGULAR_UPDATE)
+            printf("%s:%d: cut %ld undone: %s\n", R->file, R->line, (long)v, R->ctx.msg);
         else if (s != AMPS_OK) return lib_fail(R, "cut");
         snprintf(R->last_cmd, sizeof(R->last_cmd), "cut %ld", (long)v);
         R->step_time += amps_now() - t0;
@@ -234,16 +273,21 @@ static int run_line(replay *R, int nt, char **t) {
         amps_update_get_stats(amps_scene_engine(R->S), &st);
         R->steps++;
         if (!first) {
-            if (R->ntimes == R->captimes) { R->captimes = 2 * R->captimes + 64; R->times = (double *)realloc(R->times, sizeof(double) * R->captimes); }
+            if (R->ntimes == R->captimes) {
+                R->captimes = 2 * R->captimes + 64;
+                R->times = (double *)realloc(R->times, sizeof(double) * R->captimes);
+            }
             R->times[R->ntimes++] = dt;
         }
         if (!R->quiet) {
-            printf("step %4d  %-14s dofs %7ld  |S|%6ld  %9.3f ms  %9.1f Hz", R->steps, R->last_cmd[0] ? R->last_cmd : "solve",
-                   (long)st.dim, (long)st.nsys, 1e3 * dt, dt > 0 ? 1.0 / dt : 0.0);
+            printf("step %4d  %-14s dofs %7ld  |S|%6ld  %9.3f ms  %9.1f Hz", R->steps,
+                   R->last_cmd[0] ? R->last_cmd : "solve", (long)st.dim, (long)st.nsys, 1e3 * dt,
+                   dt > 0 ? 1.0 / dt : 0.0);
             if (res >= 0) printf("  residual %.2e", res);
             printf("%s\n", first ? "  (includes the factorization)" : "");
         }
-        R->step_time = 0; R->last_cmd[0] = 0;
+        R->step_time = 0;
+        R->last_cmd[0] = 0;
         return 0;
     }
     if (!strcmp(c, "residual")) {
@@ -261,7 +305,8 @@ static int run_line(replay *R, int nt, char **t) {
         f = fopen(t[1], "w");
         if (!f) return fail(R, "cannot write '%s'", t[1]);
         fprintf(f, "node,ux,uy,uz\n");
-        for (i = 0; i < m->nnode; i++) fprintf(f, "%ld,%.17g,%.17g,%.17g\n", (long)i, d[3 * i], d[3 * i + 1], d[3 * i + 2]);
+        for (i = 0; i < m->nnode; i++)
+            fprintf(f, "%ld,%.17g,%.17g,%.17g\n", (long)i, d[3 * i], d[3 * i + 1], d[3 * i + 2]);
         if (fclose(f)) return fail(R, "cannot write '%s'", t[1]);
         if (!R->quiet) printf("dump: %s (%ld nodes)\n", t[1], (long)m->nnode);
         return 0;
@@ -276,7 +321,8 @@ static int run_line(replay *R, int nt, char **t) {
         pr = (double *)malloc(sizeof(double) * 3 * (m->ntet + 1));
         s = amps_scene_stress(&R->ctx, R->S, NULL, vm, pr);
         if (s == AMPS_OK) s = amps_mesh_write_vtu(&R->ctx, t[1], m, amps_scene_displacements(R->S), vm, pr);
-        free(vm); free(pr);
+        free(vm);
+        free(pr);
         if (s != AMPS_OK) return lib_fail(R, "write");
         if (!R->quiet) printf("write: %s\n", t[1]);
         return 0;
@@ -307,7 +353,10 @@ static int replay_run_buffer(replay *R, const char *text, size_t len) {
         while (*p) {
             while (*p && isspace((unsigned char)*p)) *p++ = 0;
             if (!*p) break;
-            if (nt == MAXTOK) { nt = MAXTOK + 1; break; }
+            if (nt == MAXTOK) {
+                nt = MAXTOK + 1;
+                break;
+            }
             tok[nt++] = p;
             while (*p && !isspace((unsigned char)*p)) p++;
         }
@@ -328,7 +377,8 @@ static void replay_init(replay *R) {
 static void replay_free(replay *R) {
     free(R->times);
     amps_scene_free(&R->ctx, R->S);
-    R->times = NULL; R->S = NULL;
+    R->times = NULL;
+    R->S = NULL;
 }
 
 #ifndef AMPS_REPLAY_NO_MAIN
@@ -354,12 +404,18 @@ int main(int argc, char **argv) {
             else if (!strcmp(o, "metis")) R.opts.order.method = AMPS_ORDER_METIS;
             else if (!strcmp(o, "natural")) R.opts.order.method = AMPS_ORDER_NATURAL;
             else if (!strcmp(o, "auto")) R.opts.order.method = AMPS_ORDER_AUTO;
-            else { fprintf(stderr, "amps_replay: unknown ordering '%s'\n", o); return 2; }
-        } else if (argv[a][0] == '-' && argv[a][1]) { fprintf(stderr, "amps_replay: unknown option '%s'\n", argv[a]); return 2; }
-        else path = argv[a];
+            else {
+                fprintf(stderr, "amps_replay: unknown ordering '%s'\n", o);
+                return 2;
+            }
+        } else if (argv[a][0] == '-' && argv[a][1]) {
+            fprintf(stderr, "amps_replay: unknown option '%s'\n", argv[a]);
+            return 2;
+        } else path = argv[a];
     }
     if (!path) {
-        fprintf(stderr, "usage: amps_replay [-q] [--residual] [--threads N] [--order auto|amd|nd|metis|natural] [--dual] [--xs-from-dense] [--surface FILE] scenario\n");
+        fprintf(stderr,
+                "usage: amps_replay [-q] [--residual] [--threads N] [--order auto|amd|nd|metis|natural] [--dual] [--xs-from-dense] [--surface FILE] scenario\n");
         return 2;
     }
 #ifdef _OPENMP
@@ -374,19 +430,32 @@ int main(int argc, char **argv) {
         R.dir[n] = 0;
     }
     f = fopen(path, "r");
-    if (!f) { fprintf(stderr, "%s: cannot open\n", path); return 1; }
+    if (!f) {
+        fprintf(stderr, "%s: cannot open\n", path);
+        return 1;
+    }
     for (;;) {
         size_t got;
         if (len == cap) {
             char *t2 = (char *)realloc(text, cap = 2 * cap + 65536);
-            if (!t2) { fclose(f); free(text); fprintf(stderr, "%s: out of memory\n", path); return 1; }
+            if (!t2) {
+                fclose(f);
+                free(text);
+                fprintf(stderr, "%s: out of memory\n", path);
+                return 1;
+            }
             text = t2;
         }
         got = fread(text + len, 1, cap - len, f);
         len += got;
         if (got == 0) break;
     }
-    if (ferror(f)) { fclose(f); free(text); fprintf(stderr, "%s: read error\n", path); return 1; }
+    if (ferror(f)) {
+        fclose(f);
+        free(text);
+        fprintf(stderr, "%s: read error\n", path);
+        return 1;
+    }
     fclose(f);
     rc = replay_run_buffer(&R, text, len);
     free(text);
@@ -394,8 +463,10 @@ int main(int argc, char **argv) {
         if (R.ntimes > 0) {
             double med, worst;
             qsort(R.times, (size_t)R.ntimes, sizeof(double), cmp_double);
-            med = R.times[R.ntimes / 2]; worst = R.times[R.ntimes - 1];
-            printf("summary: %d solves; after the first: median step %.3f ms (%.1f Hz), worst %.3f ms", R.steps, 1e3 * med, 1.0 / med, 1e3 * worst);
+            med = R.times[R.ntimes / 2];
+            worst = R.times[R.ntimes - 1];
+            printf("summary: %d solves; after the first: median step %.3f ms (%.1f Hz), worst %.3f ms", R.steps,
+                   1e3 * med, 1.0 / med, 1e3 * worst);
         } else printf("summary: %d solves", R.steps);
         if (R.residual_on) printf(", worst residual %.2e", R.worst_res);
         printf("\n");

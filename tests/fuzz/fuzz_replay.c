@@ -10,7 +10,7 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size);
 int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size) {
     replay R;
     static int quiet_io = 0;
-    if (!quiet_io) {   /* the replayer prints per line: keep the fuzzer's output readable */
+    if (!quiet_io) { /* the replayer prints per line: keep the fuzzer's output readable */
         if (!freopen("/dev/null", "w", stdout)) return 0;
         quiet_io = 1;
     }
@@ -21,6 +21,7 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size) {
     R.file = "fuzz.scn";
     (void)replay_run_buffer(&R, (const char *)data, size);
     replay_free(&R);
-    (void)write_surface; (void)cmp_double;   /* main's helpers, unused here */
+    (void)write_surface;
+    (void)cmp_double; /* main's helpers, unused here */
     return 0;
 }

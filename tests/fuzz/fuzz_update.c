@@ -12,7 +12,10 @@
 #define AMPS_IMPLEMENTATION
 #include "amps.h"
 
-typedef struct rd { const unsigned char *p; size_t n, k; } rd;
+typedef struct rd {
+    const unsigned char *p;
+    size_t n, k;
+} rd;
 static unsigned rb(rd *r) { return r->k < r->n ? r->p[r->k++] : 0u; }
 static int more(const rd *r) { return r->k < r->n; }
 
@@ -28,7 +31,9 @@ static double rv(rd *r, int *tame) {
     case 5: return 0.0;
     case 6: return -0.0;
     case 7: {
-        double d; unsigned char by[8]; int i;
+        double d;
+        unsigned char by[8];
+        int i;
         for (i = 0; i < 8; i++) by[i] = (unsigned char)rb(r);
         memcpy(&d, by, 8);
         if (!(fabs(d) < 1e6 && (d == 0 || fabs(d) > 1e-6))) *tame = 0;
@@ -41,8 +46,8 @@ static double rv(rd *r, int *tame) {
 /* An index around the current dimension: mostly valid, sometimes negative or too large. */
 static amps_int ri(rd *r, amps_int dim) {
     unsigned b = rb(r);
-    if (b >= 250) return (amps_int)b - 260;               /* negative */
-    if (b >= 240) return dim + (amps_int)(b - 240);      /* out of range */
+    if (b >= 250) return (amps_int)b - 260;         /* negative */
+    if (b >= 240) return dim + (amps_int)(b - 240); /* out of range */
     return dim > 0 ? (amps_int)(b % (unsigned)dim) : 0;
 }
 
@@ -62,7 +67,9 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size) {
     double *tx, *x = NULL;
     unsigned seed, ops = 0;
     int tame = 1;
-    r.p = data; r.n = size; r.k = 0;
+    r.p = data;
+    r.n = size;
+    r.k = 0;
     if (size < 8) return 0;
     amps_ctx_init(&ctx);
     ctx.nthreads = 1;
@@ -72,11 +79,28 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size) {
     ti = (amps_int *)malloc(sizeof(amps_int) * 4 * (size_t)n);
     tj = (amps_int *)malloc(sizeof(amps_int) * 4 * (size_t)n);
     tx = (double *)malloc(sizeof(double) * 4 * (size_t)n);
-    for (k = 0; k < n; k++) { ti[nz] = k; tj[nz] = k; tx[nz] = 4.0 + (double)((seed + (unsigned)k) % 5); nz++; }
-    for (k = 0; k + 1 < n; k++) { ti[nz] = k; tj[nz] = k + 1; tx[nz] = -1.0; nz++; }
-    for (k = 0; k + 3 < n; k += 1 + (amps_int)(seed % 3)) { ti[nz] = k; tj[nz] = k + 3; tx[nz] = 0.5; nz++; }
+    for (k = 0; k < n; k++) {
+        ti[nz] = k;
+        tj[nz] = k;
+        tx[nz] = 4.0 + (double)((seed + (unsigned)k) % 5);
+        nz++;
+    }
+    for (k = 0; k + 1 < n; k++) {
+        ti[nz] = k;
+        tj[nz] = k + 1;
+        tx[nz] = -1.0;
+        nz++;
+    }
+    for (k = 0; k + 3 < n; k += 1 + (amps_int)(seed % 3)) {
+        ti[nz] = k;
+        tj[nz] = k + 3;
+        tx[nz] = 0.5;
+        nz++;
+    }
     K = amps_csc_from_triplets(&ctx, n, nz, ti, tj, tx, AMPS_UPPER);
-    free(ti); free(tj); free(tx);
+    free(ti);
+    free(tj);
+    free(tx);
     if (!K) abort();
     F = amps_analyze(&ctx, K, AMPS_UPPER, NULL);
     if (!F || amps_factorize(&ctx, F, K) != AMPS_OK) abort();
@@ -95,7 +119,10 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size) {
         o.cap_vpool = (double)(b5 % 64);
     }
     U = amps_update_create(&ctx, K, AMPS_UPPER, F, &o);
-    if (!U) { check_status(&ctx, ctx.status); goto done; }
+    if (!U) {
+        check_status(&ctx, ctx.status);
+        goto done;
+    }
     while (more(&r) && ops++ < 200) {
         amps_int dim = amps_update_dim(U), idx[4], cols[4], cp[5], ci[12];
         double val[12];
@@ -109,7 +136,11 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size) {
             break;
         }
         case 1:
-            for (a = 0; a < m; a++) { idx[a] = ri(&r, dim); cols[a] = ri(&r, dim); val[a] = rv(&r, &tame); }
+            for (a = 0; a < m; a++) {
+                idx[a] = ri(&r, dim);
+                cols[a] = ri(&r, dim);
+                val[a] = rv(&r, &tame);
+            }
             s = amps_update_add(&ctx, U, (amps_int)m, idx, cols, val);
             break;
         case 2: {
@@ -118,14 +149,21 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size) {
             for (a = 0; a < (unsigned)nrow; a++) {
                 unsigned e = rb(&r) % 5, q;
                 idx[a] = ri(&r, dim);
-                for (q = 0; q < e && t < 12; q++) { ci[t] = ri(&r, dim); val[t] = rv(&r, &tame); t++; }
+                for (q = 0; q < e && t < 12; q++) {
+                    ci[t] = ri(&r, dim);
+                    val[t] = rv(&r, &tame);
+                    t++;
+                }
                 cp[a + 1] = t;
             }
             s = amps_update_set_rows(&ctx, U, nrow, idx, cp, ci, val);
             break;
         }
         case 3:
-            for (a = 0; a < m; a++) { idx[a] = ri(&r, dim); val[a] = rv(&r, &tame); }
+            for (a = 0; a < m; a++) {
+                idx[a] = ri(&r, dim);
+                val[a] = rv(&r, &tame);
+            }
             s = amps_update_constrain(&ctx, U, (amps_int)m, idx, val);
             break;
         case 4:
@@ -133,13 +171,15 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size) {
             s = amps_update_release(&ctx, U, (amps_int)m, idx);
             break;
         case 5:
-            for (a = 0; a < m; a++) { idx[a] = ri(&r, dim); val[a] = rv(&r, &tame); }
+            for (a = 0; a < m; a++) {
+                idx[a] = ri(&r, dim);
+                val[a] = rv(&r, &tame);
+            }
             s = amps_update_set_force(&ctx, U, (amps_int)m, idx, val);
             break;
-        case 6:
-            s = amps_update_commit(&ctx, U);
-            break;
-        case 7: case 8: {
+        case 6: s = amps_update_commit(&ctx, U); break;
+        case 7:
+        case 8: {
             double *x2 = (double *)realloc(x, sizeof(double) * (size_t)(dim > 0 ? dim : 1));
             if (!x2) goto done;
             x = x2;
@@ -148,16 +188,16 @@ int LLVMFuzzerTestOneInput(const unsigned char *data, size_t size) {
                 amps_int d2 = amps_update_dim(U), q;
                 double res = -1;
                 if (d2 > dim) abort();
-                if (tame) for (q = 0; q < d2; q++) if (!(x[q] - x[q] == 0)) abort();   /* finite input, finite answer */
+                if (tame)
+                    for (q = 0; q < d2; q++)
+                        if (!(x[q] - x[q] == 0)) abort(); /* finite input, finite answer */
                 if (amps_update_residual(&ctx, U, &res) != AMPS_OK || (tame && !(res >= 0))) abort();
                 (void)amps_update_reaction(U, ri(&r, d2));
                 (void)amps_update_solution(U);
             }
             break;
         }
-        case 9:
-            amps_update_discard(U);
-            break;
+        case 9: amps_update_discard(U); break;
         case 10: {
             amps_update_stats st;
             double res;
