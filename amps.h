@@ -4249,51 +4249,78 @@ AMPS_API amps_int amps_closure(const amps_factor *F, amps_int nidx, const amps_i
     return cnt;
 }
 
+/* Forward kernel of a block of KC (1-4 or 8) columns c..c+KC-1 of a group ending at ke, S its
+   shared rows: x(S) -= sum_k L(S, c+k) x(c+k), summed in ascending k by blocks of 4, the two
+   blocks of 8 columns added last. */
+AMPS__KERNEL void amps__fwd_block(int KC, const amps_factor *F, amps_int c, amps_int ke, const amps_int *S, amps_int ns,
+                                  double *x) {
+    const double *s[8];
+    double xk[8];
+    amps_int p;
+    int k;
+    AMPS__UNROLL
+    for (k = 0; k < KC; k++) {
+        s[k] = F->Lx + F->Lp[c + k] + (ke - c - k); /* L(S, c+k) */
+        xk[k] = x[c + k];
+    }
+    for (p = 0; p < ns; p++) {
+        double a = s[0][p] * xk[0];
+        AMPS__UNROLL
+        for (k = 1; k < (KC < 4 ? KC : 4); k++) a += s[k][p] * xk[k];
+        if (KC > 4) {
+            double b = s[4][p] * xk[4];
+            AMPS__UNROLL
+            for (k = 5; k < KC; k++) b += s[k][p] * xk[k];
+            a = a + b;
+        }
+        x[S[p]] -= a;
+    }
+}
+
+/* Backward kernel of a block of KC (1-4 or 8) columns c..c+KC-1 of a group ending at ke:
+   x(c+k) -= L(S, c+k)^T x(S), each dot product summed in ascending order of S. */
+AMPS__KERNEL void amps__bwd_block(int KC, const amps_factor *F, amps_int c, amps_int ke, const amps_int *S, amps_int ns,
+                                  double *x) {
+    const double *s[8];
+    double t[8];
+    amps_int p;
+    int k;
+    AMPS__UNROLL
+    for (k = 0; k < KC; k++) {
+        s[k] = F->Lx + F->Lp[c + k] + (ke - c - k);
+        t[k] = 0;
+    }
+    for (p = 0; p < ns; p++) {
+        double xs = x[S[p]];
+        AMPS__UNROLL
+        for (k = 0; k < KC; k++) t[k] += s[k][p] * xs;
+    }
+    AMPS__UNROLL
+    for (k = 0; k < KC; k++) x[c + k] -= t[k];
+}
+
+/* Block width for the kc columns left: 8, 4, or all of them when fewer than 4. */
+static int amps__block_width(amps_int kc) { return kc >= 8 ? 8 : (kc >= 4 ? 4 : (int)kc); }
+
 /* x := L^{-1} x on columns c0..ke of one group (ke its last column; width-1 groups are plain columns). */
 static void amps__fwd(const amps_factor *F, amps_int c0, amps_int ke, double *x) {
     const amps_int *Lp = F->Lp;
     const double *Lx = F->Lx;
     const amps_int *S = F->Li + Lp[ke];
-    amps_int ns = Lp[ke + 1] - Lp[ke], c, o, p;
-    for (c = c0; c < ke; c++) {
+    amps_int ns = Lp[ke + 1] - Lp[ke], c, o;
+    int w;
+    for (c = c0; c < ke; c++) { /* the group's triangle */
         const double *Lc = Lx + Lp[c];
         double xc = x[c];
         for (o = 0; o < ke - c; o++) x[c + 1 + o] -= Lc[o] * xc;
     }
-    for (c = c0; c <= ke;) {
-        amps_int kc = ke + 1 - c;
-        if (kc >= 8) {
-            const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1);
-            const double *s2 = Lx + Lp[c + 2] + (ke - c - 2), *s3 = Lx + Lp[c + 3] + (ke - c - 3);
-            const double *s4 = Lx + Lp[c + 4] + (ke - c - 4), *s5 = Lx + Lp[c + 5] + (ke - c - 5);
-            const double *s6 = Lx + Lp[c + 6] + (ke - c - 6), *s7 = Lx + Lp[c + 7] + (ke - c - 7);
-            const double x0 = x[c], x1 = x[c + 1], x2 = x[c + 2], x3 = x[c + 3];
-            const double x4 = x[c + 4], x5 = x[c + 5], x6 = x[c + 6], x7 = x[c + 7];
-            for (p = 0; p < ns; p++)
-                x[S[p]] -= (s0[p] * x0 + s1[p] * x1 + s2[p] * x2 + s3[p] * x3) +
-                           (s4[p] * x4 + s5[p] * x5 + s6[p] * x6 + s7[p] * x7);
-            c += 8;
-        } else if (kc >= 4) {
-            const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1);
-            const double *s2 = Lx + Lp[c + 2] + (ke - c - 2), *s3 = Lx + Lp[c + 3] + (ke - c - 3);
-            const double x0 = x[c], x1 = x[c + 1], x2 = x[c + 2], x3 = x[c + 3];
-            for (p = 0; p < ns; p++) x[S[p]] -= s0[p] * x0 + s1[p] * x1 + s2[p] * x2 + s3[p] * x3;
-            c += 4;
-        } else if (kc == 3) {
-            const double *s0 = Lx + Lp[c] + 2, *s1 = Lx + Lp[c + 1] + 1, *s2 = Lx + Lp[c + 2];
-            const double x0 = x[c], x1 = x[c + 1], x2 = x[c + 2];
-            for (p = 0; p < ns; p++) x[S[p]] -= s0[p] * x0 + s1[p] * x1 + s2[p] * x2;
-            c += 3;
-        } else if (kc == 2) {
-            const double *s0 = Lx + Lp[c] + 1, *s1 = Lx + Lp[c + 1];
-            const double x0 = x[c], x1 = x[c + 1];
-            for (p = 0; p < ns; p++) x[S[p]] -= s0[p] * x0 + s1[p] * x1;
-            c += 2;
-        } else {
-            const double *s0 = Lx + Lp[c];
-            const double x0 = x[c];
-            for (p = 0; p < ns; p++) x[S[p]] -= s0[p] * x0;
-            c += 1;
+    for (c = c0; c <= ke; c += w) {
+        switch (w = amps__block_width(ke + 1 - c)) {
+        case 8: amps__fwd_block(8, F, c, ke, S, ns, x); break;
+        case 4: amps__fwd_block(4, F, c, ke, S, ns, x); break;
+        case 3: amps__fwd_block(3, F, c, ke, S, ns, x); break;
+        case 2: amps__fwd_block(2, F, c, ke, S, ns, x); break;
+        default: amps__fwd_block(1, F, c, ke, S, ns, x); break;
         }
     }
 }
@@ -4301,85 +4328,16 @@ static void amps__fwd(const amps_factor *F, amps_int c0, amps_int ke, double *x)
 /* x(c0:cl) -= L(S, c0:cl)^T x(S) for columns c0..cl of the group ending at ke, S its shared rows
    (below ke). The columns are independent: blocks of them may run on different threads. */
 static void amps__bwd_rows(const amps_factor *F, amps_int c0, amps_int cl, amps_int ke, double *x) {
-    const amps_int *Lp = F->Lp;
-    const double *Lx = F->Lx;
-    const amps_int *S = F->Li + Lp[ke];
-    amps_int ns = Lp[ke + 1] - Lp[ke], c, p;
-    for (c = c0; c <= cl;) {
-        amps_int kc = cl + 1 - c;
-        if (kc >= 8) {
-            const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1);
-            const double *s2 = Lx + Lp[c + 2] + (ke - c - 2), *s3 = Lx + Lp[c + 3] + (ke - c - 3);
-            const double *s4 = Lx + Lp[c + 4] + (ke - c - 4), *s5 = Lx + Lp[c + 5] + (ke - c - 5);
-            const double *s6 = Lx + Lp[c + 6] + (ke - c - 6), *s7 = Lx + Lp[c + 7] + (ke - c - 7);
-            double t0 = 0, t1 = 0, t2 = 0, t3 = 0, t4 = 0, t5 = 0, t6 = 0, t7 = 0;
-            for (p = 0; p < ns; p++) {
-                double xs = x[S[p]];
-                t0 += s0[p] * xs;
-                t1 += s1[p] * xs;
-                t2 += s2[p] * xs;
-                t3 += s3[p] * xs;
-                t4 += s4[p] * xs;
-                t5 += s5[p] * xs;
-                t6 += s6[p] * xs;
-                t7 += s7[p] * xs;
-            }
-            x[c] -= t0;
-            x[c + 1] -= t1;
-            x[c + 2] -= t2;
-            x[c + 3] -= t3;
-            x[c + 4] -= t4;
-            x[c + 5] -= t5;
-            x[c + 6] -= t6;
-            x[c + 7] -= t7;
-            c += 8;
-        } else if (kc >= 4) {
-            const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1);
-            const double *s2 = Lx + Lp[c + 2] + (ke - c - 2), *s3 = Lx + Lp[c + 3] + (ke - c - 3);
-            double t0 = 0, t1 = 0, t2 = 0, t3 = 0;
-            for (p = 0; p < ns; p++) {
-                double xs = x[S[p]];
-                t0 += s0[p] * xs;
-                t1 += s1[p] * xs;
-                t2 += s2[p] * xs;
-                t3 += s3[p] * xs;
-            }
-            x[c] -= t0;
-            x[c + 1] -= t1;
-            x[c + 2] -= t2;
-            x[c + 3] -= t3;
-            c += 4;
-        } else if (kc == 3) {
-            const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1),
-                         *s2 = Lx + Lp[c + 2] + (ke - c - 2);
-            double t0 = 0, t1 = 0, t2 = 0;
-            for (p = 0; p < ns; p++) {
-                double xs = x[S[p]];
-                t0 += s0[p] * xs;
-                t1 += s1[p] * xs;
-                t2 += s2[p] * xs;
-            }
-            x[c] -= t0;
-            x[c + 1] -= t1;
-            x[c + 2] -= t2;
-            c += 3;
-        } else if (kc == 2) {
-            const double *s0 = Lx + Lp[c] + (ke - c), *s1 = Lx + Lp[c + 1] + (ke - c - 1);
-            double t0 = 0, t1 = 0;
-            for (p = 0; p < ns; p++) {
-                double xs = x[S[p]];
-                t0 += s0[p] * xs;
-                t1 += s1[p] * xs;
-            }
-            x[c] -= t0;
-            x[c + 1] -= t1;
-            c += 2;
-        } else {
-            const double *s0 = Lx + Lp[c] + (ke - c);
-            double t0 = 0;
-            for (p = 0; p < ns; p++) t0 += s0[p] * x[S[p]];
-            x[c] -= t0;
-            c += 1;
+    const amps_int *S = F->Li + F->Lp[ke];
+    amps_int ns = F->Lp[ke + 1] - F->Lp[ke], c;
+    int w;
+    for (c = c0; c <= cl; c += w) {
+        switch (w = amps__block_width(cl + 1 - c)) {
+        case 8: amps__bwd_block(8, F, c, ke, S, ns, x); break;
+        case 4: amps__bwd_block(4, F, c, ke, S, ns, x); break;
+        case 3: amps__bwd_block(3, F, c, ke, S, ns, x); break;
+        case 2: amps__bwd_block(2, F, c, ke, S, ns, x); break;
+        default: amps__bwd_block(1, F, c, ke, S, ns, x); break;
         }
     }
 }
