@@ -503,6 +503,18 @@ issue's target, within 2x of step 10, is met where end / start is at most 2.0.
 
 EOF
 fi
+if ls "$dir"/compare_*.txt >/dev/null 2>&1; then
+  echo "## 8b. Side by side with an earlier revision (\`bench/compare.sh\`)"
+  echo
+  for f in "$dir"/compare_*.txt; do
+    sed -n '1,/^$/p' "$f" | sed '$d'
+    echo
+    echo '```'
+    sed '1,/^$/d' "$f"
+    echo '```'
+    echo
+  done
+fi
 cat <<'EOF'
 ## 9. How to reproduce
 
@@ -510,5 +522,6 @@ cat <<'EOF'
 as root, otherwise it names them), `make bench-quick` for a subset (under 3 minutes; results in
 `build/bench/quick/`). `bench/run.sh` is the driver, `bench/factor.c` and `bench/harness.c` the
 programs (`bench/bench.h` the scenario and shared helpers), `bench/summarize.sh` writes this file and the
-plots from the CSV files.
+plots from the CSV files. `bench/compare.sh REV` runs the factorization, the cut step and the
+haptic step of amps.h at revision REV and of the working tree side by side (section 8b).
 EOF
