@@ -9200,13 +9200,6 @@ static amps_status amps__scene_node(amps_ctx *ctx, amps_scene *S, amps_int v, co
     return AMPS_OK;
 }
 
-/* Commits the engine; a failed commit leaves no change recorded (amps_update_discard). */
-static amps_status amps__scene_commit(amps_ctx *ctx, amps_scene *S) {
-    amps_status s = amps_update_commit(ctx, S->U);
-    if (s != AMPS_OK) amps_update_discard(S->U);
-    return s;
-}
-
 AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, const double f[3]) {
     amps_int k, idx[3], m = 0;
     double val[3];
@@ -9245,7 +9238,7 @@ AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, co
     }
     for (k = 0; k < 3; k++) idx[k] = S->node.dof[3 * v + k];
     if ((s = amps_update_constrain(ctx, S->U, 3, idx, u)) != AMPS_OK) return s;
-    if (!S->node.pinned[v] && (s = amps__scene_commit(ctx, S)) != AMPS_OK) return s;
+    if (!S->node.pinned[v] && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s;
     S->node.pinned[v] = 1;
     for (k = 0; k < 3; k++) S->node.pin_value[3 * v + k] = u[k];
     return AMPS_OK;
@@ -9262,7 +9255,7 @@ AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v
     }
     for (k = 0; k < 3; k++) idx[k] = S->node.dof[3 * v + k];
     if ((s = amps_update_release(ctx, S->U, 3, idx)) != AMPS_OK) return s;
-    if ((s = amps__scene_commit(ctx, S)) != AMPS_OK) {
+    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
         char msg[256];
         memcpy(msg, ctx ? ctx->msg : "", ctx ? sizeof(msg) : 1);
         return amps__err(ctx, s, "amps_scene_release: releasing node %ld leaves a piece held by nothing (%s)", (long)v,
@@ -9594,7 +9587,7 @@ static amps_status amps__scene_cut_update(amps_ctx *ctx, amps_scene *S, amps_int
             nz++;
         }
     if ((s = amps_update_add(ctx, S->U, nz, S->cut.row, S->cut.col, S->cut.val)) != AMPS_OK) goto undo_engine;
-    if ((s = amps__scene_commit(ctx, S)) != AMPS_OK) {
+    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
         if (s == AMPS_ERR_SINGULAR_UPDATE)
             amps__err(ctx, s, "amps_scene_cut: the cut at node %ld leaves a piece held by nothing; the cut was undone",
                       (long)v);
@@ -9622,7 +9615,7 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
     int watched;
     if (new_node) *new_node = -1;
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_cut")) != AMPS_OK) return s;
-    if (S->prepared && (s = amps__scene_commit(ctx, S)) != AMPS_OK) return s; /* earlier changes first */
+    if (S->prepared && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
     if ((s = amps__scene_cut_room(ctx, S, v, &watched)) != AMPS_OK) return s;
     s = S->prepared ? amps__scene_cut_update(ctx, S, v, p, nrm, &vc) : amps__scene_cut_topology(ctx, S, v, p, nrm, &vc);
     if (s != AMPS_OK) return s;
