@@ -113,10 +113,33 @@ typedef enum amps_status {
     AMPS_WARN_INACCURATE = 2       /* solved, but the accuracy guard's tolerance was not reached */
 } amps_status;
 
-/* Caller-owned context: allocator user pointer, thread count, and the last error. */
+/* A range task: runs items [begin, end) on worker `worker` (0 <= worker < worker_count). */
+typedef void amps_task_fn(amps_int begin, amps_int end, int worker, void *task_ctx);
+/* Host task system (Box2D v3 style). enqueue hands the host n items with a minimum range
+   min_range; the host calls task on sub-ranges covering [0, n) exactly once each, on any of its
+   workers, and returns a handle it later receives in finish, which returns when every sub-range
+   has run. Returning NULL means "not queued": amps runs the task itself, inline.
+   Contract: enqueue and finish are called from the thread that called amps (never from amps'
+   background re-factorization thread, which runs its kernels serially); the task function may
+   run on any thread, concurrently with itself; finish must not return before every sub-range
+   has returned. Each item amps enqueues claims the next chunks of the loop from an atomic
+   counter (so does the calling thread meanwhile): an item that starts late finds the work done
+   and returns at once, and finish waits only for chunks already claimed, provided the host runs
+   queued items itself in finish or has free workers. */
+typedef void *amps_enqueue_task_fn(amps_task_fn *task, amps_int n, amps_int min_range, void *task_ctx,
+                                   void *user);
+typedef void amps_finish_task_fn(void *handle, void *user);
+
+/* Caller-owned context: allocator user pointer, threads or the host's task system, and the last
+   error. The kernels run on the host's task system when enqueue_task and finish_task are set
+   (both or neither), else on OpenMP threads (compiled with -fopenmp), else serially. */
 typedef struct amps_ctx {
-    void *alloc_user;   /* passed as u to AMPS_MALLOC/AMPS_REALLOC/AMPS_FREE */
-    int nthreads;       /* OpenMP threads used by amps kernels; 0 = OpenMP default */
+    void *alloc_user;                   /* passed as u to AMPS_MALLOC/AMPS_REALLOC/AMPS_FREE */
+    int nthreads;                       /* OpenMP threads used by amps kernels; 0 = OpenMP default, 1 = serial */
+    amps_enqueue_task_fn *enqueue_task; /* host back end (both or neither); NULL = OpenMP/serial */
+    amps_finish_task_fn *finish_task;
+    void *task_user;                    /* passed as user to both */
+    int worker_count;                   /* workers of the host system (>= 1; worker indices < it); 0 = 1 */
     amps_status status; /* status of the last call that failed or warned */
     char msg[256];      /* human-readable message for status */
 } amps_ctx;
@@ -1132,6 +1155,189 @@ static int amps__isfinite(double v) { return v - v == 0.0; }
 
 /* Largest value of amps_int. */
 #define AMPS__IMAX ((amps_int)((((unsigned long long)1) << (sizeof(amps_int) * 8 - 1)) - 1))
+
+/* ---- the parallel layer: one loop primitive over three back ends ----
+   amps__par_for(par, nt, n, chunk, fn, arg) runs fn(begin, end, slot, arg) on the chunks
+   [c * chunk, min(n, (c + 1) * chunk)) of [0, n), each exactly once, on at most nt participants
+   (nt <= the scratch slots of the kernel; slot < nt indexes its per-participant scratch; no two
+   participants share a slot). The chunks depend on (n, chunk) only, never on the participants,
+   and every participant claims the next chunk from one atomic counter, so a descheduled worker
+   delays only the chunk it holds and no kernel waits for a particular worker. Kernels give each
+   output one writer (a chunk); a kernel that reduces across chunks keeps a partial result per
+   chunk and combines them in chunk order on one thread afterwards, so results are bitwise the
+   same for any participant count and schedule.
+   Back ends: the host's task system (ctx->enqueue_task/finish_task): the caller enqueues
+   min(nt - 1, chunks - 1) items, each claiming chunks under slot = its item index, claims
+   chunks itself under the last slot, then calls finish; OpenMP (no callbacks, -fopenmp): a team
+   of nt threads claims chunks (slot = thread number); serial otherwise, when nt <= 1, when
+   there is one chunk, or during a back-off.
+   Back-off: a parallel loop ends when its slowest participant does; beside other busy
+   processes a woken worker may wait a time slice for a core, and the caller waits for it at the
+   end of the loop (the OpenMP join, or finish). The caller measures that wait: after it found
+   the counter exhausted (t_m, its own chunks done), the loop ends at t_1; when t_1 - t_m exceeds
+   half of t_m - t_0 plus 30 us (a wait no balanced loop of dynamically claimed chunks shows)
+   the owner's loops run serially for AMPS__PAR_QUIET seconds, doubled while the next probe is
+   late again (at most AMPS__PAR_QUIET_MAX) and halved after a probe that is not. Serial and
+   parallel runs give the same bits, so this trades only time. */
+#ifndef AMPS__PAR_BACKOFF
+#define AMPS__PAR_BACKOFF 1 /* 0: no adaptive back-off (tests of the parallel schedule) */
+#endif
+#ifndef AMPS__PAR_QUIET
+#define AMPS__PAR_QUIET 0.02
+#endif
+#ifndef AMPS__PAR_QUIET_MAX
+#define AMPS__PAR_QUIET_MAX 1.0
+#endif
+
+#if defined(__GNUC__) || defined(__clang__)
+#define AMPS__HAVE_ATOMICS 1
+#define AMPS__FETCH_ADD(p, v) __atomic_fetch_add((p), (v), __ATOMIC_ACQ_REL)
+static double amps__dload(const double *p) {
+    double v;
+    __atomic_load(p, &v, __ATOMIC_RELAXED);
+    return v;
+}
+static void amps__dstore(double *p, double v) { __atomic_store(p, &v, __ATOMIC_RELAXED); }
+#elif defined(_MSC_VER)
+#include <intrin.h>
+#define AMPS__HAVE_ATOMICS 1
+#define AMPS__FETCH_ADD(p, v) _InterlockedExchangeAdd((volatile long *)(p), (v))
+static double amps__dload(const double *p) { return *(const volatile double *)p; }
+static void amps__dstore(double *p, double v) { *(volatile double *)p = v; }
+#else
+#define AMPS__HAVE_ATOMICS 0 /* no atomic counter: every loop runs serially */
+static double amps__dload(const double *p) { return *p; }
+static void amps__dstore(double *p, double v) { *p = v; }
+#endif
+
+#ifdef _OPENMP
+#define AMPS__HAVE_OMP 1
+#else
+#define AMPS__HAVE_OMP 0
+#endif
+
+typedef void amps__chunk_fn(amps_int begin, amps_int end, int slot, void *arg);
+
+/* Back-off state of an object's loops (relaxed atomics: solves of one factor may run
+   concurrently). */
+typedef struct amps__parbo {
+    double until; /* loops before this time (amps_now) run serially */
+    double len;   /* the current back-off, seconds (0: none) */
+} amps__parbo;
+
+/* A back end captured from a context; bo points at the owner's back-off state (or NULL). */
+typedef struct amps__par {
+    amps_enqueue_task_fn *enqueue;
+    amps_finish_task_fn *finish;
+    void *user;
+    amps__parbo *bo;
+} amps__par;
+
+/* Participants (scratch slots) of the context's back end: worker_count + 1 (the caller claims
+   chunks too) with callbacks, else the OpenMP threads (ctx->nthreads, else the OpenMP
+   default), else 1. */
+static int amps__par_slots(const amps_ctx *ctx) {
+    int t = 1;
+    if (ctx && ctx->enqueue_task && ctx->finish_task) return (ctx->worker_count > 1 ? ctx->worker_count : 1) + 1;
+#ifdef _OPENMP
+    t = (ctx && ctx->nthreads > 0) ? ctx->nthreads : omp_get_max_threads();
+#else
+    (void)ctx;
+#endif
+    return t < 1 ? 1 : t;
+}
+
+static amps__par amps__par_of(const amps_ctx *ctx, amps__parbo *bo) {
+    amps__par p;
+    p.enqueue = ctx && ctx->finish_task ? ctx->enqueue_task : NULL;
+    p.finish = p.enqueue ? ctx->finish_task : NULL;
+    p.user = p.enqueue ? ctx->task_user : NULL;
+    p.bo = bo;
+    return p;
+}
+
+typedef struct amps__job {
+    amps__chunk_fn *fn;
+    void *arg;
+    amps_int n, chunk;
+    long nchunk, next; /* chunks; the next one to claim (atomic) */
+} amps__job;
+
+/* Runs chunks of j under slot until none is left. */
+static void amps__par_claim(amps__job *j, int slot) {
+#if AMPS__HAVE_ATOMICS
+    long c;
+    while ((c = AMPS__FETCH_ADD(&j->next, 1L)) < j->nchunk) {
+        amps_int b = (amps_int)c * j->chunk;
+        j->fn(b, j->n - b < j->chunk ? j->n : b + j->chunk, slot, j->arg);
+    }
+#else
+    (void)j;
+    (void)slot;
+#endif
+}
+
+/* The task handed to the host: item `begin` is a participant with slot = begin. */
+static void amps__par_task(amps_int begin, amps_int end, int worker, void *task_ctx) {
+    (void)end;
+    (void)worker;
+    amps__par_claim(AMPS__CAST(amps__job *, task_ctx), (int)begin);
+}
+
+/* The back-off rule of the layer's comment, after a parallel loop (t0 start, tm the caller's
+   chunks done, t1 end). */
+static void amps__par_note(amps__parbo *bo, double t0, double tm, double t1) {
+    double len;
+    if (!bo || !AMPS__PAR_BACKOFF) return;
+    len = amps__dload(&bo->len);
+    if (t1 - tm > 0.5 * (tm - t0) + 30e-6) {
+        len = len > 0 ? 2 * len : AMPS__PAR_QUIET;
+        if (len > AMPS__PAR_QUIET_MAX) len = AMPS__PAR_QUIET_MAX;
+        amps__dstore(&bo->until, t1 + len);
+        amps__dstore(&bo->len, len);
+    } else if (len > 0)
+        amps__dstore(&bo->len, len > AMPS__PAR_QUIET ? len / 2 : 0);
+}
+
+static void amps__par_for(const amps__par *par, int nt, amps_int n, amps_int chunk, amps__chunk_fn *fn, void *arg) {
+    amps__job j;
+    double t0, tm = 0;
+    if (n <= 0) return;
+    if (chunk < 1) chunk = 1;
+    j.fn = fn;
+    j.arg = arg;
+    j.n = n;
+    j.chunk = chunk;
+    j.nchunk = (long)((n - 1) / chunk + 1);
+    j.next = 0;
+    if (nt > j.nchunk) nt = (int)j.nchunk;
+    if (!AMPS__HAVE_ATOMICS || nt <= 1 || (!par->enqueue && !AMPS__HAVE_OMP)) {
+        fn(0, n, 0, arg);
+        return;
+    }
+    t0 = amps_now();
+    if (par->bo && AMPS__PAR_BACKOFF && t0 < amps__dload(&par->bo->until)) {
+        fn(0, n, 0, arg);
+        return;
+    }
+    if (par->enqueue) {
+        void *h = par->enqueue(amps__par_task, (amps_int)(nt - 1), 1, &j, par->user);
+        amps__par_claim(&j, nt - 1);
+        tm = amps_now();
+        if (h) par->finish(h, par->user); /* not queued (NULL): the caller claimed every chunk */
+    }
+#ifdef _OPENMP
+    else {
+#pragma omp parallel num_threads(nt)
+        {
+            int tid = omp_get_thread_num();
+            amps__par_claim(&j, tid);
+            if (tid == 0) tm = amps_now();
+        }
+    }
+#endif
+    amps__par_note(par->bo, t0, tm, amps_now());
+}
 
 /* ==== [amps:sparse impl] sparse matrices ====================================================== */
 
@@ -3302,6 +3508,7 @@ typedef struct amps__fpriv {
     double parmin;                /* factorizations with less work run on one thread */
     double pargroup;              /* top groups with (entries of their columns) x (width) >= this run on all threads */
     double touch;                 /* AMPS_COUNT_TOUCH: L entries read by sparse/partial solves */
+    amps__parbo bo;               /* back-off of the factorization's and the solves' parallel loops */
 } amps__fpriv;
 
 /* Relative pivot threshold: pivot d of column c is accepted iff d > AMPS_PIVOT_TOL * A(c,c) (original
@@ -3443,14 +3650,9 @@ AMPS_API void amps_factor_inertia(const amps_factor *F, amps_int *npos, amps_int
     if (nzero) *nzero = z;
 }
 
-/* Threads for a kernel: ctx->nthreads, else the OpenMP default; at most cap. */
+/* Participants of a kernel: the back end's slots (amps__par_slots); at most cap. */
 static int amps__nthreads(const amps_ctx *ctx, amps_int cap) {
-    int t = 1;
-#ifdef _OPENMP
-    t = (ctx && ctx->nthreads > 0) ? ctx->nthreads : omp_get_max_threads();
-#else
-    (void)ctx;
-#endif
+    int t = amps__par_slots(ctx);
     if (t > cap) t = (int)cap;
     return t < 1 ? 1 : t;
 }
@@ -4023,56 +4225,90 @@ static amps_int amps__fgroup(amps_factor *F, amps__fpriv *P, const double *Ax, a
     return -1;
 }
 
-#ifdef _OPENMP
-/* amps__fgroup for a top-part group on nt threads: targets of the queued updates and panels of a
-   superblock are split by 4-column blocks; same arithmetic per entry as amps__fgroup (the k chunks
-   stay aligned at s). Uses the workspace of threads 0 and 1. */
-static amps_int amps__fgroup_par(amps_factor *F, amps__fpriv *P, const double *Ax, amps_int J, int nt) {
-    amps_int s = P->gs[J], e = P->gs[J + 1] - 1, nJ = F->Lp[e + 1] - F->Lp[e], n = F->n, cnt = 0, bad = -1;
+/* A parallel loop of amps__fgroup_par. */
+typedef struct amps__fgjob {
+    amps_factor *F;
+    amps__fpriv *P;
+    const double *Ax;
+    const amps_int *rel, *kl, *kb;
+    amps_int s, e, nJ, cnt, cb, ce;
+} amps__fgjob;
+
+/* Owner classes of the targets in amps__fgroup_par's updates (the chunks of that loop). */
+#ifndef AMPS__FOWN
+#define AMPS__FOWN 8
+#endif
+
+static void amps__fg_scatter(amps_int b, amps_int e, int slot, void *arg) {
+    amps__fgjob *g = AMPS__CAST(amps__fgjob *, arg);
+    (void)slot;
+    amps__scatter(g->F, g->P, g->Ax, g->s + b, g->s + e - 1);
+}
+
+/* Owner classes [b, e): the queued updates of the targets each owns, in list order. */
+static void amps__fg_update(amps_int b, amps_int e, int slot, void *arg) {
+    amps__fgjob *g = AMPS__CAST(amps__fgjob *, arg);
+    amps_int o, i;
+    (void)slot;
+    for (o = b; o < e; o++)
+        for (i = 0; i < g->cnt; i++)
+            amps__update(g->F, g->P, g->kl[i], g->s, g->e, g->P->gpos[g->kl[i]], g->kb[i], g->rel, (int)o, AMPS__FOWN);
+}
+
+/* Panels [b, e) of superblock [cb, ce): the updates from the group's columns before cb. */
+static void amps__fg_panels(amps_int b, amps_int e, int slot, void *arg) {
+    amps__fgjob *g = AMPS__CAST(amps__fgjob *, arg);
+    amps_int ip;
+    (void)slot;
+    for (ip = b; ip < e; ip++) {
+        amps_int c0 = g->cb + 4 * ip, tc = g->ce - c0 < 4 ? g->ce - c0 : 4;
+        amps__panel_rect(g->F, g->s, g->cb, c0, tc, 0, (g->e - c0 - tc + 1) + g->nJ);
+        amps__panel_factor(g->F, g->P, g->Ax, g->e, g->s, g->cb, c0, tc, g->rel, 0);
+    }
+}
+
+/* amps__fgroup for a top-part group as a sequence of parallel loops (no loop waits for a
+   particular participant): the scatter by columns; the queued updates by the AMPS__FOWN owner
+   classes of the targets (4-column blocks, cyclic); per superblock of AMPS__SBLK columns the
+   updates of its panels from the columns before it, by panels, then its own factorization on
+   the caller. Same arithmetic per entry as amps__fgroup (the k chunks stay aligned at s). Uses
+   the workspace of slots 0 and 1. */
+static amps_int amps__fgroup_par(amps_factor *F, amps__fpriv *P, const double *Ax, amps_int J, const amps__par *par,
+                                 int nt) {
+    amps_int s = P->gs[J], e = P->gs[J + 1] - 1, n = F->n, cnt = 0, bad = -1, i, c0, cb, K;
     amps_int *rel = P->iwork, *kl = P->iwork + 2 * n, *kb = P->iwork + 3 * n;
-#pragma omp parallel num_threads(nt)
-    {
-        int tid = omp_get_thread_num(), T = omp_get_num_threads();
-        amps_int c, i, c0, cb;
-#pragma omp for schedule(static)
-        for (c = s; c <= e; c++) amps__scatter(F, P, Ax, c, c);
-#pragma omp single
-        {
-            amps_int K;
-            amps__rowmaps(F, s, e, rel);
-            while ((K = P->head[J]) >= 0) {
-                P->head[J] = P->next[K];
-                kl[cnt] = K;
-                kb[cnt++] = amps__span(F, P, K, e);
-            }
-        }
-        for (i = 0; i < cnt; i++) amps__update(F, P, kl[i], s, e, P->gpos[kl[i]], kb[i], rel, tid, T);
-#pragma omp barrier
-#pragma omp single
-        for (i = 0; i < cnt; i++) {
-            P->gpos[kl[i]] = kb[i];
-            amps__link(F, P, kl[i], -1);
-        }
-        /* superblocks of AMPS__SBLK columns: updates from the columns before it in parallel (panels
-           owned cyclically), then its own factorization on one thread */
-        for (cb = s; cb <= e; cb += AMPS__SBLK) {
-            amps_int ce = cb + AMPS__SBLK <= e + 1 ? cb + AMPS__SBLK : e + 1, ip;
-            if (cb > s) {
-                for (c0 = cb, ip = 0; c0 < ce; c0 += 4, ip++) {
-                    amps_int tc = ce - c0 < 4 ? ce - c0 : 4;
-                    if (ip % T != tid) continue;
-                    amps__panel_rect(F, s, cb, c0, tc, 0, (e - c0 - tc + 1) + nJ);
-                    amps__panel_factor(F, P, Ax, e, s, cb, c0, tc, rel, 0);
-                }
-#pragma omp barrier
-            }
-#pragma omp single
-            for (c0 = cb; c0 < ce && bad < 0; c0 += 4) {
-                amps_int tc = ce - c0 < 4 ? ce - c0 : 4;
-                amps__panel_rect(F, cb, c0, c0, tc, 0, (e - c0 - tc + 1) + nJ);
-                bad = amps__panel_factor(F, P, Ax, e, cb, c0, c0, tc, rel, 1);
-            }
-            if (bad >= 0) break;
+    amps__fgjob g;
+    g.F = F;
+    g.P = P;
+    g.Ax = Ax;
+    g.rel = rel;
+    g.kl = kl;
+    g.kb = kb;
+    g.s = s;
+    g.e = e;
+    g.nJ = F->Lp[e + 1] - F->Lp[e];
+    amps__par_for(par, nt, e + 1 - s, 16, amps__fg_scatter, &g);
+    amps__rowmaps(F, s, e, rel);
+    while ((K = P->head[J]) >= 0) {
+        P->head[J] = P->next[K];
+        kl[cnt] = K;
+        kb[cnt++] = amps__span(F, P, K, e);
+    }
+    g.cnt = cnt;
+    amps__par_for(par, nt, AMPS__FOWN, 1, amps__fg_update, &g);
+    for (i = 0; i < cnt; i++) {
+        P->gpos[kl[i]] = kb[i];
+        amps__link(F, P, kl[i], -1);
+    }
+    for (cb = s; cb <= e && bad < 0; cb += AMPS__SBLK) {
+        amps_int ce = cb + AMPS__SBLK <= e + 1 ? cb + AMPS__SBLK : e + 1;
+        g.cb = cb;
+        g.ce = ce;
+        if (cb > s) amps__par_for(par, nt, (ce - cb + 3) / 4, 1, amps__fg_panels, &g);
+        for (c0 = cb; c0 < ce && bad < 0; c0 += 4) {
+            amps_int tc = ce - c0 < 4 ? ce - c0 : 4;
+            amps__panel_rect(F, cb, c0, c0, tc, 0, (e - c0 - tc + 1) + g.nJ);
+            bad = amps__panel_factor(F, P, Ax, e, cb, c0, c0, tc, rel, 1);
         }
     }
     if (bad < 0) {
@@ -4081,13 +4317,36 @@ static amps_int amps__fgroup_par(amps_factor *F, amps__fpriv *P, const double *A
     }
     return bad;
 }
-#endif
+
+/* A parallel loop of amps_factorize over subtrees. */
+typedef struct amps__fsjob {
+    amps_factor *F;
+    amps__fpriv *P;
+    const double *Ax;
+} amps__fsjob;
+
+/* Subtrees [b, e), each by ascending groups, with the row maps of slot. */
+static void amps__fsub(amps_int b, amps_int e, int slot, void *arg) {
+    amps__fsjob *j = AMPS__CAST(amps__fsjob *, arg);
+    amps__fpriv *P = j->P;
+    amps_int *iw = P->iwork + (size_t)slot * 2 * (size_t)j->F->n, i, q;
+    for (i = b; i < e; i++)
+        for (q = P->subp[i]; q < P->subp[i + 1]; q++) {
+            amps_int col = amps__fgroup(j->F, P, j->Ax, P->subg[q], iw, i);
+            if (col >= 0) {
+                P->fail[i] = col;
+                break;
+            }
+        }
+}
 
 AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_csc *A) {
     amps__fpriv *P;
     amps_int n, k, g, i, bad = -1, nsub;
     const double *Ax;
     int nt;
+    amps__par par;
+    amps__fsjob fj;
     if (!F || !F->priv || !A) return amps__err(ctx, AMPS_ERR_ARG, "amps_factorize: NULL argument");
     P = AMPS__CAST(amps__fpriv *, F->priv);
     n = F->n;
@@ -4109,41 +4368,23 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
     for (g = 0; g < P->ng; g++) P->head[g] = -1;
     for (i = 0; i <= nsub; i++) P->fail[i] = -1;
     nt = P->work < P->parmin ? 1 : amps__nthreads(ctx, P->nthr < nsub ? P->nthr : (nsub > 0 ? nsub : 1));
-    (void)nt;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 1) num_threads(nt)
-#endif
-    for (i = 0; i < nsub; i++) {
-        amps_int *iw = P->iwork;
-        amps_int q;
-#ifdef _OPENMP
-        iw += (size_t)omp_get_thread_num() * 2 * (size_t)F->n;
-#endif
-        for (q = P->subp[i]; q < P->subp[i + 1]; q++) {
-            amps_int col = amps__fgroup(F, P, Ax, P->subg[q], iw, i);
-            if (col >= 0) {
-                P->fail[i] = col;
-                break;
-            }
-        }
-    }
+    par = amps__par_of(ctx, &P->bo);
+    fj.F = F;
+    fj.P = P;
+    fj.Ax = Ax;
+    amps__par_for(&par, nt, nsub, 1, amps__fsub, &fj);
     for (i = 0; i < nsub; i++)
         if (P->fail[i] >= 0 && (bad < 0 || P->fail[i] < bad)) bad = P->fail[i];
     if (bad < 0) {
         for (g = 0; g < P->ng; g++)
             if (P->gsub[g] >= 0) amps__link(F, P, g, -1);
         int ntp = P->work < P->parmin ? 1 : amps__nthreads(ctx, P->nthr);
-        (void)ntp;
         for (k = 0; k < P->ntop && bad < 0; k++) {
             amps_int J = P->topg[k], s = P->gs[J], e = P->gs[J + 1] - 1;
-#ifdef _OPENMP
             if (ntp > 1 && (double)(F->Lp[e + 1] - F->Lp[s]) * (double)(e - s + 1) >= P->pargroup) {
-                bad = amps__fgroup_par(F, P, Ax, J, ntp);
+                bad = amps__fgroup_par(F, P, Ax, J, &par, ntp);
                 continue;
             }
-#endif
-            (void)s;
-            (void)e;
             bad = amps__fgroup(F, P, Ax, J, P->iwork, -1);
         }
     }
@@ -4384,19 +4625,36 @@ AMPS_API void amps_ltsolve(const amps_factor *F, double *x) {
         for (c = F->n - 1; c >= 0; c--) amps__bwd(F, c, c, x);
 }
 
-/* amps__bwd of columns c0..ke of a group on nthr threads when it is large: x(c) -= L(S, c)^T x(S)
-   is independent per column, so blocks of 8 columns go to the threads; then the triangle. */
-static void amps__bwd_par(const amps_factor *F, amps_int c0, amps_int ke, double *x, int nthr) {
-    amps_int nb = (ke + 1 - c0) / 8, b;
+/* A parallel loop of the backward solves. */
+typedef struct amps__bwjob {
+    const amps_factor *F;
+    double *x;
+    amps_int c0, ke, nr;
+    const amps_int *iw; /* the runs of amps__ltsolve_closure_par */
+} amps__bwjob;
+
+/* Blocks [b, e) of 8 columns of amps__bwd_par. */
+static void amps__bw_rows(amps_int b, amps_int e, int slot, void *arg) {
+    amps__bwjob *j = AMPS__CAST(amps__bwjob *, arg);
+    (void)slot;
+    for (; b < e; b++) amps__bwd_rows(j->F, j->c0 + 8 * b, j->c0 + 8 * b + 7, j->ke, j->x);
+}
+
+/* amps__bwd of columns c0..ke of a group on nthr participants when it is large: x(c) -= L(S, c)^T
+   x(S) is independent per column, so chunks of 4 blocks of 8 columns are claimed; then the
+   triangle. */
+static void amps__bwd_par(const amps_factor *F, amps_int c0, amps_int ke, double *x, const amps__par *par, int nthr) {
+    amps_int nb = (ke + 1 - c0) / 8;
+    amps__bwjob j;
     if (nb < 2 || (double)(F->Lp[ke + 1] - F->Lp[c0]) < 1e5) {
         amps__bwd(F, c0, ke, x);
         return;
     }
-    (void)nthr; /* used by the pragma only */
-#ifdef _OPENMP
-#pragma omp parallel for schedule(static) num_threads(nthr)
-#endif
-    for (b = 0; b < nb; b++) amps__bwd_rows(F, c0 + 8 * b, c0 + 8 * b + 7, ke, x);
+    j.F = F;
+    j.x = x;
+    j.c0 = c0;
+    j.ke = ke;
+    amps__par_for(par, nthr, nb, 4, amps__bw_rows, &j);
     amps__bwd_rows(F, c0 + 8 * nb, ke, ke, x);
     amps__bwd_tri(F, c0, ke, x);
 }
@@ -4407,28 +4665,36 @@ static int amps__par_bwd(const amps_factor *F, int nthr) {
     return P && nthr > 1 && P->nsub >= 2 && (double)F->Lp[F->n] >= 2e5;
 }
 
-/* amps_ltsolve on nthr threads, same result bit for bit: the top part of the subtree decomposition
-   (closed under parents) first, by descending groups (amps__bwd_par); then the subtrees, one per
-   thread at a time, each by descending groups (it reads only its own and top rows, and writes
-   its own). */
-static void amps__ltsolve_par(const amps_factor *F, double *x, int nthr) {
+/* Subtrees [b, e) of amps__ltsolve_par, each by descending groups. */
+static void amps__bw_sub(amps_int b, amps_int e, int slot, void *arg) {
+    amps__bwjob *j = AMPS__CAST(amps__bwjob *, arg);
+    const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, j->F->priv);
+    amps_int i, k;
+    (void)slot;
+    for (i = b; i < e; i++)
+        for (k = P->subp[i + 1] - 1; k >= P->subp[i]; k--) {
+            amps_int g = P->subg[k];
+            amps__bwd(j->F, P->gs[g], P->gs[g + 1] - 1, j->x);
+        }
+}
+
+/* amps_ltsolve on nthr participants, same result bit for bit: the top part of the subtree
+   decomposition (closed under parents) first, by descending groups (amps__bwd_par); then the
+   subtrees, one chunk each, each by descending groups (it reads only its own and top rows, and
+   writes its own). */
+static void amps__ltsolve_par(const amps_factor *F, double *x, const amps__par *par, int nthr) {
     const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
     amps_int i;
+    amps__bwjob j;
     if (!amps__par_bwd(F, nthr)) {
         amps_ltsolve(F, x);
         return;
     }
-    for (i = P->ntop - 1; i >= 0; i--) amps__bwd_par(F, P->gs[P->topg[i]], P->gs[P->topg[i] + 1] - 1, x, nthr);
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 1) num_threads(nthr)
-#endif
-    for (i = 0; i < P->nsub; i++) {
-        amps_int k;
-        for (k = P->subp[i + 1] - 1; k >= P->subp[i]; k--) {
-            amps_int g = P->subg[k];
-            amps__bwd(F, P->gs[g], P->gs[g + 1] - 1, x);
-        }
-    }
+    for (i = P->ntop - 1; i >= 0; i--)
+        amps__bwd_par(F, P->gs[P->topg[i]], P->gs[P->topg[i] + 1] - 1, x, par, nthr);
+    j.F = F;
+    j.x = x;
+    amps__par_for(par, nthr, P->nsub, 1, amps__bw_sub, &j);
 }
 
 /* First index j <= k of the run of closure[0..k] that ends at closure[k] inside its group. */
@@ -4439,15 +4705,29 @@ static amps_int amps__run_start(const amps_factor *F, const amps_int *closure, a
     return j;
 }
 
-/* amps_ltsolve_closure on nthr threads, same result bit for bit, as amps__ltsolve_par: the runs of
-   the closure in top groups first (descending), the others listed in iw (room for cnt) by their
-   first index and solved per subtree, one subtree per thread at a time. The closure is closed
-   under parents and a group is a chain, so a run ends at its group's last column. Each thread
+/* Subtrees [b, e) of amps__ltsolve_closure_par: the runs (j->iw) in each, in list order. */
+static void amps__bw_runs(amps_int b, amps_int e, int slot, void *arg) {
+    amps__bwjob *j = AMPS__CAST(amps__bwjob *, arg);
+    const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, j->F->priv);
+    amps_int i, r;
+    (void)slot;
+    for (i = b; i < e; i++)
+        for (r = 0; r < j->nr; r++) {
+            amps_int c = j->iw[r], g = P->cgrp[c];
+            if (P->gsub[g] == i) amps__bwd(j->F, c, P->gs[g + 1] - 1, j->x);
+        }
+}
+
+/* amps_ltsolve_closure on nthr participants, same result bit for bit, as amps__ltsolve_par: the
+   runs of the closure in top groups first (descending), the others listed in iw (room for cnt)
+   by their first index and solved per subtree, one chunk per subtree. The closure is closed
+   under parents and a group is a chain, so a run ends at its group's last column. Each chunk
    scans the list: O(nsub x runs) index work beside the solve. */
-static void amps__ltsolve_closure_par(const amps_factor *F, amps_int cnt, const amps_int *closure, double *y, int nthr,
-                                      amps_int *iw) {
+static void amps__ltsolve_closure_par(const amps_factor *F, amps_int cnt, const amps_int *closure, double *y,
+                                      const amps__par *par, int nthr, amps_int *iw) {
     amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
-    amps_int k, j, nr = 0, i;
+    amps_int k, j, nr = 0;
+    amps__bwjob bj;
     if (!amps__par_bwd(F, nthr)) {
         amps_ltsolve_closure(F, cnt, closure, y);
         return;
@@ -4458,19 +4738,14 @@ static void amps__ltsolve_closure_par(const amps_factor *F, amps_int cnt, const 
 #ifdef AMPS_COUNT_TOUCH
         P->touch += (double)(F->Lp[ke + 1] - F->Lp[closure[j]]);
 #endif
-        if (P->gsub[P->cgrp[ke]] < 0) amps__bwd_par(F, closure[j], ke, y, nthr);
+        if (P->gsub[P->cgrp[ke]] < 0) amps__bwd_par(F, closure[j], ke, y, par, nthr);
         else iw[nr++] = closure[j];
     }
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 1) num_threads(nthr)
-#endif
-    for (i = 0; i < P->nsub; i++) {
-        amps_int r;
-        for (r = 0; r < nr; r++) {
-            amps_int c = iw[r], g = P->cgrp[c];
-            if (P->gsub[g] == i) amps__bwd(F, c, P->gs[g + 1] - 1, y);
-        }
-    }
+    bj.F = F;
+    bj.x = y;
+    bj.nr = nr;
+    bj.iw = iw;
+    amps__par_for(par, nthr, P->nsub, 1, amps__bw_runs, &bj);
 }
 
 AMPS_API amps_status amps_solve(amps_ctx *ctx, const amps_factor *F, const double *b, double *x, double *work) {
@@ -4481,7 +4756,11 @@ AMPS_API amps_status amps_solve(amps_ctx *ctx, const amps_factor *F, const doubl
     for (k = 0; k < n; k++) work[k] = b[F->perm[k]];
     amps_lsolve(F, work);
     amps_dsolve(F, work);
-    amps__ltsolve_par(F, work, amps__nthreads(ctx, 1024));
+    {
+        amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
+        amps__par par = amps__par_of(ctx, P ? &P->bo : NULL);
+        amps__ltsolve_par(F, work, &par, amps__nthreads(ctx, 1024));
+    }
     for (k = 0; k < n; k++) x[F->perm[k]] = work[k];
     return AMPS_OK;
 }
@@ -4584,10 +4863,47 @@ static void amps__solve4(const amps_factor *F, double *w) {
     }
 }
 
+/* A parallel loop of amps_solve_multi. */
+typedef struct amps__msjob {
+    const amps_factor *F;
+    amps_int nrhs, ldb, ldx;
+    const double *B;
+    double *X, *work;
+} amps__msjob;
+
+/* Blocks [b, e) of AMPS__RHSB right-hand sides, in the workspace of slot. */
+static void amps__ms_blocks(amps_int b, amps_int e, int slot, void *arg) {
+    amps__msjob *j = AMPS__CAST(amps__msjob *, arg);
+    const amps_factor *F = j->F;
+    amps_int n = F->n, blk;
+    double *w = j->work + (size_t)slot * AMPS__RHSB * (size_t)n;
+    for (blk = b; blk < e; blk++) {
+        amps_int r0 = blk * AMPS__RHSB, rc = j->nrhs - r0 < AMPS__RHSB ? j->nrhs - r0 : AMPS__RHSB, k, r;
+        for (k = 0; k < n; k++) {
+            const double *bk = j->B + F->perm[k] + (size_t)r0 * (size_t)j->ldb;
+            for (r = 0; r < AMPS__RHSB; r++) w[AMPS__RHSB * k + r] = r < rc ? bk[(size_t)r * (size_t)j->ldb] : 0.0;
+        }
+        if (rc == 1) {
+            for (k = 0; k < n; k++) w[k] = w[AMPS__RHSB * k]; /* single vector: use the grouped kernels */
+            amps_lsolve(F, w);
+            amps_dsolve(F, w);
+            amps_ltsolve(F, w);
+            for (k = 0; k < n; k++) j->X[F->perm[k] + (size_t)r0 * (size_t)j->ldx] = w[k];
+            continue;
+        }
+        amps__solve4(F, w);
+        for (k = 0; k < n; k++) {
+            double *xk = j->X + F->perm[k] + (size_t)r0 * (size_t)j->ldx;
+            for (r = 0; r < rc; r++) xk[(size_t)r * (size_t)j->ldx] = w[AMPS__RHSB * k + r];
+        }
+    }
+}
+
 AMPS_API amps_status amps_solve_multi(amps_ctx *ctx, const amps_factor *F, amps_int nrhs, const double *B, amps_int ldb,
                                       double *X, amps_int ldx, double *work) {
-    amps_int nblk, blk, n;
-    int nt;
+    amps_int nblk, n;
+    amps__msjob j;
+    amps__par par;
     if (!F || nrhs < 0 || (nrhs > 0 && (!B || !X || !work)))
         return amps__err(ctx, AMPS_ERR_ARG, "amps_solve_multi: NULL argument or negative nrhs %lld", (long long)nrhs);
     if (!F->is_numeric) return amps__err(ctx, AMPS_ERR_STATE, "amps_solve_multi: factor has no numeric values");
@@ -4596,35 +4912,15 @@ AMPS_API amps_status amps_solve_multi(amps_ctx *ctx, const amps_factor *F, amps_
         return amps__err(ctx, AMPS_ERR_ARG, "amps_solve_multi: leading dimension (ldb %lld, ldx %lld) below n = %lld",
                          (long long)ldb, (long long)ldx, (long long)n);
     nblk = (nrhs + AMPS__RHSB - 1) / AMPS__RHSB;
-    nt = amps__nthreads(ctx, nblk > 0 ? nblk : 1);
-    (void)nt;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 1) num_threads(nt)
-#endif
-    for (blk = 0; blk < nblk; blk++) {
-        double *w = work;
-        amps_int r0 = blk * AMPS__RHSB, rc = nrhs - r0 < AMPS__RHSB ? nrhs - r0 : AMPS__RHSB, k, r;
-#ifdef _OPENMP
-        w += (size_t)omp_get_thread_num() * AMPS__RHSB * (size_t)n;
-#endif
-        for (k = 0; k < n; k++) {
-            const double *bk = B + F->perm[k] + (size_t)r0 * (size_t)ldb;
-            for (r = 0; r < AMPS__RHSB; r++) w[AMPS__RHSB * k + r] = r < rc ? bk[(size_t)r * (size_t)ldb] : 0.0;
-        }
-        if (rc == 1) {
-            for (k = 0; k < n; k++) w[k] = w[AMPS__RHSB * k]; /* single vector: use the grouped kernels */
-            amps_lsolve(F, w);
-            amps_dsolve(F, w);
-            amps_ltsolve(F, w);
-            for (k = 0; k < n; k++) X[F->perm[k] + (size_t)r0 * (size_t)ldx] = w[k];
-            continue;
-        }
-        amps__solve4(F, w);
-        for (k = 0; k < n; k++) {
-            double *xk = X + F->perm[k] + (size_t)r0 * (size_t)ldx;
-            for (r = 0; r < rc; r++) xk[(size_t)r * (size_t)ldx] = w[AMPS__RHSB * k + r];
-        }
-    }
+    j.F = F;
+    j.nrhs = nrhs;
+    j.B = B;
+    j.ldb = ldb;
+    j.X = X;
+    j.ldx = ldx;
+    j.work = work;
+    par = amps__par_of(ctx, F->priv ? &AMPS__CAST(amps__fpriv *, F->priv)->bo : NULL);
+    amps__par_for(&par, amps__nthreads(ctx, nblk > 0 ? nblk : 1), nblk, 1, amps__ms_blocks, &j);
     return AMPS_OK;
 }
 
@@ -4879,6 +5175,8 @@ struct amps_update {
         double *job_y, *job_xw;    /* the two-phase job in progress (NULL: none) */
     } watch;
     amps_update_stats stats;
+    amps__par par; /* the kernels' back end (from the ctx at create; bo points at this handle's bo) */
+    amps__parbo bo;
 };
 
 
@@ -5258,13 +5556,9 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     U->n = n;
     U->N = n;
     U->cap_N = n + o.cap_new;
-#ifdef _OPENMP
-    U->nthr = ctx && ctx->nthreads > 0 ? ctx->nthreads : omp_get_max_threads();
-#else
-    U->nthr = 1;
-#endif
-    if (U->nthr < 1) U->nthr = 1;
+    U->nthr = amps__par_slots(ctx);
     U->nbuf = U->nthr;
+    U->par = amps__par_of(ctx, &U->bo);
     if (amps__sym_full(ctx, K, stype, &U->base.Kp, &U->base.Ki, &U->base.Kx)) goto fail;
     U->memo.cap = o.cap_vpool > 0 ? (size_t)o.cap_vpool : (size_t)o.cap_mod * (size_t)(F->height > 0 ? F->height : 1);
     U->delta.cap = o.cap_delta > 0 ? o.cap_delta : 96 * o.cap_mod;
@@ -5664,35 +5958,20 @@ AMPS__WSOLVE(12)
 AMPS__WSOLVE(16)
 #undef AMPS__WSOLVE
 
-/* W columns (W = D^{-1/2} L^{-1} e_p on the root path of p, ascending) of the U positions
-   list[0..nb-1], written at memo.off/memo.len. The columns are split into chunks of at most AMPS__VB,
-   one chunk per thread at a time; a chunk is one forward solve over the union of its paths
-   (ascending = topological), X(t, j) row-major over the chunk, so each column of L on the
-   union is read once per chunk. The rows of L(:, k) lie on the path of k, so no solve leaves
-   the union. Workspace per thread: work.chunk (chunk_rows * AMPS__VB), work.row_map (n, -1
-   outside use), work.closure (n). */
-static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
+typedef struct amps__wcjob {
+    amps_update *U;
+    const amps_int *list;
+    amps_int nb, csize;
+} amps__wcjob;
+
+/* Chunks [b, e) of amps__wcols. */
+static void amps__wc_chunks(amps_int b, amps_int e, int th, void *arg) {
+    amps__wcjob *wj = AMPS__CAST(amps__wcjob *, arg);
+    amps_update *U = wj->U;
     const amps_factor *F = U->F;
-    amps_int nchunk, csize, ch;
-    if (nb <= 0) return;
-    { /* threads only when the work (entries of L on one path, times nb) is worth a fork */
-        double work = 0;
-        amps_int k;
-        for (k = F->iperm[U->aug.idx[list[0]]]; k != -1; k = F->parent[k]) work += (double)(F->Lp[k + 1] - F->Lp[k]);
-        work *= (double)nb;
-        csize = work > 2e6 ? (nb + U->nthr - 1) / U->nthr : nb;
-    }
-    if (csize > AMPS__VB) csize = AMPS__VB;
-    nchunk = (nb + csize - 1) / csize;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 1) num_threads(U->nthr) if (nchunk > 1)
-#endif
-    for (ch = 0; ch < nchunk; ch++) {
-#ifdef _OPENMP
-        int th = omp_get_thread_num();
-#else
-        int th = 0;
-#endif
+    const amps_int *list = wj->list;
+    amps_int nb = wj->nb, csize = wj->csize, ch;
+    for (ch = b; ch < e; ch++) {
         double *X = U->work.chunk + (size_t)th * (size_t)U->work.chunk_rows * AMPS__VB;
         amps_int *lmap = U->work.row_map + (size_t)th * (size_t)U->n,
                  *clo = U->work.closure + (size_t)th * (size_t)U->n;
@@ -5726,6 +6005,36 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
         }
         for (t = 0; t < nc; t++) lmap[clo[t]] = -1;
     }
+}
+
+/* W columns (W = D^{-1/2} L^{-1} e_p on the root path of p, ascending) of the U positions
+   list[0..nb-1], written at memo.off/memo.len. The columns are split into chunks of at most AMPS__VB,
+   one chunk per participant at a time; a chunk is one forward solve over the union of its paths
+   (ascending = topological), X(t, j) row-major over the chunk, so each column of L on the
+   union is read once per chunk. The rows of L(:, k) lie on the path of k, so no solve leaves
+   the union. Workspace per slot: work.chunk (chunk_rows * AMPS__VB), work.row_map (n, -1
+   outside use), work.closure (n). */
+static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
+    const amps_factor *F = U->F;
+    amps_int nchunk, csize;
+    amps__wcjob wj;
+    if (nb <= 0) return;
+    { /* 4 chunks (of at least 4 columns) only when the work (entries of L on one path, times nb)
+         is worth a parallel loop */
+        double work = 0;
+        amps_int k;
+        for (k = F->iperm[U->aug.idx[list[0]]]; k != -1; k = F->parent[k]) work += (double)(F->Lp[k + 1] - F->Lp[k]);
+        work *= (double)nb;
+        csize = work > 2e6 ? (nb + 3) / 4 : nb;
+        if (csize < 4) csize = 4;
+    }
+    if (csize > AMPS__VB) csize = AMPS__VB;
+    nchunk = (nb + csize - 1) / csize;
+    wj.U = U;
+    wj.list = list;
+    wj.nb = nb;
+    wj.csize = csize;
+    amps__par_for(&U->par, nchunk > 1 ? U->nthr : 1, nchunk, 1, amps__wc_chunks, &wj);
 }
 
 /* acc(0:W) = sum over the common suffix of the root path (wi, wv, len) and the union mapped by
@@ -5762,14 +6071,52 @@ AMPS__GSCAN(16)
 /* Step 2: G(a, b) = W_a^T W_b for the new positions a >= u_old and every b <= a (both triangles).
    The new columns go by chunks of at most AMPS__VB: a chunk is scattered row-major over the union
    of its root paths, and each W_b is then read once for the whole chunk (its suffix in the
-   union), the products W_b^T X in one pass; threads share the b. */
+   union), the products W_b^T X in one pass; the b go by chunks of 16 to the participants. */
+typedef struct amps__gcjob {
+    amps_update *U;
+    const double *X;
+    const amps_int *lmap;
+    amps_int u_old, a0, m, mw;
+} amps__gcjob;
+
+/* The b in [b0, b1) of amps__gcols for its chunk a0..a0+m-1. */
+static void amps__gc_rows(amps_int b0, amps_int b1, int slot, void *arg) {
+    amps__gcjob *gj = AMPS__CAST(amps__gcjob *, arg);
+    amps_update *U = gj->U;
+    amps_int n = U->n, b, a0 = gj->a0, mw = gj->mw;
+    size_t ld = (size_t)U->aug.cap;
+    (void)slot;
+    for (b = b0; b < b1; b++) {
+        double acc[AMPS__VB];
+        amps_int jj;
+        if (U->aug.idx[b] < n) {
+            const amps_int *wi = U->memo.idx + U->memo.off[b];
+            const double *wv = U->memo.val + U->memo.off[b];
+            if (mw == 4) amps__gscan4(wi, wv, U->memo.len[b], gj->lmap, gj->X, acc);
+            else if (mw == 8) amps__gscan8(wi, wv, U->memo.len[b], gj->lmap, gj->X, acc);
+            else if (mw == 12) amps__gscan12(wi, wv, U->memo.len[b], gj->lmap, gj->X, acc);
+            else amps__gscan16(wi, wv, U->memo.len[b], gj->lmap, gj->X, acc);
+        }
+        for (jj = 0; jj < gj->m; jj++) {
+            amps_int a = a0 + jj;
+            double gv;
+            if (b >= gj->u_old && b > a) continue; /* the chunk of b writes it */
+            gv = (U->aug.idx[a] >= n || U->aug.idx[b] >= n) ? (a == b ? 1.0 / U->sigma : 0.0) : acc[jj];
+            U->lu.G[(size_t)b * ld + (size_t)a] = gv;
+            U->lu.G[(size_t)a * ld + (size_t)b] = gv;
+        }
+    }
+}
+
 static void amps__gcols(amps_update *U, amps_int u_old) {
     amps_int u = U->aug.size, n = U->n, a0;
-    size_t ld = (size_t)U->aug.cap;
-    double *X = U->work.chunk; /* thread 0's Step 1 workspace */
+    double *X = U->work.chunk; /* slot 0's Step 1 workspace */
     amps_int *lmap = U->work.row_map, *clo = U->work.closure;
+    amps__gcjob gj;
+    gj.U = U;
+    gj.u_old = u_old;
     for (a0 = u_old; a0 < u; a0 += AMPS__VB) {
-        amps_int m = u - a0 < AMPS__VB ? u - a0 : AMPS__VB, mw = amps__width(m), nc = 0, j, t, b;
+        amps_int m = u - a0 < AMPS__VB ? u - a0 : AMPS__VB, mw = amps__width(m), nc = 0, j, t;
         for (j = 0; j < m; j++) {
             const amps_int *wi = U->memo.idx + U->memo.off[a0 + j];
             if (U->aug.idx[a0 + j] >= n) continue;
@@ -5786,29 +6133,12 @@ static void amps__gcols(amps_update *U, amps_int u_old) {
             if (U->aug.idx[a0 + j] >= n) continue;
             for (t = 0; t < U->memo.len[a0 + j]; t++) X[(size_t)lmap[wi[t]] * (size_t)mw + (size_t)j] = wv[t];
         }
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 16) num_threads(U->nthr) if ((double)u * nc > 1e5)
-#endif
-        for (b = 0; b < u; b++) {
-            double acc[AMPS__VB];
-            amps_int jj;
-            if (U->aug.idx[b] < n) {
-                const amps_int *wi = U->memo.idx + U->memo.off[b];
-                const double *wv = U->memo.val + U->memo.off[b];
-                if (mw == 4) amps__gscan4(wi, wv, U->memo.len[b], lmap, X, acc);
-                else if (mw == 8) amps__gscan8(wi, wv, U->memo.len[b], lmap, X, acc);
-                else if (mw == 12) amps__gscan12(wi, wv, U->memo.len[b], lmap, X, acc);
-                else amps__gscan16(wi, wv, U->memo.len[b], lmap, X, acc);
-            }
-            for (jj = 0; jj < m; jj++) {
-                amps_int a = a0 + jj;
-                double gv;
-                if (b >= u_old && b > a) continue; /* the chunk of b writes it */
-                gv = (U->aug.idx[a] >= n || U->aug.idx[b] >= n) ? (a == b ? 1.0 / U->sigma : 0.0) : acc[jj];
-                U->lu.G[(size_t)b * ld + (size_t)a] = gv;
-                U->lu.G[(size_t)a * ld + (size_t)b] = gv;
-            }
-        }
+        gj.X = X;
+        gj.lmap = lmap;
+        gj.a0 = a0;
+        gj.m = m;
+        gj.mw = mw;
+        amps__par_for(&U->par, (double)u * nc > 1e5 ? U->nthr : 1, u, 16, amps__gc_rows, &gj);
         for (t = 0; t < nc; t++) lmap[clo[t]] = -1;
     }
 }
@@ -5989,19 +6319,40 @@ static void amps__dot4(const double *a, size_t lda, amps_int nr, const double *b
 
 /* C(0:m, 0:w) -= A(0:m, 0:kk) B(0:kk, 0:w), column major; one parallel region over row blocks
    of 128, each swept in k blocks of 256 (the block of A stays in cache for all of C's columns). */
-static void amps__gemm_sub(amps_int m, amps_int w, amps_int kk, const double *A, size_t lda, const double *B,
-                           size_t ldb, double *C, size_t ldc, int nthr) {
-    amps_int rb, nrb = (m + 127) / 128;
-    (void)nthr;
-    if (m <= 0 || w <= 0 || kk <= 0) return;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(static) num_threads(nthr) if ((double)m * w * kk > 1e6)
-#endif
-    for (rb = 0; rb < nrb; rb++) {
-        amps_int r0 = rb * 128, r1 = r0 + 128 < m ? r0 + 128 : m, k0;
-        for (k0 = 0; k0 < kk; k0 += 256)
-            amps__gemm_tile(r0, r1, w, k0, k0 + 256 < kk ? k0 + 256 : kk, A, lda, B, ldb, C, ldc);
+typedef struct amps__gmjob {
+    amps_int m, w, kk;
+    const double *A, *B;
+    double *C;
+    size_t lda, ldb, ldc;
+} amps__gmjob;
+
+/* Row blocks [b, e) of 128 rows of amps__gemm_sub. */
+static void amps__gm_rows(amps_int b, amps_int e, int slot, void *arg) {
+    amps__gmjob *j = AMPS__CAST(amps__gmjob *, arg);
+    amps_int rb;
+    (void)slot;
+    for (rb = b; rb < e; rb++) {
+        amps_int r0 = rb * 128, r1 = r0 + 128 < j->m ? r0 + 128 : j->m, k0;
+        for (k0 = 0; k0 < j->kk; k0 += 256)
+            amps__gemm_tile(r0, r1, j->w, k0, k0 + 256 < j->kk ? k0 + 256 : j->kk, j->A, j->lda, j->B, j->ldb, j->C,
+                            j->ldc);
     }
+}
+
+static void amps__gemm_sub(amps_int m, amps_int w, amps_int kk, const double *A, size_t lda, const double *B,
+                           size_t ldb, double *C, size_t ldc, const amps__par *par, int nthr) {
+    amps__gmjob j;
+    if (m <= 0 || w <= 0 || kk <= 0) return;
+    j.m = m;
+    j.w = w;
+    j.kk = kk;
+    j.A = A;
+    j.lda = lda;
+    j.B = B;
+    j.ldb = ldb;
+    j.C = C;
+    j.ldc = ldc;
+    amps__par_for(par, (double)m * w * kk > 1e6 ? nthr : 1, (m + 127) / 128, 1, amps__gm_rows, &j);
 }
 
 /* The new rows u_old..u-1 of L on the factored positions 0..nf-1: L(r, 0:nf) solves
@@ -6034,20 +6385,20 @@ static amps_status amps__lu_new_rows(amps_update *U, amps_int nf, amps_int u_old
 }
 
 /* Panel qp..qp+w-1 of the factor: A(row_perm, col_order[qp:qp+w]), and the column norms. */
-static void amps__lu_panel_load(amps_update *U, amps_int qp, amps_int w) {
+typedef struct amps__pljob {
+    amps_update *U;
+    amps_int qp;
+} amps__pljob;
+
+/* Columns qp + [b, e) of the panel, with the column buffer of slot. */
+static void amps__pl_cols(amps_int b, amps_int e, int slot, void *arg) {
+    amps__pljob *pj = AMPS__CAST(amps__pljob *, arg);
+    amps_update *U = pj->U;
     amps_int u = U->aug.size, c;
     size_t ld = (size_t)U->aug.cap;
-    double *P = U->lu.LU + (size_t)qp * ld;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 1) num_threads(U->nthr) if (w > 1 && u > 64)
-#endif
-    for (c = 0; c < w; c++) {
-#ifdef _OPENMP
-        double *buf = U->lu.panel + (size_t)omp_get_thread_num() * ld;
-#else
-        double *buf = U->lu.panel;
-#endif
-        amps_int j = U->lu.col_order[qp + c], rr;
+    double *P = U->lu.LU + (size_t)pj->qp * ld, *buf = U->lu.panel + (size_t)slot * ld;
+    for (c = b; c < e; c++) {
+        amps_int j = U->lu.col_order[pj->qp + c], rr;
         double nrm = 0, *col = P + (size_t)c * ld;
         amps__acol(U, j, buf);
         for (rr = 0; rr < u; rr++) {
@@ -6056,6 +6407,13 @@ static void amps__lu_panel_load(amps_update *U, amps_int qp, amps_int w) {
         }
         U->lu.col_norm[j] = nrm;
     }
+}
+
+static void amps__lu_panel_load(amps_update *U, amps_int qp, amps_int w) {
+    amps__pljob pj;
+    pj.U = U;
+    pj.qp = qp;
+    amps__par_for(&U->par, w > 1 && U->aug.size > 64 ? U->nthr : 1, w, 1, amps__pl_cols, &pj);
 }
 
 /* The factored columns 0..qp-1 applied to the panel P = qp..qp+w-1: P(0:qp) = L11^{-1} P(0:qp)
@@ -6083,9 +6441,9 @@ static void amps__lu_panel_apply(amps_update *U, amps_int qp, amps_int w) {
             amps__gemm_tile(i1, k1, w, ib, i1, LU, ld, P, ld, P, ld);
         }
         amps__gemm_sub(qp - k1, w, k1 - kb, LU + (size_t)kb * ld + (size_t)k1, ld, P + (size_t)kb, ld, P + (size_t)k1,
-                       ld, U->nthr);
+                       ld, &U->par, U->nthr);
     }
-    amps__gemm_sub(u - qp, w, qp, LU + (size_t)qp, ld, P, ld, P + (size_t)qp, ld, U->nthr);
+    amps__gemm_sub(u - qp, w, qp, LU + (size_t)qp, ld, P, ld, P + (size_t)qp, ld, &U->par, U->nthr);
 }
 
 /* Factors the panel qp..qp+w-1 with partial pivoting (swaps act on whole rows 0..qp+w-1);
@@ -6857,7 +7215,7 @@ static void amps__refine(amps_update *U, const double *sv, const double *wv, con
     }
     memcpy(s2, sv, sizeof(double) * (size_t)n);
     ncl = amps_closure(F, nreq, req, clo, &U->work.mark_n);
-    amps__ltsolve_closure_par(F, ncl, clo, s2, U->nthr, req); /* req is free again */
+    amps__ltsolve_closure_par(F, ncl, clo, s2, &U->par, U->nthr, req); /* req is free again */
     for (k = 0; k < ncl; k++) x[F->perm[clo[k]]] = s2[clo[k]];
     for (k = n; k < U->N; k++) {
         a = U->aug.pos[k];
@@ -6883,22 +7241,41 @@ static void amps__refine(amps_update *U, const double *sv, const double *wv, con
 /* Step 4: r = H^T K-bar^{-1} f = W^T ct on base positions, f/sigma on appended ones. With
    cache (ct is force.ct), the base entries r[0..sol.n_rhs-1] are current and only later ones
    are formed. */
-static void amps__step4(amps_update *U, const double *ct, const double *fv, int cache, double *r) {
-    amps_int u = U->aug.size, n = U->n, a, a0 = cache ? U->sol.n_rhs : 0;
-    double t0 = amps_now();
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 16) num_threads(U->nthr) if (u - a0 > 64)
-#endif
-    for (a = a0; a < u; a++) {
+/* A parallel loop of amps__step4. */
+typedef struct amps__s4job {
+    const amps_update *U;
+    const double *ct;
+    double *r;
+    amps_int a0;
+} amps__s4job;
+
+/* r[a] = W_a^T ct for the base positions a in a0 + [b, e). */
+static void amps__s4_rows(amps_int b, amps_int e, int slot, void *arg) {
+    amps__s4job *j = AMPS__CAST(amps__s4job *, arg);
+    const amps_update *U = j->U;
+    amps_int a;
+    (void)slot;
+    for (a = j->a0 + b; a < j->a0 + e; a++) {
         amps_int i = U->aug.idx[a], t;
-        if (i < n) {
+        if (i < U->n) {
             const double *w = U->memo.val + U->memo.off[a];
             const amps_int *wi = U->memo.idx + U->memo.off[a];
             double sum = 0;
-            for (t = 0; t < U->memo.len[a]; t++) sum += w[t] * ct[wi[t]];
-            r[a] = sum;
+            for (t = 0; t < U->memo.len[a]; t++) sum += w[t] * j->ct[wi[t]];
+            j->r[a] = sum;
         }
     }
+}
+
+static void amps__step4(amps_update *U, const double *ct, const double *fv, int cache, double *r) {
+    amps_int u = U->aug.size, n = U->n, a, a0 = cache ? U->sol.n_rhs : 0;
+    double t0 = amps_now();
+    amps__s4job j;
+    j.U = U;
+    j.ct = ct;
+    j.r = r;
+    j.a0 = a0;
+    amps__par_for(&U->par, u - a0 > 64 ? U->nthr : 1, u - a0, 16, amps__s4_rows, &j);
     for (a = 0; a < u; a++)
         if (U->aug.idx[a] >= n) r[a] = fv[U->aug.idx[a]] / U->sigma;
     if (cache) U->sol.n_rhs = u;
@@ -6964,7 +7341,7 @@ static void amps__solve_core(amps_update *U, const double *ct, const double *fv,
         U->stats.t_step[AMPS_STEP_SOLVE] += amps_now() - t0;
         return;
     } else {
-        amps__ltsolve_par(F, sv, U->nthr);
+        amps__ltsolve_par(F, sv, &U->par, U->nthr);
         for (k = 0; k < n; k++) {
             x[F->perm[k]] = sv[k];
             sv[k] = 0.0;
@@ -7347,6 +7724,8 @@ typedef struct amps__bg {
         const double *Kx; /* the parent's base K */
         amps_update_opts opts;
         void *alloc_user;
+        amps__par par; /* the parent's back end, and its slots (nbuf) */
+        int nbuf;
     } snap;
     struct { /* the m' log: appended by the engine's thread, read by the worker (under mu) */
         amps__lentry *entries;
@@ -7420,6 +7799,8 @@ static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U) {
     b->snap.n = U->n;
     b->snap.sigma = U->sigma;
     b->snap.nthr = U->nthr;
+    b->snap.par = U->par;
+    b->snap.nbuf = U->nbuf;
     b->snap.Kp = U->base.Kp;
     b->snap.Ki = U->base.Ki;
     b->snap.Kx = U->base.Kx;
@@ -7614,6 +7995,10 @@ static amps_status amps__bg_engine(amps_ctx *c2, amps__bg *b) {
     o2.grow = 1;
     o2.refactor = AMPS_REFACTOR_OFF;
     c2->nthreads = b->snap.nthr; /* per-thread buffers for the owner's threads */
+    c2->enqueue_task = b->snap.par.enqueue; /* ... or the owner's task system, used only after */
+    c2->finish_task = b->snap.par.finish;   /* the swap, on the owner's thread (nthr = 1 here) */
+    c2->task_user = b->snap.par.user;
+    c2->worker_count = b->snap.nbuf - 1;
     V = b->result.U = amps_update_create(c2, b->result.K, AMPS_UPPER, b->result.F, &o2);
     if (!V) return c2->status;
     V->nthr = 1; /* the catch-up runs on this thread alone */
@@ -7782,6 +8167,7 @@ static void amps__bg_take(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg
     *U = *V;
     U->grow = old.grow;
     U->nthr = old.nbuf;
+    U->par = old.par;
     U->guard.tol = old.guard.tol;
     U->refac = old.refac;
     U->refac.job = NULL;

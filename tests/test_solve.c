@@ -71,7 +71,10 @@ static void check_solves(const char *name, const amps_csc *A, const int *perm) {
             for (k = 0; k < n; k++) z[k] = b[F->perm[k]] + 0.25;
             memcpy(y, z, sizeof(double) * n);
             amps_ltsolve(F, y);
-            amps__ltsolve_par(F, z, nt);
+            {
+                amps__par tp = amps__par_of(&ctx, NULL);
+                amps__ltsolve_par(F, z, &tp, nt);
+            }
             CHECK(memcmp(y, z, sizeof(double) * n) == 0, "%s: parallel backward solve on %d threads differs", name, nt);
         }
     }
@@ -136,7 +139,10 @@ static void check_solves(const char *name, const amps_csc *A, const int *perm) {
             double tc = amps_touch_count(F);
             memcpy(z, w, sizeof(double) * n);
             amps_touch_reset(F);
-            amps__ltsolve_closure_par(F, cnt, cl, z, 2 + t % 2, cl2);
+            {
+                amps__par tp = amps__par_of(&ctx, NULL);
+                amps__ltsolve_closure_par(F, cnt, cl, z, &tp, 2 + t % 2, cl2);
+            }
             CHECK(memcmp(y, z, sizeof(double) * n) == 0, "%s: parallel closure solve differs", name);
             CHECK(amps_touch_count(F) == tc, "%s: parallel closure solve touched %g, sequential %g", name,
                   amps_touch_count(F), tc);
