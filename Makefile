@@ -2,7 +2,9 @@
 #   make test          build and run every test (last line: "N passed, N failed")
 #   make test SAN=1    the same under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make test OMP=     the same without OpenMP
-#   make tsan          ThreadSanitizer on the tests that run background re-factorizations
+#   make tsan          ThreadSanitizer on the tests that run background re-factorizations and
+#                      on tests/test_par.c (the parallel layer on a pthread job system)
+#   make test-tasks    the tests with every context on the host-task back end (tests/jobs_test.h)
 #   make examples      build the examples (build/default/readme_example, haptic_loop)
 #   make switches      AMPS_NO_FEM / NO_STDIO / NO_THREADS combinations: build, tests, object sizes
 #   make demo          the main job: replay examples/brick_incision.scn (VTU, CSV, PNG in build/demo)
@@ -45,7 +47,7 @@ TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
 TEST_SH   := $(wildcard tests/test_*.sh)
 TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example $(BUILD)/haptic_loop
 
-.PHONY: tsan all test deps deps-check tools examples demo bench bench-quick clean distclean cxx switches stress fuzz \
+.PHONY: tsan test-tasks all test deps deps-check tools examples demo bench bench-quick clean distclean cxx switches stress fuzz \
         format format-check
 all: tools
 
@@ -103,9 +105,14 @@ cxx: | $(BUILD)
 
 # libgomp is not instrumented, so without OpenMP; the threads are the re-factorization's
 tsan:
-	$(MAKE) SAN=thread OMP= BUILD=build/tsan OPT="-O1 -g" build/tsan/test_update build/tsan/test_scene
+	$(MAKE) SAN=thread OMP= BUILD=build/tsan OPT="-O1 -g" build/tsan/test_update build/tsan/test_scene \
+	  build/tsan/test_par
 	@TSAN_OPTIONS="halt_on_error=1 suppressions=$(abspath tests/tsan.supp)" AMPS_BUILD=build/tsan \
-	  bash tests/run.sh build/tsan/test_update build/tsan/test_scene
+	  bash tests/run.sh build/tsan/test_update build/tsan/test_scene build/tsan/test_par
+
+# The whole suite on the host-callback back end (tests/jobs_test.h's pool of 4 workers), no OpenMP.
+test-tasks:
+	$(MAKE) test OMP= BUILD=build/tasks EXTRA="-DAMPS_TEST_HOST_TASKS -pthread $(EXTRA)"
 
 # The compile-time switches, each combination built with -Werror, tested and sized (tests/switches.sh).
 switches: deps-check

@@ -65,4 +65,17 @@ static inline amps_csc *t_fixed_stiffness(amps_ctx *ctx, const amps_mesh *m, uns
     return amps_mesh_assemble(ctx, m, *dof, *n);
 }
 #endif
+#ifdef AMPS_TEST_HOST_TASKS
+/* The whole suite on the host-callback back end: every context the tests initialize runs its
+   kernels on the test job system (tests/jobs_test.h), mode AMPS_TEST_TASK_MODE (1..4, default 2:
+   4 pthread workers). amps.h's own calls are compiled before this macro and keep the real one. */
+#include "jobs_test.h"
+static void t_ctx_init_tasks(amps_ctx *c) {
+    const char *m = getenv("AMPS_TEST_TASK_MODE");
+    int mode = m && m[0] >= '1' && m[0] <= '4' ? m[0] - '0' : T_JOBS_POOL;
+    (amps_ctx_init)(c);
+    if (c) t_jobs_ctx(c, mode);
+}
+#define amps_ctx_init(c) t_ctx_init_tasks(c)
+#endif
 #endif
