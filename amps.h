@@ -1183,10 +1183,10 @@ static int amps__isfinite(double v) { return v - v == 0.0; }
 #define AMPS__PAR_BACKOFF 1 /* 0: no adaptive back-off (tests of the parallel schedule) */
 #endif
 #ifndef AMPS__PAR_QUIET
-#define AMPS__PAR_QUIET 0.02
+#define AMPS__PAR_QUIET 0.25
 #endif
 #ifndef AMPS__PAR_QUIET_MAX
-#define AMPS__PAR_QUIET_MAX 1.0
+#define AMPS__PAR_QUIET_MAX 4.0
 #endif
 
 #if defined(__GNUC__) || defined(__clang__)
