@@ -263,14 +263,15 @@ typedef struct amps_factor {
 /* Ordering + elimination tree + column counts + Lp for symmetric A (stype part); allocates L.
    opts may be NULL (AMPS_ORDER_AUTO, block detection). With AMPS_FULL only entries with row <= column
    are read (A is taken as symmetric). Also builds the pattern Li and the scatter map of A into L, and
-   the workspace of amps_factorize for ctx->nthreads threads (0: the OpenMP default). */
+   the workspace of amps_factorize for the participants of ctx's back end (host workers + 1, or
+   ctx->nthreads OpenMP threads, 0: the OpenMP default). */
 AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts);
 /* Numeric LDL^T of A, which must have the pattern given to amps_analyze, stored as the same
    triangle (values may differ; AMPS_ERR_PATTERN otherwise).
    A pivot must be finite and exceed AMPS_PIVOT_TOL (default 1e-12) times the column's diagonal entry
    of A, else AMPS_ERR_NOT_SPD names the failing column in the original numbering; F is then not
-   numeric. Uses ctx->nthreads OpenMP threads (at most the count at amps_analyze); the result does
-   not depend on the thread count. Allocates nothing. */
+   numeric. Runs on ctx's back end (at most the participants of amps_analyze); the result does
+   not depend on the back end or the thread count. Allocates nothing. */
 AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_csc *A);
 AMPS_API void amps_factor_free(amps_ctx *ctx, amps_factor *F);
 /* Number of entries of L, counting the unit diagonal. */
@@ -300,7 +301,7 @@ AMPS_API void amps_marker_next(amps_marker *m);
 AMPS_API amps_int amps_closure(const amps_factor *F, amps_int nidx, const amps_int *idx, amps_int *out, amps_marker *m);
 
 /* Full solve K x = b in the original numbering; x may equal b; work has n doubles. The backward
-   solve of a large factor runs on ctx->nthreads threads (OpenMP; same result on any number). */
+   solve of a large factor runs on ctx's back end (same result on any). */
 AMPS_API amps_status amps_solve(amps_ctx *ctx, const amps_factor *F, const double *b, double *x, double *work);
 /* Permuted-space kernels on a dense n-vector x: x := L^{-1} x, x := D^{-1} x, x := L^{-T} x. */
 AMPS_API void amps_lsolve(const amps_factor *F, double *x);
@@ -320,9 +321,9 @@ AMPS_API amps_int amps_ltsolve_partial(const amps_factor *F, amps_int nreq, cons
    under parent): x = L^{-T} y on closure[0..cnt-1] only. Reads L's columns in the closure. */
 AMPS_API void amps_ltsolve_closure(const amps_factor *F, amps_int cnt, const amps_int *closure, double *y);
 /* Solves K X = B for nrhs right-hand sides: columns of B (leading dimension ldb >= n) into X
-   (ldx >= n; X may equal B), original numbering. Blocks of 4 columns run in parallel on OpenMP
-   threads (ctx->nthreads, else the OpenMP default). work: amps_solve_multi_work(ctx, F, nrhs)
-   doubles (4n per thread used; query it with the same ctx settings). Allocates nothing. */
+   (ldx >= n; X may equal B), original numbering. Blocks of 4 columns run in parallel on ctx's
+   back end. work: amps_solve_multi_work(ctx, F, nrhs) doubles (4n per participant: host workers
+   + 1, or OpenMP threads; query it with the same ctx settings). Allocates nothing. */
 AMPS_API amps_status amps_solve_multi(amps_ctx *ctx, const amps_factor *F, amps_int nrhs, const double *B, amps_int ldb,
                                       double *X, amps_int ldx, double *work);
 AMPS_API size_t amps_solve_multi_work(const amps_ctx *ctx, const amps_factor *F, amps_int nrhs);
@@ -4005,7 +4006,7 @@ static amps_status amps__analyze_subtrees(amps_ctx *ctx, amps_factor *F, amps__a
     return AMPS_OK;
 }
 
-/* Workspace of amps_factorize for ctx->nthreads threads, the pattern hash and the thresholds. */
+/* Workspace of amps_factorize for the back end's participants, the pattern hash and the thresholds. */
 static amps_status amps__analyze_workspace(amps_ctx *ctx, const amps_csc *A, amps_factor *F) {
     amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
     amps_int nthr = amps__nthreads(ctx, 1024);
@@ -8000,6 +8001,8 @@ static amps_status amps__bg_engine(amps_ctx *c2, amps__bg *b) {
     c2->task_user = b->snap.par.user;
     c2->worker_count = b->snap.nbuf - 1;
     V = b->result.U = amps_update_create(c2, b->result.K, AMPS_UPPER, b->result.F, &o2);
+    c2->enqueue_task = NULL; /* this thread never calls the host */
+    c2->finish_task = NULL;
     if (!V) return c2->status;
     V->nthr = 1; /* the catch-up runs on this thread alone */
     for (j = 0; j < b->snap.N; j++)
