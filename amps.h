@@ -503,7 +503,11 @@ AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m
 /* Commits, then computes x on the watched indices only: xw[k] = x[idx[k]] (xw may be NULL; the
    values also land in amps_update_solution, whose other entries are then stale). The backward
    solve reads L only on closure_L(watched) and, for the local refinement, on the closure of
-   S u C and its neighbours. Updates the reactions too. No accuracy guard. Allocates nothing.
+   S u C and its neighbours. Updates the reactions too. Allocates nothing. Neither the default
+   refinement (opts.refine_tol) nor the guard: a product with K^ would cost more than this
+   solve, so x is the augmented solve's with the local refinement (opts.refine), whose backward
+   error on a badly conditioned K^ can exceed a fresh direct solve's (measured up to 0.02 eps
+   sqrt(cond(K^)), bench/RESULTS.md section 6b); amps_update_solve gives x at that level.
    AMPS_ERR_INDEX (a watched index no longer exists) comes before the commit; a failed commit:
    see amps_update_commit. */
 AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, double *xw);
