@@ -4878,6 +4878,7 @@ struct amps_update {
         double tol;      /* 0: off */
         double *ct;      /* n: forward solve of the residual */
         double *scratch; /* 2 * cap_N */
+        double knorm;    /* ||K-bar||_inf (the base rows and sigma), the scale of the backward error */
     } guard;
     struct {                   /* re-factorization */
         amps_update_opts opts; /* as created (for the engine of a new base) */
@@ -5295,6 +5296,12 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
         for (p = U->base.Kp[j]; p < U->base.Kp[j + 1]; p++)
             if (U->base.Ki[p] == j) s += U->base.Kx[p];
     U->sigma = n > 0 && s > 0 ? s / (double)n : 1.0;
+    U->guard.knorm = U->sigma;
+    for (j = 0; j < n; j++) {
+        double sa = 0;
+        for (p = U->base.Kp[j]; p < U->base.Kp[j + 1]; p++) sa += fabs(U->base.Kx[p]);
+        if (sa > U->guard.knorm) U->guard.knorm = sa;
+    }
     U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
     U->stats.dim = n;
     return U;
@@ -7000,34 +7007,13 @@ static void amps__solve_core(amps_update *U, const double *ct, const double *fv,
 static void amps__kmul(const amps_update *U, const double *v, double *y);
 
 /* rho = f^ - K^ x on the free rows F (0 on the constrained rows C) and the normwise backward error
-   of x on the reduced system, eta = ||rho_F||_2 / (||K^||_inf ||x_F||_2 + ||f^_F||_2), in one pass
-   over K^ (nnz(K^)). ||K^||_inf: the largest absolute row sum of the free rows that equal K-bar's
-   (a modified row would be bounded by |K-bar| + |Delta|, which overstates it; the unmodified rows
-   dominate the norm). *rnorm receives ||rho_F||_2. */
+   of x on the reduced system, eta = ||rho_F||_2 / (||K-bar||_inf ||x_F||_2 + ||f^_F||_2), in one
+   product with K^ (nnz(K^)). ||K-bar||_inf stands for ||K^||_inf: the changes (cuts, constraints)
+   remove couplings, and the unmodified rows dominate the norm. *rnorm receives ||rho_F||_2. */
 static double amps__backward_error(const amps_update *U, const double *x, double *rho, double *rnorm) {
-    amps_int n = U->n, N = U->N, j, p, a, k;
-    double knorm = 0, num = 0, xn = 0, fn = 0;
-    for (j = 0; j < N; j++) {
-        double s = 0, sa = 0;
-        if (j < n)
-            for (p = U->base.Kp[j]; p < U->base.Kp[j + 1]; p++) {
-                s += U->base.Kx[p] * x[U->base.Ki[p]];
-                sa += fabs(U->base.Kx[p]);
-            }
-        else {
-            s = U->sigma * x[j];
-            sa = U->sigma;
-        }
-        rho[j] = s;
-        a = U->aug.pos[j];
-        if ((a < 0 || (!(U->aug.kind[a] & AMPS__UCON) && U->delta.row_len[a] == 0)) && sa > knorm) knorm = sa;
-    }
-    for (a = 0; a < U->aug.size; a++) {
-        double s = 0;
-        for (k = 0; k < U->delta.row_len[a]; k++)
-            s += U->delta.val[U->delta.row_start[a] + k] * x[U->aug.idx[U->delta.col[U->delta.row_start[a] + k]]];
-        rho[U->aug.idx[a]] += s;
-    }
+    amps_int N = U->N, j, a;
+    double num = 0, xn = 0, fn = 0;
+    amps__kmul(U, x, rho);
     for (j = 0; j < N; j++) {
         a = U->aug.pos[j];
         if (a >= 0 && (U->aug.kind[a] & AMPS__UCON)) {
@@ -7039,9 +7025,8 @@ static double amps__backward_error(const amps_update *U, const double *x, double
         xn += x[j] * x[j];
         fn += U->force.f[j] * U->force.f[j];
     }
-    if (knorm == 0) knorm = U->sigma;
     *rnorm = sqrt(num);
-    return num > 0 ? sqrt(num) / (knorm * sqrt(xn) + sqrt(fn)) : 0.0;
+    return num > 0 ? sqrt(num) / (U->guard.knorm * sqrt(xn) + sqrt(fn)) : 0.0;
 }
 
 /* ||f^_F - K^_FC g||_2, the norm of the reduced system's right-hand side (tmp: 2 N). */
