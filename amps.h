@@ -7073,25 +7073,33 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
 }
 
 /* The accuracy of a full solve into sol.x.
-   Where the error enters (measured, bench/RESULTS.md section 6b): x = K-bar^{-1}(f - H w) is
-   formed from the base factor (backward stable for K-bar, like CHOLMOD's) and the forces w of the
-   small system. On a long cantilever cut near its free end (beam 5x5x256, cond 9e9) the entries
-   of G = H^T K-bar^{-1} H reach 1e4-1e6 times the diagonal scale and w is a difference of such
-   columns: the rounding of G Delta and of the dense LU (growth < 10, not the cause) is carried
-   into x with the factor ||G|| ||Delta|| ~ sqrt(cond), which is the measured growth of the
-   backward error (0.02 eps sqrt(cond): 467 eps at cond 9e9, where CHOLMOD keeps 0.2 eps). The
-   dual form and x_S from the small system (opts.xs_from_dense) sit on the same G and do no
-   better; the local refinement (opts.refine) corrects the rows of S u C only, while the error is
-   spread over every row x depends on through w.
-   The fix: the normwise backward error eta of x on the explicit current system, from one product
-   with K^ (nnz(K^), small beside the triangular solves of nnz(L)), and while eta > refine_tol
-   (default 1 eps, CHOLMOD's level) refinement steps through the augmented solve: each divides the
-   error by about 1 / (eps ||G|| ||Delta||), so one step suffices on every measured case; at most
-   3, and they stop when eta no longer halves. If eta is still above 64 refine_tol (the
-   augmentation itself has gone bad), the caller re-factors. With the guard on, the relative
-   residual ||rho|| / ||f^_F - K^_FC g|| must also reach guard.tol. Sets stats.relres (guard on),
-   backward_error, guard_steps, refine_solves and guard_result (pass 1: after a re-factorization);
-   returns 1 when a re-factorization is wanted. */
+   Where the error enters. x = K-bar^{-1}(f - H w) comes from the base factor (backward stable
+   for K-bar, like CHOLMOD's) and the forces w of the small system A = I~ + G Delta~. Measured on
+   a cantilever fixed at one end, loaded at its free end and cut 25 times near it (refinement of
+   every kind off, then on; tests/test_stress.c fwd_*):
+     model             max|G| sigma  |G||Delta| / |A|  LU growth  max|w| / max|f|  be, refine 0 / 1 / 2
+     beam 5x5x256      5.6e5         4.0e6             2.0        1.4e7            4.3e4 / 0.6 / 0.7 eps
+     beam 5x5x1024     3.6e7         2.7e8             1.0        9.0e8            1.0e6 / 3.1 / 3.1 eps
+     brick, nu 0.4999  9.0e3         3.1e4             1.0        1.2e5            658 / 0.2 / 0.2 eps
+   (be: normwise backward error; CHOLMOD's is 0.1-0.2 eps.) The dense LU does not grow (growth
+   <= 2), the dual form gives the same (3.0 eps on 5x5x1024) and x_S from the small system is
+   worse (3.7e6 eps): the error is not in the small system's solve. It is the size of w: the
+   correction forces are up to 1e9 times the applied ones, G's entries cancel into A by the
+   same factor, and x is the difference of the large terms K-bar^{-1} f and K-bar^{-1} H w, so
+   the base solve's rounding of K-bar^{-1} H w leaves a residual ~ eps ||H w|| on every row that
+   x depends on through w. The local refinement (opts.refine) removes it on the rows of S u C
+   and their neighbours only; a second step changes nothing (3.1 eps), and with random pins and
+   forces the rest reaches 370 eps (beam 5x5x256, stress suite).
+   The fix: the residual of the explicit current system, one product with K^ (nnz(K^); measured
+   +5.7% instructions on a brick:14 cut step), its normwise backward error eta, and while
+   eta > refine_tol (default 1 eps) refinement steps through the augmented solve with the same
+   factors (the correction is driven by a residual of size eps ||H w||, so its own w is small):
+   on 5x5x1024, 17 steps over the 25 cut solves bring eta from 3.1 to 0.1 eps; bricks and bunnies
+   meet 1 eps without a step. At most 3 steps; they stop when eta no longer halves. If eta is still
+   above 64 refine_tol, the augmentation itself has gone bad and the caller re-factors. With the
+   guard on, the relative residual ||rho|| / ||f^_F - K^_FC g|| must also reach guard.tol. Sets
+   stats.relres (guard on), backward_error, guard_steps, refine_solves and guard_result (pass 1:
+   after a re-factorization); returns 1 when a re-factorization is wanted. */
 static int amps__accuracy(amps_update *U, int pass) {
     double *rho = U->work.resid, *dx = U->work.resid + U->cap_N, tol = U->refac.opts.refine_tol;
     double gtol = U->guard.tol, rn, den = gtol > 0 ? amps__rhs_norm(U, U->guard.scratch) : 0;

@@ -957,8 +957,9 @@ static int quad_reference(amps_ctx *ctx, const amps_csc *A, const double *b, dou
 
 /* The forward error of the scene's displacements and of CHOLMOD's plain solve against the quad
    reference of the current mesh (nodes with coordinate axis below 1e-9 fixed, forces f: 3 per
-   node); *err_chol receives CHOLMOD's. Returns the scene's, -1 on failure. */
-static double quad_errors(amps_ctx *ctx, amps_scene *S, const double *f, double *err_chol, int *steps) {
+   node); *err_chol receives CHOLMOD's, *neq the order of the system, *steps the reference's
+   refinement steps. Returns the scene's, -1 on failure. */
+static double quad_errors(amps_ctx *ctx, amps_scene *S, const double *f, double *err_chol, int *neq, int *steps) {
     const amps_mesh *m = amps_scene_mesh(S);
     amps_int nn = m->nnode, v, n, *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * nn);
     unsigned char *fixed = (unsigned char *)calloc(nn, 1);
@@ -967,6 +968,7 @@ static double quad_errors(amps_ctx *ctx, amps_scene *S, const double *f, double 
     int d;
     for (v = 0; v < nn; v++) fixed[v] = m->xyz[3 * v + 2] < 1e-9;
     n = amps_mesh_number_dofs(m, fixed, dof);
+    *neq = (int)n;
     K = amps_mesh_assemble(ctx, m, dof, n);
     b = (double *)calloc(n + 1, sizeof(double));
     xq = (double *)calloc(n + 1, sizeof(double));
@@ -1006,11 +1008,16 @@ static void forward_error_case(const char *name, amps_mesh *m0, double nu, int n
     double lo[3], hi[3], *f, worst = 0, worst_chol = 0, ratio = 0, t0 = amps_now();
     amps_int v, nn0 = m0->nnode;
     int k, cuts = 0, cap = (int)nn0 + ncuts + 1, steps = 0;
+    stats *st = table + ntable;
     amps_ctx_init(&ctx);
     if (!selected(name)) {
         amps_mesh_free(&ctx, m0);
         return;
     }
+    ntable++;
+    memset(st, 0, sizeof(*st));
+    snprintf(st->name, sizeof(st->name), "%s", name);
+    st->piv_min = 1.0;
     bbox_len(m0, lo, hi);
     amps_mesh_set_material(&ctx, m0, 1000.0, nu);
     amps_scene_opts_default(&so);
@@ -1044,20 +1051,27 @@ static void forward_error_case(const char *name, amps_mesh *m0, double nu, int n
         if (s == AMPS_OK) cuts++;
         CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "%s cut %d: solve: %s", name, k, ctx.msg);
         if (k % check_every == 0 || k == ncuts) {
-            double ec, e = quad_errors(&ctx, S, f, &ec, &steps);
+            double ec, e = quad_errors(&ctx, S, f, &ec, &st->neq, &steps);
             CHECK(e >= 0, "%s cut %d: reference failed", name, k);
             if (e < 0) break;
             printf("    %-22s cut %3d  error %.2e (CHOLMOD %.2e)  reference: %d steps\n", name, k, e, ec, steps);
             if (check)
                 CHECK(e <= BOUND_FWD_FACTOR * ec + 1e-15, "%s cut %d: error %.3e > %g x CHOLMOD's %.3e", name, k, e,
                       BOUND_FWD_FACTOR, ec);
+            st->checks++;
+            if (check && e > BOUND_FWD_FACTOR * ec + 1e-15) st->fails++;
             if (e > worst) worst = e;
             if (ec > worst_chol) worst_chol = ec;
             if (e / (ec + 1e-300) > ratio) ratio = e / (ec + 1e-300);
         }
     }
+    st->steps = ncuts;
+    st->cuts = cuts;
+    st->err = worst;
+    st->err_chol = worst_chol;
+    st->seconds = amps_now() - t0;
     printf("  %s: %d cuts, worst forward error %.2e, CHOLMOD's %.2e, worst ratio %.2f (%.1f s)\n", name, cuts, worst,
-           worst_chol, ratio, amps_now() - t0);
+           worst_chol, ratio, st->seconds);
     amps_scene_free(&ctx, S);
     free(f);
 }
