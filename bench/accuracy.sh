@@ -1,15 +1,16 @@
 #!/usr/bin/env bash
 # The stress suite's cases (tests/test_stress.c, short mode) under engine variants: default,
-# xs_from_dense (x_S from the small system, [AMPS] Eq. 3.20), norefine (no local refinement step),
-# guard (accuracy guard at 1e-12); the bunny case is left out (time). Writes one row per case and
-# variant to <out.csv>.
+# noacc (refine_tol = 0: no default refinement), xs_from_dense (x_S from the small system, [AMPS]
+# Eq. 3.20), norefine (no local refinement step), guard (accuracy guard at 1e-12); the bunny case
+# is left out (time). The fwd_* rows: errors against the __float128-refined reference (CHOLMOD's:
+# its plain solve). Writes one row per case and variant to <out.csv>.
 #   bench/accuracy.sh <out.csv>
 set -u
 cd "$(dirname "$0")/.."
 out=${1:-bench/out/accuracy.csv}
 make -s build/default/test_stress >/dev/null || exit 1
 echo "variant,case,neq,steps,cuts,cond0,res,res_chol,be_eps,be_chol_eps,err,err_chol,piv_min,fails" > "$out"
-for v in default xs_from_dense norefine guard; do
+for v in default noacc xs_from_dense norefine guard; do
   echo "+ AMPS_STRESS_VARIANT=$v build/default/test_stress"
   AMPS_BUNNY=none AMPS_STRESS_VARIANT=$v AMPS_STRESS_TABLE="$out" build/default/test_stress \
     > "build/accuracy_$v.log" 2>&1

@@ -20,7 +20,8 @@
    Methods (the time of a step is wall clock of the change plus the solve; building the explicit
    matrix used by CG, GMRES and the reference is not counted):
    amps_<p|d><threads>  amps_scene_cut / amps_scene_pin + amps_scene_solve, primal or dual
-                        formulation (opts.update.formulation), ctx.nthreads = 1 or 2.
+                        formulation (opts.update.formulation), ctx.nthreads = 1 or 2; a trailing
+                        o (amps_p1o) turns the default refinement off (opts.update.refine_tol = 0).
    chol_refactor        CHOLMOD analyze + factorize (supernodal LL', OpenBLAS) + solve on the
                         explicitly assembled reduced system; chol_solve: a second plain solve.
    chol_refactor_simpl  the same with CHOLMOD's simplicial LDL'.
@@ -34,8 +35,8 @@
                         restarted GMRES; see gm_* below.
    The iterative methods run once per step to the tightest tolerance; the time and iterate at
    which each looser tolerance is first met are recorded (a run stopped there would do exactly
-   the same work). Reference: CHOLMOD's solution improved by 3 refinement steps (residual in
-   double). Errors and residuals are those of the reduced system (bench.h).
+   the same work). Reference: CHOLMOD's solution improved by refinement steps with the residual
+   in quad precision (__float128). Errors and residuals are those of the reduced system (bench.h).
    Build: see bench/run.sh. */
 #define AMPS_IMPLEMENTATION
 #include "../amps.h"
@@ -95,16 +96,39 @@ static void expand(const bench_sys *S, const int *fmap, const double *xf, double
     for (i = 0; i < S->n; i++) x[i] = fmap[i] >= 0 ? xf[fmap[i]] : S->g[i];
 }
 
-/* CHOLMOD refactor + solve (timed), a second solve (timed), then xref by 3 refinement steps;
-   with simpl, also the simplicial LDL' refactor. Writes the rows of chol_refactor(_simpl), chol_solve. */
+#ifdef __SIZEOF_FLOAT128__
+__extension__ typedef __float128 quad;
+#else
+typedef long double quad;
+#endif
+
+/* r = b - A x summed in quad precision (A: the upper triangle, stype 1), rounded to double. */
+static void quad_residual(const cholmod_sparse *A, const double *b, const quad *x, quad *acc, double *r) {
+    const int *Ap = (const int *)A->p, *Ai = (const int *)A->i;
+    const double *Ax = (const double *)A->x;
+    int n = (int)A->ncol, j, p;
+    for (j = 0; j < n; j++) acc[j] = b[j];
+    for (j = 0; j < n; j++)
+        for (p = Ap[j]; p < Ap[j + 1]; p++) {
+            int i = Ai[p];
+            acc[i] -= (quad)Ax[p] * x[j];
+            if (i != j) acc[j] -= (quad)Ax[p] * x[i];
+        }
+    for (j = 0; j < n; j++) r[j] = (double)acc[j];
+}
+
+/* CHOLMOD refactor + solve (timed), a second solve (timed), then xref by refinement steps whose
+   residual is summed in quad precision (x kept in quad too; until a correction is below 1e-3 eps
+   ||x||, at most 20 steps): exact to working precision for cond < 1 / eps, so the errors of
+   CHOLMOD and amps.h are measured, not the reference's. With simpl, also the simplicial LDL'
+   refactor. Writes the rows of chol_refactor(_simpl), chol_solve. */
 static void reference(const bench_sys *S, double *xref, double *work, int simpl) {
     cholmod_common c;
     cholmod_sparse *A;
     cholmod_dense *B, *X, *X2, *R;
     cholmod_factor *L;
     int *fmap = (int *)bench_alloc(sizeof(int) * (size_t)S->n), it;
-    double t0, t_ref, t_sol, one[2] = {1, 0}, mone[2] = {-1, 0},
-                             *x0 = (double *)bench_alloc(sizeof(double) * (size_t)S->n);
+    double t0, t_ref, t_sol, *x0 = (double *)bench_alloc(sizeof(double) * (size_t)S->n);
     cholmod_start(&c);
     c.supernodal = CHOLMOD_SUPERNODAL;
     A = reduced(S, fmap, &B, &c);
@@ -118,15 +142,28 @@ static void reference(const bench_sys *S, double *xref, double *work, int simpl)
     t_sol = amps_now() - t0;
     if (!X || !X2 || c.status != CHOLMOD_OK) bench_die("cholmod", "reference factorization failed");
     expand(S, fmap, (double *)X->x, x0);
-    for (it = 0; it < 3; it++) { /* X2 += A^{-1} (B - A X2) */
-        cholmod_dense *D;
-        size_t k;
+    {
+        size_t k, nr = X2->nrow;
+        quad *xq = (quad *)bench_alloc(sizeof(quad) * (nr + 1)), *acc = (quad *)bench_alloc(sizeof(quad) * (nr + 1));
+        for (k = 0; k < nr; k++) xq[k] = ((double *)X2->x)[k];
         R = cholmod_copy_dense(B, &c);
-        cholmod_sdmult(A, 0, mone, one, X2, R, &c);
-        D = cholmod_solve(CHOLMOD_A, L, R, &c);
-        for (k = 0; k < X2->nrow; k++) ((double *)X2->x)[k] += ((double *)D->x)[k];
+        for (it = 0; it < 20; it++) { /* xq += A^{-1} (B - A xq) */
+            cholmod_dense *D;
+            double dn = 0, xn = 0;
+            quad_residual(A, (const double *)B->x, xq, acc, (double *)R->x);
+            D = cholmod_solve(CHOLMOD_A, L, R, &c);
+            for (k = 0; k < nr; k++) {
+                xq[k] += ((double *)D->x)[k];
+                dn += ((double *)D->x)[k] * ((double *)D->x)[k];
+                xn += (double)xq[k] * (double)xq[k];
+            }
+            cholmod_free_dense(&D, &c);
+            if (dn <= 1e-6 * 4.93e-32 * xn) break;
+        }
+        for (k = 0; k < nr; k++) ((double *)X2->x)[k] = (double)xq[k];
         cholmod_free_dense(&R, &c);
-        cholmod_free_dense(&D, &c);
+        free(xq);
+        free(acc);
     }
     expand(S, fmap, (double *)X2->x, xref);
     put("chol_refactor", 0, t_ref, 0, bench_sys_relres(S, x0, work), bench_sys_relerr(S, x0, xref), 1, S->n, 0, NULL);
@@ -857,6 +894,7 @@ int main(int argc, char **argv) {
         amps_scene_opts_default(&so);
         if (conf[k][5] == 'd') so.update.formulation = AMPS_FORM_DUAL;
         if (getenv("BENCH_GUARD")) so.update.guard_tol = atof(getenv("BENCH_GUARD"));
+        if (conf[k][7] == 'o') so.update.refine_tol = 0; /* no default refinement */
         /* background re-factorization off: its thread would run while the other methods are
            timed (bench/refactor measures it alone); BENCH_REFACTOR=auto turns it on */
         so.update.refactor = getenv("BENCH_REFACTOR") && !strcmp(getenv("BENCH_REFACTOR"), "auto") ? AMPS_REFACTOR_AUTO

@@ -43,6 +43,11 @@ static const double EPS = 2.220446049250313e-16;
    Measured: at most 0.16 eps * cond (a hinge-like cut, adv_fall_off), usually 0.01; margin >= 100. */
 #define BOUND_BE_FACTOR 1.0
 #define BOUND_ERR_FACTOR 20.0
+/* The contract of the default (opts.refine_tol): at every step the relative residual on the
+   explicit reduced system is at most BOUND_RES_FACTOR times CHOLMOD's (its plain solve of the same
+   system) plus BOUND_RES_FLOOR. Measured: at most 4x (beam 5x5x256 before its cuts), usually 1-2x. */
+#define BOUND_RES_FACTOR 10.0
+#define BOUND_RES_FLOOR (16 * 2.220446049250313e-16)
 
 /* ---- engine internals read by the singular-pivot diagnostics (not API) ---- */
 /* Smallest pivot ratio |pivot| / reference of the current dense factor A = I~ + G Delta~, with the
@@ -105,10 +110,13 @@ static double bbox_len(const amps_mesh *m, double lo[3], double hi[3]) {
 
 /* AMPS_STRESS_VARIANT: the engine options of the run_case scenes (bench/accuracy.sh compares
    them): default, xs_from_dense (x_S from the small system, Eq. 3.20), norefine (no local refinement
-   step), guard (guard_tol = 1e-12), norefactor (no background re-factorization). */
+   step), guard (guard_tol = 1e-12), norefactor (no background re-factorization), noacc
+   (refine_tol = 0: no default refinement; the residual contract is then not checked). */
 static const char *variant = "default";
+static int contract_on(void) { return strcmp(variant, "noacc") != 0; }
 static void variant_opts(amps_update_opts *o) {
-    if (!strcmp(variant, "xs_from_dense")) o->xs_from_dense = 1;
+    if (!strcmp(variant, "noacc")) o->refine_tol = 0;
+    else if (!strcmp(variant, "xs_from_dense")) o->xs_from_dense = 1;
     else if (!strcmp(variant, "norefine")) o->refine = 0;
     else if (!strcmp(variant, "guard")) o->guard_tol = 1e-12;
     else if (!strcmp(variant, "norefactor")) o->refactor = AMPS_REFACTOR_OFF;
@@ -137,7 +145,12 @@ static void check_step(amps_ctx *ctx, amps_scene *S, const shadow *w, stats *st,
     CHECK(err <= berr,
           "%s step %d: error %.3e > bound %.3e (cond %.2e, CHOLMOD %.3e, CHOLMOD residual %.2e, smallest pivot ratio %.2e)",
           st->name, step, err, berr, cond, inf.err_chol, inf.res_chol, min_pivot_ratio(amps_scene_engine(S)));
-    if (inf.be_disp > bres || err > berr) st->fails++;
+    CHECK(!contract_on() || inf.res_disp <= BOUND_RES_FACTOR * inf.res_chol + BOUND_RES_FLOOR,
+          "%s step %d: residual %.3e > %g x CHOLMOD's %.3e + %.1e", st->name, step, inf.res_disp, BOUND_RES_FACTOR,
+          inf.res_chol, BOUND_RES_FLOOR);
+    if (inf.be_disp > bres || err > berr ||
+        (contract_on() && inf.res_disp > BOUND_RES_FACTOR * inf.res_chol + BOUND_RES_FLOOR))
+        st->fails++;
     if (inf.be_disp > st->be) st->be = inf.be_disp;
     if (step <= st->steps / 4 && inf.be_disp > st->be_q1) st->be_q1 = inf.be_disp;
     if (step >= st->steps - st->steps / 4 && inf.be_disp > st->be_q4) st->be_q4 = inf.be_disp;
@@ -833,14 +846,18 @@ static void adv_near_cancel(void) {
         /* ||K^{-1}||_1 grows by ||z||_1 ||z||_inf (1 - delta) / (cii delta) (Sherman-Morrison) */
         cond = delta > 0 ? knorm * (kinv1 + z1 * zi * (1 - delta) / (cii * delta)) : INFINITY;
         if (s == AMPS_OK) {
-            double pr = min_pivot_ratio(U), nb = t_norm((int)n, f), nr;
+            double pr = min_pivot_ratio(U), nb = t_norm((int)n, f), nr, nr0 = -1;
             /* explicit K^: K with the diagonal entry (i, i) changed */
             for (pk = K->p[i]; pk < K->p[i + 1] && K->i[pk] != i; pk++) {}
             K->x[pk] -= t;
             ref_residual_vec((int)n, K->p, K->i, K->x, x, f, w);
             nr = t_norm((int)n, w);
             be = nr / (knorm * t_norm((int)n, x) + nb);
-            if (ref_solve_refined((int)n, K->p, K->i, K->x, f, xr, 2, NULL) == 0) err = t_reldiff((int)n, x, xr);
+            if (ref_solve_refined((int)n, K->p, K->i, K->x, f, xr, 2, w + n) == 0) {
+                err = t_reldiff((int)n, x, xr);
+                ref_residual_vec((int)n, K->p, K->i, K->x, w + n, f, w);
+                nr0 = t_norm((int)n, w);
+            }
             K->x[pk] += t;
             nok++;
             if (pr < st->piv_min) st->piv_min = pr;
@@ -849,6 +866,9 @@ static void adv_near_cancel(void) {
             printf("  near cancel delta %.0e: solved, cond %.1e, pivot ratio %.1e, backward error %.1f eps, error %.2e%s\n",
                    delta, cond, pr, be / EPS, err, err < 0 ? " (CHOLMOD failed)" : "");
             CHECK(be <= BOUND_BE_FACTOR * EPS * sqrt(cond), "near cancel delta %.0e: backward error %.3e", delta, be);
+            CHECK(nr0 < 0 || nr <= BOUND_RES_FACTOR * nr0 + BOUND_RES_FLOOR * nb,
+                  "near cancel delta %.0e: residual %.3e > %g x CHOLMOD's %.3e", delta, nr / nb, BOUND_RES_FACTOR,
+                  nr0 / nb);
             CHECK(err < 0 ? delta < 1e-12 : err <= BOUND_ERR_FACTOR * EPS * cond + 1e-15,
                   "near cancel delta %.0e: error %.3e for cond %.2e (silent garbage)", delta, err, cond);
         } else {
@@ -881,6 +901,192 @@ static void adv_near_cancel(void) {
     free(xr);
 }
 
+/* ---- forward error against a reference refined in quadruple precision ----
+   The reference of the explicit system A x = b (upper A): the amps.h factor of A, then
+   refinement steps whose residual b - A x is summed in __float128 (x kept in __float128 too), so
+   the reference is exact to working precision whatever cond(A) < 1 / eps. CHOLMOD's error is that
+   of its plain solve of the same system against the same reference. */
+#ifdef __SIZEOF_FLOAT128__
+__extension__ typedef __float128 quad;
+#else
+typedef long double quad;
+#endif
+
+/* x = A^{-1} b to working precision (at most 40 steps; stops when a correction is below
+   1e-3 eps ||x||). Returns the steps taken, -1 on failure. */
+static int quad_reference(amps_ctx *ctx, const amps_csc *A, const double *b, double *x) {
+    amps_int n = A->ncol, j, p;
+    amps_factor *F = amps_analyze(ctx, A, AMPS_UPPER, NULL);
+    quad *xq = (quad *)calloc(n + 1, sizeof(quad)), *rq = (quad *)malloc(sizeof(quad) * (n + 1));
+    double *r = (double *)malloc(sizeof(double) * (n + 1)), *d = (double *)malloc(sizeof(double) * (n + 1));
+    double *w = (double *)malloc(sizeof(double) * (n + 1));
+    int it = -1, k;
+    if (F && amps_factorize(ctx, F, A) == AMPS_OK) {
+        memcpy(r, b, sizeof(double) * n);
+        for (it = 0; it < 40; it++) {
+            double dn = 0, xn = 0;
+            if (amps_solve(ctx, F, r, d, w) != AMPS_OK) {
+                it = -1;
+                break;
+            }
+            for (k = 0; k < n; k++) {
+                xq[k] += d[k];
+                dn += d[k] * d[k];
+                xn += (double)xq[k] * (double)xq[k];
+            }
+            if (dn <= 1e-6 * EPS * EPS * xn) break;
+            for (k = 0; k < n; k++) rq[k] = b[k];
+            for (j = 0; j < n; j++)
+                for (p = A->p[j]; p < A->p[j + 1]; p++) {
+                    amps_int i = A->i[p];
+                    rq[i] -= (quad)A->x[p] * xq[j];
+                    if (i != j) rq[j] -= (quad)A->x[p] * xq[i];
+                }
+            for (k = 0; k < n; k++) r[k] = (double)rq[k];
+        }
+    }
+    for (k = 0; k < n; k++) x[k] = (double)xq[k];
+    amps_factor_free(ctx, F);
+    free(xq);
+    free(rq);
+    free(r);
+    free(d);
+    free(w);
+    return it;
+}
+
+/* The forward error of the scene's displacements and of CHOLMOD's plain solve against the quad
+   reference of the current mesh (nodes with coordinate axis below 1e-9 fixed, forces f: 3 per
+   node); *err_chol receives CHOLMOD's, *neq the order of the system, *steps the reference's
+   refinement steps. Returns the scene's, -1 on failure. */
+static double quad_errors(amps_ctx *ctx, amps_scene *S, const double *f, double *err_chol, int *neq, int *steps) {
+    const amps_mesh *m = amps_scene_mesh(S);
+    amps_int nn = m->nnode, v, n, *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * nn);
+    unsigned char *fixed = (unsigned char *)calloc(nn, 1);
+    amps_csc *K;
+    double *b, *xq, *xc, *xa, e = -1;
+    int d;
+    for (v = 0; v < nn; v++) fixed[v] = m->xyz[3 * v + 2] < 1e-9;
+    n = amps_mesh_number_dofs(m, fixed, dof);
+    *neq = (int)n;
+    K = amps_mesh_assemble(ctx, m, dof, n);
+    b = (double *)calloc(n + 1, sizeof(double));
+    xq = (double *)calloc(n + 1, sizeof(double));
+    xc = (double *)calloc(n + 1, sizeof(double));
+    xa = (double *)calloc(n + 1, sizeof(double));
+    for (v = 0; v < nn; v++)
+        for (d = 0; d < 3; d++)
+            if (dof[3 * v + d] >= 0) {
+                b[dof[3 * v + d]] = f[3 * v + d];
+                xa[dof[3 * v + d]] = amps_scene_displacements(S)[3 * v + d];
+            }
+    *err_chol = -1;
+    if (K && (*steps = quad_reference(ctx, K, b, xq)) >= 0 && ref_solve_refined((int)n, K->p, K->i, K->x, b, xc, 0, NULL) == 0) {
+        *err_chol = t_reldiff((int)n, xc, xq);
+        e = t_reldiff((int)n, xa, xq);
+    }
+    amps_csc_free(ctx, K);
+    free(dof);
+    free(fixed);
+    free(b);
+    free(xq);
+    free(xc);
+    free(xa);
+    return e;
+}
+
+/* Mesh m (taken over; material E = 1000, nu) fixed at z = 0 with a load across its top (the
+   free end), factored uncut, then ncuts cuts through random nodes of its top layers by random
+   planes, each solved through the updates (default options). At every check_every-th cut and
+   the last: the forward error against the quad reference at most BOUND_FWD_FACTOR times
+   CHOLMOD's (check: 0 reports only). */
+#define BOUND_FWD_FACTOR 10.0
+static void forward_error_case(const char *name, amps_mesh *m0, double nu, int ncuts, int check_every, int check) {
+    amps_ctx ctx;
+    amps_scene_opts so;
+    amps_scene *S;
+    double lo[3], hi[3], *f, worst = 0, worst_chol = 0, ratio = 0, t0 = amps_now();
+    amps_int v, nn0 = m0->nnode;
+    int k, cuts = 0, cap = (int)nn0 + ncuts + 1, steps = 0;
+    stats *st = table + ntable;
+    amps_ctx_init(&ctx);
+    if (!selected(name)) {
+        amps_mesh_free(&ctx, m0);
+        return;
+    }
+    ntable++;
+    memset(st, 0, sizeof(*st));
+    snprintf(st->name, sizeof(st->name), "%s", name);
+    st->piv_min = 1.0;
+    bbox_len(m0, lo, hi);
+    amps_mesh_set_material(&ctx, m0, 1000.0, nu);
+    amps_scene_opts_default(&so);
+    variant_opts(&so.update);
+    S = amps_scene_create(&ctx, m0, &so);
+    CHECK(S != NULL, "%s: create: %s", name, ctx.msg);
+    if (!S) return;
+    f = (double *)calloc(3 * (size_t)cap, sizeof(double));
+    amps_scene_fix_where(&ctx, S, 2, AMPS_LT, 1e-9, NULL);
+    for (v = 0; v < nn0; v++)
+        if (amps_scene_mesh(S)->xyz[3 * v + 2] > hi[2] - 1e-9) {
+            f[3 * v + 1] = 1.0;
+            amps_scene_force(&ctx, S, v, f + 3 * v);
+        }
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "%s: first solve: %s", name, ctx.msg);
+    t_seed(900);
+    for (k = 1; k <= ncuts; k++) {
+        const amps_mesh *m = amps_scene_mesh(S);
+        double p[3], nrm[3];
+        amps_int vc;
+        amps_status s;
+        int d;
+        do v = t_int((int)m->nnode);
+        while (m->xyz[3 * v + 2] < hi[2] - 3.0 - 1e-9);
+        for (d = 0; d < 3; d++) {
+            p[d] = m->xyz[3 * v + d];
+            nrm[d] = t_unif() - 0.5;
+        }
+        s = amps_scene_cut(&ctx, S, v, p, nrm, &vc);
+        CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP || s == AMPS_ERR_SINGULAR_UPDATE, "%s: cut: %s", name, ctx.msg);
+        if (s == AMPS_OK) cuts++;
+        CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "%s cut %d: solve: %s", name, k, ctx.msg);
+        if (k % check_every == 0 || k == ncuts) {
+            double ec, e = quad_errors(&ctx, S, f, &ec, &st->neq, &steps);
+            CHECK(e >= 0, "%s cut %d: reference failed", name, k);
+            if (e < 0) break;
+            printf("    %-22s cut %3d  error %.2e (CHOLMOD %.2e)  reference: %d steps\n", name, k, e, ec, steps);
+            if (check)
+                CHECK(e <= BOUND_FWD_FACTOR * ec + 1e-15, "%s cut %d: error %.3e > %g x CHOLMOD's %.3e", name, k, e,
+                      BOUND_FWD_FACTOR, ec);
+            st->checks++;
+            if (check && e > BOUND_FWD_FACTOR * ec + 1e-15) st->fails++;
+            if (e > worst) worst = e;
+            if (ec > worst_chol) worst_chol = ec;
+            if (e / (ec + 1e-300) > ratio) ratio = e / (ec + 1e-300);
+        }
+    }
+    st->steps = ncuts;
+    st->cuts = cuts;
+    st->err = worst;
+    st->err_chol = worst_chol;
+    st->seconds = amps_now() - t0;
+    printf("  %s: %d cuts, worst forward error %.2e, CHOLMOD's %.2e, worst ratio %.2f (%.1f s)\n", name, cuts, worst,
+           worst_chol, ratio, st->seconds);
+    amps_scene_free(&ctx, S);
+    free(f);
+}
+
+static void forward_errors(void) {
+    amps_ctx ctx;
+    amps_ctx_init(&ctx);
+    printf("forward error against a quad-precision reference\n");
+    forward_error_case("fwd_beam_5x5x256", amps_mesh_beam(&ctx, 256), 0.3, 25, 25, 1);
+    forward_error_case("fwd_brick_nu_0.4999", amps_mesh_brick(&ctx, long_mode ? 8 : 5), 0.4999, 25, 5, 1);
+    if (!long_mode) return;
+    forward_error_case("fwd_beam_5x5x1024", amps_mesh_beam(&ctx, 1024), 0.3, 25, 5, 1);
+    forward_error_case("fwd_beam_5x5x4096", amps_mesh_beam(&ctx, 4096), 0.3, 25, 25, 0);
+}
+
 static void adversarial(void) {
     double r0 = -1;
     if (only) return;
@@ -903,6 +1109,7 @@ int main(int argc, char **argv) {
     printf("test_stress: %s mode, variant %s\n", long_mode ? "long" : "short", variant);
     adversarial();
     conditioning();
+    forward_errors();
     long_runs();
     printf("\nsing/f: commits refused as singular / of those, cuts CHOLMOD solves (false alarms)\n%-20s %6s %5s %5s %4s %5s %8s %8s | %8s %8s | %6s %6s | %8s %8s %8s | %8s %5s\n",
            "case", "n", "steps", "check", "cuts", "sing/f", "cond0", "cond_end", "res", "res_chol", "be/eps", "chol",

@@ -844,6 +844,40 @@ static void test_guard(void) {
     fe_free(&mesh);
 }
 
+/* The default accuracy (opts.refine_tol) on the same beam, no option set: every step's residual
+   within 10x of CHOLMOD's (model_check), the backward error reported is the one reached (at most
+   64 refine_tol: refinement stops when it stagnates), and with refine_tol = 0 nothing is
+   measured or refined. */
+static void test_default_accuracy(void) {
+    int off;
+    for (off = 0; off <= 1; off++) {
+        model m;
+        amps_update_opts o;
+        fe_mesh mesh = fe_beam(96);
+        amps_update_stats st;
+        amps_update_opts_default(&o);
+        CHECK(o.refine_tol > 0 && o.refine_tol <= 4.5e-16, "default refine_tol %.3e", o.refine_tol);
+        o.grow = 1;
+        o.refactor = AMPS_REFACTOR_OFF; /* the augmentation grows: the refinement is what keeps the contract */
+        if (off) o.refine_tol = 0;
+        fe_model(&m, &mesh, 2, &o);
+        if (off) m.res_ok = 1e-6; /* no contract without the refinement */
+        cut_sequence(&m, &mesh, 40, 17, 1e-7);
+        amps_update_get_stats(m.U, &st);
+        if (off) CHECK(st.backward_error == -1 && st.refine_solves == 0, "refine_tol 0: backward error %.3e, %d refinement steps",
+                       st.backward_error, (int)st.refine_solves);
+        else CHECK(st.backward_error >= 0 && st.backward_error <= 64 * o.refine_tol && st.relres == -1 &&
+                           st.guard_result == AMPS_GUARD_MET,
+                   "default: backward error %.3e, relres %.3e, guard result %d", st.backward_error, st.relres,
+                   (int)st.guard_result);
+        printf("  refine_tol %.1e: %d refinement steps over %d solves, last backward error %.2e\n", o.refine_tol,
+               (int)st.refine_solves, (int)st.nsolve, st.backward_error);
+        report(off ? "beam 5x5x96 cuts, refine_tol 0" : "beam 5x5x96 cuts, default", &m);
+        model_free(&m);
+        fe_free(&mesh);
+    }
+}
+
 /* Re-factorizations started, awaited and cancelled at random steps of random and cut sequences
    (several in flight over a sequence, swaps between any kinds of change): every step agrees
    with CHOLMOD. Injected failures in each phase leave the engine on its old factors. */
@@ -1038,6 +1072,7 @@ int main(void) {
     test_random_sequences();
     test_fe_sequences();
     test_guard();
+    test_default_accuracy();
     test_refactor();
     test_lu_drop();
     test_threads();
