@@ -557,6 +557,8 @@ AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U);
 
 /* ==== [amps:fem] mesh and P1 elasticity ======================================================= */
 #ifndef AMPS_NO_FEM
+/* The elasticity is linear (small strains, small displacements, isotropic Hooke material): K is
+   the stiffness of the reference configuration and does not follow large deformations. */
 /* ---- tetrahedral mesh ---- */
 
 /* Tetrahedral mesh in the reference configuration, with the node copies made by cuts.
@@ -689,6 +691,8 @@ AMPS_API amps_int amps_mesh_boundary(amps_ctx *ctx, const amps_mesh *m, amps_int
 /* ==== [amps:scene] a mesh with fixed nodes, forces, pins and cuts ============================= */
 #ifndef AMPS_NO_FEM
 /* The scene: a mesh with fixed nodes, forces, pins and cuts, solved by the update engine.
+   The model is linear elasticity (small strains): displacements are linear in the forces and
+   pins, and every stiffness is that of the reference configuration.
    Node displacements are kept exact with one factorization of the initial stiffness matrix
    (fixed nodes eliminated); every cut, pin and release becomes an update of the engine:
    a cut changes the rows of v, its copy v' and the nodes of the tets that moved, computed from
@@ -710,11 +714,13 @@ typedef struct amps_scene_opts {
 AMPS_API void amps_scene_opts_default(amps_scene_opts *o);
 /* Scene over mesh m, which it takes over in every case: the scene cuts it and frees it with
    itself, and a failed create frees it. So amps_scene_create(ctx, amps_mesh_read(ctx, path),
-   opts) leaks nothing; when the reader fails (NULL), ctx keeps the reader's message. */
+   opts) leaks nothing; when the reader fails (NULL), ctx keeps the reader's status and message
+   (a NULL m with no error in ctx gives AMPS_ERR_ARG). */
 AMPS_API amps_scene *amps_scene_create(amps_ctx *ctx, amps_mesh *m, const amps_scene_opts *opts);
 AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S);
 AMPS_API const amps_mesh *amps_scene_mesh(const amps_scene *S);
-/* Sets the material of every tet (before the factorization only). */
+/* Sets the material of every tet; before the factorization only: AMPS_ERR_STATE after it (the
+   run-time change of materials is amps_scene_set_tet_material's). */
 AMPS_API amps_status amps_scene_set_material(amps_ctx *ctx, amps_scene *S, double E, double nu);
 /* Fixes nodes (zero displacement, eliminated from the system); before the factorization only.
    amps_scene_fix_where fixes the nodes whose coordinate axis (0, 1, 2) is below / above value. */
