@@ -519,6 +519,15 @@ static void test_messages(void) {
     CHECK(amps_mesh_read_gmsh_mem(&ctx, hexmsh, sizeof(hexmsh) - 1, "hex.msh") == NULL && ctx.status == AMPS_ERR_MESH &&
                   strstr(ctx.msg, "1 hexahedron") && strstr(ctx.msg, "1 pyramid") && strstr(ctx.msg, "hex.msh"),
           "gmsh hexahedra: %s", ctx.msg);
+    { /* the same in 4.1: a prism block of 2 */
+        static const char msh4[] = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 7 1 7\n3 1 0 7\n1\n2\n3\n4\n5\n6\n7\n"
+                                   "0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 0 1\n0 1 1\n0 0 2\n$EndNodes\n"
+                                   "$Elements\n2 3 1 3\n3 1 6 2\n1 1 2 3 4 5 6\n2 1 2 3 4 5 6\n3 1 4 1\n3 4 5 6 7\n"
+                                   "$EndElements\n";
+        CHECK(amps_mesh_read_gmsh_mem(&ctx, msh4, sizeof(msh4) - 1, "p.msh") == NULL && ctx.status == AMPS_ERR_MESH &&
+                      strstr(ctx.msg, "2 prisms") && strstr(ctx.msg, "0 hexahedra"),
+              "gmsh 4.1 prisms: %s", ctx.msg);
+    }
     /* a long path keeps the reason */
     strcpy(path, "/nonexistent");
     for (k = 0; k < 60; k++) strcat(path, "/abcdefghijklmnop");
