@@ -9030,24 +9030,18 @@ AMPS_API amps_int amps_mesh_boundary(amps_ctx *ctx, const amps_mesh *m, amps_int
         amps__free(ctx, bnd);
         return amps__err(ctx, AMPS_ERR_OOM, "amps_mesh_boundary: out of memory"), -1;
     }
-    for (t = 0; t < m->ntet; t++) {
-        amps_int key[3];
-        int f;
-        if (!amps__tet_live(m, t)) continue;
-        for (f = 0; f < 4; f++) {
-            amps__face_key(m, t, f, key);
-            start[key[0] + 2]++;
+    for (i = 0; i < 2; i++) { /* the bucket sizes, then the faces in their buckets */
+        for (t = 0; t < m->ntet; t++) {
+            amps_int key[3];
+            int f;
+            if (!amps__tet_live(m, t)) continue;
+            for (f = 0; f < 4; f++) {
+                amps__face_key(m, t, f, key);
+                if (i == 0) start[key[0] + 2]++;
+                else order[start[key[0] + 1]++] = 4 * t + f;
+            }
         }
-    }
-    for (v = 0; v < m->nnode; v++) start[v + 2] += start[v + 1];
-    for (t = 0; t < m->ntet; t++) {
-        amps_int key[3];
-        int f;
-        if (!amps__tet_live(m, t)) continue;
-        for (f = 0; f < 4; f++) {
-            amps__face_key(m, t, f, key);
-            order[start[key[0] + 1]++] = 4 * t + f;
-        }
+        for (v = 0; i == 0 && v < m->nnode; v++) start[v + 2] += start[v + 1];
     }
     for (v = 0; v < m->nnode; v++) /* faces start[v] .. start[v+1]-1 have smallest node v */
         for (i = start[v]; i < start[v + 1]; i++) {
@@ -10156,12 +10150,10 @@ static amps_status amps__render_rebuild(amps_ctx *ctx, amps_scene *S) {
     const amps_mesh *m = S->m;
     amps_int k, nt = 4 * m->ntet, n = amps_mesh_boundary(ctx, m, NULL, NULL);
     if (n < 0) return ctx ? ctx->status : AMPS_ERR_OOM;
-    if (!R->face_id) {
-        R->face_id = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
-        R->moved = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m->ntet, sizeof(amps_int)));
-        R->tet_moved = AMPS__CAST(unsigned char *, amps__calloc(ctx, (size_t)m->ntet, 1));
-        if (!R->face_id || !R->moved || !R->tet_moved) return AMPS_ERR_OOM;
-    }
+    if (!R->face_id) R->face_id = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
+    if (!R->moved) R->moved = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m->ntet, sizeof(amps_int)));
+    if (!R->tet_moved) R->tet_moved = AMPS__CAST(unsigned char *, amps__malloc(ctx, (size_t)m->ntet, 1));
+    if (!R->face_id || !R->moved || !R->tet_moved) return AMPS_ERR_OOM;
     if (amps__render_ids(ctx, R, n + 64)) return AMPS_ERR_OOM;
     amps_mesh_boundary(ctx, m, R->tri, R->face);
     for (k = 0; k < nt; k++) R->face_id[k] = -1;

@@ -180,13 +180,15 @@ static int parse_nodes(replay *R, int nt, char **t, amps_int *v) {
     return 1;
 }
 
-/* fixnodes <v> [<v> ...] */
-static int cmd_fixnodes(replay *R, int nt, char **t) {
+/* fixnodes <v> [<v> ...] | watch <v> [<v> ...] */
+static int cmd_nodelist(replay *R, int nt, char **t) {
     amps_int v[MAXTOK];
-    if (nt < 2) return fail(R, "%s", "usage: fixnodes <node> [<node> ...]");
+    int fix = !strcmp(t[0], "fixnodes");
+    if (nt < 2) return fail(R, "usage: %s <node> [<node> ...]", t[0]);
     if (!parse_nodes(R, nt, t, v)) return 1;
-    if (amps_scene_fix(&R->ctx, R->S, nt - 1, v)) return lib_fail(R, "fixnodes");
-    if (!R->quiet) printf("fixnodes: %d nodes\n", nt - 1);
+    if (fix ? amps_scene_fix(&R->ctx, R->S, nt - 1, v) : amps_scene_watch(&R->ctx, R->S, nt - 1, v))
+        return lib_fail(R, t[0]);
+    if (fix && !R->quiet) printf("fixnodes: %d nodes\n", nt - 1);
     return 0;
 }
 
@@ -202,15 +204,6 @@ static int cmd_fixregion(replay *R, int nt, char **t) {
     s = box ? amps_scene_fix_box(&R->ctx, R->S, x, x + 3, &cnt) : amps_scene_fix_sphere(&R->ctx, R->S, x, x[3], &cnt);
     if (s != AMPS_OK) return lib_fail(R, t[0]);
     if (!R->quiet) printf("%s: %ld nodes\n", t[0], (long)cnt);
-    return 0;
-}
-
-/* watch <v> [<v> ...] */
-static int cmd_watch(replay *R, int nt, char **t) {
-    amps_int v[MAXTOK];
-    if (nt < 2) return fail(R, "%s", "usage: watch <node> [<node> ...]");
-    if (!parse_nodes(R, nt, t, v)) return 1;
-    if (amps_scene_watch(&R->ctx, R->S, nt - 1, v)) return lib_fail(R, "watch");
     return 0;
 }
 
@@ -265,9 +258,8 @@ static int cmd_boundary(replay *R, int nt, char **t) {
 /* The selection, watch, haptic and boundary commands; -1 if c is none of them. */
 static int run_selection_line(replay *R, int nt, char **t) {
     const char *c = t[0];
-    if (!strcmp(c, "fixnodes")) return cmd_fixnodes(R, nt, t);
+    if (!strcmp(c, "fixnodes") || !strcmp(c, "watch")) return cmd_nodelist(R, nt, t);
     if (!strcmp(c, "fixbox") || !strcmp(c, "fixsphere")) return cmd_fixregion(R, nt, t);
-    if (!strcmp(c, "watch")) return cmd_watch(R, nt, t);
     if (!strcmp(c, "solve_watched")) return cmd_solve_watched(R, nt);
     if (!strcmp(c, "haptic")) return cmd_haptic(R, nt, t);
     if (!strcmp(c, "boundary")) return cmd_boundary(R, nt, t);
