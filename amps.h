@@ -10155,7 +10155,7 @@ static amps_status amps__render_rebuild(amps_ctx *ctx, amps_scene *S) {
     if (!R->tet_moved) R->tet_moved = AMPS__CAST(unsigned char *, amps__malloc(ctx, (size_t)m->ntet, 1));
     if (!R->face_id || !R->moved || !R->tet_moved) return AMPS_ERR_OOM;
     if (amps__render_ids(ctx, R, n + 64)) return AMPS_ERR_OOM;
-    amps_mesh_boundary(ctx, m, R->tri, R->face);
+    if (amps_mesh_boundary(ctx, m, R->tri, R->face) != n) return AMPS_ERR_OOM;
     for (k = 0; k < nt; k++) R->face_id[k] = -1;
     for (k = 0; k < m->ntet; k++) R->tet_moved[k] = 0;
     for (k = 0; k < n; k++) {

@@ -6,6 +6,7 @@
    incidence; the node-to-equation map and the watched positions; the nearest node equals brute
    force; fixing by box / sphere equals fixing the nodes brute force selects, with displacements
    equal to CHOLMOD's; bad inputs are clear errors that change nothing; the reader messages. */
+#include "t_alloc.h"
 #define AMPS_IMPLEMENTATION
 #include "amps.h"
 #include "amps_test.h"
@@ -124,6 +125,18 @@ static void mirror_snapshot(mirror *w, const amps_mesh *m) {
     w->tet0 = (amps_int *)realloc(w->tet0, sizeof(amps_int) * 4 * m->ntet);
     memcpy(w->tet0, m->tet, sizeof(amps_int) * 4 * m->ntet);
     w->nnode0 = m->nnode;
+}
+
+/* The whole table into the mirror (what a renderer does on a reset). */
+static void mirror_load(mirror *w, const amps_scene *S) {
+    const amps_int *tri, *face;
+    amps_int nid = amps_scene_boundary(S, &tri, &face);
+    w->cap = nid;
+    w->tri = (amps_int *)realloc(w->tri, sizeof(amps_int) * 3 * (nid + 1));
+    w->face = (amps_int *)realloc(w->face, sizeof(amps_int) * (nid + 1));
+    memcpy(w->tri, tri, sizeof(amps_int) * 3 * nid);
+    memcpy(w->face, face, sizeof(amps_int) * nid);
+    mirror_snapshot(w, amps_scene_mesh(S));
 }
 
 /* Takes the changes, applies them to the mirror and compares with the mesh and the scene. */
@@ -537,6 +550,45 @@ static void test_messages(void) {
           "long path: %s", ctx.msg);
 }
 
+/* Every allocation of the first take, a nearest-node query and a recorded cut failing in turn:
+   a clear OOM or success, then a take that is consistent with the mesh, and nothing leaked. */
+static void test_oom(void) {
+    int k, fails = 0;
+    for (k = 0; k < 40; k++) {
+        amps_ctx ctx;
+        amps_scene *S;
+        amps_scene_changes c;
+        mirror w;
+        amps_int v, vc;
+        amps_status s1, s2, s3;
+        double p[3] = {0.5, 0.5, 1.0}, nrm[3] = {0.3, 0, 1};
+        amps_ctx_init(&ctx);
+        memset(&w, 0, sizeof(w));
+        t_al.live = 0;
+        ctx.alloc_user = &t_al;
+        S = amps_scene_create(&ctx, amps_mesh_brick(&ctx, 2), NULL);
+        amps_scene_fix_where(&ctx, S, 2, AMPS_LT, 0.1, NULL);
+        amps_scene_prepare(&ctx, S);
+        t_al.fail_at = k;
+        s1 = amps_scene_take_changes(&ctx, S, &c);
+        if (s1 == AMPS_OK) mirror_load(&w, S);
+        s2 = amps_scene_nearest_node(&ctx, S, p, &v);
+        s3 = amps_scene_cut(&ctx, S, s2 == AMPS_OK ? v : 9 * 2 + 4, p, nrm, &vc);
+        fails += s1 != AMPS_OK || s2 != AMPS_OK || s3 != AMPS_OK;
+        CHECK((s1 == AMPS_OK || s1 == AMPS_ERR_OOM) && (s2 == AMPS_OK || s2 == AMPS_ERR_OOM) &&
+                      (s3 == AMPS_OK || s3 == AMPS_ERR_OOM),
+              "oom %d: %d %d %d: %s", k, s1, s2, s3, ctx.msg);
+        t_al.fail_at = -1;
+        take_and_check(&ctx, S, &w, "oom", k);
+        amps_scene_free(&ctx, S);
+        CHECK(t_al.live == 0, "oom %d: %ld blocks leaked", k, t_al.live);
+        free(w.tri);
+        free(w.face);
+        free(w.tet0);
+    }
+    CHECK(fails > 0, "no allocation failed");
+}
+
 int main(void) {
     amps_ctx ctx;
     amps_mesh *box;
@@ -556,5 +608,6 @@ int main(void) {
     fix_region_case(1, "fix sphere");
     test_fix_bad();
     test_messages();
+    test_oom();
     return amps_t_end("test_render");
 }
