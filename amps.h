@@ -782,13 +782,13 @@ AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S);
 /* What changed since the last amps_scene_take_changes: boundary triangles by stable id (see
    amps_scene_boundary), the copies cuts created and the tets whose nodes they changed. */
 typedef struct amps_scene_changes {
-    int reset;                /* 1: redraw everything from amps_scene_boundary (the first take, or
+    int reset; /* 1: redraw everything from amps_scene_boundary (the first take, or
                                  an allocation failed while recording); added lists every
                                  triangle, removed is empty */
     amps_int nadded, nremoved;
-    const amps_int *added;    /* ids of the triangles that appeared (an id whose triangle changed
+    const amps_int *added;   /* ids of the triangles that appeared (an id whose triangle changed
                                  nodes appears in removed and added) */
-    const amps_int *removed;  /* ids of the triangles that disappeared; reused after this take */
+    const amps_int *removed; /* ids of the triangles that disappeared; reused after this take */
     amps_int nnew;
     const amps_int *new_nodes; /* copies created by cuts, in creation order */
     amps_int nmoved;
@@ -830,8 +830,7 @@ AMPS_API amps_status amps_scene_nearest_node(amps_ctx *ctx, amps_scene *S, const
    AMPS_ERR_ARG (lo > hi on an axis, r < 0, NULL), AMPS_ERR_STATE. */
 AMPS_API amps_status amps_scene_fix_box(amps_ctx *ctx, amps_scene *S, const double lo[3], const double hi[3],
                                         amps_int *count);
-AMPS_API amps_status amps_scene_fix_sphere(amps_ctx *ctx, amps_scene *S, const double c[3], double r,
-                                           amps_int *count);
+AMPS_API amps_status amps_scene_fix_sphere(amps_ctx *ctx, amps_scene *S, const double c[3], double r, amps_int *count);
 /* 1 if node v is fixed / pinned, else 0 (also for a NULL scene or v out of range). */
 AMPS_API int amps_scene_is_fixed(const amps_scene *S, amps_int v);
 AMPS_API int amps_scene_is_pinned(const amps_scene *S, amps_int v);
@@ -1005,8 +1004,8 @@ AMPS_API double amps_now(void) {
 /* ---- messages: a small printf subset, identical in every build and free of <stdio.h> ----
    Conversions: %% %c %s %d %u %ld %lu %lld %llu, and %f %e %g with an optional precision
    (%.3g); no flags or widths; %P prints a path (a string) of over 80 characters as its first 32,
-   "..." and its last 45, so that a long path leaves room for the reason after it. Numbers carry at most 15 significant digits (later ones print as
-   0); otherwise the output is printf's, correctly rounded (tests/test_fmt.c compares the two). */
+   "..." and its last 45, so that a long path leaves room for the reason after it. Numbers carry
+   at most 15 significant digits (later ones print as 0); otherwise the output is printf's, correctly rounded (tests/test_fmt.c compares the two). */
 
 typedef struct amps__str {
     char *p, *end;
@@ -9113,13 +9112,13 @@ typedef struct amps__scene_watch {
 /* The boundary triangles by stable id and the change record (amps_scene_take_changes). Ids
    freed since the last take are held (not reused) until the next take. */
 typedef struct amps__scene_render {
-    int on;                /* recording since the first take */
-    int lost;              /* an allocation failed while recording: the next take rebuilds */
-    int taken;             /* the lists were taken: the next change starts new ones */
-    amps_int *face_id;     /* 4 ntet: the id of face 4t+f, or -1 */
-    amps_int nid, cap;     /* ids in use or freed; capacity of the per-id arrays */
-    amps_int *tri, *face;  /* per id: nodes (3), face; -1 when free */
-    unsigned char *fresh;  /* per id: added since the last take */
+    int on;               /* recording since the first take */
+    int lost;             /* an allocation failed while recording: the next take rebuilds */
+    int taken;            /* the lists were taken: the next change starts new ones */
+    amps_int *face_id;    /* 4 ntet: the id of face 4t+f, or -1 */
+    amps_int nid, cap;    /* ids in use or freed; capacity of the per-id arrays */
+    amps_int *tri, *face; /* per id: nodes (3), face; -1 when free */
+    unsigned char *fresh; /* per id: added since the last take */
     amps_int *free_ids, nfree, *held, nheld;
     amps_int *added, nadded, *removed, nremoved;
     amps_int *new_nodes, nnew, cap_new;
@@ -10183,7 +10182,7 @@ AMPS_API amps_status amps_scene_take_changes(amps_ctx *ctx, amps_scene *S, amps_
         R->on = 1;
         c->reset = 1;
     } else {
-        amps__render_begin(R); /* a take after a take: empty lists */
+        amps__render_begin(R);          /* a take after a take: empty lists */
         for (k = 0; k < R->nadded; k++) /* the ids added and still there */
             if (R->fresh[R->added[k]]) {
                 R->fresh[R->added[k]] = 0;
@@ -10277,13 +10276,15 @@ static amps_status amps__scene_grid_build(amps_ctx *ctx, amps_scene *S) {
     if (!G->cell_ptr || !G->cell_node || !G->last_copy) return AMPS_ERR_OOM;
     for (v = 0; v < nf; v++) {
         const double *x = m->xyz + 3 * v;
-        c = amps__grid_cell(G, 0, x[0]) + G->n[0] * (amps_int)(amps__grid_cell(G, 1, x[1]) + G->n[1] * amps__grid_cell(G, 2, x[2]));
+        c = amps__grid_cell(G, 0, x[0]) +
+            G->n[0] * (amps_int)(amps__grid_cell(G, 1, x[1]) + G->n[1] * amps__grid_cell(G, 2, x[2]));
         G->cell_ptr[c + 2]++;
     }
     for (c = 0; c < ncell; c++) G->cell_ptr[c + 2] += G->cell_ptr[c + 1];
     for (v = 0; v < nf; v++) {
         const double *x = m->xyz + 3 * v;
-        c = amps__grid_cell(G, 0, x[0]) + G->n[0] * (amps_int)(amps__grid_cell(G, 1, x[1]) + G->n[1] * amps__grid_cell(G, 2, x[2]));
+        c = amps__grid_cell(G, 0, x[0]) +
+            G->n[0] * (amps_int)(amps__grid_cell(G, 1, x[1]) + G->n[1] * amps__grid_cell(G, 2, x[2]));
         G->cell_node[G->cell_ptr[c + 1]++] = v;
         G->last_copy[v] = v;
     }
@@ -10429,8 +10430,7 @@ AMPS_API amps_status amps_scene_fix_box(amps_ctx *ctx, amps_scene *S, const doub
     return amps__scene_fix_region(ctx, S, lo, hi, 0, 0, count, "amps_scene_fix_box");
 }
 
-AMPS_API amps_status amps_scene_fix_sphere(amps_ctx *ctx, amps_scene *S, const double c[3], double r,
-                                           amps_int *count) {
+AMPS_API amps_status amps_scene_fix_sphere(amps_ctx *ctx, amps_scene *S, const double c[3], double r, amps_int *count) {
     return amps__scene_fix_region(ctx, S, c, c, r, 1, count, "amps_scene_fix_sphere");
 }
 
@@ -10885,7 +10885,8 @@ typedef struct amps__gmsh {
     int version;      /* 2 (2.x) or 4 (4.1) after $MeshFormat, else 0 */
     int have_nodes, have_elems;
     char sec[24]; /* name of the current section, without '$' */
-    long long nvol[3], vol_line; /* hexahedra, prisms, pyramids (not read) and the first one's line */
+    /* hexahedra, prisms, pyramids (not read) and the line of the first */
+    long long nvol[3], vol_line;
 } amps__gmsh;
 
 /* Counts an element of Gmsh type type on line line if it is a hexahedron, prism or pyramid (of

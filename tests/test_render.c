@@ -76,24 +76,28 @@ static double orient(const double *x, amps_int a, amps_int b, amps_int c, amps_i
 /* amps_mesh_boundary against brute force; outward orientation; the enclosed volume. */
 static void check_scratch(amps_ctx *ctx, const amps_mesh *m, const char *what) {
     amps_int nb = amps_mesh_boundary(ctx, m, NULL, NULL), k, q;
-    amps_int *tri = (amps_int *)malloc(sizeof(amps_int) * 3 * (nb + 1)), *fc = (amps_int *)malloc(sizeof(amps_int) * (nb + 1));
+    amps_int *tri = (amps_int *)malloc(sizeof(amps_int) * 3 * (nb + 1)),
+             *fc = (amps_int *)malloc(sizeof(amps_int) * (nb + 1));
     amps_int *ref = (amps_int *)malloc(sizeof(amps_int) * 4 * (size_t)m->ntet);
     amps_int nr = brute_boundary(m, ref);
     double vol = 0, enc = 0;
     int bad_or = 0, bad_nodes = 0;
     CHECK(amps_mesh_boundary(ctx, m, tri, fc) == nb && nb == nr, "%s: %ld boundary triangles, brute force %ld", what,
           (long)nb, (long)nr);
-    for (k = 0; k < nb && k < nr; k++) CHECK(fc[k] == ref[k], "%s: triangle %ld face %ld vs %ld", what, (long)k, (long)fc[k], (long)ref[k]);
+    for (k = 0; k < nb && k < nr; k++)
+        CHECK(fc[k] == ref[k], "%s: triangle %ld face %ld vs %ld", what, (long)k, (long)fc[k], (long)ref[k]);
     for (k = 0; k < nb; k++) {
         amps_int t = fc[k] / 4, f = fc[k] % 4, d = m->tet[4 * t + f];
         int hits = 0;
         for (q = 0; q < 4; q++)
-            if (q != f) hits += m->tet[4 * t + q] == tri[3 * k] || m->tet[4 * t + q] == tri[3 * k + 1] ||
-                                m->tet[4 * t + q] == tri[3 * k + 2];
+            if (q != f)
+                hits += m->tet[4 * t + q] == tri[3 * k] || m->tet[4 * t + q] == tri[3 * k + 1] ||
+                        m->tet[4 * t + q] == tri[3 * k + 2];
         bad_nodes += hits != 3;
         bad_or += !(orient(m->xyz, tri[3 * k], tri[3 * k + 1], tri[3 * k + 2], d) < 0);
         { /* x0 . ((x1 - x0) x (x2 - x0)) / 6 = x0 . (x1 x x2) / 6 */
-            const double *a = m->xyz + 3 * tri[3 * k], *b = m->xyz + 3 * tri[3 * k + 1], *c = m->xyz + 3 * tri[3 * k + 2];
+            const double *a = m->xyz + 3 * tri[3 * k], *b = m->xyz + 3 * tri[3 * k + 1],
+                         *c = m->xyz + 3 * tri[3 * k + 2];
             enc += (a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2]) +
                     a[2] * (b[0] * c[1] - b[1] * c[0])) /
                    6;
@@ -163,10 +167,11 @@ static void take_and_check(amps_ctx *ctx, amps_scene *S, mirror *w, const char *
         int nmv = 0;
         CHECK(c.nnew == m->nnode - w->nnode0, "%s step %d: %ld new nodes, mesh grew by %ld", what, step, (long)c.nnew,
               (long)(m->nnode - w->nnode0));
-        for (k = 0; k < c.nnew; k++) CHECK(c.new_nodes[k] == w->nnode0 + k, "%s step %d: new node %ld", what, step, (long)k);
+        for (k = 0; k < c.nnew; k++)
+            CHECK(c.new_nodes[k] == w->nnode0 + k, "%s step %d: new node %ld", what, step, (long)k);
         for (k = 0; k < c.nmoved; k++) {
-            CHECK(c.moved_tets[k] >= 0 && c.moved_tets[k] < m->ntet && !mv[c.moved_tets[k]], "%s: moved tet listed twice",
-                  what);
+            CHECK(c.moved_tets[k] >= 0 && c.moved_tets[k] < m->ntet && !mv[c.moved_tets[k]],
+                  "%s: moved tet listed twice", what);
             mv[c.moved_tets[k]] = 1;
         }
         for (k = 0; k < m->ntet; k++) {
@@ -260,7 +265,8 @@ static void cut_sequence(amps_mesh *m, int ncut, int prepared, const char *what)
             p[k] = mm->xyz[3 * v + k] + 0.01 * (t_unif() - 0.5);
         }
         s = amps_scene_cut(&ctx, S, v, p, nrm, &vc);
-        CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP || s == AMPS_ERR_SINGULAR_UPDATE, "%s cut %d: %s", what, step, ctx.msg);
+        CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP || s == AMPS_ERR_SINGULAR_UPDATE, "%s cut %d: %s", what, step,
+              ctx.msg);
         cuts += s == AMPS_OK;
         if (t_int(3) != 0 || step == ncut) take_and_check(&ctx, S, &w, what, step);
     }
@@ -294,8 +300,8 @@ static void test_removed_hook(void) {
     S = amps_scene_create(&ctx, amps_mesh_brick(&ctx, 3), NULL);
     take_and_check(&ctx, S, &w, "removal", 0);
     m = (amps_mesh *)amps_scene_mesh(S);
-    rm[0] = 0;              /* a corner tet */
-    rm[1] = m->ntet / 2;    /* an interior one */
+    rm[0] = 0;           /* a corner tet */
+    rm[1] = m->ntet / 2; /* an interior one */
     rm[2] = m->ntet / 2 + 1;
     for (r = 0; r < 3; r++) {
         int q;
@@ -341,11 +347,14 @@ static void test_node_map(void) {
         CHECK(amps_scene_node_dofs(&ctx, S, v, dof) == AMPS_OK, "node dofs");
         for (d = 0; d < 3; d++) {
             if (amps_scene_is_fixed(S, v)) bad += dof[d] != -1;
-            else bad += dof[d] < 0 || dof[d] >= amps_scene_ndof(S) || x[dof[d]] != amps_scene_displacements(S)[3 * v + d];
+            else
+                bad += dof[d] < 0 || dof[d] >= amps_scene_ndof(S) ||
+                       x[dof[d]] != amps_scene_displacements(S)[3 * v + d];
         }
     }
     CHECK(bad == 0, "node dofs disagree with the solution at %d DOFs", bad);
-    CHECK(amps_scene_node_dofs(&ctx, S, vc, dof) == AMPS_OK && dof[0] >= amps_scene_ndof(S) - 3, "the copy's equations");
+    CHECK(amps_scene_node_dofs(&ctx, S, vc, dof) == AMPS_OK && dof[0] >= amps_scene_ndof(S) - 3,
+          "the copy's equations");
     CHECK(amps_scene_node_dofs(&ctx, S, -1, dof) == AMPS_ERR_INDEX, "node dofs out of range");
     CHECK(amps_scene_node_dofs(&ctx, S, amps_scene_mesh(S)->nnode, dof) == AMPS_ERR_INDEX, "node dofs out of range");
     wn = amps_scene_watched(S, &nw);
@@ -403,7 +412,7 @@ static void test_nearest(amps_mesh *m, const char *what) {
         for (k = 0; k < 400; k++) {
             int q;
             double spread = k < 300 ? 1.2 : 6.0; /* inside and around, then far outside */
-            if (k % 5 == 0) { /* exactly at a node: the smallest live index there */
+            if (k % 5 == 0) {                    /* exactly at a node: the smallest live index there */
                 amps_int u = (amps_int)t_int(mm->nnode);
                 memcpy(p, mm->xyz + 3 * u, sizeof(p));
             } else
@@ -445,8 +454,10 @@ static void fix_region_case(int ball, const char *what) {
     list = (amps_int *)malloc(sizeof(amps_int) * m->nnode);
     for (v = 0; v < m->nnode; v++) {
         const double *x = m->xyz + 3 * v;
-        int in = ball ? (x[0] - c[0]) * (x[0] - c[0]) + (x[1] - c[1]) * (x[1] - c[1]) + (x[2] - c[2]) * (x[2] - c[2]) <= r * r
-                      : x[0] >= lo[0] && x[0] <= hi[0] && x[1] >= lo[1] && x[1] <= hi[1] && x[2] >= lo[2] && x[2] <= hi[2];
+        int in = ball ? (x[0] - c[0]) * (x[0] - c[0]) + (x[1] - c[1]) * (x[1] - c[1]) + (x[2] - c[2]) * (x[2] - c[2]) <=
+                                 r * r
+                      : x[0] >= lo[0] && x[0] <= hi[0] && x[1] >= lo[1] && x[1] <= hi[1] && x[2] >= lo[2] &&
+                                 x[2] <= hi[2];
         if (in) list[nl++] = v;
     }
     CHECK((ball ? amps_scene_fix_sphere(&ctx, A, c, r, &cnt) : amps_scene_fix_box(&ctx, A, lo, hi, &cnt)) == AMPS_OK,
@@ -468,8 +479,8 @@ static void fix_region_case(int ball, const char *what) {
     scene_reference(&ctx, m, &w, 0, NULL, u, NULL, 0);
     CHECK(t_reldiff(3 * m->nnode, amps_scene_displacements(A), u) <= 1e-10, "%s: displacements vs CHOLMOD %.3e", what,
           t_reldiff(3 * m->nnode, amps_scene_displacements(A), u));
-    CHECK(t_reldiff(3 * m->nnode, amps_scene_displacements(B), amps_scene_displacements(A)) == 0, "%s: same bits as the list",
-          what);
+    CHECK(t_reldiff(3 * m->nnode, amps_scene_displacements(B), amps_scene_displacements(A)) == 0,
+          "%s: same bits as the list", what);
     /* after the factorization: a clear error, nothing fixed */
     CHECK(amps_scene_fix_box(&ctx, A, lo, hi, &cnt) == AMPS_ERR_STATE && strstr(ctx.msg, "factored") && cnt == 0,
           "%s: box after the factorization: %s", what, ctx.msg);
@@ -533,10 +544,11 @@ static void test_messages(void) {
                   strstr(ctx.msg, "1 hexahedron") && strstr(ctx.msg, "1 pyramid") && strstr(ctx.msg, "hex.msh"),
           "gmsh hexahedra: %s", ctx.msg);
     { /* the same in 4.1: a prism block of 2 */
-        static const char msh4[] = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 7 1 7\n3 1 0 7\n1\n2\n3\n4\n5\n6\n7\n"
-                                   "0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 0 1\n0 1 1\n0 0 2\n$EndNodes\n"
-                                   "$Elements\n2 3 1 3\n3 1 6 2\n1 1 2 3 4 5 6\n2 1 2 3 4 5 6\n3 1 4 1\n3 4 5 6 7\n"
-                                   "$EndElements\n";
+        static const char msh4[] =
+                "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 7 1 7\n3 1 0 7\n1\n2\n3\n4\n5\n6\n7\n"
+                "0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 0 1\n0 1 1\n0 0 2\n$EndNodes\n"
+                "$Elements\n2 3 1 3\n3 1 6 2\n1 1 2 3 4 5 6\n2 1 2 3 4 5 6\n3 1 4 1\n3 4 5 6 7\n"
+                "$EndElements\n";
         CHECK(amps_mesh_read_gmsh_mem(&ctx, msh4, sizeof(msh4) - 1, "p.msh") == NULL && ctx.status == AMPS_ERR_MESH &&
                       strstr(ctx.msg, "2 prisms") && strstr(ctx.msg, "0 hexahedra"),
               "gmsh 4.1 prisms: %s", ctx.msg);
