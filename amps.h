@@ -597,6 +597,8 @@ AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U);
 
 /* ==== [amps:fem] mesh and P1 elasticity ======================================================= */
 #ifndef AMPS_NO_FEM
+/* The elasticity is linear (small strains, small displacements, isotropic Hooke material): K is
+   the stiffness of the reference configuration and does not follow large deformations. */
 /* ---- tetrahedral mesh ---- */
 
 /* Tetrahedral mesh in the reference configuration, with the node copies made by cuts.
@@ -711,11 +713,26 @@ AMPS_API double amps_tet_stress(const double X[12], double E, double nu, const d
 /* Eigenvalues (descending) of the symmetric matrix [s0 s3 s5; s3 s1 s4; s5 s4 s2] (closed form). */
 AMPS_API void amps_sym3_eig(const double s[6], double lam[3]);
 
+/* ---- boundary ---- */
+
+/* Boundary triangles of m: the faces of exactly one tet. A cut makes its faces between the tets
+   that use v and those that use the copy v' boundary faces of both (the two sides of the cut).
+   A tet that the incidence lists of its nodes do not contain (a removed tet) has no faces.
+   Triangle k is tri[3k .. 3k+2], ordered so that its normal (x1 - x0) x (x2 - x0) (reference
+   coordinates) points out of its tet; face[k] = 4 t + f: tet t, local face f = the face opposite
+   the tet's node f, the others in tet order (up to orientation). Triangles come in ascending
+   face order. tri and face may be NULL (count only), else have room for the count (at most
+   4 ntet). Returns the number of triangles, or -1: AMPS_ERR_ARG (NULL mesh), AMPS_ERR_OOM.
+   Cost O(ntet * degree); allocates O(nnode + ntet) scratch. */
+AMPS_API amps_int amps_mesh_boundary(amps_ctx *ctx, const amps_mesh *m, amps_int *tri, amps_int *face);
+
 #endif /* AMPS_NO_FEM */
 
 /* ==== [amps:scene] a mesh with fixed nodes, forces, pins and cuts ============================= */
 #ifndef AMPS_NO_FEM
 /* The scene: a mesh with fixed nodes, forces, pins and cuts, solved by the update engine.
+   The model is linear elasticity (small strains): displacements are linear in the forces and
+   pins, and every stiffness is that of the reference configuration.
    Node displacements are kept exact with one factorization of the initial stiffness matrix
    (fixed nodes eliminated); every cut, pin and release becomes an update of the engine:
    a cut changes the rows of v, its copy v' and the nodes of the tets that moved, computed from
@@ -737,11 +754,13 @@ typedef struct amps_scene_opts {
 AMPS_API void amps_scene_opts_default(amps_scene_opts *o);
 /* Scene over mesh m, which it takes over in every case: the scene cuts it and frees it with
    itself, and a failed create frees it. So amps_scene_create(ctx, amps_mesh_read(ctx, path),
-   opts) leaks nothing; when the reader fails (NULL), ctx keeps the reader's message. */
+   opts) leaks nothing; when the reader fails (NULL), ctx keeps the reader's status and message
+   (a NULL m with no error in ctx gives AMPS_ERR_ARG). */
 AMPS_API amps_scene *amps_scene_create(amps_ctx *ctx, amps_mesh *m, const amps_scene_opts *opts);
 AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S);
 AMPS_API const amps_mesh *amps_scene_mesh(const amps_scene *S);
-/* Sets the material of every tet (before the factorization only). */
+/* Sets the material of every tet; before the factorization only: AMPS_ERR_STATE after it (the
+   run-time change of materials is amps_scene_set_tet_material's). */
 AMPS_API amps_status amps_scene_set_material(amps_ctx *ctx, amps_scene *S, double E, double nu);
 /* Fixes nodes (zero displacement, eliminated from the system); before the factorization only.
    amps_scene_fix_where fixes the nodes whose coordinate axis (0, 1, 2) is below / above value. */
@@ -797,6 +816,64 @@ AMPS_API amps_int amps_scene_ndof(const amps_scene *S);
 /* The engine (for statistics) and its current base factor; NULL before the factorization. */
 AMPS_API amps_update *amps_scene_engine(const amps_scene *S);
 AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S);
+
+/* ---- rendering data, node map, picking and selection ---- */
+
+/* What changed since the last amps_scene_take_changes: boundary triangles by stable id (see
+   amps_scene_boundary), the copies cuts created and the tets whose nodes they changed. */
+typedef struct amps_scene_changes {
+    int reset; /* 1: redraw everything from amps_scene_boundary (the first take, or
+                                 an allocation failed while recording); added lists every
+                                 triangle, removed is empty */
+    amps_int nadded, nremoved;
+    const amps_int *added;   /* ids of the triangles that appeared (an id whose triangle changed
+                                 nodes appears in removed and added) */
+    const amps_int *removed; /* ids of the triangles that disappeared; reused after this take */
+    amps_int nnew;
+    const amps_int *new_nodes; /* copies created by cuts, in creation order */
+    amps_int nmoved;
+    const amps_int *moved_tets; /* tets that use a new node instead of its original, each once */
+} amps_scene_changes;
+
+/* Takes the change record: fills c (arrays valid until the next change to the scene) and starts
+   a new one. The first call starts the recording (allocates O(ntet) and reports reset = 1);
+   from then on every cut records its changes, at a cost of O(degree^2) of the cut node. Only
+   this call and amps_scene_boundary read the record. Errors: AMPS_ERR_ARG (NULL), AMPS_ERR_OOM
+   (the recording stays off). */
+AMPS_API amps_status amps_scene_take_changes(amps_ctx *ctx, amps_scene *S, amps_scene_changes *c);
+/* The boundary triangles (amps_mesh_boundary's, oriented outward) by stable id: returns the
+   number of ids; id k is the triangle (*tri)[3k .. 3k+2] of face (*face)[k] = 4 t + f, or a
+   free id (nodes and face -1). Valid from the first amps_scene_take_changes to the next change;
+   returns 0 (pointers NULL) before it. */
+AMPS_API amps_int amps_scene_boundary(const amps_scene *S, const amps_int **tri, const amps_int **face);
+
+/* The equations of node v's DOFs (copies included): dof[d] = equation of DOF d, or -1 if v is
+   fixed or in no tet. A pinned node keeps its equations (they are constrained). Errors:
+   AMPS_ERR_STATE before the factorization (no numbering yet), AMPS_ERR_INDEX, AMPS_ERR_ARG. */
+AMPS_API amps_status amps_scene_node_dofs(amps_ctx *ctx, const amps_scene *S, amps_int v, amps_int dof[3]);
+/* The watch set (amps_scene_watch, with the copies cuts added): *n nodes; NULL if empty. */
+AMPS_API const amps_int *amps_scene_watched(const amps_scene *S, amps_int *n);
+/* Deformed positions of the watched nodes (reference + displacement of the last solve or
+   watched solve), 3 per node in amps_scene_watched's order, into out. */
+AMPS_API amps_status amps_scene_watched_positions(amps_ctx *ctx, const amps_scene *S, double *out);
+
+/* The node nearest to p in the reference configuration (copies share their origin's place:
+   among equally near nodes the smallest index), over the nodes in at least one tet; *v = -1
+   if there is none. The first call builds a uniform grid over the nodes (O(nnode) memory);
+   later calls cost about the nodes of a few grid cells. Errors: AMPS_ERR_VALUE (NaN/Inf in
+   p), AMPS_ERR_ARG (NULL), AMPS_ERR_OOM. For picking on the deformed surface, pass the
+   reference point of the picked triangle (barycentric coordinates map it back). */
+AMPS_API amps_status amps_scene_nearest_node(amps_ctx *ctx, amps_scene *S, const double p[3], amps_int *v);
+/* Fixes the nodes (copies included) whose reference coordinates lie in the closed box
+   [lo, hi] / the closed ball |x - c| <= r; before the factorization only (AMPS_ERR_STATE).
+   *count (may be NULL) receives their number. Errors (nothing fixed): AMPS_ERR_VALUE (NaN/Inf),
+   AMPS_ERR_ARG (lo > hi on an axis, r < 0, NULL), AMPS_ERR_STATE. */
+AMPS_API amps_status amps_scene_fix_box(amps_ctx *ctx, amps_scene *S, const double lo[3], const double hi[3],
+                                        amps_int *count);
+AMPS_API amps_status amps_scene_fix_sphere(amps_ctx *ctx, amps_scene *S, const double c[3], double r, amps_int *count);
+/* 1 if node v is fixed / pinned, else 0 (also for a NULL scene or v out of range). */
+AMPS_API int amps_scene_is_fixed(const amps_scene *S, amps_int v);
+AMPS_API int amps_scene_is_pinned(const amps_scene *S, amps_int v);
 #endif /* AMPS_NO_FEM */
 
 /* ==== [amps:io] mesh readers and writers ====================================================== */
@@ -806,8 +883,10 @@ AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S);
    if a file cannot be read, AMPS_ERR_MESH "file:line: ..." for a degenerate tet).
    TetGen .node/.ele: index base = first point number in .node (0 or 1), point numbers
      consecutive; attributes and boundary markers ignored; 4 or 10 nodes per tet (first 4 used).
-   Gmsh .msh ASCII 2.x and 4.1: tetrahedra are element type 4; other types are skipped; node
-     tags may be any distinct integers. Binary files are rejected.
+   Gmsh .msh ASCII 2.x and 4.1: tetrahedra are element type 4; surface, line and point elements
+     are skipped; hexahedra, prisms and pyramids (any order) are an error, AMPS_ERR_MESH with
+     their counts and the line of the first; node tags may be any distinct integers. Binary
+     files are rejected.
    MEDIT .mesh (ASCII): Dimension 3, Vertices, Tetrahedra; other keywords are skipped.
    amps_mesh_read picks the reader by extension: .node (and the .ele of the same name), .ele
    (and the .node), .msh, .mesh. The *_mem variants parse a buffer of len bytes (no NUL needed);
@@ -964,8 +1043,9 @@ AMPS_API double amps_now(void) {
 
 /* ---- messages: a small printf subset, identical in every build and free of <stdio.h> ----
    Conversions: %% %c %s %d %u %ld %lu %lld %llu, and %f %e %g with an optional precision
-   (%.3g); no flags or widths. Numbers carry at most 15 significant digits (later ones print as
-   0); otherwise the output is printf's, correctly rounded (tests/test_fmt.c compares the two). */
+   (%.3g); no flags or widths; %P prints a path (a string) of over 80 characters as its first 32,
+   "..." and its last 45, so that a long path leaves room for the reason after it. Numbers carry
+   at most 15 significant digits (later ones print as 0); otherwise the output is printf's, correctly rounded (tests/test_fmt.c compares the two). */
 
 typedef struct amps__str {
     char *p, *end;
@@ -1110,6 +1190,17 @@ static void amps__vfmt(char *buf, size_t size, const char *fmt, va_list ap) {
             const char *s = va_arg(ap, const char *);
             if (!s) s = "(null)";
             amps__puts(&o, s, strlen(s));
+        } else if (c == 'P') { /* a path: at most 80 characters, shortened in the middle */
+            const char *s = va_arg(ap, const char *);
+            size_t n;
+            if (!s) s = "(null)";
+            n = strlen(s);
+            if (n <= 80) amps__puts(&o, s, n);
+            else {
+                amps__puts(&o, s, 32);
+                amps__puts(&o, "...", 3);
+                amps__puts(&o, s + n - 45, 45);
+            }
         } else if (c == 'c') {
             amps__putc(&o, (char)va_arg(ap, int));
         } else if (c == '%') {
@@ -9321,6 +9412,111 @@ AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, am
     return AMPS_OK;
 }
 
+/* ---- boundary ---- */
+
+/* 1 if the incidence list of tet t's first node contains t (a tet in use). */
+static int amps__tet_live(const amps_mesh *m, amps_int t) {
+    const amps_int *inc = m->inc + m->inc_ptr[m->tet[4 * t]];
+    amps_int lo = 0, hi = m->inc_len[m->tet[4 * t]] - 1;
+    while (lo <= hi) {
+        amps_int mid = lo + (hi - lo) / 2;
+        if (inc[mid] == t) return 1;
+        if (inc[mid] < t) lo = mid + 1;
+        else hi = mid - 1;
+    }
+    return 0;
+}
+
+/* The nodes of face f of tet t (the face opposite its node f), ordered so that the normal
+   (x1 - x0) x (x2 - x0) points away from node f. */
+static void amps__face_tri(const amps_mesh *m, amps_int t, int f, amps_int tri[3]) {
+    const double *x = m->xyz;
+    double e1[3], e2[3], e3[3], s;
+    int q, k = 0;
+    for (q = 0; q < 4; q++)
+        if (q != f) tri[k++] = m->tet[4 * t + q];
+    for (q = 0; q < 3; q++) {
+        e1[q] = x[3 * tri[1] + q] - x[3 * tri[0] + q];
+        e2[q] = x[3 * tri[2] + q] - x[3 * tri[0] + q];
+        e3[q] = x[3 * m->tet[4 * t + f] + q] - x[3 * tri[0] + q];
+    }
+    s = (e1[1] * e2[2] - e1[2] * e2[1]) * e3[0] + (e1[2] * e2[0] - e1[0] * e2[2]) * e3[1] +
+        (e1[0] * e2[1] - e1[1] * e2[0]) * e3[2];
+    if (s > 0) {
+        amps_int w = tri[1];
+        tri[1] = tri[2];
+        tri[2] = w;
+    }
+}
+
+/* The nodes of face f of tet t in ascending order. */
+static void amps__face_key(const amps_mesh *m, amps_int t, int f, amps_int key[3]) {
+    int q, k = 0;
+    for (q = 0; q < 4; q++)
+        if (q != f) {
+            amps_int v = m->tet[4 * t + q];
+            int j = k++;
+            while (j > 0 && key[j - 1] > v) {
+                key[j] = key[j - 1];
+                j--;
+            }
+            key[j] = v;
+        }
+}
+
+/* Sorting the faces by their smallest node (a counting sort), then comparing the faces in each
+   bucket: a face with no equal is a boundary face. */
+AMPS_API amps_int amps_mesh_boundary(amps_ctx *ctx, const amps_mesh *m, amps_int *tri, amps_int *face) {
+    amps_int nf, t, i, j, v, n = 0, *start, *order;
+    unsigned char *bnd;
+    if (!m) return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_boundary: NULL mesh"), -1;
+    nf = 4 * m->ntet;
+    start = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)m->nnode + 2, sizeof(amps_int)));
+    order = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nf, sizeof(amps_int)));
+    bnd = AMPS__CAST(unsigned char *, amps__calloc(ctx, (size_t)nf, 1));
+    if (!start || !order || !bnd) {
+        amps__free(ctx, start);
+        amps__free(ctx, order);
+        amps__free(ctx, bnd);
+        return amps__err(ctx, AMPS_ERR_OOM, "amps_mesh_boundary: out of memory"), -1;
+    }
+    for (i = 0; i < 2; i++) { /* the bucket sizes, then the faces in their buckets */
+        for (t = 0; t < m->ntet; t++) {
+            amps_int key[3];
+            int f;
+            if (!amps__tet_live(m, t)) continue;
+            for (f = 0; f < 4; f++) {
+                amps__face_key(m, t, f, key);
+                if (i == 0) start[key[0] + 2]++;
+                else order[start[key[0] + 1]++] = 4 * t + f;
+            }
+        }
+        for (v = 0; i == 0 && v < m->nnode; v++) start[v + 2] += start[v + 1];
+    }
+    for (v = 0; v < m->nnode; v++) /* faces start[v] .. start[v+1]-1 have smallest node v */
+        for (i = start[v]; i < start[v + 1]; i++) {
+            amps_int a[3];
+            amps__face_key(m, order[i] / 4, (int)(order[i] % 4), a);
+            for (j = start[v]; j < start[v + 1]; j++) {
+                amps_int b[3];
+                if (j == i) continue;
+                amps__face_key(m, order[j] / 4, (int)(order[j] % 4), b);
+                if (a[1] == b[1] && a[2] == b[2]) break;
+            }
+            if (j == start[v + 1]) bnd[order[i]] = 1;
+        }
+    for (i = 0; i < nf; i++)
+        if (bnd[i]) {
+            if (tri) amps__face_tri(m, i / 4, (int)(i % 4), tri + 3 * n);
+            if (face) face[n] = i;
+            n++;
+        }
+    amps__free(ctx, start);
+    amps__free(ctx, order);
+    amps__free(ctx, bnd);
+    return n;
+}
+
 #endif /* AMPS_NO_FEM */
 
 /* ==== [amps:scene impl] a mesh with fixed nodes, forces, pins and cuts ======================== */
@@ -9364,6 +9560,36 @@ typedef struct amps__scene_watch {
     int stale; /* the engine's watch set must be rebuilt */
 } amps__scene_watch;
 
+/* The boundary triangles by stable id and the change record (amps_scene_take_changes). Ids
+   freed since the last take are held (not reused) until the next take. */
+typedef struct amps__scene_render {
+    int on;               /* recording since the first take */
+    int lost;             /* an allocation failed while recording: the next take rebuilds */
+    int taken;            /* the lists were taken: the next change starts new ones */
+    amps_int *face_id;    /* 4 ntet: the id of face 4t+f, or -1 */
+    amps_int nid, cap;    /* ids in use or freed; capacity of the per-id arrays */
+    amps_int *tri, *face; /* per id: nodes (3), face; -1 when free */
+    unsigned char *fresh; /* per id: added since the last take */
+    amps_int *free_ids, nfree, *held, nheld;
+    amps_int *added, nadded, *removed, nremoved;
+    amps_int *new_nodes, nnew, cap_new;
+    amps_int *moved, nmoved;  /* room for ntet */
+    unsigned char *tet_moved; /* per tet: in moved */
+} amps__scene_render;
+
+/* The uniform grid of amps_scene_nearest_node over the creation nodes; copies are chained to
+   their origin (next_copy, ascending). */
+typedef struct amps__scene_grid {
+    int built;
+    amps_int n[3];
+    double lo[3], h;
+    amps_int *cell_ptr, *cell_node;
+    amps_int *next_copy, *last_copy, nlinked, cap;
+} amps__scene_grid;
+
+static void amps__scene_render_free(amps_ctx *ctx, amps_scene *S);
+static void amps__scene_cut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v, amps_int vc);
+
 struct amps_scene {
     amps_mesh *m;
     amps_scene_opts opts;
@@ -9376,6 +9602,8 @@ struct amps_scene {
     amps__scene_watch watch;
     amps__scene_cutws cut;
     amps__scene_mech mech;
+    amps__scene_render rd;
+    amps__scene_grid grid;
 };
 
 AMPS_API void amps_scene_opts_default(amps_scene_opts *o) {
@@ -9414,6 +9642,7 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->mech.queue_head);
     amps__free(ctx, S->mech.queue_tail);
     amps__free(ctx, S->mech.active);
+    amps__scene_render_free(ctx, S);
     amps__free(ctx, S);
 }
 
@@ -9446,8 +9675,8 @@ static amps_status amps__scene_grow(amps_ctx *ctx, amps_scene *S, amps_int cap) 
 
 AMPS_API amps_scene *amps_scene_create(amps_ctx *ctx, amps_mesh *m, const amps_scene_opts *opts) {
     amps_scene *S;
-    if (!m) {
-        amps__err(ctx, AMPS_ERR_ARG, "amps_scene_create: NULL mesh (did the mesh reader fail?)");
+    if (!m) { /* a reader's failure keeps its message */
+        if (!ctx || ctx->status >= 0) amps__err(ctx, AMPS_ERR_ARG, "amps_scene_create: NULL mesh");
         return NULL;
     }
     S = AMPS__CAST(amps_scene *, amps__calloc(ctx, 1, sizeof(amps_scene)));
@@ -9474,7 +9703,10 @@ AMPS_API amps_int amps_scene_ndof(const amps_scene *S) {
 
 AMPS_API amps_status amps_scene_set_material(amps_ctx *ctx, amps_scene *S, double E, double nu) {
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_set_material: NULL scene");
-    if (S->prepared) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_set_material: the system is already factored");
+    if (S->prepared)
+        return amps__err(ctx, AMPS_ERR_STATE,
+                         "amps_scene_set_material: the system is already factored; materials at run time: "
+                         "amps_scene_set_tet_material");
     return amps_mesh_set_material(ctx, S->m, E, nu);
 }
 
@@ -10070,6 +10302,7 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
     if ((s = amps__scene_cut_room(ctx, S, v, &watched)) != AMPS_OK) return s;
     s = S->prepared ? amps__scene_cut_update(ctx, S, v, p, nrm, &vc) : amps__scene_cut_topology(ctx, S, v, p, nrm, &vc);
     if (s != AMPS_OK) return s;
+    amps__scene_cut_recorded(ctx, S, v, vc);
     if (new_node) *new_node = vc;
     if (watched) {
         S->watch.nodes[S->watch.n++] = vc;
@@ -10191,6 +10424,473 @@ AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, doubl
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_stress: NULL scene");
     return amps_mesh_stress(ctx, S->m, S->node.disp, sigma, von_mises, principal);
 }
+
+/* ---- rendering data ---- */
+
+static void amps__scene_render_free(amps_ctx *ctx, amps_scene *S) {
+    amps__scene_render *R = &S->rd;
+    amps__scene_grid *G = &S->grid;
+    amps__free(ctx, R->face_id);
+    amps__free(ctx, R->tri);
+    amps__free(ctx, R->face);
+    amps__free(ctx, R->fresh);
+    amps__free(ctx, R->free_ids);
+    amps__free(ctx, R->held);
+    amps__free(ctx, R->added);
+    amps__free(ctx, R->removed);
+    amps__free(ctx, R->new_nodes);
+    amps__free(ctx, R->moved);
+    amps__free(ctx, R->tet_moved);
+    memset(R, 0, sizeof(*R));
+    amps__free(ctx, G->cell_ptr);
+    amps__free(ctx, G->cell_node);
+    amps__free(ctx, G->next_copy);
+    amps__free(ctx, G->last_copy);
+    memset(G, 0, sizeof(*G));
+}
+
+/* Room for cap ids in every per-id array. */
+static amps_status amps__render_ids(amps_ctx *ctx, amps__scene_render *R, amps_int cap) {
+    size_t c = (size_t)cap;
+    if (cap <= R->cap) return AMPS_OK;
+    if (amps__realloc(ctx, (void **)&R->tri, 3 * c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&R->face, c, sizeof(amps_int)) || amps__realloc(ctx, (void **)&R->fresh, c, 1) ||
+        amps__realloc(ctx, (void **)&R->free_ids, c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&R->held, c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&R->added, c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&R->removed, c, sizeof(amps_int)))
+        return AMPS_ERR_OOM;
+    R->cap = cap;
+    return AMPS_OK;
+}
+
+/* After a take, the first change starts new lists: the held ids become free, the moved marks clear. */
+static void amps__render_begin(amps__scene_render *R) {
+    amps_int k;
+    if (!R->taken) return;
+    for (k = 0; k < R->nheld; k++) R->free_ids[R->nfree++] = R->held[k];
+    for (k = 0; k < R->nmoved; k++) R->tet_moved[R->moved[k]] = 0;
+    R->nheld = R->nadded = R->nremoved = R->nnew = R->nmoved = 0;
+    R->taken = 0;
+}
+
+/* Removes the triangle of face fc (it has one). */
+static void amps__render_remove(amps__scene_render *R, amps_int fc) {
+    amps_int id = R->face_id[fc];
+    if (!R->fresh[id]) R->removed[R->nremoved++] = id;
+    R->fresh[id] = 0;
+    R->tri[3 * id] = R->tri[3 * id + 1] = R->tri[3 * id + 2] = R->face[id] = -1;
+    R->held[R->nheld++] = id;
+    R->face_id[fc] = -1;
+}
+
+/* Adds the triangle tri of face fc (it has none). */
+static amps_status amps__render_add(amps_ctx *ctx, amps__scene_render *R, amps_int fc, const amps_int tri[3]) {
+    amps_int id;
+    if (R->nfree > 0) id = R->free_ids[--R->nfree];
+    else {
+        if (R->nid == R->cap && amps__render_ids(ctx, R, 2 * R->cap + 64)) return AMPS_ERR_OOM;
+        id = R->nid++;
+    }
+    memcpy(R->tri + 3 * id, tri, 3 * sizeof(amps_int));
+    R->face[id] = fc;
+    R->fresh[id] = 1;
+    R->added[R->nadded++] = id;
+    R->face_id[fc] = id;
+    return AMPS_OK;
+}
+
+/* 1 if a tet other than t in the incidence lists contains the nodes key[0..2]. */
+static int amps__face_shared(const amps_mesh *m, amps_int t, const amps_int key[3]) {
+    amps_int k, deg, best = key[0];
+    const amps_int *inc;
+    int q;
+    for (q = 1; q < 3; q++)
+        if (m->inc_len[key[q]] < m->inc_len[best]) best = key[q];
+    inc = amps_mesh_incident(m, best, &deg);
+    for (k = 0; k < deg; k++) {
+        amps_int u = inc[k], hits = 0;
+        if (u == t) continue;
+        for (q = 0; q < 4; q++) {
+            amps_int w = m->tet[4 * u + q];
+            hits += w == key[0] || w == key[1] || w == key[2];
+        }
+        if (hits == 3) return 1;
+    }
+    return 0;
+}
+
+/* Brings the triangle of face f of tet t up to date with the mesh. */
+static amps_status amps__render_face(amps_ctx *ctx, amps_scene *S, amps_int t, int f) {
+    amps__scene_render *R = &S->rd;
+    amps_int key[3], tri[3], fc = 4 * t + f, id = R->face_id[fc];
+    amps__face_key(S->m, t, f, key);
+    if (!amps__tet_live(S->m, t) || amps__face_shared(S->m, t, key)) {
+        if (id >= 0) amps__render_remove(R, fc);
+        return AMPS_OK;
+    }
+    amps__face_tri(S->m, t, f, tri);
+    if (id >= 0 && !memcmp(R->tri + 3 * id, tri, sizeof(tri))) return AMPS_OK;
+    if (id >= 0) amps__render_remove(R, fc);
+    return amps__render_add(ctx, R, fc, tri);
+}
+
+/* Recomputes the boundary faces of tets[0..n-1] and of their face neighbours (the tets that
+   share the nodes of one of their faces), after a change of their nodes or their removal (a
+   tet no incidence list holds has no faces). An allocation failure stops the recording (the
+   next take reports a reset). */
+static void amps__scene_faces_changed(amps_ctx *ctx, amps_scene *S, const amps_int *tets, amps_int n) {
+    const amps_mesh *m = S->m;
+    amps_int k, j, deg;
+    int f, q;
+    if (!S->rd.on || S->rd.lost) return;
+    amps__render_begin(&S->rd);
+    for (k = 0; k < n; k++)
+        for (f = 0; f < 4; f++) {
+            amps_int t = tets[k], key[3];
+            const amps_int *inc;
+            if (amps__render_face(ctx, S, t, f)) goto lost;
+            amps__face_key(m, t, f, key);
+            inc = amps_mesh_incident(m, key[0], &deg);
+            for (j = 0; j < deg; j++) { /* the neighbours across face f */
+                amps_int u = inc[j], hits = 0;
+                if (u == t) continue;
+                for (q = 0; q < 4; q++) hits += m->tet[4 * u + q] == key[1] || m->tet[4 * u + q] == key[2];
+                for (q = 0; q < 4 && hits == 2; q++) {
+                    amps_int w = m->tet[4 * u + q];
+                    if (w != key[0] && w != key[1] && w != key[2] && amps__render_face(ctx, S, u, q)) goto lost;
+                }
+            }
+        }
+    return;
+lost:
+    S->rd.lost = 1;
+}
+
+/* The change record of a cut of v into v and vc: the copy, the tets that moved to it, the faces
+   around both. */
+static void amps__scene_cut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v, amps_int vc) {
+    amps__scene_render *R = &S->rd;
+    amps_int k, deg;
+    const amps_int *inc;
+    if (!R->on || R->lost || vc < 0) return;
+    amps__render_begin(R);
+    if (R->nnew == R->cap_new) {
+        if (amps__realloc(ctx, (void **)&R->new_nodes, (size_t)R->cap_new * 2 + 16, sizeof(amps_int))) {
+            R->lost = 1;
+            return;
+        }
+        R->cap_new = R->cap_new * 2 + 16;
+    }
+    R->new_nodes[R->nnew++] = vc;
+    inc = amps_mesh_incident(S->m, vc, &deg);
+    for (k = 0; k < deg; k++)
+        if (!R->tet_moved[inc[k]]) {
+            R->tet_moved[inc[k]] = 1;
+            R->moved[R->nmoved++] = inc[k];
+        }
+    amps__scene_faces_changed(ctx, S, inc, deg);
+    inc = amps_mesh_incident(S->m, v, &deg);
+    amps__scene_faces_changed(ctx, S, inc, deg);
+}
+
+/* Every triangle from scratch, with new ids (all added). */
+static amps_status amps__render_rebuild(amps_ctx *ctx, amps_scene *S) {
+    amps__scene_render *R = &S->rd;
+    const amps_mesh *m = S->m;
+    amps_int k, nt = 4 * m->ntet, n = amps_mesh_boundary(ctx, m, NULL, NULL);
+    if (n < 0) return ctx ? ctx->status : AMPS_ERR_OOM;
+    if (!R->face_id) R->face_id = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
+    if (!R->moved) R->moved = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m->ntet, sizeof(amps_int)));
+    if (!R->tet_moved) R->tet_moved = AMPS__CAST(unsigned char *, amps__malloc(ctx, (size_t)m->ntet, 1));
+    if (!R->face_id || !R->moved || !R->tet_moved) return AMPS_ERR_OOM;
+    if (amps__render_ids(ctx, R, n + 64)) return AMPS_ERR_OOM;
+    if (amps_mesh_boundary(ctx, m, R->tri, R->face) != n) return AMPS_ERR_OOM;
+    for (k = 0; k < nt; k++) R->face_id[k] = -1;
+    for (k = 0; k < m->ntet; k++) R->tet_moved[k] = 0;
+    for (k = 0; k < n; k++) {
+        R->face_id[R->face[k]] = k;
+        R->added[k] = k;
+        R->fresh[k] = 0;
+    }
+    R->nid = R->nadded = n;
+    R->nfree = R->nheld = R->nremoved = R->nnew = R->nmoved = 0;
+    R->lost = 0;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_take_changes(amps_ctx *ctx, amps_scene *S, amps_scene_changes *c) {
+    amps__scene_render *R;
+    amps_int k, n = 0;
+    if (!S || !c) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_take_changes: NULL argument");
+    R = &S->rd;
+    memset(c, 0, sizeof(*c));
+    if (!R->on || R->lost) {
+        if (amps__render_rebuild(ctx, S)) {
+            R->on = 0;
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_take_changes: out of memory");
+        }
+        R->on = 1;
+        c->reset = 1;
+    } else {
+        amps__render_begin(R);          /* a take after a take: empty lists */
+        for (k = 0; k < R->nadded; k++) /* the ids added and still there */
+            if (R->fresh[R->added[k]]) {
+                R->fresh[R->added[k]] = 0;
+                R->added[n++] = R->added[k];
+            }
+        R->nadded = n;
+    }
+    c->nadded = R->nadded;
+    c->added = R->added;
+    c->nremoved = R->nremoved;
+    c->removed = R->removed;
+    c->nnew = R->nnew;
+    c->new_nodes = R->new_nodes;
+    c->nmoved = R->nmoved;
+    c->moved_tets = R->moved;
+    R->taken = 1;
+    return AMPS_OK;
+}
+
+AMPS_API amps_int amps_scene_boundary(const amps_scene *S, const amps_int **tri, const amps_int **face) {
+    int on = S && S->rd.on;
+    if (tri) *tri = on ? S->rd.tri : NULL;
+    if (face) *face = on ? S->rd.face : NULL;
+    return on ? S->rd.nid : 0;
+}
+
+/* ---- node map and watched positions ---- */
+
+AMPS_API amps_status amps_scene_node_dofs(amps_ctx *ctx, const amps_scene *S, amps_int v, amps_int dof[3]) {
+    int d;
+    if (!S || !dof) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_node_dofs: NULL argument");
+    if (v < 0 || v >= S->m->nnode)
+        return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_node_dofs: node %ld out of range [0, %ld)", (long)v,
+                         (long)S->m->nnode);
+    if (!S->prepared)
+        return amps__err(ctx, AMPS_ERR_STATE,
+                         "amps_scene_node_dofs: no equations before the factorization (call amps_scene_prepare)");
+    for (d = 0; d < 3; d++) dof[d] = S->node.dof[3 * v + d];
+    return AMPS_OK;
+}
+
+AMPS_API const amps_int *amps_scene_watched(const amps_scene *S, amps_int *n) {
+    if (n) *n = S ? S->watch.n : 0;
+    return S && S->watch.n > 0 ? S->watch.nodes : NULL;
+}
+
+AMPS_API amps_status amps_scene_watched_positions(amps_ctx *ctx, const amps_scene *S, double *out) {
+    if (!S || !out) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_watched_positions: NULL argument");
+    return S->watch.n > 0 ? amps_scene_positions(ctx, S, S->watch.n, S->watch.nodes, out) : AMPS_OK;
+}
+
+/* ---- picking and selection ---- */
+
+/* The grid cell coordinate of x on axis k (clamped to the grid). */
+static amps_int amps__grid_cell(const amps__scene_grid *G, int k, double x) {
+    double c = floor((x - G->lo[k]) / G->h);
+    return c < 0 ? 0 : c >= (double)G->n[k] ? G->n[k] - 1 : (amps_int)c;
+}
+
+/* The grid over the creation nodes: cells of side h about one node each (cells <= 2 nfile + 8). */
+static amps_status amps__scene_grid_build(amps_ctx *ctx, amps_scene *S) {
+    amps__scene_grid *G = &S->grid;
+    const amps_mesh *m = S->m;
+    amps_int v, nf = m->nfile, ncell, c;
+    double hi[3], vol = 1, ext = 0;
+    int k;
+    for (k = 0; k < 3; k++) G->lo[k] = hi[k] = m->xyz[k];
+    for (v = 0; v < nf; v++)
+        for (k = 0; k < 3; k++) {
+            double x = m->xyz[3 * v + k];
+            if (x < G->lo[k]) G->lo[k] = x;
+            if (x > hi[k]) hi[k] = x;
+        }
+    for (k = 0; k < 3; k++) {
+        vol *= hi[k] - G->lo[k];
+        if (hi[k] - G->lo[k] > ext) ext = hi[k] - G->lo[k];
+    }
+    G->h = vol > 0 ? cbrt(vol / (double)nf) : (ext > 0 ? ext / cbrt((double)nf) : 1.0);
+    if (!(G->h > 0)) G->h = 1.0;
+    for (;;) {
+        double cells = 1;
+        for (k = 0; k < 3; k++) cells *= floor((hi[k] - G->lo[k]) / G->h) + 1;
+        if (cells <= 2.0 * (double)nf + 8) break;
+        G->h *= 1.26;
+    }
+    for (k = 0; k < 3; k++) G->n[k] = (amps_int)floor((hi[k] - G->lo[k]) / G->h) + 1;
+    ncell = G->n[0] * G->n[1] * G->n[2];
+    G->cell_ptr = AMPS__CAST(amps_int *, amps__calloc(ctx, (size_t)ncell + 2, sizeof(amps_int)));
+    G->cell_node = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nf, sizeof(amps_int)));
+    G->last_copy = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nf, sizeof(amps_int)));
+    if (!G->cell_ptr || !G->cell_node || !G->last_copy) return AMPS_ERR_OOM;
+    for (v = 0; v < nf; v++) {
+        const double *x = m->xyz + 3 * v;
+        c = amps__grid_cell(G, 0, x[0]) +
+            G->n[0] * (amps_int)(amps__grid_cell(G, 1, x[1]) + G->n[1] * amps__grid_cell(G, 2, x[2]));
+        G->cell_ptr[c + 2]++;
+    }
+    for (c = 0; c < ncell; c++) G->cell_ptr[c + 2] += G->cell_ptr[c + 1];
+    for (v = 0; v < nf; v++) {
+        const double *x = m->xyz + 3 * v;
+        c = amps__grid_cell(G, 0, x[0]) +
+            G->n[0] * (amps_int)(amps__grid_cell(G, 1, x[1]) + G->n[1] * amps__grid_cell(G, 2, x[2]));
+        G->cell_node[G->cell_ptr[c + 1]++] = v;
+        G->last_copy[v] = v;
+    }
+    G->nlinked = 0;
+    G->built = 1;
+    return AMPS_OK;
+}
+
+/* Chains the nodes created since the last query to their origins. */
+static amps_status amps__scene_grid_link(amps_ctx *ctx, amps_scene *S) {
+    amps__scene_grid *G = &S->grid;
+    const amps_mesh *m = S->m;
+    amps_int v;
+    if (m->nnode > G->cap) {
+        if (amps__realloc(ctx, (void **)&G->next_copy, (size_t)m->nnode, sizeof(amps_int))) return AMPS_ERR_OOM;
+        G->cap = m->nnode;
+    }
+    for (v = G->nlinked; v < m->nnode; v++) {
+        G->next_copy[v] = -1;
+        if (v >= m->nfile) {
+            G->next_copy[G->last_copy[m->origin[v]]] = v;
+            G->last_copy[m->origin[v]] = v;
+        }
+    }
+    G->nlinked = m->nnode;
+    return AMPS_OK;
+}
+
+/* The nodes of grid cell c (i, j, k) against the best (*bd2, *bv) so far. */
+static void amps__grid_scan(const amps_scene *S, amps_int i, amps_int j, amps_int k, const double p[3], double *bd2,
+                            amps_int *bv) {
+    const amps__scene_grid *G = &S->grid;
+    amps_int c = i + G->n[0] * (j + G->n[1] * k), a;
+    for (a = G->cell_ptr[c]; a < G->cell_ptr[c + 1]; a++) {
+        amps_int o = G->cell_node[a], w = o;
+        const double *x = S->m->xyz + 3 * o;
+        double d2 = (x[0] - p[0]) * (x[0] - p[0]) + (x[1] - p[1]) * (x[1] - p[1]) + (x[2] - p[2]) * (x[2] - p[2]);
+        while (w >= 0 && S->m->inc_len[w] == 0) w = G->next_copy[w];
+        if (w >= 0 && (d2 < *bd2 || (d2 == *bd2 && w < *bv))) {
+            *bd2 = d2;
+            *bv = w;
+        }
+    }
+}
+
+/* A lower bound on the distance from p to the cells beyond the shell r around cell c; -1 if
+   there are none. */
+static double amps__grid_gap(const amps__scene_grid *G, const amps_int c[3], amps_int r, const double p[3]) {
+    double gap = -1;
+    int k;
+    for (k = 0; k < 3; k++) {
+        if (c[k] + r + 1 < G->n[k]) {
+            double g = G->lo[k] + (double)(c[k] + r + 1) * G->h - p[k];
+            g = g > 0 ? g : 0;
+            if (gap < 0 || g < gap) gap = g;
+        }
+        if (c[k] - r - 1 >= 0) {
+            double g = p[k] - (G->lo[k] + (double)(c[k] - r) * G->h);
+            g = g > 0 ? g : 0;
+            if (gap < 0 || g < gap) gap = g;
+        }
+    }
+    return gap;
+}
+
+/* Shells of cells at growing Chebyshev distance r around p's cell, until the best distance is
+   below what any cell beyond can hold. */
+AMPS_API amps_status amps_scene_nearest_node(amps_ctx *ctx, amps_scene *S, const double p[3], amps_int *v) {
+    amps__scene_grid *G;
+    amps_int c[3], r, i, j, k, bv = -1;
+    double bd2 = HUGE_VAL;
+    int a;
+    if (v) *v = -1;
+    if (!S || !p || !v) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_nearest_node: NULL argument");
+    if (!amps__isfinite(p[0]) || !amps__isfinite(p[1]) || !amps__isfinite(p[2]))
+        return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_nearest_node: NaN or Inf in the point");
+    G = &S->grid;
+    if (!G->built && amps__scene_grid_build(ctx, S)) {
+        amps__free(ctx, G->cell_ptr);
+        amps__free(ctx, G->cell_node);
+        amps__free(ctx, G->last_copy);
+        G->cell_ptr = G->cell_node = G->last_copy = NULL;
+        return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_nearest_node: out of memory");
+    }
+    if (amps__scene_grid_link(ctx, S)) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_nearest_node: out of memory");
+    for (a = 0; a < 3; a++) c[a] = amps__grid_cell(G, a, p[a]);
+    for (r = 0;; r++) {
+        double gap;
+        for (k = c[2] - r; k <= c[2] + r; k++)
+            for (j = c[1] - r; j <= c[1] + r; j++)
+                for (i = c[0] - r; i <= c[0] + r; i++) {
+                    amps_int di = i - c[0], dj = j - c[1], dk = k - c[2];
+                    if (i < 0 || j < 0 || k < 0 || i >= G->n[0] || j >= G->n[1] || k >= G->n[2]) continue;
+                    if ((di < 0 ? -di : di) != r && (dj < 0 ? -dj : dj) != r && (dk < 0 ? -dk : dk) != r) continue;
+                    amps__grid_scan(S, i, j, k, p, &bd2, &bv);
+                }
+        gap = amps__grid_gap(G, c, r, p);
+        if (gap < 0) break;
+        gap -= 1e-9 * G->h; /* a node rounded into the cell next to its own */
+        if (bv >= 0 && gap > 0 && bd2 < gap * gap) break;
+    }
+    *v = bv;
+    return AMPS_OK;
+}
+
+/* Fixes the nodes whose reference coordinates lie in the box [lo, hi] (ball = 0) or in the ball
+   of center lo and radius r (ball = 1). */
+static amps_status amps__scene_fix_region(amps_ctx *ctx, amps_scene *S, const double *lo, const double *hi, double r,
+                                          int ball, amps_int *count, const char *fn) {
+    amps_int v, n = 0;
+    int k;
+    if (count) *count = 0;
+    if (!S || !lo || !hi) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL argument", fn);
+    for (k = 0; k < 3; k++)
+        if (!amps__isfinite(lo[k]) || !amps__isfinite(hi[k]) || !amps__isfinite(r))
+            return amps__err(ctx, AMPS_ERR_VALUE, "%s: NaN or Inf in the region", fn);
+    for (k = 0; k < 3; k++)
+        if (lo[k] > hi[k])
+            return amps__err(ctx, AMPS_ERR_ARG, "%s: lo[%d] = %g above hi[%d] = %g", fn, k, lo[k], k, hi[k]);
+    if (r < 0) return amps__err(ctx, AMPS_ERR_ARG, "%s: negative radius %g", fn, r);
+    if (S->prepared)
+        return amps__err(ctx, AMPS_ERR_STATE,
+                         "%s: the system is already factored (fix nodes before the first change or solve)", fn);
+    for (v = 0; v < S->m->nnode; v++) {
+        const double *x = S->m->xyz + 3 * v;
+        double d2 = 0;
+        int in = 1;
+        for (k = 0; k < 3; k++) {
+            in = in && x[k] >= lo[k] && x[k] <= hi[k];
+            d2 += (x[k] - lo[k]) * (x[k] - lo[k]);
+        }
+        if (ball ? d2 <= r * r : in) {
+            S->node.fixed[v] = 1;
+            n++;
+        }
+    }
+    if (count) *count = n;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_fix_box(amps_ctx *ctx, amps_scene *S, const double lo[3], const double hi[3],
+                                        amps_int *count) {
+    return amps__scene_fix_region(ctx, S, lo, hi, 0, 0, count, "amps_scene_fix_box");
+}
+
+AMPS_API amps_status amps_scene_fix_sphere(amps_ctx *ctx, amps_scene *S, const double c[3], double r, amps_int *count) {
+    return amps__scene_fix_region(ctx, S, c, c, r, 1, count, "amps_scene_fix_sphere");
+}
+
+AMPS_API int amps_scene_is_fixed(const amps_scene *S, amps_int v) {
+    return S && v >= 0 && v < S->m->nnode && S->node.fixed[v];
+}
+AMPS_API int amps_scene_is_pinned(const amps_scene *S, amps_int v) {
+    return S && v >= 0 && v < S->m->nnode && S->node.pinned[v];
+}
 #endif /* AMPS_NO_FEM */
 
 /* ==== [amps:io impl] mesh readers and writers ================================================= */
@@ -10274,7 +10974,7 @@ static amps_status amps__lx_err(amps__lex *L, long long line, amps_status s, con
     va_start(ap, fmt);
     amps__vfmt(msg, sizeof(msg), fmt, ap);
     va_end(ap);
-    return amps__err(L->ctx, s, "%s:%lld: %s", L->name, line, msg);
+    return amps__err(L->ctx, s, "%P:%lld: %s", L->name, line, msg);
 }
 
 /* The last token, printable and shortened, in out. */
@@ -10636,7 +11336,22 @@ typedef struct amps__gmsh {
     int version;      /* 2 (2.x) or 4 (4.1) after $MeshFormat, else 0 */
     int have_nodes, have_elems;
     char sec[24]; /* name of the current section, without '$' */
+    /* hexahedra, prisms, pyramids (not read) and the line of the first */
+    long long nvol[3], vol_line;
 } amps__gmsh;
+
+/* Counts an element of Gmsh type type on line line if it is a hexahedron, prism or pyramid (of
+   any order), n of them. */
+static void amps__gmsh_volume(amps__gmsh *G, long long type, long long line, long long n) {
+    static const int kind[][5] = {{5, 12, 17, 92, 93}, {6, 13, 18, 90, 91}, {7, 14, 19, 118, 119}};
+    int a, b;
+    for (a = 0; a < 3; a++)
+        for (b = 0; b < 5; b++)
+            if (type == kind[a][b]) {
+                if (!G->nvol[0] && !G->nvol[1] && !G->nvol[2]) G->vol_line = line;
+                G->nvol[a] += n;
+            }
+}
 
 /* Header of a 4.1 entity block. */
 typedef struct amps__gblk {
@@ -10864,6 +11579,7 @@ static amps_status amps__gmsh_elems2(amps__gmsh *G, long long total) {
         if (!s && c < 0) s = amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "negative tag count %lld", c);
         for (i = 0; !s && type == 4 && i < c; i++) s = amps__lx_int(L, 0, &a, "element tag");
         if (!s && type == 4) s = amps__gmsh_tet(G, &r);
+        if (!s) amps__gmsh_volume(G, type, r.line, 1);
         if (!s) amps__lx_eol(L);
     }
     return s;
@@ -10878,6 +11594,7 @@ static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long to
     long long b, i, a, got = 0;
     for (b = 0; b < nblk; b++) {
         amps_status s = amps__gmsh_block(L, 1, total, got, &h);
+        if (!s) amps__gmsh_volume(G, h.kind, L->tline, h.n);
         for (i = 0; !s && i < h.n; i++) {
             if (h.kind == 4) {
                 s = amps__lx_int(L, 1, &a, "element tag");
@@ -10933,6 +11650,12 @@ AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size
     while (!s && amps__lx_tok(L, 1)) s = amps__gmsh_section(&G);
     if (!s && !G.version) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "empty file (no $MeshFormat)");
     if (!s && !G.have_nodes) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no $Nodes section");
+    if (!s && (G.nvol[0] || G.nvol[1] || G.nvol[2]))
+        s = amps__lx_err(L, G.vol_line, AMPS_ERR_MESH,
+                         "%lld hexahedr%s, %lld prism%s, %lld pyramid%s: amps reads tetrahedra only (type 4); "
+                         "mesh with tetrahedra only",
+                         G.nvol[0], G.nvol[0] == 1 ? "on" : "a", G.nvol[1], G.nvol[1] == 1 ? "" : "s", G.nvol[2],
+                         G.nvol[2] == 1 ? "" : "s");
     if (!s && G.R.tb.n == 0)
         s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no tetrahedra (element type 4) in the file");
     m = amps__rd_end(&G.R, s);
@@ -11049,7 +11772,7 @@ static amps_status amps__read_all(amps_ctx *ctx, const char *path, char **out, s
     *len = 0;
     if (!path) return amps__err(ctx, AMPS_ERR_ARG, "NULL file name");
     f = fopen(path, "rb");
-    if (!f) return amps__err(ctx, AMPS_ERR_IO, "%s: cannot open file", path);
+    if (!f) return amps__err(ctx, AMPS_ERR_IO, "%P: cannot open file", path);
     for (;;) {
         if (cap - n < 2) {
             void *p = b;
@@ -11057,7 +11780,7 @@ static amps_status amps__read_all(amps_ctx *ctx, const char *path, char **out, s
             if (nc < cap || amps__realloc(ctx, &p, nc, 1)) {
                 amps__free(ctx, b);
                 fclose(f);
-                return amps__err(ctx, AMPS_ERR_OOM, "%s: out of memory reading the file", path);
+                return amps__err(ctx, AMPS_ERR_OOM, "%P: out of memory reading the file", path);
             }
             b = AMPS__CAST(char *, p);
             cap = nc;
@@ -11069,7 +11792,7 @@ static amps_status amps__read_all(amps_ctx *ctx, const char *path, char **out, s
     if (ferror(f)) {
         amps__free(ctx, b);
         fclose(f);
-        return amps__err(ctx, AMPS_ERR_IO, "%s: read error", path);
+        return amps__err(ctx, AMPS_ERR_IO, "%P: read error", path);
     }
     fclose(f);
     b[n] = 0;
@@ -11148,7 +11871,7 @@ AMPS_API amps_mesh *amps_mesh_read(amps_ctx *ctx, const char *path) {
     }
     if (amps__has_ext(path, ".msh")) return amps_mesh_read_gmsh(ctx, path);
     if (amps__has_ext(path, ".mesh")) return amps_mesh_read_medit(ctx, path);
-    amps__err(ctx, AMPS_ERR_ARG, "%s: unknown mesh format (expected .node, .ele, .msh or .mesh)", path);
+    amps__err(ctx, AMPS_ERR_ARG, "%P: unknown mesh format (expected .node, .ele, .msh or .mesh)", path);
     return NULL;
 }
 
@@ -11170,13 +11893,13 @@ static void amps__pr(amps__out *o, const char *fmt, ...) {
 static amps_status amps__open_out(amps_ctx *ctx, const char *fn, const char *path, amps__out *o) {
     o->bad = 0;
     o->f = path ? fopen(path, "wb") : NULL;
-    if (!o->f) return amps__err(ctx, AMPS_ERR_IO, "%s: %s: cannot open for writing", fn, path ? path : "(null)");
+    if (!o->f) return amps__err(ctx, AMPS_ERR_IO, "%s: %P: cannot open for writing", fn, path ? path : "(null)");
     return AMPS_OK;
 }
 
 static amps_status amps__close_out(amps_ctx *ctx, const char *fn, const char *path, amps__out *o) {
     if (fclose(o->f) != 0) o->bad = 1;
-    if (o->bad) return amps__err(ctx, AMPS_ERR_IO, "%s: %s: write failed", fn, path);
+    if (o->bad) return amps__err(ctx, AMPS_ERR_IO, "%s: %P: write failed", fn, path);
     return AMPS_OK;
 }
 

@@ -44,5 +44,22 @@ CASES
 # comments and blank lines anywhere; release of an unpinned node does nothing
 printf 'mesh beam 4 # comment\n\n# whole-line comment\nfix z lt 0.5\nrelease 60\nforce 99 0 0 1 # tip\nsolve\n' > "$tmp/ok.scn"
 "$R" "$tmp/ok.scn" > "$tmp/ok.out" 2>&1 && ok || bad "comments: $(cat "$tmp/ok.out")"
+# selection, watch, haptic and boundary commands: the fixed counts, the OBJ's faces, errors
+printf 'mesh brick 3\nfixbox -1 -1 -1 2 2 0.1\nfixsphere 0 0 2 0.2\nfixnodes 1 2 3\nwatch 60 61\npin 61 0 0 0.1\ncut 60 0.5 0.5 1 0 0 1\nsolve_watched\nhaptic 50\nsolve\nboundary b.obj\nboundary b.surf\n' > "$tmp/sel.scn"
+if (cd "$tmp" && "$OLDPWD/$R" sel.scn) > "$tmp/sel.out" 2>&1; then ok; else bad "selection commands: $(cat "$tmp/sel.out")"; fi
+grep -q '^fixbox: 16 nodes' "$tmp/sel.out" && grep -q '^fixsphere: 1 nodes' "$tmp/sel.out" && grep -q '^haptic: 50 steps' "$tmp/sel.out" && grep -q '^solve_watched: 3 nodes' "$tmp/sel.out" && ok || bad "selection output: $(cat "$tmp/sel.out")"
+n=$(sed -n 's/^boundary: b.obj (\([0-9]*\) triangles)/\1/p' "$tmp/sel.out")
+[ -n "$n" ] && [ "$(grep -c '^f ' "$tmp/b.obj")" = "$n" ] && [ "$(grep -c . "$tmp/b.surf")" = "$((4 * n))" ] && ok || bad "boundary files ($n triangles)"
+while IFS='|' read -r name line want text; do
+  printf '%b' "$line" > "$tmp/$name.scn"
+  out=$("$R" "$tmp/$name.scn" 2>&1); rc=$?
+  if [ $rc -ne 0 ] && printf '%s' "$out" | grep -q "$name.scn:$want: .*$text"; then ok; else bad "$name: rc=$rc out=$out"; fi
+done <<'CASES'
+fixrange|mesh beam 4\nfixnodes 1 100000\n|2|bad node
+fixlate|mesh beam 4\nfix z lt 0.5\nsolve\nfixnodes 3\n|4|already factored
+boxinv|mesh beam 4\nfixbox 1 0 0 0 1 1\n|2|lo\[0\]
+spherenan|mesh beam 4\nfixsphere 0 0 0 nan\n|2|bad number
+hapticarg|mesh beam 4\nhaptic 0\n|2|usage
+CASES
 echo "test_replay: $pass passed, $fail failed"
 [ $fail -eq 0 ]

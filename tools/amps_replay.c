@@ -18,7 +18,16 @@
      solve
      residual on|off
      dump <file.csv>          node,ux,uy,uz of every node (values of the last solve)
-     write <file.vtu>         mesh, displacement and stresses for ParaView */
+     write <file.vtu>         mesh, displacement and stresses for ParaView
+     fixnodes <v> [<v> ...]   fix the listed nodes (up to 63 a line; before the first solve)
+     fixbox x0 y0 z0 x1 y1 z1 fix the nodes in the box [x0, x1] x [y0, y1] x [z0, z1]
+     fixsphere x y z r        fix the nodes within distance r of (x, y, z)
+     watch <v> [<v> ...]      the watched nodes (replaces the set; copies of cut nodes join it)
+     solve_watched            solve for the watched nodes only
+     haptic <n>               n haptic steps (pin reactions from the dense system); prints the
+                              median and worst step
+     boundary <file>          the boundary triangles at their deformed positions: an OBJ file
+                              if the name ends in .obj, else the --surface format */
 #define AMPS_IMPLEMENTATION
 #include "amps.h"
 #include <stdio.h>
@@ -27,7 +36,7 @@
 #include <ctype.h>
 #include <math.h>
 
-#define MAXTOK 16
+#define MAXTOK 64
 
 typedef struct replay {
     amps_ctx ctx;
@@ -67,73 +76,47 @@ static int parse_node(const char *s, amps_int *v) {
     return 1;
 }
 
-typedef struct face {
-    amps_int v[3], t;
-} face;
-
-static int cmp_face(const void *a, const void *b) {
-    const face *x = (const face *)a, *y = (const face *)b;
-    int k;
-    for (k = 0; k < 3; k++)
-        if (x->v[k] != y->v[k]) return x->v[k] < y->v[k] ? -1 : 1;
-    return 0;
-}
-
-/* Boundary triangles (faces of exactly one tet) at their deformed positions. */
-static int write_surface(replay *R, const char *path) {
+/* Boundary triangles (amps_mesh_boundary: faces of exactly one tet, cut faces included) at their
+   deformed positions: an OBJ file (obj != 0) or blocks of 4 lines "x y z |u|" per triangle. */
+static int write_boundary(replay *R, const char *path, int obj) {
     const amps_mesh *m = amps_scene_mesh(R->S);
     const double *u = amps_scene_displacements(R->S);
-    static const int fv[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
-    face *f = (face *)malloc(sizeof(face) * 4 * (size_t)m->ntet);
-    amps_int t, k, n = 0;
-    FILE *o = fopen(path, "w");
-    if (!f || !o) {
-        free(f);
-        if (o) fclose(o);
+    amps_int n = amps_mesh_boundary(&R->ctx, m, NULL, NULL), k, v;
+    amps_int *tri = (amps_int *)malloc(sizeof(amps_int) * 3 * (size_t)(n > 0 ? n : 1));
+    FILE *o = n >= 0 && tri ? fopen(path, "w") : NULL;
+    int q;
+    if (!o) {
+        free(tri);
         fprintf(stderr, "%s: cannot write\n", path);
         return 1;
     }
-    for (t = 0; t < m->ntet; t++)
-        for (k = 0; k < 4; k++) {
-            amps_int a = m->tet[4 * t + fv[k][0]], b = m->tet[4 * t + fv[k][1]], c = m->tet[4 * t + fv[k][2]], x;
-            if (a > b) {
-                x = a;
-                a = b;
-                b = x;
+    amps_mesh_boundary(&R->ctx, m, tri, NULL);
+    if (obj) {
+        for (v = 0; v < m->nnode; v++)
+            fprintf(o, "v %.17g %.17g %.17g\n", m->xyz[3 * v] + u[3 * v], m->xyz[3 * v + 1] + u[3 * v + 1],
+                    m->xyz[3 * v + 2] + u[3 * v + 2]);
+        for (k = 0; k < n; k++)
+            fprintf(o, "f %ld %ld %ld\n", (long)tri[3 * k] + 1, (long)tri[3 * k + 1] + 1, (long)tri[3 * k + 2] + 1);
+    } else
+        for (k = 0; k < n; k++) {
+            for (q = 0; q <= 3; q++) {
+                v = tri[3 * k + q % 3];
+                fprintf(o, "%g %g %g %g\n", m->xyz[3 * v] + u[3 * v], m->xyz[3 * v + 1] + u[3 * v + 1],
+                        m->xyz[3 * v + 2] + u[3 * v + 2],
+                        sqrt(u[3 * v] * u[3 * v] + u[3 * v + 1] * u[3 * v + 1] + u[3 * v + 2] * u[3 * v + 2]));
             }
-            if (b > c) {
-                x = b;
-                b = c;
-                c = x;
-            }
-            if (a > b) {
-                x = a;
-                a = b;
-                b = x;
-            }
-            f[n].v[0] = a;
-            f[n].v[1] = b;
-            f[n].v[2] = c;
-            f[n].t = t;
-            n++;
+            fprintf(o, "\n");
         }
-    qsort(f, (size_t)n, sizeof(face), cmp_face);
-    for (k = 0; k < n; k++) {
-        int q;
-        if ((k > 0 && !cmp_face(f + k, f + k - 1)) || (k + 1 < n && !cmp_face(f + k, f + k + 1))) continue;
-        for (q = 0; q <= 3; q++) {
-            amps_int v = f[k].v[q % 3];
-            double d = sqrt(u[3 * v] * u[3 * v] + u[3 * v + 1] * u[3 * v + 1] + u[3 * v + 2] * u[3 * v + 2]);
-            fprintf(o, "%g %g %g %g\n", m->xyz[3 * v] + u[3 * v], m->xyz[3 * v + 1] + u[3 * v + 1],
-                    m->xyz[3 * v + 2] + u[3 * v + 2], d);
-        }
-        fprintf(o, "\n");
+    free(tri);
+    if (fclose(o)) {
+        fprintf(stderr, "%s: cannot write\n", path);
+        return 1;
     }
-    free(f);
-    fclose(o);
-    if (!R->quiet) printf("surface: %s\n", path);
+    if (!R->quiet) printf("%s: %s (%ld triangles)\n", obj ? "boundary" : "surface", path, (long)n);
     return 0;
 }
+
+static int write_surface(replay *R, const char *path) { return write_boundary(R, path, 0); }
 
 static int cmp_double(const void *a, const void *b) {
     double x = *(const double *)a, y = *(const double *)b;
@@ -186,6 +169,103 @@ static void print_factor_info(replay *R, double t) {
            (long)F->n, amps_factor_nnz(F), (long)F->height, 1e3 * t);
 }
 
+/* Nodes t[1..nt-1] into v (room for nt); 0 after a message if one is bad or out of range. */
+static int parse_nodes(replay *R, int nt, char **t, amps_int *v) {
+    int k;
+    for (k = 1; k < nt; k++)
+        if (!parse_node(t[k], v + k - 1) || v[k - 1] >= amps_scene_mesh(R->S)->nnode) {
+            fail(R, "bad node '%s'", t[k]);
+            return 0;
+        }
+    return 1;
+}
+
+/* fixnodes <v> [<v> ...] | watch <v> [<v> ...] */
+static int cmd_nodelist(replay *R, int nt, char **t) {
+    amps_int v[MAXTOK];
+    int fix = !strcmp(t[0], "fixnodes");
+    if (nt < 2) return fail(R, "usage: %s <node> [<node> ...]", t[0]);
+    if (!parse_nodes(R, nt, t, v)) return 1;
+    if (fix ? amps_scene_fix(&R->ctx, R->S, nt - 1, v) : amps_scene_watch(&R->ctx, R->S, nt - 1, v))
+        return lib_fail(R, t[0]);
+    if (fix && !R->quiet) printf("fixnodes: %d nodes\n", nt - 1);
+    return 0;
+}
+
+/* fixbox x0 y0 z0 x1 y1 z1 | fixsphere x y z r */
+static int cmd_fixregion(replay *R, int nt, char **t) {
+    int box = !strcmp(t[0], "fixbox"), k;
+    double x[6];
+    amps_int cnt = 0;
+    amps_status s;
+    if (nt != (box ? 7 : 5)) return fail(R, "%s", box ? "usage: fixbox x0 y0 z0 x1 y1 z1" : "usage: fixsphere x y z r");
+    for (k = 1; k < nt; k++)
+        if (!parse_num(t[k], &x[k - 1])) return fail(R, "bad number '%s'", t[k]);
+    s = box ? amps_scene_fix_box(&R->ctx, R->S, x, x + 3, &cnt) : amps_scene_fix_sphere(&R->ctx, R->S, x, x[3], &cnt);
+    if (s != AMPS_OK) return lib_fail(R, t[0]);
+    if (!R->quiet) printf("%s: %ld nodes\n", t[0], (long)cnt);
+    return 0;
+}
+
+/* solve_watched */
+static int cmd_solve_watched(replay *R, int nt) {
+    double t0 = amps_now(), dt;
+    amps_int n;
+    if (nt != 1) return fail(R, "%s", "usage: solve_watched");
+    if (amps_scene_solve_watched(&R->ctx, R->S) < 0) return lib_fail(R, "solve_watched");
+    dt = amps_now() - t0;
+    if (!R->solved) print_factor_info(R, dt);
+    R->solved = 1;
+    amps_scene_watched(R->S, &n);
+    if (!R->quiet) printf("solve_watched: %ld nodes, %.3f ms\n", (long)n, 1e3 * dt);
+    return 0;
+}
+
+/* haptic <n> */
+static int cmd_haptic(replay *R, int nt, char **t) {
+    amps_int n, k;
+    double *dt;
+    if (nt != 2 || !parse_node(t[1], &n) || n < 1 || n > 10000000) return fail(R, "%s", "usage: haptic <steps>");
+    if (R->sandbox && n > 100) n = 100;
+    dt = (double *)malloc(sizeof(double) * (size_t)n);
+    if (!dt) return fail(R, "%s", "out of memory");
+    for (k = 0; k < n; k++) {
+        double t0 = amps_now();
+        if (amps_scene_solve_reactions(&R->ctx, R->S) < 0) {
+            free(dt);
+            return lib_fail(R, "haptic");
+        }
+        dt[k] = amps_now() - t0;
+        if (k == 0 && !R->solved) print_factor_info(R, dt[0]);
+        R->solved = 1;
+    }
+    qsort(dt, (size_t)n, sizeof(double), cmp_double);
+    if (!R->quiet)
+        printf("haptic: %ld steps, median %.2f us, worst %.2f us\n", (long)n, 1e6 * dt[n / 2], 1e6 * dt[n - 1]);
+    free(dt);
+    return 0;
+}
+
+/* boundary <file> */
+static int cmd_boundary(replay *R, int nt, char **t) {
+    size_t n;
+    if (nt != 2) return fail(R, "%s", "usage: boundary <file.obj|file.surf>");
+    if (R->sandbox) return 0;
+    n = strlen(t[1]);
+    return write_boundary(R, t[1], n >= 4 && !strcmp(t[1] + n - 4, ".obj"));
+}
+
+/* The selection, watch, haptic and boundary commands; -1 if c is none of them. */
+static int run_selection_line(replay *R, int nt, char **t) {
+    const char *c = t[0];
+    if (!strcmp(c, "fixnodes") || !strcmp(c, "watch")) return cmd_nodelist(R, nt, t);
+    if (!strcmp(c, "fixbox") || !strcmp(c, "fixsphere")) return cmd_fixregion(R, nt, t);
+    if (!strcmp(c, "solve_watched")) return cmd_solve_watched(R, nt);
+    if (!strcmp(c, "haptic")) return cmd_haptic(R, nt, t);
+    if (!strcmp(c, "boundary")) return cmd_boundary(R, nt, t);
+    return -1;
+}
+
 static int run_line(replay *R, int nt, char **t) {
     const char *c = t[0];
     amps_int v;
@@ -194,6 +274,7 @@ static int run_line(replay *R, int nt, char **t) {
     double t0 = amps_now();
     if (!strcmp(c, "mesh")) return cmd_mesh(R, nt, t);
     if (!need_scene(R)) return 1;
+    if ((k = run_selection_line(R, nt, t)) >= 0) return k;
     if (!strcmp(c, "material")) {
         if (nt != 3 || !parse_num(t[1], &x[0]) || !parse_num(t[2], &x[1]))
             return fail(R, "%s", "usage: material <E> <nu>");
