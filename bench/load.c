@@ -101,7 +101,7 @@ static int tick(double seconds) {
         }
         clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, NULL);
     }
-    return 0;
+    return sink < 0; /* 0; reads sink */
 }
 
 /* The incision: among the nodes within 0.035 of the height of z = 0 and in the upper 45% in y,

@@ -8,7 +8,7 @@
 # Configurations: 1 (one thread), omp2 (two OpenMP threads, today's default on 2 cores), jobs2
 # (two workers of examples/jobs.h through ctx->enqueue_task/finish_task). Cases: the cut and
 # deformation sequences of bench/harness on bunny20k and bunny50k (amps.h alone, bench/load run),
-# and a bunny incision (bunny9k, 20 cuts) through tools/amps_replay (1 and omp2 only: the replay
+# 12 steps each, and a bunny incision (bunny9k, 20 cuts) through tools/amps_replay (1 and omp2 only: the replay
 # has no job-system option). The configurations of a case alternate within each load, so drift of
 # the machine hits them alike; the whole process set is pinned to cpus 0-1 (taskset).
 # Output: $out/load.csv (case,load,conf,step,time), $out/load_summary.txt (medians, ratios).
@@ -27,9 +27,9 @@ command -v taskset > /dev/null || TS=""
 csv=$out/load.csv
 echo "case,load,conf,step,time" > "$csv"
 if [ "$mode" = quick ]; then
-  runs="brick:8:cut:6 brick:8:deform:6"
-  scn=examples/brick_incision.scn
-  loads="idle spin2 tick"
+  runs="brick:6:cut:4 brick:6:deform:4"
+  scn=$PWD/examples/brick_incision.scn
+  loads="idle spin2"
 else
   bash bench/get_bunny.sh || exit 1
   d=bench/data
@@ -38,8 +38,8 @@ else
     rm -f $d/bunny9k.1.face $d/bunny9k.1.edge $d/bunny9k.1.smesh
   fi
   build/bench/load scn $d/bunny9k.1.node 24 > $d/bunny9k_incision.scn || exit 1
-  runs="$d/bunny20k.1.node:cut:20 $d/bunny20k.1.node:deform:20 $d/bunny50k.1.node:cut:20 $d/bunny50k.1.node:deform:20"
-  scn=$d/bunny9k_incision.scn
+  runs="$d/bunny20k.1.node:cut:12 $d/bunny20k.1.node:deform:12 $d/bunny50k.1.node:cut:12 $d/bunny50k.1.node:deform:12"
+  scn=$PWD/$d/bunny9k_incision.scn
   loads="idle spin1 spin2 tick"
 fi
 pids=""
@@ -62,7 +62,7 @@ trap 'stop_load' EXIT
 replay() {
   local t=1
   [ "$2" = omp2 ] && t=2
-  $TS build/bench/amps_replay --threads $t "$scn" 2> /dev/null |
+  (cd build/bench && $TS ./amps_replay --threads $t "$scn" 2> /dev/null) | # dump/write lines write here
     awk -v l="$1" -v c="$2" '/^step / && $2 > 1 { for (k = 1; k < NF; k++) if ($(k+1) == "ms") print "incision," l "," c "," $2 "," $k / 1000 }' >> "$csv"
 }
 for load in $loads; do
