@@ -68,17 +68,18 @@
    THREAD SAFETY
      No global mutable state: calls on distinct objects (and distinct contexts) may always run
      concurrently. One object (a factor, an engine, a scene and its engine) takes one call at a
-     time, with two exceptions: amps_update_watched_run may run on any thread, without the
-     caller's lock, between amps_update_watched_begin and _end (it reads only its job's vector and
-     the base factor); and the background re-factorization (opts.refactor) runs on a thread of
-     its own. That thread reads a snapshot of the engine taken at the start, the base factor's
-     ordering and the engine's change log (under the job's mutex), and writes only the job's new
-     base; every engine call swaps a ready job in or drops a failed one on the caller's thread.
+     time, with two exceptions: amps_update_watched_run may run on any thread, concurrently with
+     the other calls on the engine, between amps_update_watched_begin and _end (it reads only its
+     job's vector and the base factor); and the background re-factorization (opts.refactor) runs on a thread of
+     its own. That thread reads the engine's base matrix (no call changes it while a job runs),
+     a copy of the changes, constraints and forces taken at the start and the engine's change log
+     (under the job's mutex), and writes only the job's new base (matrix, factor, engine); the
+     caller's engine calls swap a ready job in or drop a failed one, on the caller's thread.
      An amps_ctx is used by one call at a time (it records the last error).
-     Task callbacks (ctx->enqueue_task, ctx->finish_task): enqueue runs task on every sub-range
-     of [0, n) exactly once (sub-ranges of at least min_range, except the last), on any thread
-     and in any order, or returns NULL (not queued: amps runs all of it inline); finish returns
-     only when every sub-range of that handle has run. A task never calls amps on the object of
+     Task callbacks (ctx->enqueue_task, ctx->finish_task): enqueue either returns NULL (not
+     queued: amps runs [0, n) itself) or a handle, and the host then runs task on sub-ranges that
+     cover [0, n) once each (at least min_range long, except the last), on any threads, in any
+     order; finish returns only when every sub-range of that handle has run. A task never calls amps on the object of
      the call that queued it; worker is below ctx->worker_count.
      The log callback (ctx->log) is called only on the thread of the call that got ctx, during
      that call: failures of the background thread reach it at the next call on the engine.

@@ -2,6 +2,7 @@
 # amps.h under load (bench/load.c): median step times of each configuration under each load,
 # and the ratios of issue 17's targets, measured in one run.
 #   bench/load.sh [full|quick] [outdir]   (full: bench/out/load.csv; quick: build/bench/load_quick)
+#   bench/load.sh summary [outdir]        the table again from outdir/load.csv (a run cut short)
 # Loads, each started before and stopped after its runs:
 #   idle; spin1, spin2: one / two `yes > /dev/null` processes; tick: bench/load tick (a 1 kHz
 #   loop working 0.3 ms per period, a haptic thread).
@@ -16,6 +17,10 @@ set -u
 cd "$(dirname "$0")/.."
 mode=${1:-full}
 out=${2:-}
+if [ "$mode" = summary ]; then # bench/load.sh summary <dir>: the table of <dir>/load.csv again
+  only_summary=1
+  mode=full
+fi
 [ -z "$out" ] && { [ "$mode" = quick ] && out=build/bench/load_quick || out=bench/out; }
 mkdir -p "$out" build/bench
 CC=${CC:-cc}
@@ -25,7 +30,6 @@ $CC $FLAGS -o build/bench/amps_replay tools/amps_replay.c -lm || exit 1
 TS="taskset -c 0,1"
 command -v taskset > /dev/null || TS=""
 csv=$out/load.csv
-echo "case,load,conf,step,time" > "$csv"
 if [ "$mode" = quick ]; then
   runs="brick:6:cut:4 brick:6:deform:4"
   scn=$PWD/examples/brick_incision.scn
@@ -38,7 +42,7 @@ else
     rm -f $d/bunny9k.1.face $d/bunny9k.1.edge $d/bunny9k.1.smesh
   fi
   build/bench/load scn $d/bunny9k.1.node 24 > $d/bunny9k_incision.scn || exit 1
-  runs="$d/bunny20k.1.node:cut:12 $d/bunny20k.1.node:deform:12 $d/bunny50k.1.node:cut:12 $d/bunny50k.1.node:deform:12"
+  runs="$d/bunny20k.1.node:cut:12 $d/bunny50k.1.node:cut:12 $d/bunny20k.1.node:deform:12 $d/bunny50k.1.node:deform:12"
   scn=$PWD/$d/bunny9k_incision.scn
   loads="idle spin1 spin2 tick"
 fi
@@ -58,26 +62,8 @@ stop_load() {
   pids=""
 }
 trap 'stop_load' EXIT
-# replay <load> <conf>: one row per solve after the first (its step time, from the step lines)
-replay() {
-  local t=1
-  [ "$2" = omp2 ] && t=2
-  (cd build/bench && $TS ./amps_replay --threads $t "$scn" 2> /dev/null) | # dump/write lines write here
-    awk -v l="$1" -v c="$2" '/^step / && $2 > 1 { for (k = 1; k < NF; k++) if ($(k+1) == "ms") print "incision," l "," c "," $2 "," $k / 1000 }' >> "$csv"
-}
-for load in $loads; do
-  start_load $load
-  echo "load $load"
-  for r in $runs; do
-    IFS=: read -r -a f <<< "$r"
-    n=${#f[@]}
-    mesh=$(IFS=:; echo "${f[*]:0:n-2}")
-    for conf in 1 omp2 jobs2; do $TS build/bench/load run "$mesh" "${f[n-2]}" "${f[n-1]}" $conf $load "$csv" || exit 1; done
-  done
-  for conf in 1 omp2 1 omp2; do replay $load $conf; done
-  stop_load
-done
 # medians per case, load, conf; the target ratios
+summary() {
 awk -F, 'NR > 1 { k = $1 "," $2 "," $3; v[k, ++n[k]] = $5; keys[k] = 1 }
   function med(k,   m, i, j, a, t) { m = n[k]; for (i = 1; i <= m; i++) a[i] = v[k, i]
     for (i = 2; i <= m; i++) { t = a[i]; for (j = i - 1; j >= 1 && a[j] > t; j--) a[j + 1] = a[j]; a[j + 1] = t }
@@ -91,3 +77,31 @@ awk -F, 'NR > 1 { k = $1 "," $2 "," $3; v[k, ++n[k]] = $5; keys[k] = 1 }
       printf "%-18s %-6s %9.2f %9.2f %9s %10.2f %10s\n", c, l, one, o, j < 0 ? "-" : sprintf("%.2f", j), o / one, j < 0 ? "-" : sprintf("%.2f", j / one) }
   }' "$csv" | { read -r h; echo "$h"; sort; } | tee "$out/load_summary.txt"
 echo "targets: under spin1/spin2/tick the default (omp2) at most 1.1x the 1-thread step; idle omp2/1 at most 0.7 on cut_bunny50k"
+}
+if [ -n "${only_summary:-}" ]; then summary; exit 0; fi
+echo "case,load,conf,step,time" > "$csv"
+# replay <load> <conf>: one row per solve after the first (its step time, from the step lines)
+replay() {
+  local t=1
+  [ "$2" = omp2 ] && t=2
+  (cd build/bench && $TS ./amps_replay --threads $t "$scn" 2> /dev/null) | # dump/write lines write here
+    awk -v l="$1" -v c="$2" '/^step / && $2 > 1 { for (k = 1; k < NF; k++) if ($(k+1) == "ms") print "incision," l "," c "," $2 "," $k / 1000 }' >> "$csv"
+}
+# case by case (the incision first), each under every load: a run cut short still has every
+# load of the cases it finished
+for load in $loads; do
+  start_load $load
+  for conf in 1 omp2 1 omp2; do replay $load $conf; done
+  stop_load
+done
+for r in $runs; do
+  IFS=: read -r -a f <<< "$r"
+  n=${#f[@]}
+  mesh=$(IFS=:; echo "${f[*]:0:n-2}")
+  for load in $loads; do
+    start_load $load
+    for conf in 1 omp2 jobs2; do $TS build/bench/load run "$mesh" "${f[n-2]}" "${f[n-1]}" $conf $load "$csv" || exit 1; done
+    stop_load
+  done
+done
+summary
