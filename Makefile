@@ -10,6 +10,7 @@
 #   make demo          the main job: replay examples/brick_incision.scn (VTU, CSV, PNG in build/demo)
 #   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv (tracked)
 #   make bench-quick   a subset of them; results in build/bench/quick
+#   make bench-load    the load benchmark alone (spinning processes, a 1 kHz loop; bench/load.sh)
 #   make stress        the long stress suite (beams to 5x5x4096, 10,000-step runs; CSV/PNG in build/stress)
 #   make fuzz          libFuzzer targets (clang), FUZZ_TIME seconds each (default 60)
 #   make deps          install (as root) or list the Debian packages the tests need
@@ -47,7 +48,7 @@ TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
 TEST_SH   := $(wildcard tests/test_*.sh)
 TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example $(BUILD)/haptic_loop
 
-.PHONY: tsan test-tasks all test deps deps-check tools examples demo bench bench-quick clean distclean cxx switches stress fuzz \
+.PHONY: tsan test-tasks all test deps deps-check tools examples demo bench bench-quick bench-load clean distclean cxx switches stress fuzz \
         format format-check
 all: tools
 
@@ -59,7 +60,7 @@ $(BUILD)/amps_replay: tools/amps_replay.c amps.h | $(BUILD)
 $(BUILD)/readme_example: examples/readme_example.c amps.h | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< $(LDLIBS)
 
-$(BUILD)/haptic_loop: examples/haptic_loop.c amps.h | $(BUILD)
+$(BUILD)/haptic_loop: examples/haptic_loop.c examples/jobs.h amps.h | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< -lpthread $(LDLIBS)
 
 examples: $(BUILD)/readme_example $(BUILD)/haptic_loop
@@ -123,6 +124,10 @@ bench:
 
 bench-quick:
 	bash bench/run.sh quick
+
+# the load benchmark alone (part of make bench): bench/out/load.csv, load_summary.txt
+bench-load:
+	bash bench/load.sh full
 
 # The sources clang-format keeps in the style of .clang-format (CLANG_FORMAT: version 14 or later).
 CLANG_FORMAT ?= clang-format

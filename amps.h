@@ -65,6 +65,25 @@
      Objects are owned by the caller, who frees them with the matching *_free, except the mesh
      given to amps_scene_create: the scene owns it from then on, also when the create fails.
 
+   THREAD SAFETY
+     No global mutable state: calls on distinct objects (and distinct contexts) may always run
+     concurrently. One object (a factor, an engine, a scene and its engine) takes one call at a
+     time, with two exceptions: amps_update_watched_run may run on any thread, concurrently with
+     the other calls on the engine, between amps_update_watched_begin and _end (it reads only its
+     job's vector and the base factor); and the background re-factorization (opts.refactor) runs on a thread of
+     its own. That thread reads the engine's base matrix (no call changes it while a job runs),
+     a copy of the changes, constraints and forces taken at the start and the engine's change log
+     (under the job's mutex), and writes only the job's new base (matrix, factor, engine); the
+     caller's engine calls swap a ready job in or drop a failed one, on the caller's thread.
+     An amps_ctx is used by one call at a time (it records the last error).
+     Task callbacks (ctx->enqueue_task, ctx->finish_task): enqueue either returns NULL (not
+     queued: amps runs [0, n) itself) or a handle, and the host then runs task on sub-ranges that
+     cover [0, n) once each (at least min_range long, except the last), on any threads, in any
+     order; finish returns only when every sub-range of that handle has run. A task never calls amps on the object of
+     the call that queued it; worker is below ctx->worker_count.
+     The log callback (ctx->log) is called only on the thread of the call that got ctx, during
+     that call: failures of the background thread reach it at the next call on the engine.
+
    EXAMPLE
      amps_ctx ctx; amps_ctx_init(&ctx);
      amps_csc *K = amps_csc_from_triplets(&ctx, n, nz, ti, tj, tx, AMPS_UPPER);
@@ -74,6 +93,11 @@
 */
 #ifndef AMPS_H
 #define AMPS_H
+
+#define AMPS_VERSION_MAJOR 0
+#define AMPS_VERSION_MINOR 3
+#define AMPS_VERSION_PATCH 0
+#define AMPS_VERSION_STRING "0.3.0"
 
 #include <stddef.h>
 
@@ -140,6 +164,11 @@ typedef struct amps_ctx {
     amps_finish_task_fn *finish_task;
     void *task_user;                    /* passed as user to both */
     int worker_count;                   /* workers of the host system (>= 1; worker indices < it); 0 = 1 */
+    /* optional: warnings (AMPS_WARN_*), accuracy refinements and re-factorizations, and failures
+       of the background re-factorization, as they happen (s: their status, AMPS_OK for a
+       remark); called on the caller's thread only (see THREAD SAFETY); NULL: none */
+    void (*log)(void *user, amps_status s, const char *msg);
+    void *log_user;
     amps_status status; /* status of the last call that failed or warned */
     char msg[256];      /* human-readable message for status */
 } amps_ctx;
@@ -152,6 +181,8 @@ AMPS_API const char *amps_status_str(amps_status s);
    the implementation), omp_get_wtime with OpenMP, else processor time (clock), which the
    re-factorization's cost model then misreads in threaded builds. */
 AMPS_API double amps_now(void);
+/* AMPS_VERSION_STRING of the implementation ("major.minor.patch"; static storage). */
+AMPS_API const char *amps_version(void);
 
 /* ==== [amps:sparse] sparse matrices =========================================================== */
 
@@ -1041,6 +1072,8 @@ AMPS_API double amps_now(void) {
 #endif
 }
 
+AMPS_API const char *amps_version(void) { return AMPS_VERSION_STRING; }
+
 /* ---- messages: a small printf subset, identical in every build and free of <stdio.h> ----
    Conversions: %% %c %s %d %u %ld %lu %lld %llu, and %f %e %g with an optional precision
    (%.3g); no flags or widths; %P prints a path (a string) of over 80 characters as its first 32,
@@ -1213,7 +1246,20 @@ static void amps__vfmt(char *buf, size_t size, const char *fmt, va_list ap) {
 }
 
 
-/* Records status s and a message formatted by amps__vfmt in ctx; returns s. */
+/* Passes a message formatted by amps__vfmt with status s to ctx->log, if set (caller's thread
+   only: see THREAD SAFETY). ctx->status and ctx->msg stay. */
+static void amps__log(amps_ctx *ctx, amps_status s, const char *fmt, ...) {
+    char msg[256];
+    va_list ap;
+    if (!ctx || !ctx->log) return;
+    va_start(ap, fmt);
+    amps__vfmt(msg, sizeof(msg), fmt, ap);
+    va_end(ap);
+    ctx->log(ctx->log_user, s, msg);
+}
+
+/* Records status s and a message formatted by amps__vfmt in ctx; returns s. A warning (s > 0)
+   also goes to ctx->log. */
 static amps_status amps__err(amps_ctx *ctx, amps_status s, const char *fmt, ...) {
     if (ctx) {
         va_list ap;
@@ -1221,6 +1267,7 @@ static amps_status amps__err(amps_ctx *ctx, amps_status s, const char *fmt, ...)
         va_start(ap, fmt);
         amps__vfmt(ctx->msg, sizeof(ctx->msg), fmt, ap);
         va_end(ap);
+        if (s > 0 && ctx->log) ctx->log(ctx->log_user, s, ctx->msg);
     }
     return s;
 }
@@ -7617,8 +7664,16 @@ again:
         U->refac.opts.refactor != AMPS_REFACTOR_OFF && U->aug.size > 0) {
         /* the augmentation is the suspect: a fresh base, then the same solve again */
         pass = 1;
-        if (amps_update_refactor(ctx, U) == AMPS_OK) goto again;
+        if ((s = amps_update_refactor(ctx, U)) == AMPS_OK) {
+            amps__log(ctx, AMPS_OK, "amps_update_solve: backward error %.3g above tolerance: re-factored",
+                      U->stats.backward_error);
+            goto again;
+        }
+        amps__log(ctx, s, "amps_update_solve: the accuracy re-factorization failed (%s)", ctx ? ctx->msg : "");
     }
+    if (U->stats.guard_result == AMPS_GUARD_REFINED || U->stats.guard_result == AMPS_GUARD_REFACTORED)
+        amps__log(ctx, AMPS_OK, "amps_update_solve: accuracy guard: %d refinement step(s)%s, relative residual %.3g",
+                  (int)U->stats.guard_steps, pass ? " after a re-factorization" : "", U->stats.relres);
     /* reactions (K^ x - f^)_C */
     for (a = 0; a < U->aug.size; a++) {
         amps_int i = U->aug.idx[a];
@@ -8405,8 +8460,13 @@ static void amps__bg_poll(amps_ctx *ctx, amps_update *U) {
             amps_ctx c2;
             amps_ctx_init(&c2);
             c2.alloc_user = ctx ? ctx->alloc_user : NULL;
-            (void)amps__bg_swap(&c2, U);
-        } else if (st == AMPS__BG_FAILED) amps__bg_end(ctx, U, 1);
+            if (amps__bg_swap(&c2, U) != AMPS_OK) amps__log(ctx, c2.status, "%s", c2.msg);
+        } else if (st == AMPS__BG_FAILED) {
+            amps__log(ctx, U->refac.job->status ? U->refac.job->status : AMPS_ERR_STATE,
+                      "amps_update: the automatic re-factorization failed (%s); the engine keeps its factors",
+                      U->refac.job->msg);
+            amps__bg_end(ctx, U, 1);
+        }
     }
 }
 
@@ -8426,7 +8486,8 @@ static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t) {
         amps_ctx c2;
         amps_ctx_init(&c2);
         c2.alloc_user = ctx ? ctx->alloc_user : NULL;
-        (void)amps_update_refactor_start(&c2, U);
+        if (amps_update_refactor_start(&c2, U) < 0)
+            amps__log(ctx, c2.status, "amps_update: starting the automatic re-factorization failed (%s)", c2.msg);
     }
 #else
     (void)ctx;

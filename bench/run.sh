@@ -101,6 +101,9 @@ if command -v gnuplot >/dev/null; then
       unset multiplot" 2>/dev/null || echo "gnuplot failed for $m"
   done
 fi
+# under load: spinning processes and a 1 kHz loop beside 1 thread, 2 OpenMP threads and the
+# example job system (bench/load.sh; full: about 15 minutes, quick: about 1)
+bash bench/load.sh $mode $out || exit 1
 {
   cpu=$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//')
   echo "machine: $(uname -m), $(nproc) cores, $cpu, $(free -g | awk '/Mem:/{print $2}') GiB"

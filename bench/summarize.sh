@@ -535,6 +535,26 @@ if ls "$dir"/compare_*.txt >/dev/null 2>&1; then
     echo
   done
 fi
+if [ -f "$dir/load_summary.txt" ]; then
+  cat <<'EOF'
+## 8c. Under load (`bench/load.sh`, issue 17)
+
+Median step (ms) of amps.h alone on the harness's cut and deformation sequences (`bench/load
+run`, 12 steps) and of a bunny incision through `tools/amps_replay` (bunny9k, 20 cuts), each
+idle, beside one or two spinning processes (spin1, spin2: `yes`) and beside a 1 kHz loop that
+works 0.3 ms per period (tick: `bench/load tick`), all pinned to cpus 0-1. Configurations: 1
+thread, 2 OpenMP threads (omp2, the default on 2 cores), 2 workers of the example job system
+(jobs2: `examples/jobs.h` through `ctx->enqueue_task`/`finish_task`; the caller helps). The
+configurations alternate within each load. Targets (issue 17): under spin1/spin2/tick omp2/1 at
+most 1.1; idle, omp2/1 at most 0.7 on cut_bunny50k. "idle" means no load of the benchmark's own:
+on a machine shared with other jobs it is not idle, which the 1-thread column shows.
+
+```
+EOF
+  cat "$dir/load_summary.txt"
+  echo '```'
+  echo
+fi
 cat <<'EOF'
 ## 9. How to reproduce
 
@@ -544,4 +564,5 @@ as root, otherwise it names them), `make bench-quick` for a subset (under 3 minu
 programs (`bench/bench.h` the scenario and shared helpers), `bench/summarize.sh` writes this file and the
 plots from the CSV files. `bench/compare.sh REV` runs the factorization, the cut step and the
 haptic step of amps.h at revision REV and of the working tree side by side (section 8b).
+`bench/load.sh [quick]` runs the load benchmark alone (section 8c).
 EOF

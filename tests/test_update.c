@@ -11,6 +11,8 @@ static int t_bg_fault = 0;
 #include "fe_util.h"
 #include "cholmod_ref.h"
 #include <string.h>
+#include <pthread.h>
+#include <time.h>
 
 /* ---- explicit current system: triplets (i <= j, summed on assembly) ---- */
 typedef struct trip {
@@ -1067,7 +1069,84 @@ static void test_threads(void) {
 #endif
 }
 
+/* The version macros and string; ctx->log: warnings, guard steps and a failed background
+   re-factorization reach it, on the caller's thread, at the next engine call. */
+typedef struct t_logrec {
+    int n, nwarn, nfail, nguard, other_thread;
+    pthread_t self;
+    char last[256];
+} t_logrec;
+static void t_log(void *user, amps_status s, const char *msg) {
+    t_logrec *r = (t_logrec *)user;
+    r->n++;
+    if (!pthread_equal(pthread_self(), r->self)) r->other_thread++;
+    if (s > 0) r->nwarn++;
+    if (s < 0 && strstr(msg, "re-factorization failed")) r->nfail++;
+    if (s == AMPS_OK && strstr(msg, "guard")) r->nguard++;
+    snprintf(r->last, sizeof(r->last), "%s", msg);
+}
+static void test_log(void) {
+    char v[32];
+    snprintf(v, sizeof(v), "%d.%d.%d", AMPS_VERSION_MAJOR, AMPS_VERSION_MINOR, AMPS_VERSION_PATCH);
+    CHECK(!strcmp(amps_version(), AMPS_VERSION_STRING) && !strcmp(v, AMPS_VERSION_STRING) &&
+              !strcmp(amps_version(), "0.3.0"),
+          "version %s / %s / %s", amps_version(), AMPS_VERSION_STRING, v);
+    {
+        model m;
+        amps_update_opts o;
+        int nz, *ti, *tj, k, idx[3] = {3, 9, 17};
+        double *tx, val[3] = {1, -1, 2}, fv = 1.0, x[60];
+        t_logrec r;
+        amps_update_stats st;
+        memset(&r, 0, sizeof(r));
+        r.self = pthread_self();
+        amps_update_opts_default(&o);
+        o.grow = 1;
+        o.refactor = AMPS_REFACTOR_MANUAL;
+        random_spd(60, 77, &nz, &ti, &tj, &tx);
+        CHECK(model_init(&m, 60, nz, ti, tj, tx, &o) == 0, "init: %s", m.ctx.msg);
+        m.ctx.log = t_log;
+        m.ctx.log_user = &r;
+        change_term(&m, 3, idx, val, 3.0, 0);
+        CHECK(amps_update_solve(&m.ctx, m.U, x) == AMPS_OK && r.n == 0, "log called %d times on a plain solve", r.n);
+        /* an unreachable guard tolerance: a re-factorization, refinement steps, the warning */
+        m.U->guard.tol = 1e-30;
+        change_term(&m, 3, idx, val, 0.5, 0);
+        m.f[idx[0]] = fv;
+        amps_update_set_force(&m.ctx, m.U, 1, idx, &fv);
+        CHECK(amps_update_solve(&m.ctx, m.U, x) == AMPS_WARN_INACCURATE, "guard warning: %s", m.ctx.msg);
+        CHECK(r.nwarn == 1 && !strcmp(r.last, m.ctx.msg), "warnings logged %d, last '%s'", r.nwarn, r.last);
+        CHECK(r.nguard >= 1, "guard remarks logged %d", r.nguard);
+        m.U->guard.tol = 0;
+        /* an injected failure of a background re-factorization: reported at a later commit */
+        r.n = r.nfail = 0;
+        t_bg_fault = 2;
+        CHECK(amps_update_refactor_start(&m.ctx, m.U) == AMPS_OK, "start: %s", m.ctx.msg);
+        for (k = 0; k < 2000; k++) {
+            struct timespec ts = {0, 1000000L};
+            int i2[2] = {k % 60, (k * 7 + 1) % 60};
+            double v2[2] = {0.5, -0.5};
+            change_term(&m, 2, i2, v2, 0.01, 0);
+            amps_update_commit(&m.ctx, m.U);
+            amps_update_get_stats(m.U, &st);
+            if (!st.refactor_running) break;
+            nanosleep(&ts, NULL);
+        }
+        t_bg_fault = 0;
+        CHECK(!st.refactor_running && st.refactor_failed == 1, "failed job not dropped (running %d, failed %d)",
+              (int)st.refactor_running, (int)st.refactor_failed);
+        CHECK(r.nfail == 1 && r.other_thread == 0, "background failure logged %d times (%d on another thread): '%s'",
+              r.nfail, r.other_thread, r.last);
+        model_check(&m, 1e-10, "log: after the failure");
+        model_free(&m);
+        free(ti);
+        free(tj);
+        free(tx);
+    }
+}
+
 int main(void) {
+    test_log();
     test_errors();
     test_random_sequences();
     test_fe_sequences();
