@@ -355,11 +355,28 @@ typedef enum amps_formulation {
    freed at the swap. A failed re-factorization (not SPD, out of memory) is reported by
    amps_update_refactor_wait / the stats and the engine goes on with the old factors.
    With AMPS_NO_THREADS there is no background thread: AUTO does nothing and start/refactor
-   run synchronously. Custom allocators (AMPS_MALLOC) must then be thread-safe. */
+   run synchronously. Custom allocators (AMPS_MALLOC) must then be thread-safe.
+   Triggers (AUTO): the cost model after a full amps_update_solve (refactor_ratio), and after every
+   commit, whatever solve follows it, the size: a commit that leaves |S u C| above
+   refactor_size plus its size at the last base starts one. So |S u C| stays below
+   |C| + refactor_size + the growth during one re-factorization, and the haptic step
+   (amps_update_solve_reactions with only prescribed values moved, O(|S u C|^2)) stays bounded.
+   Deterministic mode (COUNT): structural commits (those that change K^, add DOFs or grow S u C)
+   are counted; the one that brings the count since the last base to refactor_every starts a
+   re-factorization, and the first commit that may swap (not amps_update_solve_reactions) after
+   refactor_every / 2 more structural commits waits for it and swaps it in. The worker only
+   factors (the swap replays every change since the start), so identical call sequences give
+   identical bits; AUTO depends on the clock.
+   Which calls may take how long: a swap (O(one commit of the changes since the start)) happens
+   only at the start of amps_update_commit, solve, solve_watched, watched_begin, refactor_wait and
+   refactor, never in amps_update_solve_reactions; a commit costs Steps 1-5 (Step 1: the
+   L^{-1} columns of the new indices, O(their closures); Steps 2-3: O(|S u C| x new); Step 5:
+   O(|S u C|^2 x changed columns)); a start copies the augmentation (O(|Delta| + N)). */
 typedef enum amps_refactor_policy {
-    AMPS_REFACTOR_AUTO = 0,   /* start by the cost model (only with threads) and on request */
+    AMPS_REFACTOR_AUTO = 0,   /* start by the cost model and the size (only with threads) and on request */
     AMPS_REFACTOR_MANUAL = 1, /* only on request */
-    AMPS_REFACTOR_OFF = 2     /* never */
+    AMPS_REFACTOR_OFF = 2,    /* never */
+    AMPS_REFACTOR_COUNT = 3   /* deterministic: at points fixed by the count of structural commits */
 } amps_refactor_policy;
 
 /* Options; amps_update_opts_default gives the defaults. A capacity, refactor_threads or
@@ -396,6 +413,9 @@ typedef struct amps_update_opts {
                                last base reaches this times the (measured or estimated) time of a
                                re-factorization; default 0.25: it runs on another core, so the steps
                                lose less than its time (1 would be rent or buy; bench/RESULTS.md) */
+    amps_int refactor_size;         /* AUTO: start after a commit that grows |S u C| past its size at the
+                                      last base plus this; default 384 */
+    amps_int refactor_every;        /* COUNT: structural commits between re-factorizations; default 32 */
 } amps_update_opts;
 
 /* The steps of [AMPS] Table 1, indices of amps_update_stats.t_step. */
@@ -527,6 +547,7 @@ AMPS_API void amps_update_watched_end(amps_update *U, amps_update_job *job);
    alone (Steps 4-5, no full solve): O(|S u C|^2) when only prescribed values moved, plus a sparse
    forward solve over closure_L of the changed forces and O(sum of root paths) when forces
    changed. The haptic path: a pin moved, read its force. amps_update_solution is not updated.
+   Its commit never swaps in nor starts a re-factorization (the next other commit does).
    Allocates nothing. A failed commit: see amps_update_commit. */
 AMPS_API amps_status amps_update_solve_reactions(amps_ctx *ctx, amps_update *U);
 /* Solution of the last solve (amps_update_dim entries at that time). */
@@ -757,6 +778,48 @@ AMPS_API amps_int amps_scene_ndof(const amps_scene *S);
 /* The engine (for statistics) and its current base factor; NULL before the factorization. */
 AMPS_API amps_update *amps_scene_engine(const amps_scene *S);
 AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S);
+/* Nodes within distance radius (>= 0) of the segment [a, b] (a point if a = b) in the reference
+   configuration, that belong to a tet: what a blade or a grasper touches. out receives the first
+   min(count, cap) of them, ascending (out may be NULL when cap is 0). Returns their count, or a
+   negative status (AMPS_ERR_ARG: NULL scene, a, b, or out with cap > 0; AMPS_ERR_VALUE: not
+   finite, negative radius). O(nnode); allocates nothing. */
+AMPS_API amps_int amps_scene_nodes_near_segment(amps_ctx *ctx, const amps_scene *S, const double a[3],
+                                                const double b[3], double radius, amps_int *out, amps_int cap);
+/* Batches: between amps_scene_begin_batch and amps_scene_commit, cuts, pins, releases and forces
+   only record their changes (each cut's mechanism test still runs at the cut, so its refusal is
+   immediate, and the scene's mesh and node numbering change at once); amps_scene_commit applies
+   them to the engine in one commit. The solves commit an open batch first, as amps_scene_commit
+   does. amps_scene_begin_batch prepares the scene if needed (AMPS_ERR_STATE if a batch is open).
+   amps_scene_commit ends the batch; on failure (AMPS_ERR_SINGULAR_UPDATE: a piece the mechanism
+   test missed is loose; AMPS_ERR_CAPACITY, AMPS_ERR_OOM) every cut, pin and release of the batch
+   is undone (forces stay, as in the engine) and the scene is as at amps_scene_begin_batch. A cut
+   in a batch that fails for lack of memory also undoes the batch. Outside a batch amps_scene_commit
+   commits what the scene recorded (moved pins, forces). Cost: one engine commit (see
+   amps_update_commit) for the whole batch instead of one per change. */
+AMPS_API amps_status amps_scene_begin_batch(amps_ctx *ctx, amps_scene *S);
+AMPS_API amps_status amps_scene_commit(amps_ctx *ctx, amps_scene *S);
+/* A blade stroke: the polyline pts[0..npts-1] (3 per point, npts >= 2, reference configuration)
+   moved along the blade direction blade sweeps the surface made of one planar strip per segment
+   [p_i, p_i+1]: the plane through p_i spanned by the segment and the blade, whose normal is
+   n_i = (p_i+1 - p_i) x blade / |...|. Every node within radius of the polyline (of the nodes
+   that exist at the call and belong to a tet) is cut (amps_scene_cut) by the plane of its nearest
+   segment (the first of equal ones), in the order of the segments and then of the position along
+   the segment (ties by node number). The cuts form one batch committed once (inside an open batch
+   they join it and the caller commits). out (may be NULL) reports the nodes touched: node[k],
+   copy[k] (the new node, or -1) and status[k] (AMPS_OK: cut; AMPS_WARN_NOOP: the plane leaves
+   one side of the node empty; AMPS_ERR_SINGULAR_UPDATE: refused by the mechanism test) for
+   k < min(n, cap) (arrays caller-owned, cap entries each), n the number touched, ncut the nodes
+   cut. Errors: AMPS_ERR_ARG (npts < 2, NULL, a segment of zero length or parallel to the blade),
+   AMPS_ERR_VALUE (not finite, radius < 0), the commit's (the stroke undone, as amps_scene_commit)
+   and AMPS_ERR_OOM / AMPS_ERR_CAPACITY. Allocates O(nnode) scratch. */
+typedef struct amps_scene_stroke_result {
+    amps_int cap;          /* entries of the arrays (set by the caller) */
+    amps_int *node, *copy; /* caller-owned, cap entries each (may be NULL when cap is 0) */
+    amps_status *status;   /* caller-owned, cap entries (may be NULL when cap is 0) */
+    amps_int n, ncut;      /* nodes touched (may exceed cap), nodes cut */
+} amps_scene_stroke_result;
+AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int npts, const double *pts,
+                                       const double blade[3], double radius, amps_scene_stroke_result *out);
 #endif /* AMPS_NO_FEM */
 
 /* ==== [amps:io] mesh readers and writers ====================================================== */
@@ -4871,6 +4934,7 @@ struct amps_update {
         double t_factor;             /* measured (or estimated) factorization time */
         double t_step_base, t_extra; /* step time after the last swap, extra time since */
         amps_int size_base;          /* |U| after the last swap */
+        amps_int n_struct;           /* structural commits since the last swap (COUNT) */
     } refac;
     struct {                        /* watch set */
         amps_int n, n_closure, cap; /* size, |closure_L of its base indices|, capacity */
@@ -4899,6 +4963,8 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
     o->refactor_order.block = 0;
     o->refactor_threads = 1;
     o->refactor_ratio = 0.25;
+    o->refactor_size = 384;
+    o->refactor_every = 32;
 }
 
 /* ---- allocation of the capacity-dependent arrays ---- */
@@ -5041,6 +5107,7 @@ static void amps__bg_discard(amps_ctx *ctx, amps_update *U);
 static void amps__bg_poll(amps_ctx *ctx, amps_update *U);
 static void amps__bg_log(amps_update *U, amps_int kpend, const amps__pdelta *pd, amps_int npd);
 static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t);
+static void amps__bg_after_commit(amps_ctx *ctx, amps_update *U, int structural, int may_swap);
 
 AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     if (!U) return;
@@ -5170,6 +5237,8 @@ static amps_status amps__create_opts(amps_ctx *ctx, const amps_update_opts *opts
         return amps__err(ctx, AMPS_ERR_ARG, "amps_update_create: singular_tol must be in [0, 1)");
     if (!(o->refactor_ratio > 0)) o->refactor_ratio = d.refactor_ratio;
     if (o->refactor_threads <= 0) o->refactor_threads = d.refactor_threads;
+    if (o->refactor_size <= 0) o->refactor_size = d.refactor_size;
+    if (o->refactor_every <= 0) o->refactor_every = d.refactor_every;
     if (o->refactor_order.method == AMPS_ORDER_GIVEN)
         o->refactor_order.method = d.refactor_order.method; /* a given perm has the old order */
     o->refactor_order.perm = NULL;
@@ -6633,16 +6702,19 @@ static amps_status amps__lu_update(amps_update *U, amps_int q0, amps_int u_old, 
     return s;
 }
 
-AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
+/* amps_update_commit; may_swap 0 (the haptic path) neither swaps nor starts a re-factorization. */
+static amps_status amps__commit(amps_ctx *ctx, amps_update *U, int may_swap) {
     amps_int u_old, dused_old, q0, bad = -1;
     size_t vused_old;
     amps_status s;
     double t0, t1;
+    int structural;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit: NULL engine");
     /* a finished re-factorization is swapped in first: the recorded changes move along and are
        then committed on the new base, against its small augmentation */
-    if (U->refac.job) amps__bg_poll(ctx, U);
+    if (U->refac.job && may_swap) amps__bg_poll(ctx, U);
     if (!U->pending.n_delta && !U->pending.n_con && !U->pending.n_dofs) return AMPS_OK;
+    structural = U->pending.n_delta > 0 || U->pending.n_dofs > 0;
     t0 = amps_now();
     u_old = U->aug.size;
     vused_old = U->memo.used;
@@ -6691,11 +6763,14 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
     U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
     U->sol.commit_unsolved = 1;
     U->stats.ncommit++;
+    amps__bg_after_commit(ctx, U, structural || U->aug.size > u_old, may_swap);
     return AMPS_OK;
 fail:
     amps__rollback(U, u_old, vused_old, dused_old);
     return s;
 }
+
+AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) { return amps__commit(ctx, U, 1); }
 
 /* ---- Steps 4 and 6 ---- */
 
@@ -7125,7 +7200,7 @@ AMPS_API amps_status amps_update_solve_reactions(amps_ctx *ctx, amps_update *U) 
     amps_status s;
     double t0;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve_reactions: NULL engine");
-    if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
+    if ((s = amps__commit(ctx, U, 0)) != AMPS_OK) return s;
     if (!U->sol.react_stale && U->sol.has_react) return AMPS_OK;
     amps__solve_stats_begin(U);
     amps__step4(U, U->force.ct, U->force.f, 1, U->dense.rhs);
@@ -7669,8 +7744,8 @@ static void amps__bg_work(amps__bg *b) {
     c2.nthreads = b->snap.opts.refactor_threads; /* > 0: amps__create_opts */
     b->t0 = amps_now();
     if ((s = amps__bg_assemble(&c2, b)) == AMPS_OK && (s = amps__bg_factor(&c2, b)) == AMPS_OK &&
-        (s = amps__bg_engine(&c2, b)) == AMPS_OK)
-        s = amps__bg_follow_log(&c2, b);
+        (s = amps__bg_engine(&c2, b)) == AMPS_OK && b->snap.opts.refactor != AMPS_REFACTOR_COUNT)
+        s = amps__bg_follow_log(&c2, b); /* COUNT: the swap replays the whole log (same bits) */
     amps__bg_lock(b);
     if (s == AMPS_OK && b->cancel) s = b->status ? b->status : AMPS_ERR_STATE;
     if (s != AMPS_OK) {
@@ -7794,6 +7869,7 @@ static void amps__bg_take(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg
     U->refac.t_step_base = 0;
     U->refac.t_extra = 0;
     U->refac.size_base = U->aug.size;
+    U->refac.n_struct = 0;
     U->watch = old.watch; /* no job in progress (the callers check) */
     old.watch.idx = NULL;
     old.watch.from_dense = NULL;
@@ -7857,7 +7933,18 @@ static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
 /* At the start of a commit: swaps a ready re-factorization in (not while a watched-solve job
    runs), drops a failed one; the AUTO policy starts one. Never fails the caller. */
 static void amps__bg_poll(amps_ctx *ctx, amps_update *U) {
-    if (U->refac.job) {
+    if (U->refac.job && U->refac.opts.refactor == AMPS_REFACTOR_COUNT) {
+        /* deterministic: at the fixed point only, waiting for the worker */
+        amps_int every = U->refac.opts.refactor_every;
+        if (U->refac.n_struct >= every + every / 2 && !U->watch.job_y) {
+            amps_ctx c2;
+            amps_ctx_init(&c2);
+            c2.alloc_user = ctx ? ctx->alloc_user : NULL;
+            amps__bg_join(U->refac.job);
+            if (U->refac.job->state == AMPS__BG_READY) (void)amps__bg_swap(&c2, U);
+            else amps__bg_end(ctx, U, 1);
+        }
+    } else if (U->refac.job) {
         int st = amps__bg_get(U->refac.job, &U->refac.job->state);
         if (st == AMPS__BG_READY && !U->watch.job_y) {
             amps_ctx c2;
@@ -7891,6 +7978,25 @@ static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t) {
     (void)U;
     (void)t;
 #endif
+}
+
+/* After a successful commit (structural: it changed K^, added DOFs or grew S u C): counts it and,
+   in a call that may swap, starts a re-factorization when the count (COUNT) or the growth of
+   |S u C| since the last base (AUTO, with threads) calls for one. */
+static void amps__bg_after_commit(amps_ctx *ctx, amps_update *U, int structural, int may_swap) {
+    amps_refactor_policy pol = U->refac.opts.refactor;
+    int start;
+    amps_ctx c2;
+    if (structural) U->refac.n_struct++;
+    if (U->refac.job || !may_swap) return;
+    start = pol == AMPS_REFACTOR_COUNT && U->refac.n_struct >= U->refac.opts.refactor_every;
+#ifndef AMPS_NO_THREADS
+    start |= pol == AMPS_REFACTOR_AUTO && U->aug.size > U->refac.size_base + U->refac.opts.refactor_size;
+#endif
+    if (!start) return;
+    amps_ctx_init(&c2);
+    c2.alloc_user = ctx ? ctx->alloc_user : NULL;
+    (void)amps_update_refactor_start(&c2, U);
 }
 
 AMPS_API amps_status amps_update_refactor_start(amps_ctx *ctx, amps_update *U) {
@@ -8913,6 +9019,22 @@ typedef struct amps__scene_watch {
     int stale; /* the engine's watch set must be rebuilt */
 } amps__scene_watch;
 
+/* An open batch (amps_scene_begin_batch): the changes it recorded, to undo them if its commit
+   fails. moved holds the tets each cut moved, op k's at moved[op.moved_at..+op.nmoved]. */
+typedef struct amps__scene_op {
+    int kind;                    /* 0 cut, 1 pin, 2 release */
+    int watched, was_pinned;     /* cut: its copy joined the watch set; pin: v was pinned */
+    amps_int v, vc;              /* the node, the cut's copy */
+    amps_int moved_at, nmoved;   /* cut: its moved tets */
+    double old[3];               /* pin: the previous pin value */
+} amps__scene_op;
+typedef struct amps__scene_batch {
+    int open;
+    amps_int n, cap, nmoved, cap_moved;
+    amps__scene_op *ops;
+    amps_int *moved;
+} amps__scene_batch;
+
 struct amps_scene {
     amps_mesh *m;
     amps_scene_opts opts;
@@ -8925,6 +9047,7 @@ struct amps_scene {
     amps__scene_watch watch;
     amps__scene_cutws cut;
     amps__scene_mech mech;
+    amps__scene_batch batch;
 };
 
 AMPS_API void amps_scene_opts_default(amps_scene_opts *o) {
@@ -8963,6 +9086,8 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->mech.queue_head);
     amps__free(ctx, S->mech.queue_tail);
     amps__free(ctx, S->mech.active);
+    amps__free(ctx, S->batch.ops);
+    amps__free(ctx, S->batch.moved);
     amps__free(ctx, S);
 }
 
@@ -9220,6 +9345,9 @@ AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, 
     return AMPS_OK;
 }
 
+static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int nmoved);
+static void amps__scene_batch_pin(amps_scene *S, int kind, amps_int v);
+
 AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, const double u[3]) {
     amps_int k, idx[3];
     amps_status s;
@@ -9237,8 +9365,10 @@ AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, co
         return AMPS_OK;
     }
     for (k = 0; k < 3; k++) idx[k] = S->node.dof[3 * v + k];
+    if (S->batch.open && (s = amps__scene_batch_room(ctx, S, 0)) != AMPS_OK) return s;
     if ((s = amps_update_constrain(ctx, S->U, 3, idx, u)) != AMPS_OK) return s;
-    if (!S->node.pinned[v] && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s;
+    if (S->batch.open) amps__scene_batch_pin(S, 1, v);
+    else if (!S->node.pinned[v] && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s;
     S->node.pinned[v] = 1;
     for (k = 0; k < 3; k++) S->node.pin_value[3 * v + k] = u[k];
     return AMPS_OK;
@@ -9254,8 +9384,10 @@ AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v
         return AMPS_OK;
     }
     for (k = 0; k < 3; k++) idx[k] = S->node.dof[3 * v + k];
+    if (S->batch.open && (s = amps__scene_batch_room(ctx, S, 0)) != AMPS_OK) return s;
     if ((s = amps_update_release(ctx, S->U, 3, idx)) != AMPS_OK) return s;
-    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
+    if (S->batch.open) amps__scene_batch_pin(S, 2, v);
+    else if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
         char msg[256];
         memcpy(msg, ctx ? ctx->msg : "", ctx ? sizeof(msg) : 1);
         return amps__err(ctx, s, "amps_scene_release: releasing node %ld leaves a piece held by nothing (%s)", (long)v,
@@ -9555,8 +9687,12 @@ static void amps__cut_local_K(amps_scene *S, amps_int v, amps_int vc, amps_int n
     }
 }
 
+static void amps__scene_batch_cut(amps_scene *S, amps_int v, amps_int vc, amps_int nmoved);
+static void amps__scene_batch_undo(amps_scene *S);
+
 /* A cut of the factored model: the mesh cut, the mechanism test, new equations for the copy,
-   the change of K^ on the moved tets' equations, one commit. On failure the cut is undone. */
+   the change of K^ on the moved tets' equations, one commit (in a batch: recorded). On failure
+   the cut is undone. */
 static amps_status amps__scene_cut_update(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3],
                                           const double nrm[3], amps_int *vcp) {
     amps_int vc, nmoved = 0, k, nl, nz = 0, first = -1, a, b;
@@ -9587,7 +9723,8 @@ static amps_status amps__scene_cut_update(amps_ctx *ctx, amps_scene *S, amps_int
             nz++;
         }
     if ((s = amps_update_add(ctx, S->U, nz, S->cut.row, S->cut.col, S->cut.val)) != AMPS_OK) goto undo_engine;
-    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
+    if (S->batch.open) amps__scene_batch_cut(S, v, vc, nmoved);
+    else if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
         if (s == AMPS_ERR_SINGULAR_UPDATE)
             amps__err(ctx, s, "amps_scene_cut: the cut at node %ld leaves a piece held by nothing; the cut was undone",
                       (long)v);
@@ -9605,8 +9742,11 @@ undo:
         amps_ctx_init(&c2);
         (void)amps_mesh_uncut(&c2, S->m, v, vc, S->cut.moved, nmoved);
     }
+    if (S->batch.open && s != AMPS_ERR_SINGULAR_UPDATE) amps__scene_batch_undo(S); /* the engine discarded it */
     return s;
 }
+
+static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int nmoved);
 
 AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3], const double nrm[3],
                                     amps_int *new_node) {
@@ -9615,14 +9755,17 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
     int watched;
     if (new_node) *new_node = -1;
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_cut")) != AMPS_OK) return s;
-    if (S->prepared && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
+    if (S->prepared && !S->batch.open && (s = amps_update_commit(ctx, S->U)) != AMPS_OK)
+        return s; /* earlier changes first */
     if ((s = amps__scene_cut_room(ctx, S, v, &watched)) != AMPS_OK) return s;
+    if (S->batch.open && (s = amps__scene_batch_room(ctx, S, amps_mesh_degree(S->m, v))) != AMPS_OK) return s;
     s = S->prepared ? amps__scene_cut_update(ctx, S, v, p, nrm, &vc) : amps__scene_cut_topology(ctx, S, v, p, nrm, &vc);
     if (s != AMPS_OK) return s;
     if (new_node) *new_node = vc;
     if (watched) {
         S->watch.nodes[S->watch.n++] = vc;
         S->watch.stale = 1;
+        if (S->batch.open) S->batch.ops[S->batch.n - 1].watched = 1;
     }
     return AMPS_OK;
 }
@@ -9633,6 +9776,7 @@ AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve: NULL scene");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
     if ((s = amps_update_solve(ctx, S->U, NULL)) < 0) return s;
     amps__scene_gather(S, 0, NULL);
     return s; /* AMPS_WARN_INACCURATE: solved all the same */
@@ -9676,6 +9820,7 @@ AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_watched: NULL scene");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
     if (S->watch.stale) {
         /* the engine watches the equations of the watched nodes */
         amps_int k, d, m = 0,
@@ -9701,6 +9846,7 @@ AMPS_API amps_status amps_scene_solve_reactions(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_reactions: NULL scene");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
     return amps_update_solve_reactions(ctx, S->U);
 }
 
@@ -9739,6 +9885,271 @@ AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, doubl
                                        double *principal) {
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_stress: NULL scene");
     return amps_mesh_stress(ctx, S->m, S->node.disp, sigma, von_mises, principal);
+}
+
+/* ---- batches, strokes and segment queries ---- */
+
+/* Room in the batch log for one more change and a cut moving up to nmoved tets. */
+static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int nmoved) {
+    amps__scene_batch *B = &S->batch;
+    if (B->n + 1 > B->cap) {
+        amps_int cap = 2 * B->cap + 16;
+        if (amps__realloc(ctx, (void **)&B->ops, (size_t)cap, sizeof(amps__scene_op)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene: out of memory recording a batch");
+        B->cap = cap;
+    }
+    if (B->nmoved + nmoved > B->cap_moved) {
+        amps_int cap = 2 * B->cap_moved + nmoved + 64;
+        if (amps__realloc(ctx, (void **)&B->moved, (size_t)cap, sizeof(amps_int)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene: out of memory recording a batch");
+        B->cap_moved = cap;
+    }
+    return AMPS_OK;
+}
+
+/* Logs the cut of v into v and vc (its moved tets in cut.moved); room made by amps__scene_batch_room. */
+static void amps__scene_batch_cut(amps_scene *S, amps_int v, amps_int vc, amps_int nmoved) {
+    amps__scene_batch *B = &S->batch;
+    amps__scene_op *op = B->ops + B->n++;
+    memset(op, 0, sizeof(*op));
+    op->kind = 0;
+    op->v = v;
+    op->vc = vc;
+    op->moved_at = B->nmoved;
+    op->nmoved = nmoved;
+    memcpy(B->moved + B->nmoved, S->cut.moved, sizeof(amps_int) * (size_t)nmoved);
+    B->nmoved += nmoved;
+}
+
+/* Logs a pin (kind 1) or release (kind 2) of v with v's state before it. */
+static void amps__scene_batch_pin(amps_scene *S, int kind, amps_int v) {
+    amps__scene_op *op = S->batch.ops + S->batch.n++;
+    memset(op, 0, sizeof(*op));
+    op->kind = kind;
+    op->v = v;
+    op->vc = -1;
+    op->was_pinned = S->node.pinned[v];
+    memcpy(op->old, S->node.pin_value + 3 * v, sizeof(op->old));
+}
+
+/* Undoes the batch's cuts, pins and releases, last first, and closes it (the engine has
+   discarded its changes). */
+static void amps__scene_batch_undo(amps_scene *S) {
+    amps__scene_batch *B = &S->batch;
+    amps_int i, k;
+    amps_ctx c2;
+    amps_ctx_init(&c2);
+    for (i = B->n - 1; i >= 0; i--) {
+        const amps__scene_op *op = B->ops + i;
+        if (op->kind == 1) {
+            S->node.pinned[op->v] = (unsigned char)op->was_pinned;
+            memcpy(S->node.pin_value + 3 * op->v, op->old, sizeof(op->old));
+        } else if (op->kind == 2) S->node.pinned[op->v] = 1;
+        else {
+            for (k = S->watch.n - 1; op->watched && k >= 0; k--)
+                if (S->watch.nodes[k] == op->vc) {
+                    memmove(S->watch.nodes + k, S->watch.nodes + k + 1, sizeof(amps_int) * (size_t)(S->watch.n - k - 1));
+                    S->watch.n--;
+                    S->watch.stale = 1;
+                    break;
+                }
+            for (k = 0; k < 3; k++) S->node.dof[3 * op->vc + k] = -1;
+            S->node.fixed[op->vc] = 0;
+            S->node.pinned[op->vc] = 0;
+            (void)amps_mesh_uncut(&c2, S->m, op->v, op->vc, B->moved + op->moved_at, op->nmoved);
+        }
+    }
+    B->open = 0;
+    B->n = B->nmoved = 0;
+}
+
+AMPS_API amps_status amps_scene_begin_batch(amps_ctx *ctx, amps_scene *S) {
+    amps_status s;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_begin_batch: NULL scene");
+    if (S->batch.open) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_begin_batch: a batch is open");
+    if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
+    S->batch.open = 1;
+    S->batch.n = S->batch.nmoved = 0;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_commit(amps_ctx *ctx, amps_scene *S) {
+    amps_status s;
+    amps_int nops;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_commit: NULL scene");
+    if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    nops = S->batch.n;
+    s = amps_update_commit(ctx, S->U);
+    if (s != AMPS_OK && S->batch.open) {
+        char msg[200];
+        memcpy(msg, ctx ? ctx->msg : "", ctx ? sizeof(msg) : 1);
+        msg[sizeof(msg) - 1] = 0;
+        amps__scene_batch_undo(S);
+        return amps__err(ctx, s, "amps_scene_commit: the batch of %ld changes was undone (%s)", (long)nops, msg);
+    }
+    S->batch.open = 0;
+    S->batch.n = S->batch.nmoved = 0;
+    return s;
+}
+
+/* Squared distance of x to the segment [a, b]; *t: the parameter in [0, 1] of the nearest point. */
+static double amps__seg_dist2(const double *x, const double *a, const double *b, double *t) {
+    double d[3], w[3], dd = 0, wd = 0, r = 0, tt = 0;
+    int k;
+    for (k = 0; k < 3; k++) {
+        d[k] = b[k] - a[k];
+        w[k] = x[k] - a[k];
+        dd += d[k] * d[k];
+        wd += w[k] * d[k];
+    }
+    if (dd > 0) tt = wd <= 0 ? 0 : wd >= dd ? 1 : wd / dd;
+    for (k = 0; k < 3; k++) {
+        double e = w[k] - tt * d[k];
+        r += e * e;
+    }
+    if (t) *t = tt;
+    return r;
+}
+
+AMPS_API amps_int amps_scene_nodes_near_segment(amps_ctx *ctx, const amps_scene *S, const double a[3],
+                                                const double b[3], double radius, amps_int *out, amps_int cap) {
+    amps_int v, cnt = 0;
+    int k;
+    if (!S || !a || !b || (cap > 0 && !out))
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_nodes_near_segment: NULL argument");
+    for (k = 0; k < 3; k++)
+        if (!amps__isfinite(a[k]) || !amps__isfinite(b[k]))
+            return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_nodes_near_segment: segment not finite");
+    if (!(radius >= 0) || !amps__isfinite(radius))
+        return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_nodes_near_segment: radius must be finite and >= 0");
+    for (v = 0; v < S->m->nnode; v++) {
+        if (amps_mesh_degree(S->m, v) == 0 || amps__seg_dist2(S->m->xyz + 3 * v, a, b, NULL) > radius * radius)
+            continue;
+        if (cnt < cap) out[cnt] = v;
+        cnt++;
+    }
+    return cnt;
+}
+
+/* A node the stroke touches: its segment, the position along it. */
+typedef struct amps__stroke_node {
+    amps_int v, seg;
+    double t, d2;
+} amps__stroke_node;
+
+static int amps__stroke_cmp(const void *pa, const void *pb) {
+    const amps__stroke_node *x = (const amps__stroke_node *)pa, *y = (const amps__stroke_node *)pb;
+    if (x->seg != y->seg) return x->seg < y->seg ? -1 : 1;
+    if (x->t != y->t) return x->t < y->t ? -1 : 1;
+    return x->v < y->v ? -1 : x->v > y->v;
+}
+
+/* The stroke's planes: nrm[3i..] = unit (p_i+1 - p_i) x blade. */
+static amps_status amps__stroke_planes(amps_ctx *ctx, amps_int npts, const double *pts, const double *blade,
+                                       double *nrm) {
+    amps_int i;
+    int k;
+    for (i = 0; i + 1 < npts; i++) {
+        const double *p = pts + 3 * i, *q = p + 3;
+        double d[3], c[3], ld = 0, lb = 0, lc = 0;
+        for (k = 0; k < 3; k++) d[k] = q[k] - p[k];
+        c[0] = d[1] * blade[2] - d[2] * blade[1];
+        c[1] = d[2] * blade[0] - d[0] * blade[2];
+        c[2] = d[0] * blade[1] - d[1] * blade[0];
+        for (k = 0; k < 3; k++) {
+            ld += d[k] * d[k];
+            lb += blade[k] * blade[k];
+            lc += c[k] * c[k];
+        }
+        if (!(ld > 0) || !(lc > 1e-12 * ld * lb))
+            return amps__err(ctx, AMPS_ERR_ARG,
+                             "amps_scene_stroke: segment %ld has zero length or is parallel to the blade", (long)i);
+        for (k = 0; k < 3; k++) nrm[3 * i + k] = c[k] / sqrt(lc);
+    }
+    return AMPS_OK;
+}
+
+/* The nodes the stroke touches, each with its nearest segment, in cut order; *nc their number. */
+static amps_status amps__stroke_nodes(amps_ctx *ctx, amps_scene *S, amps_int npts, const double *pts, double radius,
+                                      amps__stroke_node **list, amps_int *nc) {
+    amps_int nn = S->m->nnode, i, k, n = 0, *buf, *at;
+    amps__stroke_node *L;
+    buf = AMPS__CAST(amps_int *, amps__malloc(ctx, 2 * (size_t)nn, sizeof(amps_int)));
+    L = AMPS__CAST(amps__stroke_node *, amps__malloc(ctx, (size_t)nn, sizeof(amps__stroke_node)));
+    if (!buf || !L) {
+        amps__free(ctx, buf);
+        amps__free(ctx, L);
+        return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_stroke: out of memory");
+    }
+    at = buf + nn;
+    for (k = 0; k < nn; k++) at[k] = -1;
+    for (i = 0; i + 1 < npts; i++) {
+        amps_int cnt = amps_scene_nodes_near_segment(ctx, S, pts + 3 * i, pts + 3 * i + 3, radius, buf, nn);
+        for (k = 0; k < cnt; k++) {
+            amps_int v = buf[k];
+            double t, d2 = amps__seg_dist2(S->m->xyz + 3 * v, pts + 3 * i, pts + 3 * i + 3, &t);
+            if (at[v] < 0) at[v] = n++;
+            else if (!(d2 < L[at[v]].d2)) continue;
+            L[at[v]].v = v;
+            L[at[v]].seg = i;
+            L[at[v]].t = t;
+            L[at[v]].d2 = d2;
+        }
+    }
+    amps__free(ctx, buf);
+    qsort(L, (size_t)n, sizeof(*L), amps__stroke_cmp);
+    *list = L;
+    *nc = n;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int npts, const double *pts,
+                                       const double blade[3], double radius, amps_scene_stroke_result *out) {
+    amps__stroke_node *L = NULL;
+    double *nrm;
+    amps_int i, nc = 0, ncut = 0;
+    amps_status s;
+    int opened = 0;
+    if (!S || !pts || !blade || npts < 2) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_stroke: bad arguments");
+    for (i = 0; i < 3 * npts; i++)
+        if (!amps__isfinite(pts[i]) || (i < 3 && !amps__isfinite(blade[i])))
+            return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_stroke: points or blade not finite");
+    if (!(radius >= 0) || !amps__isfinite(radius))
+        return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_stroke: radius must be finite and >= 0");
+    nrm = AMPS__CAST(double *, amps__malloc(ctx, 3 * (size_t)npts, sizeof(double)));
+    if (!nrm) return AMPS_ERR_OOM;
+    if ((s = amps__stroke_planes(ctx, npts, pts, blade, nrm)) != AMPS_OK ||
+        (s = amps__stroke_nodes(ctx, S, npts, pts, radius, &L, &nc)) != AMPS_OK)
+        goto done;
+    if (!S->batch.open) {
+        if ((s = amps_scene_begin_batch(ctx, S)) != AMPS_OK) goto done;
+        opened = 1;
+    }
+    for (i = 0; i < nc; i++) {
+        amps_int vc = -1, sg = L[i].seg;
+        amps_status c = amps_scene_cut(ctx, S, L[i].v, pts + 3 * sg, nrm + 3 * sg, &vc);
+        if (c != AMPS_OK && c != AMPS_WARN_NOOP && c != AMPS_ERR_SINGULAR_UPDATE) {
+            if (opened && S->batch.open) amps__scene_batch_undo(S);
+            s = c;
+            goto done;
+        }
+        if (c == AMPS_OK) ncut++;
+        if (out && i < out->cap) {
+            if (out->node) out->node[i] = L[i].v;
+            if (out->copy) out->copy[i] = vc;
+            if (out->status) out->status[i] = c;
+        }
+    }
+    if (opened) s = amps_scene_commit(ctx, S);
+    if (out && s == AMPS_OK) {
+        out->n = nc;
+        out->ncut = ncut;
+    }
+done:
+    amps__free(ctx, nrm);
+    amps__free(ctx, L);
+    return s;
 }
 #endif /* AMPS_NO_FEM */
 
