@@ -500,6 +500,27 @@ AMPS_API void amps_update_discard(amps_update *U);
    discarded (as by amps_update_discard); record them again, corrected, to retry. A finished
    re-factorization the call swapped in first stays swapped in. */
 AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U);
+/* The same in two phases, for a caller whose haptic thread must not wait for a commit's Steps 1-2
+   (the L^{-1} columns of the new indices and the new rows of G: the expensive part):
+     amps_update_commit_begin (under the caller's lock) swaps a ready re-factorization in, takes
+                              the recorded structural changes (matrix entries, DOFs, new
+                              constraints, releases), places their new indices and reserves
+                              their memory; the engine still shows the committed system;
+     amps_update_commit_run   (no lock) Steps 1-2 on memory no other call reads or writes;
+     amps_update_commit_end   (under the lock) Steps 3 and 5 (O(|S u C|^2 x changed columns))
+                              with the moves recorded since applied after the job's changes.
+   Between begin and end the other calls work on the committed system: solves (haptic
+   amps_update_solve_reactions, watched and full ones), moves of constraints (amps_update_constrain
+   of a constrained index) and forces; any other change (amps_update_add, set_rows, add_dofs,
+   release, a new constraint) fails with AMPS_ERR_STATE, and nothing swaps a re-factorization
+   in. A change set without new indices or releases is committed by begin at once (run and end
+   then do nothing). One job at a time; end without run runs it. Allocates (begin: the run
+   phase's workspace, nbuf x base order, once, and capacities as amps_update_commit). Failures
+   as amps_update_commit: begin (capacity, memory) or end (singular, capacity) discards the
+   recorded changes and leaves the committed system. Results equal amps_update_commit's bitwise. */
+AMPS_API amps_status amps_update_commit_begin(amps_ctx *ctx, amps_update *U);
+AMPS_API void amps_update_commit_run(amps_update *U);
+AMPS_API amps_status amps_update_commit_end(amps_ctx *ctx, amps_update *U);
 /* Commits, then solves (Step 6): x (room for amps_update_dim, may be NULL) receives the solution.
    A failed commit: see amps_update_commit. AMPS_WARN_INACCURATE (accuracy guard) is a warning:
    the solution is stored, and the guard may have re-factored. */
@@ -798,6 +819,17 @@ AMPS_API amps_int amps_scene_nodes_near_segment(amps_ctx *ctx, const amps_scene 
    amps_update_commit) for the whole batch instead of one per change. */
 AMPS_API amps_status amps_scene_begin_batch(amps_ctx *ctx, amps_scene *S);
 AMPS_API amps_status amps_scene_commit(amps_ctx *ctx, amps_scene *S);
+/* amps_scene_commit in two phases (amps_update_commit_begin/run/end): begin and end under the
+   caller's lock, run outside it (Steps 1-2, the expensive part). Meanwhile the haptic thread may
+   move pins (amps_scene_pin of a pinned node), set forces and solve (amps_scene_solve_reactions
+   never waits for the job nor swaps a re-factorization in); cuts, new pins, releases and batches
+   fail with AMPS_ERR_STATE. A failed begin or end undoes the batch (as amps_scene_commit).
+   Costs: begin O(recorded changes + the new indices' root paths), plus a swap if one is ready;
+   run Steps 1-2 (O(closure of the new indices) + O(|S u C| x new)); end Steps 3 and 5
+   (O(|S u C|^2 x changed columns)); the haptic step O(|S u C|^2). */
+AMPS_API amps_status amps_scene_commit_begin(amps_ctx *ctx, amps_scene *S);
+AMPS_API void amps_scene_commit_run(amps_scene *S);
+AMPS_API amps_status amps_scene_commit_end(amps_ctx *ctx, amps_scene *S);
 /* A blade stroke: the polyline pts[0..npts-1] (3 per point, npts >= 2, reference configuration)
    moved along the blade direction blade sweeps the surface made of one planar strip per segment
    [p_i, p_i+1]: the plane through p_i spanned by the segment and the blade, whose normal is
@@ -4943,6 +4975,20 @@ struct amps_update {
         double *job_y, *job_xw;    /* the two-phase job in progress (NULL: none) */
     } watch;
     amps_update_stats stats;
+    struct {                            /* the two-phase commit (amps_update_commit_begin) */
+        int state;                      /* 0 none, 1 begun, 2 run */
+        amps_int u_old, nlist;          /* |U| before it; the new base positions (list) */
+        struct amps_update *J;          /* the copy of the engine the run phase works on */
+        amps__pdelta *delta;            /* its matrix changes and appended DOFs */
+        amps__pcon *con;                /* its structural constraint changes */
+        amps_int n_delta, n_con, n_dofs, cap_delta, cap_con;
+        amps_int *list, cap_list;       /* the new base positions (Step 1) */
+        double *chunk;                  /* the run phase's Step 1-2 workspace (as work.*) */
+        amps_int *row_map, *closure;    /* row_map -1 between uses */
+        amps_int ws_n;                  /* base order the workspace is sized for (0: none) */
+        size_t vused_old;               /* memo.used before it */
+        double t_wcols, t_gram;         /* the run phase's step times */
+    } cjob;
 };
 
 
@@ -5112,6 +5158,13 @@ static void amps__bg_after_commit(amps_ctx *ctx, amps_update *U, int structural,
 AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     if (!U) return;
     amps__bg_discard(ctx, U);
+    amps__free(ctx, U->cjob.J);
+    amps__free(ctx, U->cjob.delta);
+    amps__free(ctx, U->cjob.con);
+    amps__free(ctx, U->cjob.list);
+    amps__free(ctx, U->cjob.chunk);
+    amps__free(ctx, U->cjob.row_map);
+    amps__free(ctx, U->cjob.closure);
     amps_factor_free(ctx, U->refac.F_own);
     amps_csc_free(ctx, U->refac.K_own);
     amps__free(ctx, U->base.Kp);
@@ -5382,11 +5435,23 @@ static amps_status amps__chk_idx(amps_ctx *ctx, const amps_update *U, const char
     return AMPS_OK;
 }
 
+/* Index i (< N) is constrained in the committed system. */
+static int amps__is_con(const amps_update *U, amps_int i) {
+    amps_int a = U->aug.pos[i];
+    return a >= 0 && a < U->aug.size && U->aug.idx[a] == i && (U->aug.kind[a] & AMPS__UCON);
+}
+
+static amps_status amps__cjob_busy(amps_ctx *ctx, const char *fn) {
+    return amps__err(ctx, AMPS_ERR_STATE,
+                     "%s: a two-phase commit is in progress (only moved constraints and forces until its end)", fn);
+}
+
 AMPS_API amps_status amps_update_add_dofs(amps_ctx *ctx, amps_update *U, amps_int k, amps_int *first) {
     amps_int i, base;
     amps_status s;
     if (!U || k < 0)
         return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add_dofs: %s", U ? "negative count" : "NULL engine");
+    if (k > 0 && U->cjob.state) return amps__cjob_busy(ctx, "amps_update_add_dofs");
     if ((s = amps__need_N(ctx, U, k)) != AMPS_OK) return s;
     if ((s = amps__need_pending(ctx, U, k, 0)) != AMPS_OK) return s;
     base = U->N + U->pending.n_dofs;
@@ -5424,6 +5489,7 @@ AMPS_API amps_status amps_update_add(amps_ctx *ctx, amps_update *U, amps_int nz,
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: NULL engine");
     if (nz < 0 || (nz > 0 && (!r || !c || !v)))
         return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: bad count or NULL array");
+    if (nz > 0 && U->cjob.state) return amps__cjob_busy(ctx, "amps_update_add");
     N = U->N + U->pending.n_dofs;
     for (k = 0; k < nz; k++) {
         if (r[k] < 0 || r[k] >= N || c[k] < 0 || c[k] >= N)
@@ -5552,6 +5618,7 @@ AMPS_API amps_status amps_update_set_rows(amps_ctx *ctx, amps_update *U, amps_in
     amps_int k, j, q, start, *iw;
     amps_status s;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: NULL engine");
+    if (U->cjob.state) return amps__cjob_busy(ctx, "amps_update_set_rows");
     if ((s = amps__set_rows_check(ctx, U, nrow, rows, cp, ci, cx)) != AMPS_OK) return s;
     /* the changes: for each row r, every column c of the current or the new row gets
        new - current; a pair of two given rows is recorded once (from the smaller row) */
@@ -5601,6 +5668,8 @@ static amps_status amps__record_con(amps_ctx *ctx, amps_update *U, const char *f
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL engine", fn);
     if (!release && m > 0 && !val) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL values", fn);
     if ((s = amps__chk_idx(ctx, U, fn, m, idx, release ? NULL : val, 1, &U->work.mark_N)) != AMPS_OK) return s;
+    for (k = 0; k < m && U->cjob.state; k++) /* during a two-phase commit: moves of constraints only */
+        if (release || idx[k] >= U->N || !amps__is_con(U, idx[k])) return amps__cjob_busy(ctx, fn);
     if ((s = amps__need_pending(ctx, U, 0, m)) != AMPS_OK) return s;
     for (k = 0; k < m; k++) {
         U->pending.con[U->pending.n_con].i = idx[k];
@@ -6702,41 +6771,15 @@ static amps_status amps__lu_update(amps_update *U, amps_int q0, amps_int u_old, 
     return s;
 }
 
-/* amps_update_commit; may_swap 0 (the haptic path) neither swaps nor starts a re-factorization. */
-static amps_status amps__commit(amps_ctx *ctx, amps_update *U, int may_swap) {
-    amps_int u_old, dused_old, q0, bad = -1;
-    size_t vused_old;
+/* Steps 3 and 5 of a commit whose new positions u_old.. have their W columns and G entries
+   (memo.used was vused_old before them), and its end; on failure the rollback. */
+static amps_status amps__commit_finish(amps_ctx *ctx, amps_update *U, amps_int u_old, size_t vused_old, int structural,
+                                       int may_swap) {
+    amps_int dused_old = U->delta.used, q0, bad = -1;
     amps_status s;
-    double t0, t1;
-    int structural;
-    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit: NULL engine");
-    /* a finished re-factorization is swapped in first: the recorded changes move along and are
-       then committed on the new base, against its small augmentation */
-    if (U->refac.job && may_swap) amps__bg_poll(ctx, U);
-    if (!U->pending.n_delta && !U->pending.n_con && !U->pending.n_dofs) return AMPS_OK;
-    structural = U->pending.n_delta > 0 || U->pending.n_dofs > 0;
-    t0 = amps_now();
-    u_old = U->aug.size;
-    vused_old = U->memo.used;
-    dused_old = U->delta.used;
+    double t0 = amps_now(), t1;
     U->journal.n_rows = 0;
     U->journal.n_kinds = 0;
-    /* grow U */
-    if ((s = amps__need_u(ctx, U, amps__count_new(U))) != AMPS_OK) {
-        amps_update_discard(U);
-        return s;
-    }
-    if ((s = amps__need_memo(ctx, U, amps__grow_aug(U))) != AMPS_OK) goto fail;
-    /* Step 1: W columns */
-    amps__step1(U, u_old);
-    t1 = amps_now();
-    U->stats.t_step[AMPS_STEP_WCOLS] = t1 - t0;
-    t0 = t1;
-    /* Step 2: trapezoidal augmentation of G ([AMPS] Eq. 3.25-3.27), both triangles stored */
-    amps__gcols(U, u_old);
-    t1 = amps_now();
-    U->stats.t_step[AMPS_STEP_GRAM] = t1 - t0;
-    t0 = t1;
     /* apply the pending changes to Delta and the kinds */
     if ((s = amps__delta_relocate(ctx, U, &dused_old)) != AMPS_OK) goto fail;
     amps__apply_pending(U, u_old);
@@ -6770,7 +6813,202 @@ fail:
     return s;
 }
 
+/* amps_update_commit; may_swap 0 (the haptic path) neither swaps nor starts a re-factorization. */
+static amps_status amps__commit(amps_ctx *ctx, amps_update *U, int may_swap) {
+    amps_int u_old;
+    size_t vused_old;
+    amps_status s;
+    double t0, t1;
+    int structural;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit: NULL engine");
+    /* a finished re-factorization is swapped in first: the recorded changes move along and are
+       then committed on the new base, against its small augmentation */
+    if (U->refac.job && may_swap && !U->cjob.state) amps__bg_poll(ctx, U);
+    if (!U->pending.n_delta && !U->pending.n_con && !U->pending.n_dofs) return AMPS_OK;
+    structural = U->pending.n_delta > 0 || U->pending.n_dofs > 0;
+    t0 = amps_now();
+    u_old = U->aug.size;
+    vused_old = U->memo.used;
+    U->journal.n_rows = 0;
+    U->journal.n_kinds = 0;
+    /* grow U */
+    if ((s = amps__need_u(ctx, U, amps__count_new(U))) != AMPS_OK) {
+        amps_update_discard(U);
+        return s;
+    }
+    if ((s = amps__need_memo(ctx, U, amps__grow_aug(U))) != AMPS_OK) {
+        amps__rollback(U, u_old, vused_old, U->delta.used);
+        return s;
+    }
+    /* Step 1: W columns */
+    amps__step1(U, u_old);
+    t1 = amps_now();
+    U->stats.t_step[AMPS_STEP_WCOLS] = t1 - t0;
+    t0 = t1;
+    /* Step 2: trapezoidal augmentation of G ([AMPS] Eq. 3.25-3.27), both triangles stored */
+    amps__gcols(U, u_old);
+    U->stats.t_step[AMPS_STEP_GRAM] = amps_now() - t0;
+    return amps__commit_finish(ctx, U, u_old, vused_old, structural, may_swap);
+}
+
 AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) { return amps__commit(ctx, U, 1); }
+
+/* ---- the two-phase commit ---- */
+
+/* The run phase's workspace (as work.chunk, row_map, closure) for base order n. */
+static amps_status amps__cjob_workspace(amps_ctx *ctx, amps_update *U) {
+    size_t nb = (size_t)U->nbuf, n = (size_t)U->n, k;
+    if (U->cjob.ws_n == U->n && U->cjob.J) return AMPS_OK;
+    amps__free(ctx, U->cjob.chunk);
+    amps__free(ctx, U->cjob.row_map);
+    amps__free(ctx, U->cjob.closure);
+    U->cjob.ws_n = 0;
+    U->cjob.chunk = AMPS__CAST(double *, amps__malloc(ctx, nb * (size_t)U->work.chunk_rows * AMPS__VB, sizeof(double)));
+    U->cjob.row_map = AMPS__CAST(amps_int *, amps__malloc(ctx, nb * n, sizeof(amps_int)));
+    U->cjob.closure = AMPS__CAST(amps_int *, amps__malloc(ctx, nb * n, sizeof(amps_int)));
+    if (!U->cjob.J) U->cjob.J = AMPS__CAST(amps_update *, amps__malloc(ctx, 1, sizeof(amps_update)));
+    if (!U->cjob.chunk || !U->cjob.row_map || !U->cjob.closure || !U->cjob.J)
+        return amps__err(ctx, AMPS_ERR_OOM, "amps_update_commit_begin: out of memory");
+    for (k = 0; k < nb * n; k++) U->cjob.row_map[k] = -1;
+    U->cjob.ws_n = U->n;
+    return AMPS_OK;
+}
+
+/* Moves the structural changes (matrix entries, DOFs, new constraints, releases and the moves of
+   constraints released later) from pending to the job; moves of constraints stay. */
+static amps_status amps__cjob_take(amps_ctx *ctx, amps_update *U) {
+    amps_marker *mk = &U->work.mark_N;
+    amps_int k, keep = 0, nc = 0;
+    if (U->pending.n_delta > U->cjob.cap_delta) {
+        if (amps__realloc(ctx, (void **)&U->cjob.delta, (size_t)U->pending.n_delta, sizeof(amps__pdelta)))
+            return AMPS_ERR_OOM;
+        U->cjob.cap_delta = U->pending.n_delta;
+    }
+    if (U->pending.n_con > U->cjob.cap_con) {
+        if (amps__realloc(ctx, (void **)&U->cjob.con, (size_t)U->pending.n_con, sizeof(amps__pcon)))
+            return AMPS_ERR_OOM;
+        U->cjob.cap_con = U->pending.n_con;
+    }
+    memcpy(U->cjob.delta, U->pending.delta, sizeof(amps__pdelta) * (size_t)U->pending.n_delta);
+    U->cjob.n_delta = U->pending.n_delta;
+    U->cjob.n_dofs = U->pending.n_dofs;
+    amps_marker_next(mk);
+    for (k = 0; k < U->pending.n_con; k++)
+        if (U->pending.con[k].release) mk->mark[U->pending.con[k].i] = mk->stamp;
+    for (k = 0; k < U->pending.n_con; k++) {
+        const amps__pcon *c = U->pending.con + k;
+        if (!c->release && c->i < U->N && mk->mark[c->i] != mk->stamp && amps__is_con(U, c->i))
+            U->pending.con[keep++] = *c;
+        else U->cjob.con[nc++] = *c;
+    }
+    U->cjob.n_con = nc;
+    U->pending.n_con = keep;
+    U->pending.n_delta = 0;
+    U->pending.n_dofs = 0;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_update_commit_begin(amps_ctx *ctx, amps_update *U) {
+    amps_int u_old, a, nl = 0;
+    size_t vused_old;
+    amps_status s;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit_begin: NULL engine");
+    if (U->cjob.state) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_commit_begin: a job is in progress");
+    if (U->refac.job) amps__bg_poll(ctx, U);
+    if (!U->pending.n_delta && !U->pending.n_dofs && amps__count_new(U) == 0) {
+        amps_int k; /* no new positions and no matrix change: one ordinary (short) commit */
+        for (k = 0; k < U->pending.n_con && !U->pending.con[k].release; k++) {}
+        if (k == U->pending.n_con) {
+            if ((s = amps__commit(ctx, U, 1)) != AMPS_OK) return s;
+            U->cjob.state = 1;
+            U->cjob.nlist = -1;
+            return AMPS_OK;
+        }
+    }
+    if ((s = amps__cjob_workspace(ctx, U)) != AMPS_OK) return s;
+    u_old = U->aug.size;
+    vused_old = U->memo.used;
+    U->journal.n_rows = 0;
+    U->journal.n_kinds = 0;
+    if ((s = amps__need_u(ctx, U, amps__count_new(U))) != AMPS_OK) {
+        amps_update_discard(U);
+        return s;
+    }
+    if ((s = amps__need_memo(ctx, U, amps__grow_aug(U))) != AMPS_OK ||
+        (U->aug.size - u_old > U->cjob.cap_list &&
+         amps__realloc(ctx, (void **)&U->cjob.list, (size_t)(U->aug.size - u_old), sizeof(amps_int)))) {
+        amps__rollback(U, u_old, vused_old, U->delta.used);
+        return s ? s : AMPS_ERR_OOM;
+    }
+    if (U->aug.size - u_old > U->cjob.cap_list) U->cjob.cap_list = U->aug.size - u_old;
+    for (a = u_old; a < U->aug.size; a++) /* Step 1's memo offsets (amps__step1) */
+        if (U->aug.idx[a] < U->n) {
+            U->memo.off[a] = U->memo.used;
+            U->memo.used += (size_t)U->memo.len[a];
+            U->cjob.list[nl++] = a;
+        }
+    if ((s = amps__cjob_take(ctx, U)) != AMPS_OK) {
+        amps__rollback(U, u_old, vused_old, U->delta.used);
+        return amps__err(ctx, s, "amps_update_commit_begin: out of memory");
+    }
+    /* the run phase's copy sees the new positions; the engine does not until the end */
+    *U->cjob.J = *U;
+    U->cjob.J->work.chunk = U->cjob.chunk;
+    U->cjob.J->work.row_map = U->cjob.row_map;
+    U->cjob.J->work.closure = U->cjob.closure;
+    for (a = u_old; a < U->aug.size; a++) U->aug.pos[U->aug.idx[a]] = -1;
+    U->aug.size = u_old;
+    U->cjob.u_old = u_old;
+    U->cjob.vused_old = vused_old;
+    U->cjob.nlist = nl;
+    U->cjob.state = 1;
+    return AMPS_OK;
+}
+
+AMPS_API void amps_update_commit_run(amps_update *U) {
+    amps_update *J;
+    double t0, t1;
+    if (!U || U->cjob.state != 1) return;
+    if (U->cjob.nlist >= 0) {
+        J = U->cjob.J;
+        t0 = amps_now();
+        amps__wcols(J, U->cjob.list, U->cjob.nlist);
+        t1 = amps_now();
+        amps__gcols(J, U->cjob.u_old);
+        U->cjob.t_wcols = t1 - t0;
+        U->cjob.t_gram = amps_now() - t1;
+    }
+    U->cjob.state = 2;
+}
+
+AMPS_API amps_status amps_update_commit_end(amps_ctx *ctx, amps_update *U) {
+    amps_int u_old, a, nc, left;
+    amps_status s;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit_end: NULL engine");
+    if (!U->cjob.state) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_commit_end: no commit begun");
+    if (U->cjob.state == 1) amps_update_commit_run(U);
+    U->cjob.state = 0;
+    if (U->cjob.nlist < 0) return AMPS_OK;
+    u_old = U->cjob.u_old;
+    U->aug.size = U->cjob.J->aug.size;
+    for (a = u_old; a < U->aug.size; a++) U->aug.pos[U->aug.idx[a]] = a;
+    /* the job's changes first, then the moves recorded since */
+    nc = U->cjob.n_con;
+    left = U->pending.n_con;
+    if ((s = amps__need_pending(ctx, U, U->cjob.n_delta, nc)) != AMPS_OK) {
+        amps__rollback(U, u_old, U->cjob.vused_old, U->delta.used);
+        return s;
+    }
+    memmove(U->pending.con + nc, U->pending.con, sizeof(amps__pcon) * (size_t)left);
+    memcpy(U->pending.con, U->cjob.con, sizeof(amps__pcon) * (size_t)nc);
+    U->pending.n_con = nc + left;
+    memcpy(U->pending.delta, U->cjob.delta, sizeof(amps__pdelta) * (size_t)U->cjob.n_delta);
+    U->pending.n_delta = U->cjob.n_delta;
+    U->pending.n_dofs = U->cjob.n_dofs;
+    U->stats.t_step[AMPS_STEP_WCOLS] = U->cjob.t_wcols;
+    U->stats.t_step[AMPS_STEP_GRAM] = U->cjob.t_gram;
+    return amps__commit_finish(ctx, U, u_old, U->cjob.vused_old, 1, 1);
+}
 
 /* ---- Steps 4 and 6 ---- */
 
@@ -7988,7 +8226,7 @@ static void amps__bg_after_commit(amps_ctx *ctx, amps_update *U, int structural,
     int start;
     amps_ctx c2;
     if (structural) U->refac.n_struct++;
-    if (U->refac.job || !may_swap) return;
+    if (U->refac.job || !may_swap || U->cjob.state) return;
     start = pol == AMPS_REFACTOR_COUNT && U->refac.n_struct >= U->refac.opts.refactor_every;
 #ifndef AMPS_NO_THREADS
     start |= pol == AMPS_REFACTOR_AUTO && U->aug.size > U->refac.size_base + U->refac.opts.refactor_size;
@@ -8027,8 +8265,8 @@ AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U) {
     amps__bg *b;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_refactor_wait: NULL engine");
     if (!(b = U->refac.job)) return AMPS_WARN_NOOP;
-    if (U->watch.job_y)
-        return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_wait: a watched-solve job is in progress");
+    if (U->watch.job_y || U->cjob.state)
+        return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_wait: a two-phase job is in progress");
     amps__bg_join(b);
     if (b->state == AMPS__BG_READY) return amps__bg_swap(ctx, U);
     {
@@ -9029,7 +9267,7 @@ typedef struct amps__scene_op {
     double old[3];               /* pin: the previous pin value */
 } amps__scene_op;
 typedef struct amps__scene_batch {
-    int open;
+    int open, committing; /* a batch records; a two-phase commit of it is in progress */
     amps_int n, cap, nmoved, cap_moved;
     amps__scene_op *ops;
     amps_int *moved;
@@ -9755,6 +9993,7 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
     int watched;
     if (new_node) *new_node = -1;
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_cut")) != AMPS_OK) return s;
+    if (S->batch.committing) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_cut: a two-phase commit is in progress");
     if (S->prepared && !S->batch.open && (s = amps_update_commit(ctx, S->U)) != AMPS_OK)
         return s; /* earlier changes first */
     if ((s = amps__scene_cut_room(ctx, S, v, &watched)) != AMPS_OK) return s;
@@ -9966,7 +10205,8 @@ static void amps__scene_batch_undo(amps_scene *S) {
 AMPS_API amps_status amps_scene_begin_batch(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_begin_batch: NULL scene");
-    if (S->batch.open) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_begin_batch: a batch is open");
+    if (S->batch.open || S->batch.committing)
+        return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_begin_batch: a batch is open");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
     S->batch.open = 1;
@@ -9991,6 +10231,37 @@ AMPS_API amps_status amps_scene_commit(amps_ctx *ctx, amps_scene *S) {
     S->batch.open = 0;
     S->batch.n = S->batch.nmoved = 0;
     return s;
+}
+
+AMPS_API amps_status amps_scene_commit_begin(amps_ctx *ctx, amps_scene *S) {
+    amps_status s;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_commit_begin: NULL scene");
+    if (S->batch.committing) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_commit_begin: a commit is in progress");
+    if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if ((s = amps_update_commit_begin(ctx, S->U)) != AMPS_OK) {
+        if (S->batch.open) amps__scene_batch_undo(S); /* the engine discarded it */
+        return s;
+    }
+    S->batch.committing = 1;
+    S->batch.open = 0; /* its log stays until the end, to undo it */
+    return AMPS_OK;
+}
+
+AMPS_API void amps_scene_commit_run(amps_scene *S) {
+    if (S && S->batch.committing) amps_update_commit_run(S->U);
+}
+
+AMPS_API amps_status amps_scene_commit_end(amps_ctx *ctx, amps_scene *S) {
+    amps_status s;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_commit_end: NULL scene");
+    if (!S->batch.committing) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_commit_end: no commit begun");
+    S->batch.committing = 0;
+    if ((s = amps_update_commit_end(ctx, S->U)) != AMPS_OK) {
+        amps__scene_batch_undo(S);
+        return s;
+    }
+    S->batch.n = S->batch.nmoved = 0;
+    return AMPS_OK;
 }
 
 /* Squared distance of x to the segment [a, b]; *t: the parameter in [0, 1] of the nearest point. */

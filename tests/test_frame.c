@@ -360,6 +360,114 @@ static void test_haptic_no_swap(void) {
     shadow_free(&w);
 }
 
+/* Frame fr of the two-phase test: a batch holding a stroke. */
+static void two_phase_batch(amps_ctx *ctx, amps_scene *S, int fr) {
+    double pts[6], blade[3] = {0, 1, 0.1};
+    stroke_point(fr, 0, pts);
+    stroke_point(fr, 1, pts + 3);
+    CHECK(amps_scene_begin_batch(ctx, S) == AMPS_OK, "two-phase: begin batch: %s", ctx->msg);
+    CHECK(amps_scene_stroke(ctx, S, 2, pts, blade, 0.55, NULL) == AMPS_OK, "two-phase: stroke: %s", ctx->msg);
+}
+
+/* Haptic steps: the top pin moved, its reaction read; returns the last x-reaction. */
+static double haptic_steps(amps_ctx *ctx, amps_scene *S, amps_int top, int fr, int nsteps) {
+    double u[3], r[3] = {0, 0, 0};
+    int h;
+    for (h = 0; h < nsteps; h++) {
+        u[0] = 0.05 + 0.0005 * h;
+        u[1] = 0.02;
+        u[2] = 0.001 * fr;
+        CHECK(amps_scene_pin(ctx, S, top, u) == AMPS_OK && amps_scene_solve_reactions(ctx, S) == AMPS_OK,
+              "two-phase: haptic: %s", ctx->msg);
+        amps_scene_reaction(ctx, S, top, r);
+    }
+    return r[0];
+}
+
+/* A two-phase commit equals a one-phase commit bitwise; haptic steps during its run phase see the
+   committed system and never swap; the changes it forbids meanwhile are refused. */
+static void test_two_phase(void) {
+    amps_ctx ctx;
+    amps_scene *A, *B;
+    shadow wa, wb;
+    amps_scene_opts so;
+    amps_int top = 25 * 15 + 12;
+    int fr, same = 1;
+    amps_ctx_init(&ctx);
+    amps_scene_opts_default(&so);
+    so.update.refactor = AMPS_REFACTOR_COUNT; /* swaps at the same points in both */
+    so.update.refactor_every = 3;
+    A = beam_scene(&ctx, 16, &wa, &so);
+    B = beam_scene(&ctx, 16, &wb, &so);
+    for (fr = 0; fr < 10; fr++) {
+        double ra, rb, u[3] = {0.05, 0.02, 0.001 * fr}, p[3] = {2, 2, 8}, nrm[3] = {1, 0, 0};
+        amps_int n3, vc;
+        two_phase_batch(&ctx, A, fr);
+        two_phase_batch(&ctx, B, fr);
+        CHECK(amps_scene_commit_begin(&ctx, A) == AMPS_OK, "two-phase: begin: %s", ctx.msg);
+        CHECK(amps_scene_cut(&ctx, A, 0, p, nrm, &vc) == AMPS_ERR_STATE, "two-phase: a cut during the job accepted");
+        CHECK(amps_scene_pin(&ctx, A, 25 * 15 + 3, u) == AMPS_ERR_STATE, "two-phase: a new pin during the job accepted");
+        amps_scene_commit_run(A);
+        CHECK(amps_scene_commit_end(&ctx, A) == AMPS_OK, "two-phase: end: %s", ctx.msg);
+        CHECK(amps_scene_commit(&ctx, B) == AMPS_OK, "two-phase: one-phase commit: %s", ctx.msg);
+        shadow_grow(&wa, (int)amps_scene_mesh(A)->nnode);
+        ra = haptic_steps(&ctx, A, top, fr, 5);
+        rb = haptic_steps(&ctx, B, top, fr, 5);
+        same &= ra == rb;
+        CHECK(amps_scene_solve(&ctx, A) == AMPS_OK && amps_scene_solve(&ctx, B) == AMPS_OK, "two-phase: solve: %s",
+              ctx.msg);
+        n3 = 3 * amps_scene_mesh(A)->nnode;
+        same &= n3 == 3 * amps_scene_mesh(B)->nnode &&
+                !memcmp(amps_scene_displacements(A), amps_scene_displacements(B), sizeof(double) * (size_t)n3);
+    }
+    CHECK(same, "two-phase: results differ from the one-phase commit's bits");
+    {
+        amps_update_stats st;
+        amps_update_get_stats(amps_scene_engine(A), &st);
+        CHECK(st.nrefactor >= 1, "two-phase: no re-factorization swapped in (COUNT)");
+    }
+    /* the haptic thread during the run phase: it sees the committed system */
+    for (fr = 10; fr < 16; fr++) {
+        double r_before, r_during, r_after, u[3] = {0.05, 0.02, 0.001 * fr};
+        amps_update_stats st0, st1;
+        r_before = haptic_steps(&ctx, A, top, fr, 1);
+        two_phase_batch(&ctx, A, fr);
+        CHECK(amps_scene_commit_begin(&ctx, A) == AMPS_OK, "two-phase: begin: %s", ctx.msg);
+        amps_update_get_stats(amps_scene_engine(A), &st0);
+        r_during = haptic_steps(&ctx, A, top, fr, 1);
+        CHECK(fabs(r_during - r_before) <= 1e-12 * fabs(r_before), "two-phase: the haptic step during the job: %.6e vs %.6e", r_during, r_before);
+#ifdef _OPENMP
+#pragma omp parallel sections num_threads(2)
+        {
+#pragma omp section
+            amps_scene_commit_run(A);
+#pragma omp section
+            (void)haptic_steps(&ctx, A, top, fr, 20);
+        }
+#else
+        amps_scene_commit_run(A);
+        (void)haptic_steps(&ctx, A, top, fr, 20);
+#endif
+        amps_update_get_stats(amps_scene_engine(A), &st1);
+        CHECK(st1.nrefactor == st0.nrefactor, "two-phase: a swap during the job");
+        CHECK(amps_scene_pin(&ctx, A, top, u) == AMPS_OK, "two-phase: pin move: %s", ctx.msg);
+        CHECK(amps_scene_commit_end(&ctx, A) == AMPS_OK, "two-phase: end: %s", ctx.msg);
+        shadow_grow(&wa, (int)amps_scene_mesh(A)->nnode);
+        memcpy(wa.pinval + 3 * top, u, sizeof(u));
+        r_after = haptic_steps(&ctx, A, top, fr, 0);
+        (void)r_after;
+        CHECK(amps_scene_solve(&ctx, A) == AMPS_OK, "two-phase: solve: %s", ctx.msg);
+        {
+            double e = ref_err(&ctx, A, &wa);
+            CHECK(e <= 1e-10, "two-phase frame %d: vs CHOLMOD %.3e", fr, e);
+        }
+    }
+    amps_scene_free(&ctx, A);
+    amps_scene_free(&ctx, B);
+    shadow_free(&wa);
+    shadow_free(&wb);
+}
+
 int main(void) {
     test_stroke();
     test_batches(21);
@@ -367,5 +475,6 @@ int main(void) {
     test_batch_undo();
     test_count();
     test_haptic_no_swap();
+    test_two_phase();
     return amps_t_end("test_frame");
 }
