@@ -3,7 +3,7 @@
 #   make test SAN=1    the same under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make test OMP=     the same without OpenMP
 #   make tsan          ThreadSanitizer on the tests that run background re-factorizations
-#   make examples      build the examples (build/default/readme_example, haptic_loop)
+#   make examples      build the examples (build/default/readme_example, haptic_loop, frame_loop)
 #   make switches      AMPS_NO_FEM / NO_STDIO / NO_THREADS combinations: build, tests, object sizes
 #   make demo          the main job: replay examples/brick_incision.scn (VTU, CSV, PNG in build/demo)
 #   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv (tracked)
@@ -43,7 +43,7 @@ LDLIBS     = -lm
 TEST_SRC  := $(wildcard tests/test_*.c)
 TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
 TEST_SH   := $(wildcard tests/test_*.sh)
-TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example $(BUILD)/haptic_loop
+TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example $(BUILD)/haptic_loop $(BUILD)/frame_loop
 
 .PHONY: tsan all test deps deps-check tools examples demo bench bench-quick clean distclean cxx switches stress fuzz \
         format format-check
@@ -60,7 +60,10 @@ $(BUILD)/readme_example: examples/readme_example.c amps.h | $(BUILD)
 $(BUILD)/haptic_loop: examples/haptic_loop.c amps.h | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< -lpthread $(LDLIBS)
 
-examples: $(BUILD)/readme_example $(BUILD)/haptic_loop
+$(BUILD)/frame_loop: examples/frame_loop.c amps.h | $(BUILD)
+	$(CC) $(CFLAGS_ALL) -o $@ $< -lpthread $(LDLIBS)
+
+examples: $(BUILD)/readme_example $(BUILD)/haptic_loop $(BUILD)/frame_loop
 
 # The main job: replay the brick incision, write VTU/CSV (and a PNG when gnuplot is there).
 demo: $(BUILD)/amps_replay
