@@ -724,8 +724,9 @@ AMPS_API void amps_sym3_eig(const double s[6], double lam[3]);
    the element stiffness of those tets only. Lifecycle: create, fix nodes and set materials,
    then any sequence of force / pin / release / cut / solve (the first of these factors K).
    A failed scene call leaves the scene as it was. Structural changes (a pin of a node not
-   pinned yet, a release, a cut) commit to the engine at once; moved pins and forces wait for
-   the next solve, whose commit then has only values to apply.
+   pinned yet, a release, a cut) commit to the engine at once, outside a batch
+   (amps_scene_begin_batch); moved pins and forces wait for the next solve, whose commit then
+   has only values to apply.
    Allocation: amps_scene_prepare (or the first change) allocates everything; later calls
    allocate only when a capacity is exceeded and opts.update.grow is set (the default). */
 typedef struct amps_scene amps_scene;
