@@ -6814,6 +6814,25 @@ fail:
     return s;
 }
 
+/* The start of a commit: positions for the new indices, room for their W columns; on failure
+   the changes are discarded. */
+static amps_status amps__commit_grow(amps_ctx *ctx, amps_update *U) {
+    amps_int u_old = U->aug.size;
+    size_t vused_old = U->memo.used;
+    amps_status s;
+    U->journal.n_rows = 0;
+    U->journal.n_kinds = 0;
+    if ((s = amps__need_u(ctx, U, amps__count_new(U))) != AMPS_OK) {
+        amps_update_discard(U);
+        return s;
+    }
+    if ((s = amps__need_memo(ctx, U, amps__grow_aug(U))) != AMPS_OK) {
+        amps__rollback(U, u_old, vused_old, U->delta.used);
+        return s;
+    }
+    return AMPS_OK;
+}
+
 /* amps_update_commit; may_swap 0 (the haptic path) neither swaps nor starts a re-factorization. */
 static amps_status amps__commit(amps_ctx *ctx, amps_update *U, int may_swap) {
     amps_int u_old;
@@ -6830,17 +6849,7 @@ static amps_status amps__commit(amps_ctx *ctx, amps_update *U, int may_swap) {
     t0 = amps_now();
     u_old = U->aug.size;
     vused_old = U->memo.used;
-    U->journal.n_rows = 0;
-    U->journal.n_kinds = 0;
-    /* grow U */
-    if ((s = amps__need_u(ctx, U, amps__count_new(U))) != AMPS_OK) {
-        amps_update_discard(U);
-        return s;
-    }
-    if ((s = amps__need_memo(ctx, U, amps__grow_aug(U))) != AMPS_OK) {
-        amps__rollback(U, u_old, vused_old, U->delta.used);
-        return s;
-    }
+    if ((s = amps__commit_grow(ctx, U)) != AMPS_OK) return s;
     /* Step 1: W columns */
     amps__step1(U, u_old);
     t1 = amps_now();
@@ -6929,17 +6938,11 @@ AMPS_API amps_status amps_update_commit_begin(amps_ctx *ctx, amps_update *U) {
     if ((s = amps__cjob_workspace(ctx, U)) != AMPS_OK) return s;
     u_old = U->aug.size;
     vused_old = U->memo.used;
-    U->journal.n_rows = 0;
-    U->journal.n_kinds = 0;
-    if ((s = amps__need_u(ctx, U, amps__count_new(U))) != AMPS_OK) {
-        amps_update_discard(U);
-        return s;
-    }
-    if ((s = amps__need_memo(ctx, U, amps__grow_aug(U))) != AMPS_OK ||
-        (U->aug.size - u_old > U->cjob.cap_list &&
-         amps__realloc(ctx, (void **)&U->cjob.list, (size_t)(U->aug.size - u_old), sizeof(amps_int)))) {
+    if ((s = amps__commit_grow(ctx, U)) != AMPS_OK) return s;
+    if (U->aug.size - u_old > U->cjob.cap_list &&
+        amps__realloc(ctx, (void **)&U->cjob.list, (size_t)(U->aug.size - u_old), sizeof(amps_int))) {
         amps__rollback(U, u_old, vused_old, U->delta.used);
-        return s ? s : AMPS_ERR_OOM;
+        return AMPS_ERR_OOM;
     }
     if (U->aug.size - u_old > U->cjob.cap_list) U->cjob.cap_list = U->aug.size - u_old;
     for (a = u_old; a < U->aug.size; a++) /* Step 1's memo offsets (amps__step1) */

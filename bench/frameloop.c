@@ -28,6 +28,7 @@
 
 typedef struct shared {
     pthread_mutex_t lock;
+    pthread_cond_t step_done; /* a haptic step ended */
     amps_scene *S;
     amps_ctx hctx;
     amps_int grasp[NGRASP];
@@ -62,6 +63,7 @@ static void *haptic(void *arg) {
         }
         pthread_mutex_lock(&sh->lock);
         if (sh->stop) {
+            pthread_cond_broadcast(&sh->step_done);
             pthread_mutex_unlock(&sh->lock);
             break;
         }
@@ -83,22 +85,18 @@ static void *haptic(void *arg) {
             sh->t_last = t;
         }
         sh->steps++;
+        pthread_cond_broadcast(&sh->step_done);
         pthread_mutex_unlock(&sh->lock);
     }
     return NULL;
 }
 
+/* Blocks until the haptic thread has made HAPTIC_PER_FRAME steps since the last frame. */
 static void wait_haptic(shared *sh) {
-    struct timespec q = {0, 200000L};
-    for (;;) {
-        int done;
-        pthread_mutex_lock(&sh->lock);
-        done = sh->stop || sh->steps - sh->frame_at >= HAPTIC_PER_FRAME;
-        if (done) sh->frame_at = sh->steps;
-        pthread_mutex_unlock(&sh->lock);
-        if (done) return;
-        nanosleep(&q, NULL);
-    }
+    pthread_mutex_lock(&sh->lock);
+    while (!sh->stop && sh->steps - sh->frame_at < HAPTIC_PER_FRAME) pthread_cond_wait(&sh->step_done, &sh->lock);
+    sh->frame_at = sh->steps;
+    pthread_mutex_unlock(&sh->lock);
 }
 
 typedef struct frame_info {
@@ -221,6 +219,7 @@ int main(int argc, char **argv) {
     tf_cut = (double *)bench_alloc(sizeof(double) * (size_t)frames);
     tl_cut = (double *)bench_alloc(sizeof(double) * (size_t)frames);
     pthread_mutex_init(&sh.lock, NULL);
+    pthread_cond_init(&sh.step_done, NULL);
     if (pthread_create(&th, NULL, haptic, &sh)) bench_die("thread", "pthread_create failed");
     for (f = 0; f < idle + frames && !sh.failed; f++) {
         wait_haptic(&sh);
@@ -273,5 +272,6 @@ int main(int argc, char **argv) {
         fclose(csv);
     }
     pthread_mutex_destroy(&sh.lock);
+    pthread_cond_destroy(&sh.step_done);
     return 0;
 }
