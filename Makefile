@@ -103,6 +103,7 @@ cxx: | $(BUILD)
 	       'int main(void){amps_ctx c; amps_ctx_init(&c); return 0;}' > $(BUILD)/cxx_check.cpp
 	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -c $(BUILD)/cxx_check.cpp -o $(BUILD)/cxx_check.o
 	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -x c++ -c examples/haptic_loop.c -o $(BUILD)/haptic_loop_cxx.o
+	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -x c++ -c examples/frame_loop.c -o $(BUILD)/frame_loop_cxx.o
 
 # libgomp is not instrumented, so without OpenMP; the threads are the re-factorization's
 tsan:
