@@ -5,7 +5,7 @@
 #   make tsan          ThreadSanitizer on the tests that run background re-factorizations and
 #                      on tests/test_par.c (the parallel layer on a pthread job system)
 #   make test-tasks    the tests with every context on the host-task back end (tests/jobs_test.h)
-#   make examples      build the examples (build/default/readme_example, haptic_loop)
+#   make examples      build the examples (build/default/readme_example, haptic_loop, frame_loop)
 #   make switches      AMPS_NO_FEM / NO_STDIO / NO_THREADS combinations: build, tests, object sizes
 #   make demo          the main job: replay examples/brick_incision.scn (VTU, CSV, PNG in build/demo)
 #   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv (tracked)
@@ -46,7 +46,7 @@ LDLIBS     = -lm
 TEST_SRC  := $(wildcard tests/test_*.c)
 TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
 TEST_SH   := $(wildcard tests/test_*.sh)
-TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example $(BUILD)/haptic_loop
+TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example $(BUILD)/haptic_loop $(BUILD)/frame_loop
 
 .PHONY: tsan test-tasks all test deps deps-check tools examples demo bench bench-quick bench-load clean distclean cxx switches stress fuzz \
         format format-check
@@ -63,7 +63,10 @@ $(BUILD)/readme_example: examples/readme_example.c amps.h | $(BUILD)
 $(BUILD)/haptic_loop: examples/haptic_loop.c examples/jobs.h amps.h | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< -lpthread $(LDLIBS)
 
-examples: $(BUILD)/readme_example $(BUILD)/haptic_loop
+$(BUILD)/frame_loop: examples/frame_loop.c amps.h | $(BUILD)
+	$(CC) $(CFLAGS_ALL) -o $@ $< -lpthread $(LDLIBS)
+
+examples: $(BUILD)/readme_example $(BUILD)/haptic_loop $(BUILD)/frame_loop
 
 # The main job: replay the brick incision, write VTU/CSV (and a PNG when gnuplot is there).
 demo: $(BUILD)/amps_replay
@@ -103,6 +106,7 @@ cxx: | $(BUILD)
 	       'int main(void){amps_ctx c; amps_ctx_init(&c); return 0;}' > $(BUILD)/cxx_check.cpp
 	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -c $(BUILD)/cxx_check.cpp -o $(BUILD)/cxx_check.o
 	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -x c++ -c examples/haptic_loop.c -o $(BUILD)/haptic_loop_cxx.o
+	$(CXX) -std=c++11 -Wall -Wextra -Werror -I. -x c++ -c examples/frame_loop.c -o $(BUILD)/frame_loop_cxx.o
 
 # libgomp is not instrumented, so without OpenMP; the threads are the re-factorization's
 tsan:

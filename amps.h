@@ -410,11 +410,28 @@ typedef enum amps_formulation {
    freed at the swap. A failed re-factorization (not SPD, out of memory) is reported by
    amps_update_refactor_wait / the stats and the engine goes on with the old factors.
    With AMPS_NO_THREADS there is no background thread: AUTO does nothing and start/refactor
-   run synchronously. Custom allocators (AMPS_MALLOC) must then be thread-safe. */
+   run synchronously. Custom allocators (AMPS_MALLOC) must then be thread-safe.
+   Triggers (AUTO): the cost model after a full amps_update_solve (refactor_ratio), and after every
+   commit, whatever solve follows it, the size: a commit that leaves |S u C| above
+   refactor_size plus its size at the last base starts one. So |S u C| stays below
+   |C| + refactor_size + the growth during one re-factorization, and the haptic step
+   (amps_update_solve_reactions with only prescribed values moved, O(|S u C|^2)) stays bounded.
+   Deterministic mode (COUNT): structural commits (those that change K^, add DOFs or grow S u C)
+   are counted; the one that brings the count since the last base to refactor_every starts a
+   re-factorization, and the first commit that may swap (not amps_update_solve_reactions) after
+   refactor_every / 2 more structural commits waits for it and swaps it in. The worker only
+   factors (the swap replays every change since the start), so identical call sequences give
+   identical bits; AUTO depends on the clock.
+   Which calls may take how long: a swap (O(one commit of the changes since the start)) happens
+   only at the start of amps_update_commit, solve, solve_watched, watched_begin, refactor_wait and
+   refactor, never in amps_update_solve_reactions; a commit costs Steps 1-5 (Step 1: the
+   L^{-1} columns of the new indices, O(their closures); Steps 2-3: O(|S u C| x new); Step 5:
+   O(|S u C|^2 x changed columns)); a start copies the augmentation (O(|Delta| + N)). */
 typedef enum amps_refactor_policy {
-    AMPS_REFACTOR_AUTO = 0,   /* start by the cost model (only with threads) and on request */
+    AMPS_REFACTOR_AUTO = 0,   /* start by the cost model and the size (only with threads) and on request */
     AMPS_REFACTOR_MANUAL = 1, /* only on request */
-    AMPS_REFACTOR_OFF = 2     /* never */
+    AMPS_REFACTOR_OFF = 2,    /* never */
+    AMPS_REFACTOR_COUNT = 3   /* deterministic: at points fixed by the count of structural commits */
 } amps_refactor_policy;
 
 /* Options; amps_update_opts_default gives the defaults. A capacity, refactor_threads or
@@ -460,6 +477,9 @@ typedef struct amps_update_opts {
                                re-factorization (unless refactor is OFF) and the solve again.
                                Default 2.2e-16 (1 eps: the level of a fresh direct solve);
                                0 = off (solves then cost no product with K^) */
+    amps_int refactor_size;         /* AUTO: start after a commit that grows |S u C| past its size at the
+                                      last base plus this; default 384 */
+    amps_int refactor_every;        /* COUNT: structural commits between re-factorizations; default 32 */
 } amps_update_opts;
 
 /* The steps of [AMPS] Table 1, indices of amps_update_stats.t_step. */
@@ -547,6 +567,27 @@ AMPS_API void amps_update_discard(amps_update *U);
    discarded (as by amps_update_discard); record them again, corrected, to retry. A finished
    re-factorization the call swapped in first stays swapped in. */
 AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U);
+/* The same in two phases, for a caller whose haptic thread must not wait for a commit's Steps 1-2
+   (the L^{-1} columns of the new indices and the new rows of G: the expensive part):
+     amps_update_commit_begin (under the caller's lock) swaps a ready re-factorization in, takes
+                              the recorded structural changes (matrix entries, DOFs, new
+                              constraints, releases), places their new indices and reserves
+                              their memory; the engine still shows the committed system;
+     amps_update_commit_run   (no lock) Steps 1-2 on memory no other call reads or writes;
+     amps_update_commit_end   (under the lock) Steps 3 and 5 (O(|S u C|^2 x changed columns))
+                              with the moves recorded since applied after the job's changes.
+   Between begin and end the other calls work on the committed system: solves (haptic
+   amps_update_solve_reactions, watched and full ones), moves of constraints (amps_update_constrain
+   of a constrained index) and forces; any other change (amps_update_add, set_rows, add_dofs,
+   release, a new constraint) fails with AMPS_ERR_STATE, and nothing swaps a re-factorization
+   in. A change set without new indices or releases is committed by begin at once (run and end
+   then do nothing). One job at a time; end without run runs it. Allocates (begin: the run
+   phase's workspace, nbuf x base order, once, and capacities as amps_update_commit). Failures
+   as amps_update_commit: begin (capacity, memory) or end (singular, capacity) discards the
+   recorded changes and leaves the committed system. Results equal amps_update_commit's bitwise. */
+AMPS_API amps_status amps_update_commit_begin(amps_ctx *ctx, amps_update *U);
+AMPS_API void amps_update_commit_run(amps_update *U);
+AMPS_API amps_status amps_update_commit_end(amps_ctx *ctx, amps_update *U);
 /* Commits, then solves (Step 6): x (room for amps_update_dim, may be NULL) receives the solution.
    A failed commit: see amps_update_commit. AMPS_WARN_INACCURATE (accuracy guard) is a warning:
    the solution is stored, and the guard may have re-factored. */
@@ -598,6 +639,7 @@ AMPS_API void amps_update_watched_end(amps_update *U, amps_update_job *job);
    alone (Steps 4-5, no full solve): O(|S u C|^2) when only prescribed values moved, plus a sparse
    forward solve over closure_L of the changed forces and O(sum of root paths) when forces
    changed. The haptic path: a pin moved, read its force. amps_update_solution is not updated.
+   Its commit never swaps in nor starts a re-factorization (the next other commit does).
    Allocates nothing. A failed commit: see amps_update_commit. */
 AMPS_API amps_status amps_update_solve_reactions(amps_ctx *ctx, amps_update *U);
 /* Solution of the last solve (amps_update_dim entries at that time). */
@@ -770,8 +812,9 @@ AMPS_API amps_int amps_mesh_boundary(amps_ctx *ctx, const amps_mesh *m, amps_int
    the element stiffness of those tets only. Lifecycle: create, fix nodes and set materials,
    then any sequence of force / pin / release / cut / solve (the first of these factors K).
    A failed scene call leaves the scene as it was. Structural changes (a pin of a node not
-   pinned yet, a release, a cut) commit to the engine at once; moved pins and forces wait for
-   the next solve, whose commit then has only values to apply.
+   pinned yet, a release, a cut) commit to the engine at once, outside a batch
+   (amps_scene_begin_batch); moved pins and forces wait for the next solve, whose commit then
+   has only values to apply.
    Allocation: amps_scene_prepare (or the first change) allocates everything; later calls
    allocate only when a capacity is exceeded and opts.update.grow is set (the default). */
 typedef struct amps_scene amps_scene;
@@ -905,6 +948,59 @@ AMPS_API amps_status amps_scene_fix_sphere(amps_ctx *ctx, amps_scene *S, const d
 /* 1 if node v is fixed / pinned, else 0 (also for a NULL scene or v out of range). */
 AMPS_API int amps_scene_is_fixed(const amps_scene *S, amps_int v);
 AMPS_API int amps_scene_is_pinned(const amps_scene *S, amps_int v);
+/* Nodes within distance radius (>= 0) of the segment [a, b] (a point if a = b) in the reference
+   configuration, that belong to a tet: what a blade or a grasper touches. out receives the first
+   min(count, cap) of them, ascending (out may be NULL when cap is 0). Returns their count, or a
+   negative status (AMPS_ERR_ARG: NULL scene, a, b, or out with cap > 0; AMPS_ERR_VALUE: not
+   finite, negative radius). O(nnode); allocates nothing. */
+AMPS_API amps_int amps_scene_nodes_near_segment(amps_ctx *ctx, const amps_scene *S, const double a[3],
+                                                const double b[3], double radius, amps_int *out, amps_int cap);
+/* Batches: between amps_scene_begin_batch and amps_scene_commit, cuts, pins, releases and forces
+   only record their changes (each cut's mechanism test still runs at the cut, so its refusal is
+   immediate, and the scene's mesh and node numbering change at once); amps_scene_commit applies
+   them to the engine in one commit. The solves commit an open batch first, as amps_scene_commit
+   does. amps_scene_begin_batch prepares the scene if needed (AMPS_ERR_STATE if a batch is open).
+   amps_scene_commit ends the batch; on failure (AMPS_ERR_SINGULAR_UPDATE: a piece the mechanism
+   test missed is loose; AMPS_ERR_CAPACITY, AMPS_ERR_OOM) every cut, pin and release of the batch
+   is undone (forces stay, as in the engine) and the scene is as at amps_scene_begin_batch. A cut
+   in a batch that fails for lack of memory also undoes the batch. Outside a batch amps_scene_commit
+   commits what the scene recorded (moved pins, forces). Cost: one engine commit (see
+   amps_update_commit) for the whole batch instead of one per change. */
+AMPS_API amps_status amps_scene_begin_batch(amps_ctx *ctx, amps_scene *S);
+AMPS_API amps_status amps_scene_commit(amps_ctx *ctx, amps_scene *S);
+/* amps_scene_commit in two phases (amps_update_commit_begin/run/end): begin and end under the
+   caller's lock, run outside it (Steps 1-2, the expensive part). Meanwhile the haptic thread may
+   move pins (amps_scene_pin of a pinned node), set forces and solve (amps_scene_solve_reactions
+   never waits for the job nor swaps a re-factorization in); cuts, new pins, releases and batches
+   fail with AMPS_ERR_STATE. A failed begin or end undoes the batch (as amps_scene_commit).
+   Costs: begin O(recorded changes + the new indices' root paths), plus a swap if one is ready;
+   run Steps 1-2 (O(closure of the new indices) + O(|S u C| x new)); end Steps 3 and 5
+   (O(|S u C|^2 x changed columns)); the haptic step O(|S u C|^2). */
+AMPS_API amps_status amps_scene_commit_begin(amps_ctx *ctx, amps_scene *S);
+AMPS_API void amps_scene_commit_run(amps_scene *S);
+AMPS_API amps_status amps_scene_commit_end(amps_ctx *ctx, amps_scene *S);
+/* A blade stroke: the polyline pts[0..npts-1] (3 per point, npts >= 2, reference configuration)
+   moved along the blade direction blade sweeps the surface made of one planar strip per segment
+   [p_i, p_i+1]: the plane through p_i spanned by the segment and the blade, whose normal is
+   n_i = (p_i+1 - p_i) x blade / |...|. Every node within radius of the polyline (of the nodes
+   that exist at the call and belong to a tet) is cut (amps_scene_cut) by the plane of its nearest
+   segment (the first of equal ones), in the order of the segments and then of the position along
+   the segment (ties by node number). The cuts form one batch committed once (inside an open batch
+   they join it and the caller commits). out (may be NULL) reports the nodes touched: node[k],
+   copy[k] (the new node, or -1) and status[k] (AMPS_OK: cut; AMPS_WARN_NOOP: the plane leaves
+   one side of the node empty; AMPS_ERR_SINGULAR_UPDATE: refused by the mechanism test) for
+   k < min(n, cap) (arrays caller-owned, cap entries each), n the number touched, ncut the nodes
+   cut. Errors: AMPS_ERR_ARG (npts < 2, NULL, a segment of zero length or parallel to the blade),
+   AMPS_ERR_VALUE (not finite, radius < 0), the commit's (the stroke undone, as amps_scene_commit)
+   and AMPS_ERR_OOM / AMPS_ERR_CAPACITY. Allocates O(nnode) scratch. */
+typedef struct amps_scene_stroke_result {
+    amps_int cap;          /* entries of the arrays (set by the caller) */
+    amps_int *node, *copy; /* caller-owned, cap entries each (may be NULL when cap is 0) */
+    amps_status *status;   /* caller-owned, cap entries (may be NULL when cap is 0) */
+    amps_int n, ncut;      /* nodes touched (may exceed cap), nodes cut */
+} amps_scene_stroke_result;
+AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int npts, const double *pts,
+                                       const double blade[3], double radius, amps_scene_stroke_result *out);
 #endif /* AMPS_NO_FEM */
 
 /* ==== [amps:io] mesh readers and writers ====================================================== */
@@ -5323,6 +5419,7 @@ struct amps_update {
         double t_factor;             /* measured (or estimated) factorization time */
         double t_step_base, t_extra; /* step time after the last swap, extra time since */
         amps_int size_base;          /* |U| after the last swap */
+        amps_int n_struct;           /* structural commits since the last swap (COUNT) */
     } refac;
     struct {                        /* watch set */
         amps_int n, n_closure, cap; /* size, |closure_L of its base indices|, capacity */
@@ -5333,6 +5430,20 @@ struct amps_update {
     amps_update_stats stats;
     amps__par par; /* the kernels' back end (from the ctx at create; bo points at this handle's bo) */
     amps__parbo bo;
+    struct {                            /* the two-phase commit (amps_update_commit_begin) */
+        int state;                      /* 0 none, 1 begun, 2 run */
+        amps_int u_old, nlist;          /* |U| before it; the new base positions (list) */
+        struct amps_update *J;          /* the copy of the engine the run phase works on */
+        amps__pdelta *delta;            /* its matrix changes and appended DOFs */
+        amps__pcon *con;                /* its structural constraint changes */
+        amps_int n_delta, n_con, n_dofs, cap_delta, cap_con;
+        amps_int *list, cap_list;       /* the new base positions (Step 1) */
+        double *chunk;                  /* the run phase's Step 1-2 workspace (as work.*) */
+        amps_int *row_map, *closure;    /* row_map -1 between uses */
+        amps_int ws_n;                  /* base order the workspace is sized for (0: none) */
+        size_t vused_old;               /* memo.used before it */
+        double t_wcols, t_gram;         /* the run phase's step times */
+    } cjob;
 };
 
 
@@ -5354,6 +5465,8 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
     o->refactor_threads = 1;
     o->refactor_ratio = 0.25;
     o->refine_tol = 2.220446049250313e-16;
+    o->refactor_size = 384;
+    o->refactor_every = 32;
 }
 
 /* ---- allocation of the capacity-dependent arrays ---- */
@@ -5496,10 +5609,18 @@ static void amps__bg_discard(amps_ctx *ctx, amps_update *U);
 static void amps__bg_poll(amps_ctx *ctx, amps_update *U);
 static void amps__bg_log(amps_update *U, amps_int kpend, const amps__pdelta *pd, amps_int npd);
 static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t);
+static void amps__bg_after_commit(amps_ctx *ctx, amps_update *U, int structural, int may_swap);
 
 AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     if (!U) return;
     amps__bg_discard(ctx, U);
+    amps__free(ctx, U->cjob.J);
+    amps__free(ctx, U->cjob.delta);
+    amps__free(ctx, U->cjob.con);
+    amps__free(ctx, U->cjob.list);
+    amps__free(ctx, U->cjob.chunk);
+    amps__free(ctx, U->cjob.row_map);
+    amps__free(ctx, U->cjob.closure);
     amps_factor_free(ctx, U->refac.F_own);
     amps_csc_free(ctx, U->refac.K_own);
     amps__free(ctx, U->base.Kp);
@@ -5625,6 +5746,8 @@ static amps_status amps__create_opts(amps_ctx *ctx, const amps_update_opts *opts
         return amps__err(ctx, AMPS_ERR_ARG, "amps_update_create: singular_tol must be in [0, 1)");
     if (!(o->refactor_ratio > 0)) o->refactor_ratio = d.refactor_ratio;
     if (o->refactor_threads <= 0) o->refactor_threads = d.refactor_threads;
+    if (o->refactor_size <= 0) o->refactor_size = d.refactor_size;
+    if (o->refactor_every <= 0) o->refactor_every = d.refactor_every;
     if (o->refactor_order.method == AMPS_ORDER_GIVEN)
         o->refactor_order.method = d.refactor_order.method; /* a given perm has the old order */
     o->refactor_order.perm = NULL;
@@ -5770,11 +5893,23 @@ static amps_status amps__chk_idx(amps_ctx *ctx, const amps_update *U, const char
     return AMPS_OK;
 }
 
+/* Index i (< N) is constrained in the committed system. */
+static int amps__is_con(const amps_update *U, amps_int i) {
+    amps_int a = U->aug.pos[i];
+    return a >= 0 && a < U->aug.size && U->aug.idx[a] == i && (U->aug.kind[a] & AMPS__UCON);
+}
+
+static amps_status amps__cjob_busy(amps_ctx *ctx, const char *fn) {
+    return amps__err(ctx, AMPS_ERR_STATE,
+                     "%s: a two-phase commit is in progress (only moved constraints and forces until its end)", fn);
+}
+
 AMPS_API amps_status amps_update_add_dofs(amps_ctx *ctx, amps_update *U, amps_int k, amps_int *first) {
     amps_int i, base;
     amps_status s;
     if (!U || k < 0)
         return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add_dofs: %s", U ? "negative count" : "NULL engine");
+    if (k > 0 && U->cjob.state) return amps__cjob_busy(ctx, "amps_update_add_dofs");
     if ((s = amps__need_N(ctx, U, k)) != AMPS_OK) return s;
     if ((s = amps__need_pending(ctx, U, k, 0)) != AMPS_OK) return s;
     base = U->N + U->pending.n_dofs;
@@ -5812,6 +5947,7 @@ AMPS_API amps_status amps_update_add(amps_ctx *ctx, amps_update *U, amps_int nz,
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: NULL engine");
     if (nz < 0 || (nz > 0 && (!r || !c || !v)))
         return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: bad count or NULL array");
+    if (nz > 0 && U->cjob.state) return amps__cjob_busy(ctx, "amps_update_add");
     N = U->N + U->pending.n_dofs;
     for (k = 0; k < nz; k++) {
         if (r[k] < 0 || r[k] >= N || c[k] < 0 || c[k] >= N)
@@ -5940,6 +6076,7 @@ AMPS_API amps_status amps_update_set_rows(amps_ctx *ctx, amps_update *U, amps_in
     amps_int k, j, q, start, *iw;
     amps_status s;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_rows: NULL engine");
+    if (U->cjob.state) return amps__cjob_busy(ctx, "amps_update_set_rows");
     if ((s = amps__set_rows_check(ctx, U, nrow, rows, cp, ci, cx)) != AMPS_OK) return s;
     /* the changes: for each row r, every column c of the current or the new row gets
        new - current; a pair of two given rows is recorded once (from the smaller row) */
@@ -5989,6 +6126,8 @@ static amps_status amps__record_con(amps_ctx *ctx, amps_update *U, const char *f
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL engine", fn);
     if (!release && m > 0 && !val) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL values", fn);
     if ((s = amps__chk_idx(ctx, U, fn, m, idx, release ? NULL : val, 1, &U->work.mark_N)) != AMPS_OK) return s;
+    for (k = 0; k < m && U->cjob.state; k++) /* during a two-phase commit: moves of constraints only */
+        if (release || idx[k] >= U->N || !amps__is_con(U, idx[k])) return amps__cjob_busy(ctx, fn);
     if ((s = amps__need_pending(ctx, U, 0, m)) != AMPS_OK) return s;
     for (k = 0; k < m; k++) {
         U->pending.con[U->pending.n_con].i = idx[k];
@@ -7154,38 +7293,15 @@ static amps_status amps__lu_update(amps_update *U, amps_int q0, amps_int u_old, 
     return s;
 }
 
-AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
-    amps_int u_old, dused_old, q0, bad = -1;
-    size_t vused_old;
+/* Steps 3 and 5 of a commit whose new positions u_old.. have their W columns and G entries
+   (memo.used was vused_old before them), and its end; on failure the rollback. */
+static amps_status amps__commit_finish(amps_ctx *ctx, amps_update *U, amps_int u_old, size_t vused_old, int structural,
+                                       int may_swap) {
+    amps_int dused_old = U->delta.used, q0, bad = -1;
     amps_status s;
-    double t0, t1;
-    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit: NULL engine");
-    /* a finished re-factorization is swapped in first: the recorded changes move along and are
-       then committed on the new base, against its small augmentation */
-    if (U->refac.job) amps__bg_poll(ctx, U);
-    if (!U->pending.n_delta && !U->pending.n_con && !U->pending.n_dofs) return AMPS_OK;
-    t0 = amps_now();
-    u_old = U->aug.size;
-    vused_old = U->memo.used;
-    dused_old = U->delta.used;
+    double t0 = amps_now(), t1;
     U->journal.n_rows = 0;
     U->journal.n_kinds = 0;
-    /* grow U */
-    if ((s = amps__need_u(ctx, U, amps__count_new(U))) != AMPS_OK) {
-        amps_update_discard(U);
-        return s;
-    }
-    if ((s = amps__need_memo(ctx, U, amps__grow_aug(U))) != AMPS_OK) goto fail;
-    /* Step 1: W columns */
-    amps__step1(U, u_old);
-    t1 = amps_now();
-    U->stats.t_step[AMPS_STEP_WCOLS] = t1 - t0;
-    t0 = t1;
-    /* Step 2: trapezoidal augmentation of G ([AMPS] Eq. 3.25-3.27), both triangles stored */
-    amps__gcols(U, u_old);
-    t1 = amps_now();
-    U->stats.t_step[AMPS_STEP_GRAM] = t1 - t0;
-    t0 = t1;
     /* apply the pending changes to Delta and the kinds */
     if ((s = amps__delta_relocate(ctx, U, &dused_old)) != AMPS_OK) goto fail;
     amps__apply_pending(U, u_old);
@@ -7212,10 +7328,211 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) {
     U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
     U->sol.commit_unsolved = 1;
     U->stats.ncommit++;
+    amps__bg_after_commit(ctx, U, structural || U->aug.size > u_old, may_swap);
     return AMPS_OK;
 fail:
     amps__rollback(U, u_old, vused_old, dused_old);
     return s;
+}
+
+/* The start of a commit: positions for the new indices, room for their W columns; on failure
+   the changes are discarded. */
+static amps_status amps__commit_grow(amps_ctx *ctx, amps_update *U) {
+    amps_int u_old = U->aug.size;
+    size_t vused_old = U->memo.used;
+    amps_status s;
+    U->journal.n_rows = 0;
+    U->journal.n_kinds = 0;
+    if ((s = amps__need_u(ctx, U, amps__count_new(U))) != AMPS_OK) {
+        amps_update_discard(U);
+        return s;
+    }
+    if ((s = amps__need_memo(ctx, U, amps__grow_aug(U))) != AMPS_OK) {
+        amps__rollback(U, u_old, vused_old, U->delta.used);
+        return s;
+    }
+    return AMPS_OK;
+}
+
+/* amps_update_commit; may_swap 0 (the haptic path) neither swaps nor starts a re-factorization. */
+static amps_status amps__commit(amps_ctx *ctx, amps_update *U, int may_swap) {
+    amps_int u_old;
+    size_t vused_old;
+    amps_status s;
+    double t0, t1;
+    int structural;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit: NULL engine");
+    /* a finished re-factorization is swapped in first: the recorded changes move along and are
+       then committed on the new base, against its small augmentation */
+    if (U->refac.job && may_swap && !U->cjob.state) amps__bg_poll(ctx, U);
+    if (!U->pending.n_delta && !U->pending.n_con && !U->pending.n_dofs) return AMPS_OK;
+    structural = U->pending.n_delta > 0 || U->pending.n_dofs > 0;
+    t0 = amps_now();
+    u_old = U->aug.size;
+    vused_old = U->memo.used;
+    if ((s = amps__commit_grow(ctx, U)) != AMPS_OK) return s;
+    /* Step 1: W columns */
+    amps__step1(U, u_old);
+    t1 = amps_now();
+    U->stats.t_step[AMPS_STEP_WCOLS] = t1 - t0;
+    t0 = t1;
+    /* Step 2: trapezoidal augmentation of G ([AMPS] Eq. 3.25-3.27), both triangles stored */
+    amps__gcols(U, u_old);
+    U->stats.t_step[AMPS_STEP_GRAM] = amps_now() - t0;
+    return amps__commit_finish(ctx, U, u_old, vused_old, structural, may_swap);
+}
+
+AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) { return amps__commit(ctx, U, 1); }
+
+/* ---- the two-phase commit ---- */
+
+/* The run phase's workspace (as work.chunk, row_map, closure) for base order n. */
+static amps_status amps__cjob_workspace(amps_ctx *ctx, amps_update *U) {
+    size_t nb = (size_t)U->nbuf, n = (size_t)U->n, k;
+    if (U->cjob.ws_n == U->n && U->cjob.J) return AMPS_OK;
+    amps__free(ctx, U->cjob.chunk);
+    amps__free(ctx, U->cjob.row_map);
+    amps__free(ctx, U->cjob.closure);
+    U->cjob.ws_n = 0;
+    U->cjob.chunk = AMPS__CAST(double *, amps__malloc(ctx, nb * (size_t)U->work.chunk_rows * AMPS__VB, sizeof(double)));
+    U->cjob.row_map = AMPS__CAST(amps_int *, amps__malloc(ctx, nb * n, sizeof(amps_int)));
+    U->cjob.closure = AMPS__CAST(amps_int *, amps__malloc(ctx, nb * n, sizeof(amps_int)));
+    if (!U->cjob.J) U->cjob.J = AMPS__CAST(amps_update *, amps__malloc(ctx, 1, sizeof(amps_update)));
+    if (!U->cjob.chunk || !U->cjob.row_map || !U->cjob.closure || !U->cjob.J)
+        return amps__err(ctx, AMPS_ERR_OOM, "amps_update_commit_begin: out of memory");
+    for (k = 0; k < nb * n; k++) U->cjob.row_map[k] = -1;
+    U->cjob.ws_n = U->n;
+    return AMPS_OK;
+}
+
+/* Moves the structural changes (matrix entries, DOFs, new constraints, releases and the moves of
+   constraints released later) from pending to the job; moves of constraints stay. */
+static amps_status amps__cjob_take(amps_ctx *ctx, amps_update *U) {
+    amps_marker *mk = &U->work.mark_N;
+    amps_int k, keep = 0, nc = 0;
+    if (U->pending.n_delta > U->cjob.cap_delta) {
+        if (amps__realloc(ctx, (void **)&U->cjob.delta, (size_t)U->pending.n_delta, sizeof(amps__pdelta)))
+            return AMPS_ERR_OOM;
+        U->cjob.cap_delta = U->pending.n_delta;
+    }
+    if (U->pending.n_con > U->cjob.cap_con) {
+        if (amps__realloc(ctx, (void **)&U->cjob.con, (size_t)U->pending.n_con, sizeof(amps__pcon)))
+            return AMPS_ERR_OOM;
+        U->cjob.cap_con = U->pending.n_con;
+    }
+    memcpy(U->cjob.delta, U->pending.delta, sizeof(amps__pdelta) * (size_t)U->pending.n_delta);
+    U->cjob.n_delta = U->pending.n_delta;
+    U->cjob.n_dofs = U->pending.n_dofs;
+    amps_marker_next(mk);
+    for (k = 0; k < U->pending.n_con; k++)
+        if (U->pending.con[k].release) mk->mark[U->pending.con[k].i] = mk->stamp;
+    for (k = 0; k < U->pending.n_con; k++) {
+        const amps__pcon *c = U->pending.con + k;
+        if (!c->release && c->i < U->N && mk->mark[c->i] != mk->stamp && amps__is_con(U, c->i))
+            U->pending.con[keep++] = *c;
+        else U->cjob.con[nc++] = *c;
+    }
+    U->cjob.n_con = nc;
+    U->pending.n_con = keep;
+    U->pending.n_delta = 0;
+    U->pending.n_dofs = 0;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_update_commit_begin(amps_ctx *ctx, amps_update *U) {
+    amps_int u_old, a, nl = 0;
+    size_t vused_old;
+    amps_status s;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit_begin: NULL engine");
+    if (U->cjob.state) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_commit_begin: a job is in progress");
+    if (U->refac.job) amps__bg_poll(ctx, U);
+    if (!U->pending.n_delta && !U->pending.n_dofs && amps__count_new(U) == 0) {
+        amps_int k; /* no new positions and no matrix change: one ordinary (short) commit */
+        for (k = 0; k < U->pending.n_con && !U->pending.con[k].release; k++) {}
+        if (k == U->pending.n_con) {
+            if ((s = amps__commit(ctx, U, 1)) != AMPS_OK) return s;
+            U->cjob.state = 1;
+            U->cjob.nlist = -1;
+            return AMPS_OK;
+        }
+    }
+    if ((s = amps__cjob_workspace(ctx, U)) != AMPS_OK) return s;
+    u_old = U->aug.size;
+    vused_old = U->memo.used;
+    if ((s = amps__commit_grow(ctx, U)) != AMPS_OK) return s;
+    if (U->aug.size - u_old > U->cjob.cap_list &&
+        amps__realloc(ctx, (void **)&U->cjob.list, (size_t)(U->aug.size - u_old), sizeof(amps_int))) {
+        amps__rollback(U, u_old, vused_old, U->delta.used);
+        return AMPS_ERR_OOM;
+    }
+    if (U->aug.size - u_old > U->cjob.cap_list) U->cjob.cap_list = U->aug.size - u_old;
+    for (a = u_old; a < U->aug.size; a++) /* Step 1's memo offsets (amps__step1) */
+        if (U->aug.idx[a] < U->n) {
+            U->memo.off[a] = U->memo.used;
+            U->memo.used += (size_t)U->memo.len[a];
+            U->cjob.list[nl++] = a;
+        }
+    if ((s = amps__cjob_take(ctx, U)) != AMPS_OK) {
+        amps__rollback(U, u_old, vused_old, U->delta.used);
+        return amps__err(ctx, s, "amps_update_commit_begin: out of memory");
+    }
+    /* the run phase's copy sees the new positions; the engine does not until the end */
+    *U->cjob.J = *U;
+    U->cjob.J->work.chunk = U->cjob.chunk;
+    U->cjob.J->work.row_map = U->cjob.row_map;
+    U->cjob.J->work.closure = U->cjob.closure;
+    for (a = u_old; a < U->aug.size; a++) U->aug.pos[U->aug.idx[a]] = -1;
+    U->aug.size = u_old;
+    U->cjob.u_old = u_old;
+    U->cjob.vused_old = vused_old;
+    U->cjob.nlist = nl;
+    U->cjob.state = 1;
+    return AMPS_OK;
+}
+
+AMPS_API void amps_update_commit_run(amps_update *U) {
+    amps_update *J;
+    double t0, t1;
+    if (!U || U->cjob.state != 1) return;
+    if (U->cjob.nlist >= 0) {
+        J = U->cjob.J;
+        t0 = amps_now();
+        amps__wcols(J, U->cjob.list, U->cjob.nlist);
+        t1 = amps_now();
+        amps__gcols(J, U->cjob.u_old);
+        U->cjob.t_wcols = t1 - t0;
+        U->cjob.t_gram = amps_now() - t1;
+    }
+    U->cjob.state = 2;
+}
+
+AMPS_API amps_status amps_update_commit_end(amps_ctx *ctx, amps_update *U) {
+    amps_int u_old, a, nc, left;
+    amps_status s;
+    if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit_end: NULL engine");
+    if (!U->cjob.state) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_commit_end: no commit begun");
+    if (U->cjob.state == 1) amps_update_commit_run(U);
+    U->cjob.state = 0;
+    if (U->cjob.nlist < 0) return AMPS_OK;
+    u_old = U->cjob.u_old;
+    U->aug.size = U->cjob.J->aug.size;
+    for (a = u_old; a < U->aug.size; a++) U->aug.pos[U->aug.idx[a]] = a;
+    /* the job's changes first, then the moves recorded since */
+    nc = U->cjob.n_con;
+    left = U->pending.n_con;
+    if ((s = amps__need_pending(ctx, U, U->cjob.n_delta, nc)) != AMPS_OK) {
+        amps__rollback(U, u_old, U->cjob.vused_old, U->delta.used);
+        return s;
+    }
+    memmove(U->pending.con + nc, U->pending.con, sizeof(amps__pcon) * (size_t)left);
+    memcpy(U->pending.con, U->cjob.con, sizeof(amps__pcon) * (size_t)nc);
+    U->pending.n_con = nc + left;
+    memcpy(U->pending.delta, U->cjob.delta, sizeof(amps__pdelta) * (size_t)U->cjob.n_delta);
+    U->pending.n_delta = U->cjob.n_delta;
+    U->pending.n_dofs = U->cjob.n_dofs;
+    U->stats.t_step[AMPS_STEP_WCOLS] = U->cjob.t_wcols;
+    U->stats.t_step[AMPS_STEP_GRAM] = U->cjob.t_gram;
+    return amps__commit_finish(ctx, U, u_old, U->cjob.vused_old, 1, 1);
 }
 
 /* ---- Steps 4 and 6 ---- */
@@ -7730,7 +8047,7 @@ AMPS_API amps_status amps_update_solve_reactions(amps_ctx *ctx, amps_update *U) 
     amps_status s;
     double t0;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve_reactions: NULL engine");
-    if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
+    if ((s = amps__commit(ctx, U, 0)) != AMPS_OK) return s;
     if (!U->sol.react_stale && U->sol.has_react) return AMPS_OK;
     amps__solve_stats_begin(U);
     amps__step4(U, U->force.ct, U->force.f, 1, U->dense.rhs);
@@ -8265,8 +8582,8 @@ static void amps__bg_work(amps__bg *b) {
     c2.nthreads = b->snap.opts.refactor_threads; /* > 0: amps__create_opts */
     b->t0 = amps_now();
     if ((s = amps__bg_assemble(&c2, b)) == AMPS_OK && (s = amps__bg_factor(&c2, b)) == AMPS_OK &&
-        (s = amps__bg_engine(&c2, b)) == AMPS_OK)
-        s = amps__bg_follow_log(&c2, b);
+        (s = amps__bg_engine(&c2, b)) == AMPS_OK && b->snap.opts.refactor != AMPS_REFACTOR_COUNT)
+        s = amps__bg_follow_log(&c2, b); /* COUNT: the swap replays the whole log (same bits) */
     amps__bg_lock(b);
     if (s == AMPS_OK && b->cancel) s = b->status ? b->status : AMPS_ERR_STATE;
     if (s != AMPS_OK) {
@@ -8391,6 +8708,7 @@ static void amps__bg_take(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg
     U->refac.t_step_base = 0;
     U->refac.t_extra = 0;
     U->refac.size_base = U->aug.size;
+    U->refac.n_struct = 0;
     U->watch = old.watch; /* no job in progress (the callers check) */
     old.watch.idx = NULL;
     old.watch.from_dense = NULL;
@@ -8454,7 +8772,18 @@ static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
 /* At the start of a commit: swaps a ready re-factorization in (not while a watched-solve job
    runs), drops a failed one; the AUTO policy starts one. Never fails the caller. */
 static void amps__bg_poll(amps_ctx *ctx, amps_update *U) {
-    if (U->refac.job) {
+    if (U->refac.job && U->refac.opts.refactor == AMPS_REFACTOR_COUNT) {
+        /* deterministic: at the fixed point only, waiting for the worker */
+        amps_int every = U->refac.opts.refactor_every;
+        if (U->refac.n_struct >= every + every / 2 && !U->watch.job_y) {
+            amps_ctx c2;
+            amps_ctx_init(&c2);
+            c2.alloc_user = ctx ? ctx->alloc_user : NULL;
+            amps__bg_join(U->refac.job);
+            if (U->refac.job->state == AMPS__BG_READY) (void)amps__bg_swap(&c2, U);
+            else amps__bg_end(ctx, U, 1);
+        }
+    } else if (U->refac.job) {
         int st = amps__bg_get(U->refac.job, &U->refac.job->state);
         if (st == AMPS__BG_READY && !U->watch.job_y) {
             amps_ctx c2;
@@ -8496,6 +8825,25 @@ static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t) {
 #endif
 }
 
+/* After a successful commit (structural: it changed K^, added DOFs or grew S u C): counts it and,
+   in a call that may swap, starts a re-factorization when the count (COUNT) or the growth of
+   |S u C| since the last base (AUTO, with threads) calls for one. */
+static void amps__bg_after_commit(amps_ctx *ctx, amps_update *U, int structural, int may_swap) {
+    amps_refactor_policy pol = U->refac.opts.refactor;
+    int start;
+    amps_ctx c2;
+    if (structural) U->refac.n_struct++;
+    if (U->refac.job || !may_swap || U->cjob.state) return;
+    start = pol == AMPS_REFACTOR_COUNT && U->refac.n_struct >= U->refac.opts.refactor_every;
+#ifndef AMPS_NO_THREADS
+    start |= pol == AMPS_REFACTOR_AUTO && U->aug.size > U->refac.size_base + U->refac.opts.refactor_size;
+#endif
+    if (!start) return;
+    amps_ctx_init(&c2);
+    c2.alloc_user = ctx ? ctx->alloc_user : NULL;
+    (void)amps_update_refactor_start(&c2, U);
+}
+
 AMPS_API amps_status amps_update_refactor_start(amps_ctx *ctx, amps_update *U) {
     amps__bg *b;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_refactor_start: NULL engine");
@@ -8524,8 +8872,8 @@ AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U) {
     amps__bg *b;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_refactor_wait: NULL engine");
     if (!(b = U->refac.job)) return AMPS_WARN_NOOP;
-    if (U->watch.job_y)
-        return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_wait: a watched-solve job is in progress");
+    if (U->watch.job_y || U->cjob.state)
+        return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_wait: a two-phase job is in progress");
     amps__bg_join(b);
     if (b->state == AMPS__BG_READY) return amps__bg_swap(ctx, U);
     {
@@ -9650,6 +9998,21 @@ typedef struct amps__scene_grid {
 
 static void amps__scene_render_free(amps_ctx *ctx, amps_scene *S);
 static void amps__scene_cut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v, amps_int vc);
+/* An open batch (amps_scene_begin_batch): the changes it recorded, to undo them if its commit
+   fails. moved holds the tets each cut moved, op k's at moved[op.moved_at..+op.nmoved]. */
+typedef struct amps__scene_op {
+    int kind;                    /* 0 cut, 1 pin, 2 release */
+    int watched, was_pinned;     /* cut: its copy joined the watch set; pin: v was pinned */
+    amps_int v, vc;              /* the node, the cut's copy */
+    amps_int moved_at, nmoved;   /* cut: its moved tets */
+    double old[3];               /* pin: the previous pin value */
+} amps__scene_op;
+typedef struct amps__scene_batch {
+    int open, committing; /* a batch records; a two-phase commit of it is in progress */
+    amps_int n, cap, nmoved, cap_moved;
+    amps__scene_op *ops;
+    amps_int *moved;
+} amps__scene_batch;
 
 struct amps_scene {
     amps_mesh *m;
@@ -9665,6 +10028,7 @@ struct amps_scene {
     amps__scene_mech mech;
     amps__scene_render rd;
     amps__scene_grid grid;
+    amps__scene_batch batch;
 };
 
 AMPS_API void amps_scene_opts_default(amps_scene_opts *o) {
@@ -9704,6 +10068,8 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->mech.queue_tail);
     amps__free(ctx, S->mech.active);
     amps__scene_render_free(ctx, S);
+    amps__free(ctx, S->batch.ops);
+    amps__free(ctx, S->batch.moved);
     amps__free(ctx, S);
 }
 
@@ -9964,6 +10330,9 @@ AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, 
     return AMPS_OK;
 }
 
+static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int nmoved);
+static void amps__scene_batch_pin(amps_scene *S, int kind, amps_int v);
+
 AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, const double u[3]) {
     amps_int k, idx[3];
     amps_status s;
@@ -9981,8 +10350,10 @@ AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, co
         return AMPS_OK;
     }
     for (k = 0; k < 3; k++) idx[k] = S->node.dof[3 * v + k];
+    if (S->batch.open && (s = amps__scene_batch_room(ctx, S, 0)) != AMPS_OK) return s;
     if ((s = amps_update_constrain(ctx, S->U, 3, idx, u)) != AMPS_OK) return s;
-    if (!S->node.pinned[v] && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s;
+    if (S->batch.open) amps__scene_batch_pin(S, 1, v);
+    else if (!S->node.pinned[v] && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s;
     S->node.pinned[v] = 1;
     for (k = 0; k < 3; k++) S->node.pin_value[3 * v + k] = u[k];
     return AMPS_OK;
@@ -9998,8 +10369,10 @@ AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v
         return AMPS_OK;
     }
     for (k = 0; k < 3; k++) idx[k] = S->node.dof[3 * v + k];
+    if (S->batch.open && (s = amps__scene_batch_room(ctx, S, 0)) != AMPS_OK) return s;
     if ((s = amps_update_release(ctx, S->U, 3, idx)) != AMPS_OK) return s;
-    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
+    if (S->batch.open) amps__scene_batch_pin(S, 2, v);
+    else if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
         char msg[256];
         memcpy(msg, ctx ? ctx->msg : "", ctx ? sizeof(msg) : 1);
         return amps__err(ctx, s, "amps_scene_release: releasing node %ld leaves a piece held by nothing (%s)", (long)v,
@@ -10299,8 +10672,12 @@ static void amps__cut_local_K(amps_scene *S, amps_int v, amps_int vc, amps_int n
     }
 }
 
+static void amps__scene_batch_cut(amps_scene *S, amps_int v, amps_int vc, amps_int nmoved);
+static void amps__scene_batch_undo(amps_scene *S);
+
 /* A cut of the factored model: the mesh cut, the mechanism test, new equations for the copy,
-   the change of K^ on the moved tets' equations, one commit. On failure the cut is undone. */
+   the change of K^ on the moved tets' equations, one commit (in a batch: recorded). On failure
+   the cut is undone. */
 static amps_status amps__scene_cut_update(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3],
                                           const double nrm[3], amps_int *vcp) {
     amps_int vc, nmoved = 0, k, nl, nz = 0, first = -1, a, b;
@@ -10331,7 +10708,8 @@ static amps_status amps__scene_cut_update(amps_ctx *ctx, amps_scene *S, amps_int
             nz++;
         }
     if ((s = amps_update_add(ctx, S->U, nz, S->cut.row, S->cut.col, S->cut.val)) != AMPS_OK) goto undo_engine;
-    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
+    if (S->batch.open) amps__scene_batch_cut(S, v, vc, nmoved);
+    else if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
         if (s == AMPS_ERR_SINGULAR_UPDATE)
             amps__err(ctx, s, "amps_scene_cut: the cut at node %ld leaves a piece held by nothing; the cut was undone",
                       (long)v);
@@ -10349,8 +10727,11 @@ undo:
         amps_ctx_init(&c2);
         (void)amps_mesh_uncut(&c2, S->m, v, vc, S->cut.moved, nmoved);
     }
+    if (S->batch.open && s != AMPS_ERR_SINGULAR_UPDATE) amps__scene_batch_undo(S); /* the engine discarded it */
     return s;
 }
+
+static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int nmoved);
 
 AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3], const double nrm[3],
                                     amps_int *new_node) {
@@ -10359,8 +10740,11 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
     int watched;
     if (new_node) *new_node = -1;
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_cut")) != AMPS_OK) return s;
-    if (S->prepared && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
+    if (S->batch.committing) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_cut: a two-phase commit is in progress");
+    if (S->prepared && !S->batch.open && (s = amps_update_commit(ctx, S->U)) != AMPS_OK)
+        return s; /* earlier changes first */
     if ((s = amps__scene_cut_room(ctx, S, v, &watched)) != AMPS_OK) return s;
+    if (S->batch.open && (s = amps__scene_batch_room(ctx, S, amps_mesh_degree(S->m, v))) != AMPS_OK) return s;
     s = S->prepared ? amps__scene_cut_update(ctx, S, v, p, nrm, &vc) : amps__scene_cut_topology(ctx, S, v, p, nrm, &vc);
     if (s != AMPS_OK) return s;
     amps__scene_cut_recorded(ctx, S, v, vc);
@@ -10368,6 +10752,7 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
     if (watched) {
         S->watch.nodes[S->watch.n++] = vc;
         S->watch.stale = 1;
+        if (S->batch.open) S->batch.ops[S->batch.n - 1].watched = 1;
     }
     return AMPS_OK;
 }
@@ -10378,6 +10763,7 @@ AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve: NULL scene");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
     if ((s = amps_update_solve(ctx, S->U, NULL)) < 0) return s;
     amps__scene_gather(S, 0, NULL);
     return s; /* AMPS_WARN_INACCURATE: solved all the same */
@@ -10421,6 +10807,7 @@ AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_watched: NULL scene");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
     if (S->watch.stale) {
         /* the engine watches the equations of the watched nodes */
         amps_int k, d, m = 0,
@@ -10446,6 +10833,7 @@ AMPS_API amps_status amps_scene_solve_reactions(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_reactions: NULL scene");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
     return amps_update_solve_reactions(ctx, S->U);
 }
 
@@ -10951,6 +11339,303 @@ AMPS_API int amps_scene_is_fixed(const amps_scene *S, amps_int v) {
 }
 AMPS_API int amps_scene_is_pinned(const amps_scene *S, amps_int v) {
     return S && v >= 0 && v < S->m->nnode && S->node.pinned[v];
+}
+
+/* ---- batches, strokes and segment queries ---- */
+
+/* Room in the batch log for one more change and a cut moving up to nmoved tets. */
+static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int nmoved) {
+    amps__scene_batch *B = &S->batch;
+    if (B->n + 1 > B->cap) {
+        amps_int cap = 2 * B->cap + 16;
+        if (amps__realloc(ctx, (void **)&B->ops, (size_t)cap, sizeof(amps__scene_op)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene: out of memory recording a batch");
+        B->cap = cap;
+    }
+    if (B->nmoved + nmoved > B->cap_moved) {
+        amps_int cap = 2 * B->cap_moved + nmoved + 64;
+        if (amps__realloc(ctx, (void **)&B->moved, (size_t)cap, sizeof(amps_int)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene: out of memory recording a batch");
+        B->cap_moved = cap;
+    }
+    return AMPS_OK;
+}
+
+/* Logs the cut of v into v and vc (its moved tets in cut.moved); room made by amps__scene_batch_room. */
+static void amps__scene_batch_cut(amps_scene *S, amps_int v, amps_int vc, amps_int nmoved) {
+    amps__scene_batch *B = &S->batch;
+    amps__scene_op *op = B->ops + B->n++;
+    memset(op, 0, sizeof(*op));
+    op->kind = 0;
+    op->v = v;
+    op->vc = vc;
+    op->moved_at = B->nmoved;
+    op->nmoved = nmoved;
+    memcpy(B->moved + B->nmoved, S->cut.moved, sizeof(amps_int) * (size_t)nmoved);
+    B->nmoved += nmoved;
+}
+
+/* Logs a pin (kind 1) or release (kind 2) of v with v's state before it. */
+static void amps__scene_batch_pin(amps_scene *S, int kind, amps_int v) {
+    amps__scene_op *op = S->batch.ops + S->batch.n++;
+    memset(op, 0, sizeof(*op));
+    op->kind = kind;
+    op->v = v;
+    op->vc = -1;
+    op->was_pinned = S->node.pinned[v];
+    memcpy(op->old, S->node.pin_value + 3 * v, sizeof(op->old));
+}
+
+/* Undoes the batch's cuts, pins and releases, last first, and closes it (the engine has
+   discarded its changes). */
+static void amps__scene_batch_undo(amps_scene *S) {
+    amps__scene_batch *B = &S->batch;
+    amps_int i, k;
+    amps_ctx c2;
+    amps_ctx_init(&c2);
+    for (i = B->n - 1; i >= 0; i--) {
+        const amps__scene_op *op = B->ops + i;
+        if (op->kind == 1) {
+            S->node.pinned[op->v] = (unsigned char)op->was_pinned;
+            memcpy(S->node.pin_value + 3 * op->v, op->old, sizeof(op->old));
+        } else if (op->kind == 2) S->node.pinned[op->v] = 1;
+        else {
+            for (k = S->watch.n - 1; op->watched && k >= 0; k--)
+                if (S->watch.nodes[k] == op->vc) {
+                    memmove(S->watch.nodes + k, S->watch.nodes + k + 1, sizeof(amps_int) * (size_t)(S->watch.n - k - 1));
+                    S->watch.n--;
+                    S->watch.stale = 1;
+                    break;
+                }
+            for (k = 0; k < 3; k++) S->node.dof[3 * op->vc + k] = -1;
+            S->node.fixed[op->vc] = 0;
+            S->node.pinned[op->vc] = 0;
+            (void)amps_mesh_uncut(&c2, S->m, op->v, op->vc, B->moved + op->moved_at, op->nmoved);
+        }
+    }
+    B->open = 0;
+    B->n = B->nmoved = 0;
+}
+
+AMPS_API amps_status amps_scene_begin_batch(amps_ctx *ctx, amps_scene *S) {
+    amps_status s;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_begin_batch: NULL scene");
+    if (S->batch.open || S->batch.committing)
+        return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_begin_batch: a batch is open");
+    if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
+    S->batch.open = 1;
+    S->batch.n = S->batch.nmoved = 0;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_commit(amps_ctx *ctx, amps_scene *S) {
+    amps_status s;
+    amps_int nops;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_commit: NULL scene");
+    if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    nops = S->batch.n;
+    s = amps_update_commit(ctx, S->U);
+    if (s != AMPS_OK && S->batch.open) {
+        char msg[200];
+        memcpy(msg, ctx ? ctx->msg : "", ctx ? sizeof(msg) : 1);
+        msg[sizeof(msg) - 1] = 0;
+        amps__scene_batch_undo(S);
+        return amps__err(ctx, s, "amps_scene_commit: the batch of %ld changes was undone (%s)", (long)nops, msg);
+    }
+    S->batch.open = 0;
+    S->batch.n = S->batch.nmoved = 0;
+    return s;
+}
+
+AMPS_API amps_status amps_scene_commit_begin(amps_ctx *ctx, amps_scene *S) {
+    amps_status s;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_commit_begin: NULL scene");
+    if (S->batch.committing) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_commit_begin: a commit is in progress");
+    if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if ((s = amps_update_commit_begin(ctx, S->U)) != AMPS_OK) {
+        if (S->batch.open) amps__scene_batch_undo(S); /* the engine discarded it */
+        return s;
+    }
+    S->batch.committing = 1;
+    S->batch.open = 0; /* its log stays until the end, to undo it */
+    return AMPS_OK;
+}
+
+AMPS_API void amps_scene_commit_run(amps_scene *S) {
+    if (S && S->batch.committing) amps_update_commit_run(S->U);
+}
+
+AMPS_API amps_status amps_scene_commit_end(amps_ctx *ctx, amps_scene *S) {
+    amps_status s;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_commit_end: NULL scene");
+    if (!S->batch.committing) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_commit_end: no commit begun");
+    S->batch.committing = 0;
+    if ((s = amps_update_commit_end(ctx, S->U)) != AMPS_OK) {
+        amps__scene_batch_undo(S);
+        return s;
+    }
+    S->batch.n = S->batch.nmoved = 0;
+    return AMPS_OK;
+}
+
+/* Squared distance of x to the segment [a, b]; *t: the parameter in [0, 1] of the nearest point. */
+static double amps__seg_dist2(const double *x, const double *a, const double *b, double *t) {
+    double d[3], w[3], dd = 0, wd = 0, r = 0, tt = 0;
+    int k;
+    for (k = 0; k < 3; k++) {
+        d[k] = b[k] - a[k];
+        w[k] = x[k] - a[k];
+        dd += d[k] * d[k];
+        wd += w[k] * d[k];
+    }
+    if (dd > 0) tt = wd <= 0 ? 0 : wd >= dd ? 1 : wd / dd;
+    for (k = 0; k < 3; k++) {
+        double e = w[k] - tt * d[k];
+        r += e * e;
+    }
+    if (t) *t = tt;
+    return r;
+}
+
+AMPS_API amps_int amps_scene_nodes_near_segment(amps_ctx *ctx, const amps_scene *S, const double a[3],
+                                                const double b[3], double radius, amps_int *out, amps_int cap) {
+    amps_int v, cnt = 0;
+    int k;
+    if (!S || !a || !b || (cap > 0 && !out))
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_nodes_near_segment: NULL argument");
+    for (k = 0; k < 3; k++)
+        if (!amps__isfinite(a[k]) || !amps__isfinite(b[k]))
+            return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_nodes_near_segment: segment not finite");
+    if (!(radius >= 0) || !amps__isfinite(radius))
+        return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_nodes_near_segment: radius must be finite and >= 0");
+    for (v = 0; v < S->m->nnode; v++) {
+        if (amps_mesh_degree(S->m, v) == 0 || amps__seg_dist2(S->m->xyz + 3 * v, a, b, NULL) > radius * radius)
+            continue;
+        if (cnt < cap) out[cnt] = v;
+        cnt++;
+    }
+    return cnt;
+}
+
+/* A node the stroke touches: its segment, the position along it. */
+typedef struct amps__stroke_node {
+    amps_int v, seg;
+    double t, d2;
+} amps__stroke_node;
+
+static int amps__stroke_cmp(const void *pa, const void *pb) {
+    const amps__stroke_node *x = (const amps__stroke_node *)pa, *y = (const amps__stroke_node *)pb;
+    if (x->seg != y->seg) return x->seg < y->seg ? -1 : 1;
+    if (x->t != y->t) return x->t < y->t ? -1 : 1;
+    return x->v < y->v ? -1 : x->v > y->v;
+}
+
+/* The stroke's planes: nrm[3i..] = unit (p_i+1 - p_i) x blade. */
+static amps_status amps__stroke_planes(amps_ctx *ctx, amps_int npts, const double *pts, const double *blade,
+                                       double *nrm) {
+    amps_int i;
+    int k;
+    for (i = 0; i + 1 < npts; i++) {
+        const double *p = pts + 3 * i, *q = p + 3;
+        double d[3], c[3], ld = 0, lb = 0, lc = 0;
+        for (k = 0; k < 3; k++) d[k] = q[k] - p[k];
+        c[0] = d[1] * blade[2] - d[2] * blade[1];
+        c[1] = d[2] * blade[0] - d[0] * blade[2];
+        c[2] = d[0] * blade[1] - d[1] * blade[0];
+        for (k = 0; k < 3; k++) {
+            ld += d[k] * d[k];
+            lb += blade[k] * blade[k];
+            lc += c[k] * c[k];
+        }
+        if (!(ld > 0) || !(lc > 1e-12 * ld * lb))
+            return amps__err(ctx, AMPS_ERR_ARG,
+                             "amps_scene_stroke: segment %ld has zero length or is parallel to the blade", (long)i);
+        for (k = 0; k < 3; k++) nrm[3 * i + k] = c[k] / sqrt(lc);
+    }
+    return AMPS_OK;
+}
+
+/* The nodes the stroke touches, each with its nearest segment, in cut order; *nc their number. */
+static amps_status amps__stroke_nodes(amps_ctx *ctx, amps_scene *S, amps_int npts, const double *pts, double radius,
+                                      amps__stroke_node **list, amps_int *nc) {
+    amps_int nn = S->m->nnode, i, k, n = 0, *buf, *at;
+    amps__stroke_node *L;
+    buf = AMPS__CAST(amps_int *, amps__malloc(ctx, 2 * (size_t)nn, sizeof(amps_int)));
+    L = AMPS__CAST(amps__stroke_node *, amps__malloc(ctx, (size_t)nn, sizeof(amps__stroke_node)));
+    if (!buf || !L) {
+        amps__free(ctx, buf);
+        amps__free(ctx, L);
+        return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_stroke: out of memory");
+    }
+    at = buf + nn;
+    for (k = 0; k < nn; k++) at[k] = -1;
+    for (i = 0; i + 1 < npts; i++) {
+        amps_int cnt = amps_scene_nodes_near_segment(ctx, S, pts + 3 * i, pts + 3 * i + 3, radius, buf, nn);
+        for (k = 0; k < cnt; k++) {
+            amps_int v = buf[k];
+            double t, d2 = amps__seg_dist2(S->m->xyz + 3 * v, pts + 3 * i, pts + 3 * i + 3, &t);
+            if (at[v] < 0) at[v] = n++;
+            else if (!(d2 < L[at[v]].d2)) continue;
+            L[at[v]].v = v;
+            L[at[v]].seg = i;
+            L[at[v]].t = t;
+            L[at[v]].d2 = d2;
+        }
+    }
+    amps__free(ctx, buf);
+    qsort(L, (size_t)n, sizeof(*L), amps__stroke_cmp);
+    *list = L;
+    *nc = n;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int npts, const double *pts,
+                                       const double blade[3], double radius, amps_scene_stroke_result *out) {
+    amps__stroke_node *L = NULL;
+    double *nrm;
+    amps_int i, nc = 0, ncut = 0;
+    amps_status s;
+    int opened = 0;
+    if (!S || !pts || !blade || npts < 2) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_stroke: bad arguments");
+    for (i = 0; i < 3 * npts; i++)
+        if (!amps__isfinite(pts[i]) || (i < 3 && !amps__isfinite(blade[i])))
+            return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_stroke: points or blade not finite");
+    if (!(radius >= 0) || !amps__isfinite(radius))
+        return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_stroke: radius must be finite and >= 0");
+    nrm = AMPS__CAST(double *, amps__malloc(ctx, 3 * (size_t)npts, sizeof(double)));
+    if (!nrm) return AMPS_ERR_OOM;
+    if ((s = amps__stroke_planes(ctx, npts, pts, blade, nrm)) != AMPS_OK ||
+        (s = amps__stroke_nodes(ctx, S, npts, pts, radius, &L, &nc)) != AMPS_OK)
+        goto done;
+    if (!S->batch.open) {
+        if ((s = amps_scene_begin_batch(ctx, S)) != AMPS_OK) goto done;
+        opened = 1;
+    }
+    for (i = 0; i < nc; i++) {
+        amps_int vc = -1, sg = L[i].seg;
+        amps_status c = amps_scene_cut(ctx, S, L[i].v, pts + 3 * sg, nrm + 3 * sg, &vc);
+        if (c != AMPS_OK && c != AMPS_WARN_NOOP && c != AMPS_ERR_SINGULAR_UPDATE) {
+            if (opened && S->batch.open) amps__scene_batch_undo(S);
+            s = c;
+            goto done;
+        }
+        if (c == AMPS_OK) ncut++;
+        if (out && i < out->cap) {
+            if (out->node) out->node[i] = L[i].v;
+            if (out->copy) out->copy[i] = vc;
+            if (out->status) out->status[i] = c;
+        }
+    }
+    if (opened) s = amps_scene_commit(ctx, S);
+    if (out && s == AMPS_OK) {
+        out->n = nc;
+        out->ncut = ncut;
+    }
+done:
+    amps__free(ctx, nrm);
+    amps__free(ctx, L);
+    return s;
 }
 #endif /* AMPS_NO_FEM */
 

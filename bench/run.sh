@@ -25,6 +25,8 @@ build() {
 build factor -lcholmod
 build harness -lcholmod -lumfpack
 for b in haptic watch refactor; do build $b; done
+build frameloop -lpthread
+bash bench/make_liver.sh >/dev/null || exit 1
 build order_metis -DAMPS_USE_METIS -lcholmod -lmetis
 log=$out/log_$mode.txt
 : > "$log"
@@ -88,6 +90,11 @@ for m in $rmesh; do
   run build/bench/refactor "$m" $rsteps off $out/refactor.csv 60
   for r in $rreps; do run build/bench/refactor "$m" $rsteps on $out/refactor.csv 0 $r; done
 done
+# the frame loop: strokes, a grasper, two-phase commits, a 1 kHz haptic thread (bench/frameloop.c)
+rm -f $out/frameloop.csv $out/frameloop_frames.csv
+if [ "$mode" = quick ]; then fmesh="bench/data/liver.1.node"; fframes=30
+else fmesh="bench/data/liver.1.node bench/data/bunny50k.1.node"; fframes=200; fi
+for m in $fmesh; do run build/bench/frameloop "$m" $fframes $out/frameloop_frames.csv $out/frameloop.csv; done
 if command -v gnuplot >/dev/null; then
   for m in $(cut -d, -f1 $out/refactor.csv | sort -u | grep -v '^mesh$'); do
     gnuplot -e "set term pngcairo size 900,600; set out '$out/refactor_$m.png'; set datafile separator ',';

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Smoke run of examples/haptic_loop (1 s, and 1 s writing VTU frames): exit 0, both loops ran
 # at a positive rate, frames written, the haptic period reported; -w 0 (no job system) runs.
+# at a positive rate, frames written; examples/frame_loop for 20 frames.
 B=${AMPS_BUILD:-build/default}
 pass=0; fail=0
 ok() { pass=$((pass+1)); }
@@ -19,5 +20,8 @@ if [ -n "$p99" ] && awk -v r="$p99" 'BEGIN{exit !(r > 0)}'; then ok; else bad "h
   || bad "haptic_loop -w 0: $(tail -3 "$tmp/out0")"
 [ -s "$tmp/frame_0000.vtu" ] && ok || bad "frame_0000.vtu not written"
 "$B/haptic_loop" -x > /dev/null 2>&1; [ $? -eq 2 ] && ok || bad "bad option: exit code not 2"
+# examples/frame_loop: 20 frames of strokes, grasper and haptic thread; watched = full solve
+if "$B/frame_loop" -f 20 > "$tmp/fl.out" 2>&1; then ok; else bad "frame_loop exited nonzero: $(tail -3 "$tmp/fl.out")"; fi
+grep -q '^frames 20, nodes cut [1-9]' "$tmp/fl.out" && ok || bad "frame_loop: $(tail -1 "$tmp/fl.out")"
 echo "test_examples: $pass passed, $fail failed"
 [ $fail -eq 0 ]

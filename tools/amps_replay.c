@@ -15,6 +15,13 @@
      pin <node> <ux> <uy> <uz>
      release <node>
      cut <node> <px> <py> <pz> <nx> <ny> <nz>
+     stroke <radius> <bx> <by> <bz> <x0> <y0> <z0> <x1> <y1> <z1> [<x2> <y2> <z2>]
+                              a blade stroke (amps_scene_stroke): the polyline of 2 or 3 points
+                              swept along the blade direction b cuts the nodes within radius of
+                              it, one commit; prints the nodes cut, the no-ops and the refusals
+     batch                    open a batch: cuts, strokes, pins, releases only record ...
+     commit                   ... until commit applies them at once (amps_scene_commit; a solve
+                              commits an open batch too)
      solve
      residual on|off
      dump <file.csv>          node,ux,uy,uz of every node (values of the last solve)
@@ -264,6 +271,41 @@ static int run_selection_line(replay *R, int nt, char **t) {
     if (!strcmp(c, "haptic")) return cmd_haptic(R, nt, t);
     if (!strcmp(c, "boundary")) return cmd_boundary(R, nt, t);
     return -1;
+/* stroke <radius> <blade xyz> <2 or 3 points xyz> */
+static int cmd_stroke(replay *R, int nt, char **t, double t0) {
+    double x[13];
+    amps_scene_stroke_result r;
+    amps_status st[64];
+    int k, np = (nt - 5) / 3, noop = 0, refused = 0;
+    if ((nt != 11 && nt != 14))
+        return fail(R, "%s", "usage: stroke <radius> <bx> <by> <bz> <x0> <y0> <z0> <x1> <y1> <z1> [<x2> <y2> <z2>]");
+    for (k = 1; k < nt; k++)
+        if (!parse_num(t[k], &x[k - 1])) return fail(R, "bad number '%s'", t[k]);
+    memset(&r, 0, sizeof(r));
+    r.cap = 64;
+    r.status = st;
+    if (amps_scene_stroke(&R->ctx, R->S, np, x + 4, x + 1, x[0], &r) != AMPS_OK) return lib_fail(R, "stroke");
+    for (k = 0; k < r.n && k < r.cap; k++) {
+        noop += st[k] == AMPS_WARN_NOOP;
+        refused += st[k] == AMPS_ERR_SINGULAR_UPDATE;
+    }
+    if (!R->quiet)
+        printf("%s:%d: stroke: %ld nodes touched, %ld cut, %d no-ops, %d refused\n", R->file, R->line, (long)r.n,
+               (long)r.ncut, noop, refused);
+    snprintf(R->last_cmd, sizeof(R->last_cmd), "stroke %ld", (long)r.ncut);
+    R->step_time += amps_now() - t0;
+    return 0;
+}
+
+/* batch | commit */
+static int cmd_batch(replay *R, int nt, char **t, double t0) {
+    int begin = !strcmp(t[0], "batch");
+    if (nt != 1) return fail(R, "usage: %s", t[0]);
+    if (begin ? amps_scene_begin_batch(&R->ctx, R->S) : amps_scene_commit(&R->ctx, R->S))
+        return lib_fail(R, t[0]);
+    if (!begin) snprintf(R->last_cmd, sizeof(R->last_cmd), "commit");
+    R->step_time += amps_now() - t0;
+    return 0;
 }
 
 static int run_line(replay *R, int nt, char **t) {
@@ -338,6 +380,8 @@ static int run_line(replay *R, int nt, char **t) {
         R->step_time += amps_now() - t0;
         return 0;
     }
+    if (!strcmp(c, "stroke")) return cmd_stroke(R, nt, t, t0);
+    if (!strcmp(c, "batch") || !strcmp(c, "commit")) return cmd_batch(R, nt, t, t0);
     if (!strcmp(c, "solve")) {
         double res = -1, dt;
         amps_update_stats st;

@@ -1,0 +1,480 @@
+/* The frame loop's calls: a blade stroke equals the same node cuts one by one (and the nodes it
+   touches are those near the polyline); batches of cuts, pins, releases and forces committed
+   once equal the same changes committed one by one, and a failing batch is undone; both against
+   CHOLMOD on the cut mesh assembled from scratch. The re-factorization: the deterministic COUNT
+   mode gives identical bits on two identical runs; the haptic path (solve_reactions) never swaps
+   a ready re-factorization in; AUTO starts one after growth with only watched and reaction solves. */
+#define AMPS_IMPLEMENTATION
+#include "amps.h"
+#include "amps_test.h"
+#include "cholmod_ref.h"
+#include "scene_ref.h"
+#include <string.h>
+
+/* The scene's displacements against CHOLMOD's of its current mesh (shadow w). */
+static double ref_err(amps_ctx *ctx, amps_scene *S, const shadow *w) {
+    const amps_mesh *m = amps_scene_mesh(S);
+    double *u = (double *)malloc(sizeof(double) * 3 * m->nnode), err;
+    scene_reference(ctx, m, w, 0, NULL, u, NULL, 0);
+    err = t_reldiff(3 * (int)m->nnode, amps_scene_displacements(S), u);
+    free(u);
+    return err;
+}
+
+/* A beam 5 x 5 x h fixed below z = 0.5, pulled at its top by a pin and pushed by a force. */
+static amps_scene *beam_scene(amps_ctx *ctx, int h, shadow *w, const amps_scene_opts *so) {
+    amps_mesh *m = amps_mesh_beam(ctx, h);
+    amps_scene *S;
+    amps_int v, top = 25 * (h - 1) + 12;
+    double u[3] = {0.05, 0.02, 0}, f[3] = {0, 0.3, 0.1};
+    memset(w, 0, sizeof(*w));
+    w->fixed0 = (unsigned char *)calloc(m->nnode, 1);
+    for (v = 0; v < m->nnode; v++) w->fixed0[v] = m->xyz[3 * v + 2] < 0.5;
+    shadow_grow(w, (int)m->nnode);
+    S = amps_scene_create(ctx, m, so);
+    CHECK(S != NULL, "create: %s", ctx->msg);
+    amps_scene_set_material(ctx, S, 1000.0, 0.3);
+    amps_scene_fix_where(ctx, S, 2, AMPS_LT, 0.5, NULL);
+    CHECK(amps_scene_pin(ctx, S, top, u) == AMPS_OK, "pin: %s", ctx->msg);
+    w->pinned[top] = 1;
+    memcpy(w->pinval + 3 * top, u, sizeof(u));
+    CHECK(amps_scene_force(ctx, S, top - 2, f) == AMPS_OK, "force: %s", ctx->msg);
+    memcpy(w->force + 3 * (top - 2), f, sizeof(f));
+    CHECK(amps_scene_prepare(ctx, S) == AMPS_OK, "prepare: %s", ctx->msg);
+    return S;
+}
+
+/* Point k of frame fr's stroke: a curve through the beam's interior, blade along y. */
+static void stroke_point(int fr, int k, double p[3]) {
+    double s = 0.7 * fr + 0.35 * k;
+    p[0] = 2.0 + 0.9 * sin(0.8 * s);
+    p[1] = 2.0 + 0.3 * cos(1.3 * s);
+    p[2] = 3.0 + s;
+}
+
+static void test_stroke(void) {
+    amps_ctx ctx;
+    amps_scene *A, *B;
+    shadow wa, wb;
+    double blade[3] = {0, 1, 0.2};
+    int fr, total = 0, skipped = 0;
+    amps_ctx_init(&ctx);
+    A = beam_scene(&ctx, 16, &wa, NULL);
+    B = beam_scene(&ctx, 16, &wb, NULL);
+    for (fr = 0; fr < 12; fr++) {
+        double pts[9], nrm[6];
+        amps_int node[64], copy[64], i, nn = amps_scene_mesh(A)->nnode, near = 0, v;
+        amps_status st[64];
+        amps_scene_stroke_result r;
+        int k, seg;
+        for (k = 0; k < 3; k++) stroke_point(fr, k, pts + 3 * k);
+        for (seg = 0; seg < 2; seg++) { /* the test's own planes: (p1 - p0) x blade */
+            const double *p = pts + 3 * seg, *q = p + 3;
+            double d[3] = {q[0] - p[0], q[1] - p[1], q[2] - p[2]}, *c = nrm + 3 * seg, l;
+            c[0] = d[1] * blade[2] - d[2] * blade[1];
+            c[1] = d[2] * blade[0] - d[0] * blade[2];
+            c[2] = d[0] * blade[1] - d[1] * blade[0];
+            l = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+            for (k = 0; k < 3; k++) c[k] /= l;
+        }
+        { /* the touched nodes are those near the polyline: brute force */
+            amps_int got[256], ng = amps_scene_nodes_near_segment(&ctx, A, pts, pts + 3, 0.6, got, 256), j;
+            int ok = ng >= 0;
+            for (v = 0, j = 0; v < nn && ok; v++) {
+                double t, d2 = amps__seg_dist2(amps_scene_mesh(A)->xyz + 3 * v, pts, pts + 3, &t);
+                if (d2 <= 0.36 && amps_mesh_degree(amps_scene_mesh(A), v) > 0) ok = j < ng && got[j++] == v;
+            }
+            CHECK(ok && j == ng, "frame %d: nodes near the segment differ from brute force", fr);
+        }
+        memset(&r, 0, sizeof(r));
+        r.cap = 64;
+        r.node = node;
+        r.copy = copy;
+        r.status = st;
+        CHECK(amps_scene_stroke(&ctx, A, 3, pts, blade, 0.6, &r) == AMPS_OK, "frame %d: stroke: %s", fr, ctx.msg);
+        CHECK(r.n <= 64, "frame %d: %ld nodes touched", fr, (long)r.n);
+        for (v = 0; v < nn; v++) {
+            double t0, t1;
+            if (amps_mesh_degree(amps_scene_mesh(B), v) == 0) continue;
+            if (amps__seg_dist2(amps_scene_mesh(B)->xyz + 3 * v, pts, pts + 3, &t0) <= 0.36 ||
+                amps__seg_dist2(amps_scene_mesh(B)->xyz + 3 * v, pts + 3, pts + 6, &t1) <= 0.36)
+                near++;
+        }
+        CHECK(near == r.n, "frame %d: stroke touched %ld nodes, %ld are near", fr, (long)r.n, (long)near);
+        /* the same cuts one by one on B, each by the plane of its nearest segment */
+        for (i = 0; i < r.n && i < 64; i++) {
+            double t, d0 = amps__seg_dist2(amps_scene_mesh(B)->xyz + 3 * node[i], pts, pts + 3, &t),
+                      d1 = amps__seg_dist2(amps_scene_mesh(B)->xyz + 3 * node[i], pts + 3, pts + 6, &t);
+            int sg = d1 < d0;
+            amps_int vc = -1;
+            amps_status s = amps_scene_cut(&ctx, B, node[i], pts + 3 * sg, nrm + 3 * sg, &vc);
+            CHECK(s == st[i] && vc == copy[i], "frame %d: node %ld: stroke %d/%ld, one by one %d/%ld", fr,
+                  (long)node[i], (int)st[i], (long)copy[i], (int)s, (long)vc);
+            if (s == AMPS_OK) {
+                shadow_grow(&wa, (int)vc + 1);
+                shadow_grow(&wb, (int)vc + 1);
+            } else skipped++;
+        }
+        total += (int)r.ncut;
+        CHECK(amps_scene_mesh(A)->nnode == amps_scene_mesh(B)->nnode, "frame %d: node counts differ", fr);
+        CHECK(amps_scene_solve(&ctx, A) == AMPS_OK && amps_scene_solve(&ctx, B) == AMPS_OK, "frame %d: solve: %s",
+              fr, ctx.msg);
+        {
+            amps_int n3 = 3 * amps_scene_mesh(A)->nnode;
+            double e = t_reldiff((int)n3, amps_scene_displacements(A), amps_scene_displacements(B)), ea;
+            CHECK(e <= 1e-11, "frame %d: stroke vs one by one %.3e", fr, e);
+            ea = ref_err(&ctx, A, &wa);
+            CHECK(ea <= 1e-10, "frame %d: stroke vs CHOLMOD %.3e", fr, ea);
+        }
+    }
+    CHECK(total >= 12, "strokes cut only %d nodes", total);
+    printf("  stroke: 12 frames, %d nodes cut, %d skipped (no-op or refused)\n", total, skipped);
+    {
+        double bad[6] = {0, 0, 0, 0, 1, 0};
+        CHECK(amps_scene_stroke(&ctx, A, 2, bad, blade + 0, 0.5, NULL) == AMPS_ERR_ARG ||
+                      amps_scene_stroke(&ctx, A, 2, bad, blade, 0.5, NULL) == AMPS_OK,
+              "stroke along the blade");
+        bad[5] = 0;
+        bad[4] = 0;
+        CHECK(amps_scene_stroke(&ctx, A, 2, bad, blade, 0.5, NULL) == AMPS_ERR_ARG, "zero-length stroke accepted");
+        CHECK(amps_scene_stroke(&ctx, A, 1, bad, blade, 0.5, NULL) == AMPS_ERR_ARG, "one-point stroke accepted");
+        CHECK(amps_scene_nodes_near_segment(&ctx, A, bad, bad, -1, NULL, 0) == AMPS_ERR_VALUE,
+              "negative radius accepted");
+    }
+    amps_scene_free(&ctx, A);
+    amps_scene_free(&ctx, B);
+    shadow_free(&wa);
+    shadow_free(&wb);
+}
+
+/* Random changes, in batches of 1-6 on A and one by one on B. */
+static void test_batches(unsigned long long seed) {
+    amps_ctx ctx;
+    amps_scene *A, *B;
+    shadow wa, wb;
+    int round, ncut = 0;
+    amps_ctx_init(&ctx);
+    A = beam_scene(&ctx, 10, &wa, NULL);
+    B = beam_scene(&ctx, 10, &wb, NULL);
+    t_seed(seed);
+    for (round = 0; round < 14; round++) {
+        int nb = 1 + t_int(6), k;
+        CHECK(amps_scene_begin_batch(&ctx, A) == AMPS_OK, "begin batch: %s", ctx.msg);
+        CHECK(amps_scene_begin_batch(&ctx, A) == AMPS_ERR_STATE, "nested batch accepted");
+        for (k = 0; k < nb; k++) {
+            const amps_mesh *m = amps_scene_mesh(A);
+            amps_int v = t_int((int)m->nnode), vca = -1, vcb = -1;
+            int op = t_int(8), d;
+            if (op < 4) {
+                double p[3], nrm[3];
+                amps_status sa, sb;
+                for (d = 0; d < 3; d++) {
+                    p[d] = m->xyz[3 * v + d];
+                    nrm[d] = t_unif() - 0.5;
+                }
+                sa = amps_scene_cut(&ctx, A, v, p, nrm, &vca);
+                sb = amps_scene_cut(&ctx, B, v, p, nrm, &vcb);
+                CHECK(sa == sb && vca == vcb, "batch cut of %ld: %d vs %d", (long)v, (int)sa, (int)sb);
+                if (sa == AMPS_OK) {
+                    ncut++;
+                    shadow_grow(&wa, (int)vca + 1);
+                }
+            } else if (op < 6) {
+                double u[3];
+                for (d = 0; d < 3; d++) u[d] = 0.02 * (t_unif() - 0.5);
+                if (wa.fixed0[m->origin[v]] || amps_mesh_degree(m, v) == 0) continue;
+                CHECK(amps_scene_pin(&ctx, A, v, u) == AMPS_OK && amps_scene_pin(&ctx, B, v, u) == AMPS_OK, "pin: %s",
+                      ctx.msg);
+                wa.pinned[v] = 1;
+                memcpy(wa.pinval + 3 * v, u, sizeof(u));
+            } else if (op == 6) {
+                if (!wa.pinned[v] || t_int(2)) continue;
+                CHECK(amps_scene_release(&ctx, A, v) == AMPS_OK && amps_scene_release(&ctx, B, v) == AMPS_OK,
+                      "release: %s", ctx.msg);
+                wa.pinned[v] = 0;
+            } else {
+                double f[3];
+                for (d = 0; d < 3; d++) f[d] = t_unif() - 0.5;
+                amps_scene_force(&ctx, A, v, f);
+                amps_scene_force(&ctx, B, v, f);
+                memcpy(wa.force + 3 * v, f, sizeof(f));
+            }
+        }
+        CHECK(amps_scene_commit(&ctx, A) == AMPS_OK, "batch commit: %s", ctx.msg);
+        CHECK(amps_scene_solve_watched(&ctx, A) == AMPS_OK && amps_scene_solve(&ctx, A) == AMPS_OK &&
+                      amps_scene_solve(&ctx, B) == AMPS_OK,
+              "solve: %s", ctx.msg);
+        {
+            double e = t_reldiff(3 * (int)amps_scene_mesh(A)->nnode, amps_scene_displacements(A),
+                                 amps_scene_displacements(B)),
+                   ea = ref_err(&ctx, A, &wa);
+            CHECK(e <= 1e-11, "round %d: batched vs one by one %.3e", round, e);
+            CHECK(ea <= 1e-10, "round %d: batched vs CHOLMOD %.3e", round, ea);
+        }
+    }
+    CHECK(ncut >= 5, "batches: only %d cuts", ncut);
+    amps_scene_free(&ctx, A);
+    amps_scene_free(&ctx, B);
+    shadow_free(&wa);
+    shadow_free(&wb);
+}
+
+/* Two stacked cells, the top one held by three pins: a batch cuts the middle layer free (allowed:
+   the pins hold the top) and releases the pins; its commit finds the top loose and undoes all. */
+static void test_batch_undo(void) {
+    amps_ctx ctx;
+    amps_scene *S;
+    amps_int v[4] = {4, 5, 6, 7}, vc, top = 10, pins[3] = {8, 10, 11};
+    double nrm[3] = {0, 0, 1}, u[3] = {0.01, 0, 0}, u0[36];
+    int k, nn;
+    amps_status s;
+    amps_ctx_init(&ctx);
+    S = amps_scene_create(&ctx, amps_mesh_grid(&ctx, 2, 2, 3, 1.0, 1.0, 1.0), NULL);
+    amps_scene_fix_where(&ctx, S, 2, AMPS_LT, 0.5, NULL);
+    for (k = 0; k < 3; k++) CHECK(amps_scene_pin(&ctx, S, pins[k], u) == AMPS_OK, "undo: pin: %s", ctx.msg);
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "undo: solve: %s", ctx.msg);
+    memcpy(u0, amps_scene_displacements(S), sizeof(u0));
+    nn = (int)amps_scene_mesh(S)->nnode;
+    CHECK(amps_scene_begin_batch(&ctx, S) == AMPS_OK, "undo: begin: %s", ctx.msg);
+    for (k = 0; k < 4; k++) {
+        double p[3];
+        memcpy(p, amps_scene_mesh(S)->xyz + 3 * v[k], sizeof(p));
+        s = amps_scene_cut(&ctx, S, v[k], p, nrm, &vc);
+        CHECK(s == AMPS_OK, "undo: cut %d: %s", k, ctx.msg);
+    }
+    CHECK(amps_scene_mesh(S)->nnode == nn + 4, "undo: the batch's cuts did not change the mesh at once");
+    for (k = 0; k < 3; k++)
+        CHECK(amps_scene_release(&ctx, S, pins[k]) == AMPS_OK, "undo: release: %s", ctx.msg);
+    s = amps_scene_commit(&ctx, S);
+    CHECK(s == AMPS_ERR_SINGULAR_UPDATE, "undo: commit of a loose piece: %d (%s)", (int)s, ctx.msg);
+    CHECK(amps_scene_mesh(S)->nnode == nn, "undo: node count not restored");
+    CHECK(amps_mesh_check(&ctx, amps_scene_mesh(S)) == AMPS_OK, "undo: mesh invariants: %s", ctx.msg);
+    {
+        double r[3];
+        CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "undo: solve after undo: %s", ctx.msg);
+        CHECK(t_reldiff(36, amps_scene_displacements(S), u0) < 1e-12, "undo: solution changed");
+        amps_scene_reaction(&ctx, S, top, r);
+        CHECK(r[0] != 0, "undo: the pin was not restored");
+    }
+    amps_scene_free(&ctx, S);
+}
+
+/* A run of cuts with watched, reaction and full solves; disp receives the final displacements. */
+static void count_run(amps_refactor_policy pol, double *disp, int *ndisp, amps_update_stats *st, double *err) {
+    amps_ctx ctx;
+    amps_scene *S;
+    amps_scene_opts so;
+    shadow w;
+    amps_int watch[3] = {3, 40, 77};
+    int fr;
+    amps_ctx_init(&ctx);
+    amps_scene_opts_default(&so);
+    so.update.refactor = pol;
+    so.update.refactor_every = 4;
+    so.update.refactor_size = 24;
+    S = beam_scene(&ctx, 16, &w, &so);
+    amps_scene_watch(&ctx, S, 3, watch);
+    for (fr = 0; fr < 16; fr++) {
+        double pts[6], blade[3] = {0, 1, 0}, u[3];
+        amps_int top = 25 * 15 + 12;
+        int h;
+        stroke_point(fr, 0, pts);
+        stroke_point(fr, 1, pts + 3);
+        CHECK(amps_scene_stroke(&ctx, S, 2, pts, blade, 0.55, NULL) == AMPS_OK, "run: stroke: %s", ctx.msg);
+        shadow_grow(&w, (int)amps_scene_mesh(S)->nnode);
+        CHECK(amps_scene_solve_watched(&ctx, S) == AMPS_OK, "run: watched: %s", ctx.msg);
+        for (h = 0; h < 5; h++) {
+            u[0] = 0.05 + 0.001 * h;
+            u[1] = 0.02;
+            u[2] = 0.001 * fr;
+            CHECK(amps_scene_pin(&ctx, S, top, u) == AMPS_OK && amps_scene_solve_reactions(&ctx, S) == AMPS_OK,
+                  "run: haptic: %s", ctx.msg);
+        }
+        memcpy(w.pinval + 3 * top, u, sizeof(u));
+    }
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "run: solve: %s", ctx.msg);
+    *ndisp = 3 * (int)amps_scene_mesh(S)->nnode;
+    memcpy(disp, amps_scene_displacements(S), sizeof(double) * (size_t)*ndisp);
+    amps_update_get_stats(amps_scene_engine(S), st);
+    *err = ref_err(&ctx, S, &w);
+    amps_scene_free(&ctx, S);
+    shadow_free(&w);
+}
+
+static void test_count(void) {
+    static double d1[3 * 4000], d2[3 * 4000];
+    int n1, n2;
+    amps_update_stats s1, s2;
+    double e1, e2;
+    count_run(AMPS_REFACTOR_COUNT, d1, &n1, &s1, &e1);
+    count_run(AMPS_REFACTOR_COUNT, d2, &n2, &s2, &e2);
+    CHECK(n1 == n2 && !memcmp(d1, d2, sizeof(double) * (size_t)n1), "COUNT: two identical runs differ");
+    CHECK(s1.nrefactor >= 2 && s1.nrefactor == s2.nrefactor, "COUNT: re-factorizations %d and %d", (int)s1.nrefactor,
+          (int)s2.nrefactor);
+    CHECK(e1 <= 1e-10, "COUNT: vs CHOLMOD %.3e", e1);
+    printf("  COUNT: %d re-factorizations, identical bits, error %.2e\n", (int)s1.nrefactor, e1);
+#ifndef AMPS_NO_THREADS
+    { /* AUTO with only watched and reaction solves (plus the final one): the growth starts it */
+        count_run(AMPS_REFACTOR_AUTO, d1, &n1, &s1, &e1);
+        CHECK(s1.nrefactor + s1.refactor_running >= 1, "AUTO: no re-factorization after |S u C| = %ld",
+              (long)s1.nsys);
+        CHECK(e1 <= 1e-10, "AUTO: vs CHOLMOD %.3e", e1);
+        printf("  AUTO by size: %d re-factorizations, error %.2e\n", (int)s1.nrefactor, e1);
+    }
+#endif
+}
+
+/* A ready re-factorization is never swapped in by the haptic path; the next watched solve does it. */
+static void test_haptic_no_swap(void) {
+    amps_ctx ctx;
+    amps_scene *S;
+    amps_scene_opts so;
+    shadow w;
+    amps_update_stats st;
+    amps_int top = 25 * 7 + 12;
+    double t0, u[3] = {0.05, 0.02, 0}, r0[3], r1[3];
+    int h = 0;
+    amps_ctx_init(&ctx);
+    amps_scene_opts_default(&so);
+    so.update.refactor = AMPS_REFACTOR_MANUAL;
+    S = beam_scene(&ctx, 8, &w, &so);
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "no swap: solve: %s", ctx.msg);
+    CHECK(amps_update_refactor_start(&ctx, amps_scene_engine(S)) == AMPS_OK, "no swap: start: %s", ctx.msg);
+    t0 = amps_now();
+    while (amps_now() - t0 < 0.25 || h < 100) { /* long after the small factorization is ready */
+        u[2] = 0.0001 * (h++ % 50);
+        CHECK(amps_scene_pin(&ctx, S, top, u) == AMPS_OK && amps_scene_solve_reactions(&ctx, S) == AMPS_OK,
+              "no swap: haptic: %s", ctx.msg);
+    }
+    amps_update_get_stats(amps_scene_engine(S), &st);
+    CHECK(st.nrefactor == 0 && st.refactor_running == 1, "no swap: the haptic path swapped (%d, %d)",
+          (int)st.nrefactor, st.refactor_running);
+    amps_scene_reaction(&ctx, S, top, r0);
+    CHECK(amps_scene_solve_watched(&ctx, S) == AMPS_OK, "no swap: watched: %s", ctx.msg);
+    amps_update_get_stats(amps_scene_engine(S), &st);
+    CHECK(st.nrefactor == 1, "no swap: the watched solve did not swap (%d)", (int)st.nrefactor);
+    amps_scene_reaction(&ctx, S, top, r1);
+    CHECK(fabs(r0[0] - r1[0]) <= 1e-9 * (1 + fabs(r1[0])), "no swap: reaction %.6e vs %.6e after the swap", r0[0],
+          r1[0]);
+    amps_scene_free(&ctx, S);
+    shadow_free(&w);
+}
+
+/* Frame fr of the two-phase test: a batch holding a stroke. */
+static void two_phase_batch(amps_ctx *ctx, amps_scene *S, int fr) {
+    double pts[6], blade[3] = {0, 1, 0.1};
+    stroke_point(fr, 0, pts);
+    stroke_point(fr, 1, pts + 3);
+    CHECK(amps_scene_begin_batch(ctx, S) == AMPS_OK, "two-phase: begin batch: %s", ctx->msg);
+    CHECK(amps_scene_stroke(ctx, S, 2, pts, blade, 0.55, NULL) == AMPS_OK, "two-phase: stroke: %s", ctx->msg);
+}
+
+/* Haptic steps: the top pin moved, its reaction read; returns the last x-reaction. */
+static double haptic_steps(amps_ctx *ctx, amps_scene *S, amps_int top, int fr, int nsteps) {
+    double u[3], r[3] = {0, 0, 0};
+    int h;
+    for (h = 0; h < nsteps; h++) {
+        u[0] = 0.05 + 0.0005 * h;
+        u[1] = 0.02;
+        u[2] = 0.001 * fr;
+        CHECK(amps_scene_pin(ctx, S, top, u) == AMPS_OK && amps_scene_solve_reactions(ctx, S) == AMPS_OK,
+              "two-phase: haptic: %s", ctx->msg);
+        amps_scene_reaction(ctx, S, top, r);
+    }
+    return r[0];
+}
+
+/* A two-phase commit equals a one-phase commit bitwise; haptic steps during its run phase see the
+   committed system and never swap; the changes it forbids meanwhile are refused. */
+static void test_two_phase(void) {
+    amps_ctx ctx;
+    amps_scene *A, *B;
+    shadow wa, wb;
+    amps_scene_opts so;
+    amps_int top = 25 * 15 + 12;
+    int fr, same = 1;
+    amps_ctx_init(&ctx);
+    amps_scene_opts_default(&so);
+    so.update.refactor = AMPS_REFACTOR_COUNT; /* swaps at the same points in both */
+    so.update.refactor_every = 3;
+    A = beam_scene(&ctx, 16, &wa, &so);
+    B = beam_scene(&ctx, 16, &wb, &so);
+    for (fr = 0; fr < 10; fr++) {
+        double ra, rb, u[3] = {0.05, 0.02, 0.001 * fr}, p[3] = {2, 2, 8}, nrm[3] = {1, 0, 0};
+        amps_int n3, vc;
+        two_phase_batch(&ctx, A, fr);
+        two_phase_batch(&ctx, B, fr);
+        CHECK(amps_scene_commit_begin(&ctx, A) == AMPS_OK, "two-phase: begin: %s", ctx.msg);
+        CHECK(amps_scene_cut(&ctx, A, 0, p, nrm, &vc) == AMPS_ERR_STATE, "two-phase: a cut during the job accepted");
+        CHECK(amps_scene_pin(&ctx, A, 25 * 15 + 3, u) == AMPS_ERR_STATE, "two-phase: a new pin during the job accepted");
+        amps_scene_commit_run(A);
+        CHECK(amps_scene_commit_end(&ctx, A) == AMPS_OK, "two-phase: end: %s", ctx.msg);
+        CHECK(amps_scene_commit(&ctx, B) == AMPS_OK, "two-phase: one-phase commit: %s", ctx.msg);
+        shadow_grow(&wa, (int)amps_scene_mesh(A)->nnode);
+        ra = haptic_steps(&ctx, A, top, fr, 5);
+        rb = haptic_steps(&ctx, B, top, fr, 5);
+        same &= ra == rb;
+        CHECK(amps_scene_solve(&ctx, A) == AMPS_OK && amps_scene_solve(&ctx, B) == AMPS_OK, "two-phase: solve: %s",
+              ctx.msg);
+        n3 = 3 * amps_scene_mesh(A)->nnode;
+        same &= n3 == 3 * amps_scene_mesh(B)->nnode &&
+                !memcmp(amps_scene_displacements(A), amps_scene_displacements(B), sizeof(double) * (size_t)n3);
+    }
+    CHECK(same, "two-phase: results differ from the one-phase commit's bits");
+    {
+        amps_update_stats st;
+        amps_update_get_stats(amps_scene_engine(A), &st);
+        CHECK(st.nrefactor >= 1, "two-phase: no re-factorization swapped in (COUNT)");
+    }
+    /* the haptic thread during the run phase: it sees the committed system */
+    for (fr = 10; fr < 16; fr++) {
+        double r_before, r_during, r_after, u[3] = {0.05, 0.02, 0.001 * fr};
+        amps_update_stats st0, st1;
+        r_before = haptic_steps(&ctx, A, top, fr, 1);
+        two_phase_batch(&ctx, A, fr);
+        CHECK(amps_scene_commit_begin(&ctx, A) == AMPS_OK, "two-phase: begin: %s", ctx.msg);
+        amps_update_get_stats(amps_scene_engine(A), &st0);
+        r_during = haptic_steps(&ctx, A, top, fr, 1);
+        CHECK(fabs(r_during - r_before) <= 1e-12 * fabs(r_before), "two-phase: the haptic step during the job: %.6e vs %.6e", r_during, r_before);
+#ifdef _OPENMP
+#pragma omp parallel sections num_threads(2)
+        {
+#pragma omp section
+            amps_scene_commit_run(A);
+#pragma omp section
+            (void)haptic_steps(&ctx, A, top, fr, 20);
+        }
+#else
+        amps_scene_commit_run(A);
+        (void)haptic_steps(&ctx, A, top, fr, 20);
+#endif
+        amps_update_get_stats(amps_scene_engine(A), &st1);
+        CHECK(st1.nrefactor == st0.nrefactor, "two-phase: a swap during the job");
+        CHECK(amps_scene_pin(&ctx, A, top, u) == AMPS_OK, "two-phase: pin move: %s", ctx.msg);
+        CHECK(amps_scene_commit_end(&ctx, A) == AMPS_OK, "two-phase: end: %s", ctx.msg);
+        shadow_grow(&wa, (int)amps_scene_mesh(A)->nnode);
+        memcpy(wa.pinval + 3 * top, u, sizeof(u));
+        r_after = haptic_steps(&ctx, A, top, fr, 0);
+        (void)r_after;
+        CHECK(amps_scene_solve(&ctx, A) == AMPS_OK, "two-phase: solve: %s", ctx.msg);
+        {
+            double e = ref_err(&ctx, A, &wa);
+            CHECK(e <= 1e-10, "two-phase frame %d: vs CHOLMOD %.3e", fr, e);
+        }
+    }
+    amps_scene_free(&ctx, A);
+    amps_scene_free(&ctx, B);
+    shadow_free(&wa);
+    shadow_free(&wb);
+}
+
+int main(void) {
+    test_stroke();
+    test_batches(21);
+    test_batches(22);
+    test_batch_undo();
+    test_count();
+    test_haptic_no_swap();
+    test_two_phase();
+    return amps_t_end("test_frame");
+}
