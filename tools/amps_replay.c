@@ -271,6 +271,8 @@ static int run_selection_line(replay *R, int nt, char **t) {
     if (!strcmp(c, "haptic")) return cmd_haptic(R, nt, t);
     if (!strcmp(c, "boundary")) return cmd_boundary(R, nt, t);
     return -1;
+}
+
 /* stroke <radius> <blade xyz> <2 or 3 points xyz> */
 static int cmd_stroke(replay *R, int nt, char **t, double t0) {
     double x[13];
