@@ -567,6 +567,8 @@ AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U);
    Incidence: the tets containing node v are inc[inc_ptr[v] .. inc_ptr[v] + inc_len[v] - 1],
    in ascending order. The slots of all nodes partition inc[0 .. 4*ntet-1]; a cut splits the
    slot of v into the slots of v and its copy, so incidence never needs more memory.
+   Removed tets (amps_mesh_remove) keep their index and nodes but are in no incidence list; the
+   slots of the nodes then cover only part of inc.
    Fields are read-only for callers: change a mesh only through amps_mesh_* functions. */
 typedef struct amps_mesh {
     amps_int nnode;    /* nodes in use */
@@ -580,6 +582,11 @@ typedef struct amps_mesh {
     amps_int *inc_ptr; /* node_cap */
     amps_int *inc_len; /* node_cap */
     amps_int *inc;     /* 4 * ntet tet indices */
+    amps_int *region;        /* ntet: region attribute (0 when the file has none) */
+    double *rho;             /* ntet: density (default 1) */
+    unsigned char *removed;  /* ntet: 1 = removed (indices never shift) */
+    amps_int nremoved;       /* tets with removed[t] = 1 */
+    struct amps__removal *last_removal; /* internal: record and undo log of the last amps_mesh_remove */
 } amps_mesh;
 
 /* Mesh with nnode nodes (xyz: 3 per node) and ntet tets (tet: 4 node indices each), copied.
@@ -605,7 +612,8 @@ AMPS_API amps_status amps_mesh_reserve(amps_ctx *ctx, amps_mesh *m, amps_int nod
 AMPS_API amps_int amps_mesh_degree(const amps_mesh *m, amps_int v);
 /* The tets containing v, ascending; *deg receives their number (NULL and 0 if v is invalid). */
 AMPS_API const amps_int *amps_mesh_incident(const amps_mesh *m, amps_int v, amps_int *deg);
-/* Verifies the mesh invariants (indices, origins, incidence slots against tet). O(nnode + ntet). */
+/* Verifies the mesh invariants (indices, origins, incidence slots against tet and the removed
+   flags, densities). O(nnode + ntet). */
 AMPS_API amps_status amps_mesh_check(amps_ctx *ctx, const amps_mesh *m);
 
 typedef enum amps_cmp { AMPS_LT = 0, AMPS_GT = 1 } amps_cmp;
@@ -621,7 +629,7 @@ AMPS_API amps_int amps_mesh_number_dofs(const amps_mesh *m, const unsigned char 
 AMPS_API void amps_mesh_tet_coords(const amps_mesh *m, amps_int t, double X[12]);
 /* amps_tet_stiffness of tet t with its material; returns its volume. */
 AMPS_API double amps_mesh_tet_stiffness(const amps_mesh *m, amps_int t, double Ke[144]);
-/* Upper triangle of the stiffness matrix K = sum_t Ke(t) over all tets, in equations: the DOF
+/* Upper triangle of the stiffness matrix K = sum_t Ke(t) over the live tets, in equations: the DOF
    d of node v is equation dof[3v+d] (0 <= dof < ndof) or eliminated (-1; its rows and columns
    are dropped). dof has 3 * nnode entries and uses each equation at most once; an equation
    used by no DOF gives an empty column. Rows are sorted in each column, duplicates summed. */
@@ -645,9 +653,69 @@ AMPS_API amps_status amps_mesh_cut(amps_ctx *ctx, amps_mesh *m, amps_int v, cons
 AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, amps_int vc, const amps_int *moved,
                                      amps_int nmoved);
 /* Per-tet stress for displacements disp (3 per node): sigma (6 per tet), von_mises (1 per tet),
-   principal (3 per tet, descending); each output may be NULL. */
+   principal (3 per tet, descending); each output may be NULL. Removed tets get zeros. */
 AMPS_API amps_status amps_mesh_stress(amps_ctx *ctx, const amps_mesh *m, const double *disp, double *sigma,
                                       double *von_mises, double *principal);
+
+/* ---- density, regions, lumped mass, element removal ---- */
+
+/* Density of all tets / of tet t. Requires rho > 0 finite (AMPS_ERR_VALUE for NaN/Inf,
+   AMPS_ERR_ARG otherwise; AMPS_ERR_INDEX for t); on error m is unchanged. */
+AMPS_API amps_status amps_mesh_set_density(amps_ctx *ctx, amps_mesh *m, double rho);
+AMPS_API amps_status amps_mesh_set_tet_density(amps_ctx *ctx, amps_mesh *m, amps_int t, double rho);
+/* E, nu and rho of every tet t with region[t] = id (removed ones included); rho <= 0 keeps the
+   densities. Errors (m unchanged): the checks of amps_mesh_set_material, a NaN rho, and
+   AMPS_ERR_ARG "no tetrahedron has region id" when none has it. */
+AMPS_API amps_status amps_mesh_set_region_material(amps_ctx *ctx, amps_mesh *m, amps_int id, double E, double nu,
+                                                   double rho);
+/* Lumped mass m_i = sum over the non-removed tets t containing node i of rho_t |V_t| / 4
+   (mass has nnode entries; a node in no live tet gets 0). */
+AMPS_API void amps_mesh_lumped_mass(const amps_mesh *m, double *mass);
+
+/* What amps_mesh_remove does at a singular vertex or edge (see there). */
+typedef enum amps_singular_policy {
+    AMPS_SINGULAR_REMOVE = 0,   /* default: keep the largest group, remove the others */
+    AMPS_SINGULAR_SEPARATE = 1, /* give every other group its own copy of the vertex */
+    AMPS_SINGULAR_IGNORE = 2    /* remove only the given tets */
+} amps_singular_policy;
+/* What a removal did; arrays are mesh-owned, valid until the next change of the mesh. */
+typedef struct amps_mesh_removal {
+    amps_int ntet;
+    const amps_int *tets;       /* every tet removed (the given ones first, in the given order) */
+    amps_int nsep;              /* separations, in the order made: node sep_node[k] ... */
+    const amps_int *sep_node;
+    const amps_int *sep_copy;   /* ... got the copy sep_copy[k] (origin as a cut copy) ... */
+    const amps_int *sep_ptr;    /* ... and the tets sep_tets[sep_ptr[k] .. sep_ptr[k+1]-1] (ascending) */
+    const amps_int *sep_tets;   /*     moved from sep_node[k] to it; sep_ptr has nsep + 1 entries */
+    amps_int norphan;
+    const amps_int *orphans;    /* nodes that had a live tet before and have none now, ascending */
+} amps_mesh_removal;
+/* Removes tets[0..n-1]: marks them removed and takes them out of the incidence lists; then,
+   unless policy is AMPS_SINGULAR_IGNORE, resolves singularities at the vertices and edges of
+   every tet removed or changed, repeatedly, until none of those is singular. A vertex is
+   singular when its tets are not connected through shared edges (two are adjacent when they
+   share a vertex besides it); an edge when its tets are not connected through shared faces.
+   The group with most tets is kept (a tie keeps the group holding the lowest tet index).
+   AMPS_SINGULAR_REMOVE removes the tets of the other groups. AMPS_SINGULAR_SEPARATE gives each
+   other group of a singular vertex its own copy of the vertex (a cut-like copy: origin, xyz,
+   split incidence slot, node capacity growth as amps_mesh_cut); at a singular edge (a, b) it
+   copies the endpoint a (else b) whose tets, grouped by shared faces, put the edge's groups in
+   different face-connected parts, giving each part that does not hold the kept group its own
+   copy; when neither endpoint separates them (the edge is pinched from both sides) the other
+   groups are removed as with AMPS_SINGULAR_REMOVE.
+   out (may be NULL) describes the result. Errors (m unchanged): AMPS_ERR_ARG (NULL mesh or
+   array, n < 1, a tet given twice or already removed), AMPS_ERR_INDEX (a tet out of range),
+   AMPS_ERR_OOM / AMPS_ERR_CAPACITY. */
+AMPS_API amps_status amps_mesh_remove(amps_ctx *ctx, amps_mesh *m, amps_int n, const amps_int *tets,
+                                      amps_singular_policy policy, amps_mesh_removal *out);
+/* Undoes the last amps_mesh_remove exactly (tets, incidence, nnode, removed flags), r being its
+   record. AMPS_ERR_ARG (m unchanged) if r is not the record of the last change of m. */
+AMPS_API amps_status amps_mesh_unremove(amps_ctx *ctx, amps_mesh *m, const amps_mesh_removal *r);
+/* Singular vertices / edges of the current mesh (definitions of amps_mesh_remove), from scratch:
+   out (may be NULL to count) receives the vertices ascending / the edges as pairs a < b, sorted.
+   Returns their number, or -1 (NULL mesh, AMPS_ERR_OOM). */
+AMPS_API amps_int amps_mesh_singular_vertices(amps_ctx *ctx, const amps_mesh *m, amps_int *out);
+AMPS_API amps_int amps_mesh_singular_edges(amps_ctx *ctx, const amps_mesh *m, amps_int *out);
 
 /* ---- linear tetrahedron (P1) elasticity ----
    X[3a+c]: coordinate c of node a (a = 0..3). Voigt order for strain and stress:
@@ -8212,6 +8280,10 @@ AMPS_API double amps_tet_stress(const double X[12], double E, double nu, const d
 
 /* ---- mesh ---- */
 
+static void amps__removal_free(amps_ctx *ctx, struct amps__removal *r);
+static void amps__removal_forget(amps_mesh *m);
+static amps_status amps__mesh_grow(amps_ctx *ctx, amps_mesh *m, const char *fn);
+
 AMPS_API void amps_mesh_free(amps_ctx *ctx, amps_mesh *m) {
     if (!m) return;
     amps__free(ctx, m->xyz);
@@ -8222,6 +8294,10 @@ AMPS_API void amps_mesh_free(amps_ctx *ctx, amps_mesh *m) {
     amps__free(ctx, m->inc_ptr);
     amps__free(ctx, m->inc_len);
     amps__free(ctx, m->inc);
+    amps__free(ctx, m->region);
+    amps__free(ctx, m->rho);
+    amps__free(ctx, m->removed);
+    amps__removal_free(ctx, m->last_removal);
     amps__free(ctx, m);
 }
 
@@ -8260,7 +8336,11 @@ static amps_mesh *amps__mesh_alloc(amps_ctx *ctx, amps_int node_cap, amps_int nt
     m->inc = AMPS__CAST(amps_int *, amps__malloc(ctx, 4 * nt, sizeof(amps_int)));
     m->E = AMPS__CAST(double *, amps__malloc(ctx, nt, sizeof(double)));
     m->nu = AMPS__CAST(double *, amps__malloc(ctx, nt, sizeof(double)));
-    if (!m->xyz || !m->origin || !m->inc_ptr || !m->inc_len || !m->tet || !m->inc || !m->E || !m->nu) {
+    m->region = AMPS__CAST(amps_int *, amps__calloc(ctx, nt, sizeof(amps_int)));
+    m->rho = AMPS__CAST(double *, amps__malloc(ctx, nt, sizeof(double)));
+    m->removed = AMPS__CAST(unsigned char *, amps__calloc(ctx, nt, 1));
+    if (!m->xyz || !m->origin || !m->inc_ptr || !m->inc_len || !m->tet || !m->inc || !m->E || !m->nu ||
+        !m->region || !m->rho || !m->removed) {
         amps_mesh_free(ctx, m);
         return NULL;
     }
@@ -8317,6 +8397,7 @@ static amps_mesh *amps__mesh_new(amps_ctx *ctx, const char *fn, amps_int nnode, 
     for (t = 0; t < ntet; t++) {
         m->E[t] = 1.0;
         m->nu[t] = 0.3;
+        m->rho[t] = 1.0;
     }
     /* incidence by counting sort over tets, so each list is ascending */
     for (v = 0; v < nnode; v++) {
@@ -8505,6 +8586,15 @@ AMPS_API amps_status amps_mesh_check(amps_ctx *ctx, const amps_mesh *m) {
     if (!m) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL mesh", fn);
     if (m->ntet < 1 || m->nfile < 0 || m->nfile > m->nnode || m->nnode > m->node_cap)
         return amps__err(ctx, AMPS_ERR_MESH, "%s: inconsistent counts", fn);
+    for (t = 0, r = 0; t < m->ntet; t++) {
+        if (m->removed[t] > 1 || !(m->rho[t] > 0.0) || !amps__isfinite(m->rho[t]))
+            return amps__err(ctx, AMPS_ERR_MESH, "%s: tetrahedron %lld: invalid removed flag or density", fn,
+                             (long long)t);
+        r += m->removed[t];
+    }
+    if (r != m->nremoved)
+        return amps__err(ctx, AMPS_ERR_MESH, "%s: %lld tetrahedra are marked removed, nremoved is %lld", fn,
+                         (long long)r, (long long)m->nremoved);
     for (t = 0; t < m->ntet; t++)
         for (q = 0; q < 4; q++) {
             v = m->tet[4 * t + q];
@@ -8539,6 +8629,7 @@ AMPS_API amps_status amps_mesh_check(amps_ctx *ctx, const amps_mesh *m) {
             t = m->inc[p + j];
             if (seen[p + j]) why = "overlaps another slot";
             else if (t < 0 || t >= m->ntet) why = "lists an invalid tetrahedron";
+            else if (m->removed[t]) why = "lists a removed tetrahedron";
             else if (j > 0 && t <= m->inc[p + j - 1]) why = "is not strictly ascending";
             else if (m->tet[4 * t] != v && m->tet[4 * t + 1] != v && m->tet[4 * t + 2] != v && m->tet[4 * t + 3] != v)
                 why = "lists a tetrahedron without the node";
@@ -8551,9 +8642,9 @@ AMPS_API amps_status amps_mesh_check(amps_ctx *ctx, const amps_mesh *m) {
         total += n;
     }
     amps__free(ctx, seen);
-    if (total != 4 * m->ntet)
+    if (total != 4 * (m->ntet - m->nremoved))
         return amps__err(ctx, AMPS_ERR_MESH, "%s: incidence lists hold %lld entries, expected %lld", fn,
-                         (long long)total, (long long)(4 * m->ntet));
+                         (long long)total, (long long)(4 * (m->ntet - m->nremoved)));
     return AMPS_OK;
 }
 
@@ -8611,6 +8702,12 @@ AMPS_API amps_status amps_mesh_stress(amps_ctx *ctx, const amps_mesh *m, const d
     for (t = 0; t < m->ntet; t++) {
         double X[12], u[12], s[6], vm, pr[3];
         int a, c;
+        if (m->removed[t]) {
+            if (sigma) memset(sigma + 6 * t, 0, sizeof(s));
+            if (von_mises) von_mises[t] = 0.0;
+            if (principal) memset(principal + 3 * t, 0, sizeof(pr));
+            continue;
+        }
         amps_mesh_tet_coords(m, t, X);
         for (a = 0; a < 4; a++)
             for (c = 0; c < 3; c++) u[3 * a + c] = disp[3 * m->tet[4 * t + a] + c];
@@ -8760,6 +8857,7 @@ AMPS_API amps_csc *amps_mesh_assemble(amps_ctx *ctx, const amps_mesh *m, const a
         double Ke[144];
         amps_int rd[12];
         int a;
+        if (m->removed[t]) continue;
         amps_mesh_tet_stiffness(m, t, Ke);
         for (a = 0; a < 12; a++) rd[a] = dof[3 * m->tet[4 * t + a / 3] + a % 3];
         amps__csc_add_element(A, rd, Ke);
@@ -8812,14 +8910,10 @@ AMPS_API amps_status amps_mesh_cut(amps_ctx *ctx, amps_mesh *m, amps_int v, cons
                          "%s: all %lld tetrahedra at node %lld lie on one side of the plane; nothing cut", fn,
                          (long long)deg, (long long)v);
     if (m->nnode == m->node_cap) {
-        amps_int cap = m->node_cap + m->node_cap / 2 + 16;
-        amps_status s;
-        if (cap > AMPS__IMAX / 3 || cap < m->node_cap) cap = AMPS__IMAX / 3;
-        if (cap <= m->nnode)
-            return amps__err(ctx, AMPS_ERR_CAPACITY, "%s: node count at the limit of the index type", fn);
-        s = amps_mesh_reserve(ctx, m, cap);
+        amps_status s = amps__mesh_grow(ctx, m, fn);
         if (s) return s;
     }
+    amps__removal_forget(m);
     vc = m->nnode;
     for (c = 0; c < 3; c++) m->xyz[3 * vc + c] = m->xyz[3 * v + c];
     m->origin[vc] = m->origin[v];
@@ -8867,7 +8961,541 @@ AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, am
     m->inc_len[vc] = 0;
     m->inc_ptr[vc] = 0;
     m->nnode--;
+    amps__removal_forget(m);
     return AMPS_OK;
+}
+
+/* ---- density, regions, lumped mass ---- */
+
+static amps_status amps__check_density(amps_ctx *ctx, const char *fn, double rho) {
+    if (!amps__isfinite(rho)) return amps__err(ctx, AMPS_ERR_VALUE, "%s: non-finite density %g", fn, rho);
+    if (!(rho > 0.0)) return amps__err(ctx, AMPS_ERR_ARG, "%s: density rho = %g must be positive", fn, rho);
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_mesh_set_density(amps_ctx *ctx, amps_mesh *m, double rho) {
+    amps_int t;
+    amps_status s;
+    if (!m) return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_set_density: NULL mesh");
+    s = amps__check_density(ctx, "amps_mesh_set_density", rho);
+    if (s) return s;
+    for (t = 0; t < m->ntet; t++) m->rho[t] = rho;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_mesh_set_tet_density(amps_ctx *ctx, amps_mesh *m, amps_int t, double rho) {
+    amps_status s;
+    if (!m) return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_set_tet_density: NULL mesh");
+    if (t < 0 || t >= m->ntet)
+        return amps__err(ctx, AMPS_ERR_INDEX, "amps_mesh_set_tet_density: tetrahedron %lld out of range [0, %lld)",
+                         (long long)t, (long long)m->ntet);
+    s = amps__check_density(ctx, "amps_mesh_set_tet_density", rho);
+    if (s) return s;
+    m->rho[t] = rho;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_mesh_set_region_material(amps_ctx *ctx, amps_mesh *m, amps_int id, double E, double nu,
+                                                   double rho) {
+    const char *fn = "amps_mesh_set_region_material";
+    amps_int t, n = 0;
+    amps_status s;
+    if (!m) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL mesh", fn);
+    s = amps__check_material(ctx, fn, E, nu);
+    if (s) return s;
+    if (rho > 0.0 || rho != rho) {
+        s = amps__check_density(ctx, fn, rho);
+        if (s) return s;
+    }
+    for (t = 0; t < m->ntet; t++) n += m->region[t] == id;
+    if (n == 0) return amps__err(ctx, AMPS_ERR_ARG, "%s: no tetrahedron has region %lld", fn, (long long)id);
+    for (t = 0; t < m->ntet; t++)
+        if (m->region[t] == id) {
+            m->E[t] = E;
+            m->nu[t] = nu;
+            if (rho > 0.0) m->rho[t] = rho;
+        }
+    return AMPS_OK;
+}
+
+AMPS_API void amps_mesh_lumped_mass(const amps_mesh *m, double *mass) {
+    amps_int v, t;
+    int a;
+    if (!m || !mass) return;
+    for (v = 0; v < m->nnode; v++) mass[v] = 0.0;
+    for (t = 0; t < m->ntet; t++) {
+        double X[12], G[12], q;
+        if (m->removed[t]) continue;
+        amps_mesh_tet_coords(m, t, X);
+        q = 0.25 * m->rho[t] * fabs(amps_tet_gradients(X, G));
+        for (a = 0; a < 4; a++) mass[m->tet[4 * t + a]] += q;
+    }
+}
+
+/* ---- element removal and topological singularities ---- */
+
+/* Growable array of amps_int. */
+typedef struct amps__ivec {
+    amps_int *a;
+    size_t n, cap;
+} amps__ivec;
+
+static amps_status amps__iv_push(amps_ctx *ctx, amps__ivec *v, amps_int x) {
+    if (v->n == v->cap) {
+        void *p = v->a;
+        size_t cap = v->cap ? 2 * v->cap : 64;
+        if (amps__realloc(ctx, &p, cap, sizeof(amps_int))) return AMPS_ERR_OOM;
+        v->a = AMPS__CAST(amps_int *, p);
+        v->cap = cap;
+    }
+    v->a[v->n++] = x;
+    return AMPS_OK;
+}
+
+/* The record of the last amps_mesh_remove and its undo log. A node's slot is saved (once)
+   before its first change; restoring the saved slots, the tet entries and nnode undoes it. */
+struct amps__removal {
+    int valid;                /* 1 while the removal is the last change of the mesh */
+    amps_int nnode0;          /* nnode before */
+    amps__ivec tets;          /* tets removed, in order */
+    amps__ivec sep_node, sep_copy, sep_ptr, sep_tets, orphans;
+    amps__ivec saved;         /* per saved node: node, inc_ptr, inc_len, offset into slot */
+    amps__ivec slot;          /* the saved slot contents */
+    amps__ivec edits;         /* per changed tet entry: 4 t + q, the old node */
+    amps__ivec queue;         /* work items (a, b): vertex a (b = -1) or edge a < b */
+    amps__ivec star, grp, aux, ed, eg; /* scratch of the singularity tests */
+    unsigned char *flag;      /* flag_cap: node saved */
+    size_t flag_cap;
+};
+
+static void amps__removal_free(amps_ctx *ctx, struct amps__removal *r) {
+    amps__ivec *v[15];
+    int k;
+    if (!r) return;
+    v[0] = &r->tets, v[1] = &r->sep_node, v[2] = &r->sep_copy, v[3] = &r->sep_ptr, v[4] = &r->sep_tets;
+    v[5] = &r->orphans, v[6] = &r->saved, v[7] = &r->slot, v[8] = &r->edits, v[9] = &r->queue;
+    v[10] = &r->star, v[11] = &r->grp, v[12] = &r->aux, v[13] = &r->ed, v[14] = &r->eg;
+    for (k = 0; k < 15; k++) amps__free(ctx, v[k]->a);
+    amps__free(ctx, r->flag);
+    amps__free(ctx, r);
+}
+
+static void amps__removal_forget(amps_mesh *m) {
+    if (m->last_removal) m->last_removal->valid = 0;
+}
+
+/* Grows the node capacity of m by half when it is full (amps_mesh_cut's growth). */
+static amps_status amps__mesh_grow(amps_ctx *ctx, amps_mesh *m, const char *fn) {
+    amps_int cap = m->node_cap + m->node_cap / 2 + 16;
+    if (m->nnode < m->node_cap) return AMPS_OK;
+    if (cap > AMPS__IMAX / 3 || cap < m->node_cap) cap = AMPS__IMAX / 3;
+    if (cap <= m->nnode) return amps__err(ctx, AMPS_ERR_CAPACITY, "%s: node count at the limit of the index type", fn);
+    return amps_mesh_reserve(ctx, m, cap);
+}
+
+/* Number of nodes tets p and q share. */
+static int amps__tet_shared(const amps_mesh *m, amps_int p, amps_int q) {
+    const amps_int *a = m->tet + 4 * p, *b = m->tet + 4 * q;
+    int i, j, n = 0;
+    for (i = 0; i < 4; i++)
+        for (j = 0; j < 4; j++) n += a[i] == b[j];
+    return n;
+}
+
+/* star = the live tets containing a (and b if b >= 0), ascending. */
+static amps_status amps__star(amps_ctx *ctx, const amps_mesh *m, amps_int a, amps_int b, amps__ivec *star) {
+    const amps_int *lst = m->inc + m->inc_ptr[a];
+    amps_int j;
+    star->n = 0;
+    for (j = 0; j < m->inc_len[a]; j++) {
+        const amps_int *tv = m->tet + 4 * lst[j];
+        if (b >= 0 && tv[0] != b && tv[1] != b && tv[2] != b && tv[3] != b) continue;
+        if (amps__iv_push(ctx, star, lst[j])) return AMPS_ERR_OOM;
+    }
+    return AMPS_OK;
+}
+
+static amps_int amps__uf_root(amps_int *g, amps_int i) {
+    while (g[i] != i) i = g[i] = g[g[i]];
+    return i;
+}
+
+/* Connected groups of the tets star[0..n-1], two adjacent when they share at least need nodes:
+   grp[i] = the first (lowest) member of i's group. Returns the number of groups; *kept = the
+   root of the largest group, a tie the one with the lowest tet. */
+static amps_int amps__groups(const amps_mesh *m, const amps_int *star, amps_int n, int need, amps_int *grp,
+                             amps_int *kept) {
+    amps_int i, j, ng = 0, best = -1, bsize = 0;
+    for (i = 0; i < n; i++) grp[i] = i;
+    for (i = 0; i < n; i++)
+        for (j = i + 1; j < n; j++) {
+            amps_int ri, rj;
+            if (amps__tet_shared(m, star[i], star[j]) < need) continue;
+            ri = amps__uf_root(grp, i);
+            rj = amps__uf_root(grp, j);
+            if (ri < rj) grp[rj] = ri;
+            else if (rj < ri) grp[ri] = rj;
+        }
+    for (i = 0; i < n; i++) grp[i] = amps__uf_root(grp, i);
+    for (i = 0; i < n; i++) {
+        amps_int size = 0;
+        if (grp[i] != i) continue;
+        ng++;
+        for (j = i; j < n; j++) size += grp[j] == i;
+        if (size > bsize) bsize = size, best = i;
+    }
+    *kept = best;
+    return ng;
+}
+
+/* Groups of the tets containing a (and b if b >= 0), adjacent when they share need nodes, into
+   R->star / R->grp (see amps__groups); returns their number. */
+static amps_int amps__rm_groups(amps_ctx *ctx, const amps_mesh *m, struct amps__removal *R, amps_int a, amps_int b,
+                                int need, amps_int *kept, amps_status *s) {
+    *s = amps__star(ctx, m, a, b, &R->star);
+    if (*s) return 0;
+    while (R->grp.cap < R->star.n)
+        if ((*s = amps__iv_push(ctx, &R->grp, 0)) != AMPS_OK) return 0;
+    return amps__groups(m, R->star.a, (amps_int)R->star.n, need, R->grp.a, kept);
+}
+
+/* Saves the slot of node v before its first change (copies made by this removal need none). */
+static amps_status amps__rm_save(amps_ctx *ctx, const amps_mesh *m, struct amps__removal *R, amps_int v) {
+    amps_int j;
+    if (v >= R->nnode0 || R->flag[v]) return AMPS_OK;
+    R->flag[v] = 1;
+    if (amps__iv_push(ctx, &R->saved, v) || amps__iv_push(ctx, &R->saved, m->inc_ptr[v]) ||
+        amps__iv_push(ctx, &R->saved, m->inc_len[v]) || amps__iv_push(ctx, &R->saved, (amps_int)R->slot.n))
+        return AMPS_ERR_OOM;
+    for (j = 0; j < m->inc_len[v]; j++)
+        if (amps__iv_push(ctx, &R->slot, m->inc[m->inc_ptr[v] + j])) return AMPS_ERR_OOM;
+    return AMPS_OK;
+}
+
+/* Queues the 4 vertices and 6 edges of tet t. */
+static amps_status amps__rm_queue_tet(amps_ctx *ctx, const amps_mesh *m, struct amps__removal *R, amps_int t) {
+    const amps_int *tv = m->tet + 4 * t;
+    int i, j;
+    for (i = 0; i < 4; i++) {
+        if (amps__iv_push(ctx, &R->queue, tv[i]) || amps__iv_push(ctx, &R->queue, -1)) return AMPS_ERR_OOM;
+        for (j = i + 1; j < 4; j++) {
+            amps_int a = tv[i] < tv[j] ? tv[i] : tv[j], b = tv[i] < tv[j] ? tv[j] : tv[i];
+            if (amps__iv_push(ctx, &R->queue, a) || amps__iv_push(ctx, &R->queue, b)) return AMPS_ERR_OOM;
+        }
+    }
+    return AMPS_OK;
+}
+
+/* Removes the live tet t: flag, incidence lists of its nodes, the record; queues its items. */
+static amps_status amps__rm_take(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R, amps_int t) {
+    int q;
+    for (q = 0; q < 4; q++)
+        if (amps__rm_save(ctx, m, R, m->tet[4 * t + q])) return AMPS_ERR_OOM;
+    if (amps__iv_push(ctx, &R->tets, t)) return AMPS_ERR_OOM;
+    for (q = 0; q < 4; q++) {
+        amps_int v = m->tet[4 * t + q], *lst = m->inc + m->inc_ptr[v], n = m->inc_len[v], j = 0;
+        while (lst[j] != t) j++;
+        for (; j + 1 < n; j++) lst[j] = lst[j + 1];
+        m->inc_len[v] = n - 1;
+    }
+    m->removed[t] = 1;
+    m->nremoved++;
+    return amps__rm_queue_tet(ctx, m, R, t);
+}
+
+/* Gives the tets star[i] with grp[i] == g (ascending, all containing v) a new copy of v: the
+   stable partition of v's slot of amps_mesh_cut, recorded as a separation; queues the items of
+   the moved tets before and after. */
+static amps_status amps__rm_separate(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R, amps_int v,
+                                     const amps_int *star, const amps_int *grp, amps_int n, amps_int g) {
+    amps_int base, deg, keep = 0, nm = 0, vc, j, i;
+    int q;
+    amps_status s = amps__rm_save(ctx, m, R, v);
+    if (!s) s = amps__mesh_grow(ctx, m, "amps_mesh_remove");
+    while (!s && R->aux.cap < (size_t)m->inc_len[v]) s = amps__iv_push(ctx, &R->aux, 0);
+    if (s) return s;
+    vc = m->nnode;
+    if (amps__iv_push(ctx, &R->sep_node, v) || amps__iv_push(ctx, &R->sep_copy, vc)) return AMPS_ERR_OOM;
+    for (i = 0; i < n; i++)
+        if (grp[i] == g && (amps__iv_push(ctx, &R->sep_tets, star[i]) || amps__rm_queue_tet(ctx, m, R, star[i])))
+            return AMPS_ERR_OOM;
+    if (amps__iv_push(ctx, &R->sep_ptr, (amps_int)R->sep_tets.n)) return AMPS_ERR_OOM;
+    for (q = 0; q < 3; q++) m->xyz[3 * vc + q] = m->xyz[3 * v + q];
+    m->origin[vc] = m->origin[v];
+    base = m->inc_ptr[v];
+    deg = m->inc_len[v];
+    for (j = 0, i = 0; j < deg; j++) { /* kept tets first, the moved ones (the slot of vc) after */
+        amps_int t = m->inc[base + j];
+        while (i < n && star[i] < t) i++;
+        if (i < n && star[i] == t && grp[i] == g) R->aux.a[nm++] = t;
+        else m->inc[base + keep++] = t;
+    }
+    for (j = 0; j < nm; j++) m->inc[base + keep + j] = R->aux.a[j];
+    m->inc_len[v] = keep;
+    m->inc_ptr[vc] = base + keep;
+    m->inc_len[vc] = nm;
+    m->nnode++;
+    for (j = 0; j < nm; j++) {
+        amps_int t = m->inc[base + keep + j];
+        for (q = 0; q < 4; q++)
+            if (m->tet[4 * t + q] == v) {
+                if (amps__iv_push(ctx, &R->edits, 4 * t + q) || amps__iv_push(ctx, &R->edits, v)) return AMPS_ERR_OOM;
+                m->tet[4 * t + q] = vc;
+            }
+        if (amps__rm_queue_tet(ctx, m, R, t)) return AMPS_ERR_OOM;
+    }
+    return amps__iv_push(ctx, &R->queue, v) || amps__iv_push(ctx, &R->queue, -1) ? AMPS_ERR_OOM : AMPS_OK;
+}
+
+/* Position of tet t in the ascending star[0..n-1] (-1 if absent). */
+static amps_int amps__star_find(const amps_int *star, amps_int n, amps_int t) {
+    amps_int lo = 0, hi = n - 1;
+    while (lo <= hi) {
+        amps_int mid = lo + (hi - lo) / 2;
+        if (star[mid] < t) lo = mid + 1;
+        else if (star[mid] > t) hi = mid - 1;
+        else return mid;
+    }
+    return -1;
+}
+
+/* Separates the singular edge (a, b), its tets and groups in R->star / R->grp (kept root k),
+   at the first endpoint x whose star, grouped through shared faces, holds the kept group and
+   another group in different parts: each such part without the kept group gets its own copy
+   of x. *done = 0 when neither endpoint separates them. */
+static amps_status amps__rm_separate_edge(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R, amps_int a,
+                                          amps_int b, amps_int k, int *done) {
+    amps_int i, j, n = (amps_int)R->star.n, kept, x, K;
+    amps_status s = AMPS_OK;
+    int e;
+    *done = 0;
+    R->ed.n = R->eg.n = 0;
+    for (i = 0; i < n && !s; i++) {
+        s = amps__iv_push(ctx, &R->ed, R->star.a[i]);
+        if (!s) s = amps__iv_push(ctx, &R->eg, R->grp.a[i] == R->grp.a[k]);
+    }
+    for (e = 0; e < 2 && !s && !*done; e++) {
+        x = e ? b : a;
+        (void)amps__rm_groups(ctx, m, R, x, -1, 3, &kept, &s);
+        if (s) break;
+        for (i = 0; !R->eg.a[i]; i++) {
+        }
+        K = R->grp.a[amps__star_find(R->star.a, (amps_int)R->star.n, R->ed.a[i])];
+        for (i = 0; i < n && !s; i++) {
+            amps_int t = R->ed.a[i], L;
+            if (R->eg.a[i]) continue;
+            j = amps__star_find(R->star.a, (amps_int)R->star.n, t);
+            if (j < 0) continue;
+            L = R->grp.a[j];
+            if (m->tet[4 * t] != x && m->tet[4 * t + 1] != x && m->tet[4 * t + 2] != x && m->tet[4 * t + 3] != x)
+                continue; /* its part already has a copy of x */
+            if (L == K) continue;
+            s = amps__rm_separate(ctx, m, R, x, R->star.a, R->grp.a, (amps_int)R->star.n, L);
+            *done = 1;
+        }
+    }
+    return s;
+}
+
+/* Resolves the queued vertices and edges until none is singular (policy REMOVE or SEPARATE). */
+static amps_status amps__rm_resolve(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R,
+                                    amps_singular_policy policy) {
+    size_t h;
+    for (h = 0; h < R->queue.n; h += 2) {
+        amps_int a = R->queue.a[h], b = R->queue.a[h + 1], kept, ng, i, n;
+        amps_status s = AMPS_OK;
+        int done = 0;
+        ng = amps__rm_groups(ctx, m, R, a, b, b < 0 ? 2 : 3, &kept, &s);
+        if (s) return s;
+        if (ng < 2) continue;
+        n = (amps_int)R->star.n;
+        if (policy == AMPS_SINGULAR_SEPARATE && b < 0) {
+            for (i = 0; i < n && !s; i++)
+                if (R->grp.a[i] == i && i != kept) s = amps__rm_separate(ctx, m, R, a, R->star.a, R->grp.a, n, i);
+            if (s) return s;
+            continue;
+        }
+        if (policy == AMPS_SINGULAR_SEPARATE) {
+            s = amps__rm_separate_edge(ctx, m, R, a, b, kept, &done);
+            if (!s && !done) ng = amps__rm_groups(ctx, m, R, a, b, 3, &kept, &s);
+            if (s) return s;
+            if (done) continue;
+            n = (amps_int)R->star.n;
+        }
+        /* take a copy of the doomed tets first: amps__rm_take changes the stars */
+        R->aux.n = 0;
+        for (i = 0; i < n && !s; i++)
+            if (R->grp.a[i] != R->grp.a[kept]) s = amps__iv_push(ctx, &R->aux, R->star.a[i]);
+        for (i = 0; i < (amps_int)R->aux.n && !s; i++) s = amps__rm_take(ctx, m, R, R->aux.a[i]);
+        if (s) return s;
+    }
+    return AMPS_OK;
+}
+
+/* Restores m to its state before the removal R recorded. */
+static void amps__rm_undo(amps_mesh *m, struct amps__removal *R) {
+    size_t k;
+    amps_int v;
+    for (k = R->edits.n; k >= 2; k -= 2) m->tet[R->edits.a[k - 2]] = R->edits.a[k - 1];
+    for (k = 0; k + 4 <= R->saved.n; k += 4) {
+        amps_int *sv = R->saved.a + k;
+        m->inc_ptr[sv[0]] = sv[1];
+        m->inc_len[sv[0]] = sv[2];
+        if (sv[2] > 0) memcpy(m->inc + sv[1], R->slot.a + sv[3], sizeof(amps_int) * (size_t)sv[2]);
+    }
+    for (v = R->nnode0; v < m->nnode; v++) m->inc_ptr[v] = m->inc_len[v] = 0;
+    m->nnode = R->nnode0;
+    for (k = 0; k < R->tets.n; k++) m->removed[R->tets.a[k]] = 0;
+    m->nremoved -= (amps_int)R->tets.n;
+    R->valid = 0;
+}
+
+/* Checks the tets of amps_mesh_remove: in range, live, none twice (marked 2 while checking). */
+static amps_status amps__rm_check_input(amps_ctx *ctx, amps_mesh *m, amps_int n, const amps_int *tets) {
+    const char *fn = "amps_mesh_remove";
+    amps_status s = AMPS_OK;
+    amps_int i, k;
+    for (i = 0; i < n && !s; i++) {
+        amps_int t = tets[i];
+        if (t < 0 || t >= m->ntet)
+            s = amps__err(ctx, AMPS_ERR_INDEX, "%s: tetrahedron %lld out of range [0, %lld)", fn, (long long)t,
+                          (long long)m->ntet);
+        else if (m->removed[t] == 1)
+            s = amps__err(ctx, AMPS_ERR_ARG, "%s: tetrahedron %lld is already removed", fn, (long long)t);
+        else if (m->removed[t] == 2)
+            s = amps__err(ctx, AMPS_ERR_ARG, "%s: tetrahedron %lld is given twice", fn, (long long)t);
+        else m->removed[t] = 2;
+    }
+    for (k = 0; k < i; k++)
+        if (m->removed[tets[k]] == 2) m->removed[tets[k]] = 0;
+    return s;
+}
+
+/* Resets the record R for a removal from the current state of m. */
+static amps_status amps__rm_begin(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R) {
+    R->valid = 0;
+    R->nnode0 = m->nnode;
+    R->tets.n = R->sep_node.n = R->sep_copy.n = R->sep_ptr.n = R->sep_tets.n = R->orphans.n = 0;
+    R->saved.n = R->slot.n = R->edits.n = R->queue.n = 0;
+    if (R->flag_cap < (size_t)m->nnode) {
+        void *p = R->flag;
+        if (amps__realloc(ctx, &p, (size_t)m->nnode, 1)) return AMPS_ERR_OOM;
+        R->flag = AMPS__CAST(unsigned char *, p);
+        memset(R->flag, 0, (size_t)m->nnode);
+        R->flag_cap = (size_t)m->nnode;
+    }
+    return amps__iv_push(ctx, &R->sep_ptr, 0);
+}
+
+/* Orphans of the removal R (saved nodes and new copies left in no tet), ascending. */
+static amps_status amps__rm_orphans(amps_ctx *ctx, const amps_mesh *m, struct amps__removal *R) {
+    size_t k;
+    amps_int v;
+    for (k = 0; k + 4 <= R->saved.n; k += 4)
+        if (m->inc_len[R->saved.a[k]] == 0 && amps__iv_push(ctx, &R->orphans, R->saved.a[k])) return AMPS_ERR_OOM;
+    for (v = R->nnode0; v < m->nnode; v++)
+        if (m->inc_len[v] == 0 && amps__iv_push(ctx, &R->orphans, v)) return AMPS_ERR_OOM;
+    if (R->orphans.n > 1) qsort(R->orphans.a, R->orphans.n, sizeof(amps_int), amps__int_cmp);
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_mesh_remove(amps_ctx *ctx, amps_mesh *m, amps_int n, const amps_int *tets,
+                                      amps_singular_policy policy, amps_mesh_removal *out) {
+    const char *fn = "amps_mesh_remove";
+    struct amps__removal *R;
+    amps_status s;
+    amps_int i;
+    size_t k;
+    if (out) memset(out, 0, sizeof(*out));
+    if (!m || !tets || n < 1) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL mesh or tets, or n < 1", fn);
+    if (policy != AMPS_SINGULAR_REMOVE && policy != AMPS_SINGULAR_SEPARATE && policy != AMPS_SINGULAR_IGNORE)
+        return amps__err(ctx, AMPS_ERR_ARG, "%s: unknown singularity policy %d", fn, (int)policy);
+    s = amps__rm_check_input(ctx, m, n, tets);
+    if (s) return s;
+    if (!m->last_removal) {
+        m->last_removal = AMPS__CAST(struct amps__removal *, amps__calloc(ctx, 1, sizeof(struct amps__removal)));
+        if (!m->last_removal) return AMPS_ERR_OOM;
+    }
+    R = m->last_removal;
+    s = amps__rm_begin(ctx, m, R);
+    for (i = 0; i < n && !s; i++) s = amps__rm_take(ctx, m, R, tets[i]);
+    if (!s && policy != AMPS_SINGULAR_IGNORE) s = amps__rm_resolve(ctx, m, R, policy);
+    if (!s) s = amps__rm_orphans(ctx, m, R);
+    for (k = 0; k + 4 <= R->saved.n; k += 4) R->flag[R->saved.a[k]] = 0;
+    if (s) {
+        amps__rm_undo(m, R);
+        return s;
+    }
+    R->valid = 1;
+    if (out) {
+        out->ntet = (amps_int)R->tets.n;
+        out->tets = R->tets.a;
+        out->nsep = (amps_int)R->sep_node.n;
+        out->sep_node = R->sep_node.a;
+        out->sep_copy = R->sep_copy.a;
+        out->sep_ptr = R->sep_ptr.a;
+        out->sep_tets = R->sep_tets.a;
+        out->norphan = (amps_int)R->orphans.n;
+        out->orphans = R->orphans.a;
+    }
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_mesh_unremove(amps_ctx *ctx, amps_mesh *m, const amps_mesh_removal *r) {
+    struct amps__removal *R = m ? m->last_removal : NULL;
+    if (!R || !R->valid || !r || r->tets != R->tets.a || r->ntet != (amps_int)R->tets.n)
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_unremove: not the record of the last change of the mesh");
+    amps__rm_undo(m, R);
+    return AMPS_OK;
+}
+
+/* Singular vertices (edges 0) or edges (edges 1) of m, see amps_mesh_singular_vertices. */
+static amps_int amps__singular(amps_ctx *ctx, const amps_mesh *m, int edges, amps_int *out) {
+    struct amps__removal R;
+    amps_int a, j, cnt = 0, kept;
+    amps_status s = AMPS_OK;
+    size_t k;
+    int q;
+    if (!m) {
+        amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_singular_%s: NULL mesh", edges ? "edges" : "vertices");
+        return -1;
+    }
+    memset(&R, 0, sizeof(R));
+    for (a = 0; a < m->nnode && !s; a++) {
+        const amps_int *lst = m->inc + m->inc_ptr[a];
+        if (!edges) {
+            if (m->inc_len[a] > 1 && amps__rm_groups(ctx, m, &R, a, -1, 2, &kept, &s) > 1) {
+                if (out) out[cnt] = a;
+                cnt++;
+            }
+            continue;
+        }
+        R.aux.n = 0; /* the neighbours b > a, ascending and distinct */
+        for (j = 0; j < m->inc_len[a] && !s; j++)
+            for (q = 0; q < 4 && !s; q++)
+                if (m->tet[4 * lst[j] + q] > a) s = amps__iv_push(ctx, &R.aux, m->tet[4 * lst[j] + q]);
+        if (s) break;
+        if (R.aux.n > 1) qsort(R.aux.a, R.aux.n, sizeof(amps_int), amps__int_cmp);
+        for (k = 0; k < R.aux.n && !s; k++) {
+            if (k > 0 && R.aux.a[k] == R.aux.a[k - 1]) continue;
+            if (amps__rm_groups(ctx, m, &R, a, R.aux.a[k], 3, &kept, &s) > 1) {
+                if (out) out[2 * cnt] = a, out[2 * cnt + 1] = R.aux.a[k];
+                cnt++;
+            }
+        }
+    }
+    amps__free(ctx, R.star.a);
+    amps__free(ctx, R.grp.a);
+    amps__free(ctx, R.aux.a);
+    return s ? -1 : cnt;
+}
+
+AMPS_API amps_int amps_mesh_singular_vertices(amps_ctx *ctx, const amps_mesh *m, amps_int *out) {
+    return amps__singular(ctx, m, 0, out);
+}
+
+AMPS_API amps_int amps_mesh_singular_edges(amps_ctx *ctx, const amps_mesh *m, amps_int *out) {
+    return amps__singular(ctx, m, 1, out);
 }
 
 #endif /* AMPS_NO_FEM */
