@@ -833,10 +833,14 @@ AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S);
    failure, with AMPS_ERR_PARSE and "file:line: message" in ctx for malformed input (AMPS_ERR_IO
    if a file cannot be read, AMPS_ERR_MESH "file:line: ..." for a degenerate tet).
    TetGen .node/.ele: index base = first point number in .node (0 or 1), point numbers
-     consecutive; attributes and boundary markers ignored; 4 or 10 nodes per tet (first 4 used).
+     consecutive; node attributes and boundary markers ignored; 4 or 10 nodes per tet (first 4
+     used); region = the first tet attribute (an integer, as tetgen -A writes it).
    Gmsh .msh ASCII 2.x and 4.1: tetrahedra are element type 4; other types are skipped; node
-     tags may be any distinct integers. Binary files are rejected.
-   MEDIT .mesh (ASCII): Dimension 3, Vertices, Tetrahedra; other keywords are skipped.
+     tags may be any distinct integers. Binary files are rejected. Region: 2.x the first
+     (physical) tag; 4.1 the first physical tag of the element's volume entity ($Entities).
+   MEDIT .mesh (ASCII): Dimension 3, Vertices, Tetrahedra; other keywords are skipped. Region:
+     the reference number of each tetrahedron.
+   A tet without a region attribute gets region 0.
    amps_mesh_read picks the reader by extension: .node (and the .ele of the same name), .ele
    (and the .node), .msh, .mesh. The *_mem variants parse a buffer of len bytes (no NUL needed);
    name is used in messages. With AMPS_NO_STDIO only the *_mem variants exist. */
@@ -852,17 +856,27 @@ AMPS_API amps_mesh *amps_mesh_read_gmsh(amps_ctx *ctx, const char *path);
 AMPS_API amps_mesh *amps_mesh_read_medit(amps_ctx *ctx, const char *path);
 
 /* VTK XML UnstructuredGrid (ASCII) of the mesh in its reference configuration (copies are
-   separate points, so a cut opens under "Warp By Vector"). Point data: "displacement" (disp,
-   3 per node, if given) and "origin". Cell data: "von_mises" (1 per tet, if given),
-   "principal_stress" (3 per tet, if given) and "cut" (1 if the tet uses a cut copy node). */
+   separate points, so a cut opens under "Warp By Vector"). Removed tets are left out. Point
+   data: "displacement" (disp, 3 per node, if given) and "origin". Cell data of the kept tets:
+   "von_mises" (von_mises has 1 per tet of m, if given), "principal_stress" (3 per tet, if
+   given), "region" and "cut" (1 if the tet uses a cut copy node). */
 AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const amps_mesh *m, const double *disp,
                                          const double *von_mises, const double *principal);
-/* Writers of all nnode nodes and the tets (copies become ordinary nodes; materials are not
-   written). TetGen: base.node and base.ele with numbering from first_index (0 or 1).
-   Gmsh: version 2 (2.2) or 4 (4.1), ASCII. MEDIT: .mesh, version 2. */
+/* Writers of all nnode nodes and the live tets in index order (copies become ordinary nodes;
+   removed tets are left out, so the tets of a mesh with removals are renumbered; materials
+   and densities are not written). Regions are written so that every reader gives them back.
+   TetGen: base.node and base.ele with numbering from first_index (0 or 1), one tet attribute
+   (the region) when any region is not 0. Gmsh: version 2 (2.2: the region as the physical tag)
+   or 4 (4.1: a volume entity per region with the region as its physical tag), ASCII.
+   MEDIT: .mesh, version 2, the region as the tet reference. */
 AMPS_API amps_status amps_mesh_write_tetgen(amps_ctx *ctx, const char *base, const amps_mesh *m, int first_index);
 AMPS_API amps_status amps_mesh_write_gmsh(amps_ctx *ctx, const char *path, const amps_mesh *m, int version);
 AMPS_API amps_status amps_mesh_write_medit(amps_ctx *ctx, const char *path, const amps_mesh *m);
+/* ParaView .pvd collection of n frames: frame k is the file vtu_files[k] (written as given, so
+   relative to the folder of the .pvd) at time times[k]. Errors: AMPS_ERR_ARG (NULL path or
+   array, n < 0), AMPS_ERR_VALUE (non-finite time), AMPS_ERR_IO. */
+AMPS_API amps_status amps_pvd_write(amps_ctx *ctx, const char *path, amps_int n, const char *const *vtu_files,
+                                    const double *times);
 #endif /* AMPS_NO_STDIO */
 #endif /* AMPS_NO_FEM */
 
@@ -10608,6 +10622,7 @@ static amps_status amps__lx_index(amps__lex *L, int cross, const char *what, lon
 typedef struct amps__tetrec {
     amps_int v[4];
     long long line;
+    amps_int region; /* region attribute (0 if none) */
 } amps__tetrec;
 
 /* Growable list of tets with the line each came from. */
@@ -10615,6 +10630,7 @@ typedef struct amps__tetbuf {
     amps_int *tet;
     long long *line;
     amps_int n, cap;
+    amps_int *region;
 } amps__tetbuf;
 
 static amps_status amps__tb_reserve(amps_ctx *ctx, amps__tetbuf *b, amps_int cap) {
@@ -10627,6 +10643,9 @@ static amps_status amps__tb_reserve(amps_ctx *ctx, amps__tetbuf *b, amps_int cap
     p = b->line;
     if (amps__realloc(ctx, &p, (size_t)cap, sizeof(long long))) return AMPS_ERR_OOM;
     b->line = AMPS__CAST(long long *, p);
+    p = b->region;
+    if (amps__realloc(ctx, &p, (size_t)cap, sizeof(amps_int))) return AMPS_ERR_OOM;
+    b->region = AMPS__CAST(amps_int *, p);
     b->cap = cap;
     return AMPS_OK;
 }
@@ -10641,6 +10660,7 @@ static amps_status amps__tb_push(amps_ctx *ctx, amps__tetbuf *b, const amps__tet
         if (b->n == b->cap) return amps__err(ctx, AMPS_ERR_OOM, "too many tetrahedra for the index type");
     }
     memcpy(b->tet + 4 * (size_t)b->n, r->v, 4 * sizeof(amps_int));
+    b->region[b->n] = r->region;
     b->line[b->n++] = r->line;
     return AMPS_OK;
 }
@@ -10648,6 +10668,15 @@ static amps_status amps__tb_push(amps_ctx *ctx, amps__tetbuf *b, const amps__tet
 static void amps__tb_free(amps_ctx *ctx, amps__tetbuf *b) {
     amps__free(ctx, b->tet);
     amps__free(ctx, b->line);
+    amps__free(ctx, b->region);
+}
+
+/* Region attribute v of the last token as an amps_int into *out. */
+static amps_status amps__lx_region(amps__lex *L, long long v, amps_int *out) {
+    if (v < -(long long)AMPS__IMAX || v > (long long)AMPS__IMAX)
+        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "region attribute %lld out of range", v);
+    *out = (amps_int)v;
+    return AMPS_OK;
 }
 
 /* State of a mesh reader: the lexer, nn points (3 coordinates each, file order) and the tets. */
@@ -10686,6 +10715,7 @@ static amps_mesh *amps__rd_mesh(amps__rd *R) {
                      "degenerate tetrahedron (file nodes %lld %lld %lld %lld, 0-based)", (long long)tv[0],
                      (long long)tv[1], (long long)tv[2], (long long)tv[3]);
     }
+    if (m) memcpy(m->region, R->tb.region, sizeof(amps_int) * (size_t)R->tb.n);
     return m;
 }
 
@@ -10751,27 +10781,35 @@ static amps_status amps__tetgen_ele_head(amps__lex *L, long long *ne, long long 
     return AMPS_OK;
 }
 
-/* One .ele line "<number> <nper node indices in [base, base + np - 1]> [attributes]": the first
-   4 nodes (0-based) and the line into r. Moves to the next line. */
-static amps_status amps__tetgen_tet(amps__lex *L, long long nper, long long base, long long np, amps__tetrec *r) {
+/* One .ele line "<number> <nper node indices in [base, base + np - 1]> [nat attributes]": the
+   first 4 nodes (0-based), the first attribute (an integer: the region, as tetgen -A writes it;
+   0 if nat = 0) and the line into r. Moves to the next line. */
+static amps_status amps__tetgen_tet(amps__lex *L, long long nper, long long nat, long long base, long long np,
+                                    amps__tetrec *r) {
     long long idx, q;
     amps_int extra;
+    double at = 0.0;
     amps_status s = amps__lx_int(L, 1, &idx, "tetrahedron number");
     r->line = L->tline;
+    r->region = 0;
     for (q = 0; !s && q < nper; q++) s = amps__lx_index(L, 0, "node index", base, np, q < 4 ? r->v + q : &extra);
-    if (!s) amps__lx_eol(L); /* attributes */
+    if (!s && nat > 0) s = amps__lx_num(L, 0, &at, "region attribute");
+    if (!s && nat > 0 && (at != floor(at) || fabs(at) > (double)AMPS__IMAX))
+        s = amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "region attribute %g is not an integer", at);
+    if (!s) r->region = (amps_int)at;
+    if (!s) amps__lx_eol(L); /* other attributes */
     return s;
 }
 
-/* The ne tet lines of .ele, node indices from base; nothing may follow. Fills R->tb. */
-static amps_status amps__tetgen_tets(amps__rd *R, long long ne, long long nper, long long base) {
+/* The ne tet lines of .ele (nat attributes), node indices from base; nothing may follow. Fills R->tb. */
+static amps_status amps__tetgen_tets(amps__rd *R, long long ne, long long nper, long long nat, long long base) {
     amps__lex *L = &R->L;
     amps__tetrec r;
     long long k;
     amps_status s = amps__tb_reserve(L->ctx, &R->tb, (amps_int)(ne > 0 ? ne : 1));
     for (k = 0; !s && k < ne; k++) {
         s = amps__lx_rec(L, k, ne, "tetrahedra");
-        if (!s) s = amps__tetgen_tet(L, nper, base, R->nn, &r);
+        if (!s) s = amps__tetgen_tet(L, nper, nat, base, R->nn, &r);
         if (!s) s = amps__tb_push(L->ctx, &R->tb, &r);
     }
     return s ? s : amps__lx_trail(L, ne, "tetrahedra");
@@ -10790,7 +10828,7 @@ AMPS_API amps_mesh *amps_mesh_read_tetgen_mem(amps_ctx *ctx, const char *node_bu
         amps__lx_init(&R.L, ctx, ele_buf, ele_len, ele_name ? ele_name : "<ele>", '#');
         s = amps__tetgen_ele_head(&R.L, &ne, &nper, &nat);
     }
-    if (!s) s = amps__tetgen_tets(&R, ne, nper, base);
+    if (!s) s = amps__tetgen_tets(&R, ne, nper, nat, base);
     return amps__rd_end(&R, s);
 }
 
@@ -10813,6 +10851,9 @@ typedef struct amps__gmsh {
     int version;      /* 2 (2.x) or 4 (4.1) after $MeshFormat, else 0 */
     int have_nodes, have_elems;
     char sec[24]; /* name of the current section, without '$' */
+    long long *vol_tag; /* 4.1 $Entities: the nvol volume entities and the first physical tag of */
+    amps_int *vol_phys; /* each (0 if none) */
+    long long nvol;
 } amps__gmsh;
 
 /* Header of a 4.1 entity block. */
@@ -11027,7 +11068,8 @@ static amps_status amps__gmsh_tet(amps__gmsh *G, amps__tetrec *r) {
     return s ? s : amps__tb_push(G->R.L.ctx, &G->R.tb, r);
 }
 
-/* 2.x element lines "number type ntags <tags> <nodes>"; the tets (type 4) join R.tb. */
+/* 2.x element lines "number type ntags <tags> <nodes>"; the tets (type 4) join R.tb, their
+   region the first tag (the physical one; 0 without tags). */
 static amps_status amps__gmsh_elems2(amps__gmsh *G, long long total) {
     amps__lex *L = &G->R.L;
     amps__tetrec r;
@@ -11039,7 +11081,11 @@ static amps_status amps__gmsh_elems2(amps__gmsh *G, long long total) {
         if (!s) s = amps__lx_int(L, 0, &type, "element type");
         if (!s) s = amps__lx_int(L, 0, &c, "tag count");
         if (!s && c < 0) s = amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "negative tag count %lld", c);
-        for (i = 0; !s && type == 4 && i < c; i++) s = amps__lx_int(L, 0, &a, "element tag");
+        r.region = 0;
+        for (i = 0; !s && type == 4 && i < c; i++) {
+            s = amps__lx_int(L, 0, &a, "element tag");
+            if (!s && i == 0) s = amps__lx_region(L, a, &r.region); /* the physical tag */
+        }
         if (!s && type == 4) s = amps__gmsh_tet(G, &r);
         if (!s) amps__lx_eol(L);
     }
@@ -11047,7 +11093,7 @@ static amps_status amps__gmsh_elems2(amps__gmsh *G, long long total) {
 }
 
 /* 4.1 element blocks: a header, then one element a line "tag <nodes>"; the tets (type 4) join
-   R.tb; together total elements. */
+   R.tb, their region the physical tag of the block's volume entity; together total elements. */
 static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long total) {
     amps__lex *L = &G->R.L;
     amps__gblk h;
@@ -11055,6 +11101,9 @@ static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long to
     long long b, i, a, got = 0;
     for (b = 0; b < nblk; b++) {
         amps_status s = amps__gmsh_block(L, 1, total, got, &h);
+        r.region = 0;
+        for (i = 0; h.dim == 3 && i < G->nvol; i++)
+            if (G->vol_tag[i] == h.tag) r.region = G->vol_phys[i];
         for (i = 0; !s && i < h.n; i++) {
             if (h.kind == 4) {
                 s = amps__lx_int(L, 1, &a, "element tag");
@@ -11069,6 +11118,41 @@ static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long to
         got += h.n;
     }
     return amps__gmsh_held(L, 1, total, got);
+}
+
+/* 4.1 $Entities up to $EndEntities: "numPoints numCurves numSurfaces numVolumes", one entity a
+   line; of a volume "tag minX minY minZ maxX maxY maxZ numPhysicalTags physicalTag ... ..."
+   keeps the tag and its first physical tag. Other versions skip the section. */
+static amps_status amps__gmsh_entities(amps__gmsh *G) {
+    amps__lex *L = &G->R.L;
+    long long cnt[4], k, i, nph, tag, ph;
+    double x;
+    amps_status s = AMPS_OK;
+    if (G->version != 4 || G->vol_tag) return amps__gmsh_skip(L, G->sec);
+    for (k = 0; k < 4 && !s; k++) s = amps__lx_nrec(L, k == 0, cnt + k, "entity count", "entity", 1);
+    if (s) return s;
+    amps__lx_eol(L);
+    G->vol_tag = AMPS__CAST(long long *, amps__malloc(L->ctx, (size_t)cnt[3], sizeof(long long)));
+    G->vol_phys = AMPS__CAST(amps_int *, amps__malloc(L->ctx, (size_t)cnt[3], sizeof(amps_int)));
+    if (!G->vol_tag || !G->vol_phys) return AMPS_ERR_OOM;
+    for (k = 0; k < cnt[0] + cnt[1] + cnt[2] && !s; k++) {
+        s = amps__lx_int(L, 1, &tag, "entity tag");
+        if (!s) amps__lx_eol(L);
+    }
+    for (k = 0; k < cnt[3] && !s; k++) {
+        s = amps__lx_int(L, 1, &tag, "volume tag");
+        for (i = 0; i < 6 && !s; i++) s = amps__lx_num(L, 0, &x, "bounding box coordinate");
+        if (!s) s = amps__lx_int(L, 0, &nph, "physical tag count");
+        G->vol_tag[k] = tag;
+        G->vol_phys[k] = 0;
+        G->nvol = k + 1;
+        for (i = 0; i < nph && !s; i++) {
+            s = amps__lx_int(L, 0, &ph, "physical tag");
+            if (!s && i == 0) s = amps__lx_region(L, ph, G->vol_phys + k);
+        }
+        if (!s) amps__lx_eol(L); /* bounding surfaces */
+    }
+    return s ? s : amps__gmsh_end(L, "Entities", " (entity count mismatch?)");
 }
 
 /* $Elements (after $Nodes) up to $EndElements. */
@@ -11097,6 +11181,7 @@ static amps_status amps__gmsh_section(amps__gmsh *G) {
     if (!strcmp(G->sec, "MeshFormat")) return amps__gmsh_format(G);
     if (!strcmp(G->sec, "Nodes")) return amps__gmsh_nodes(G);
     if (!strcmp(G->sec, "Elements")) return amps__gmsh_elements(G);
+    if (!strcmp(G->sec, "Entities")) return amps__gmsh_entities(G);
     return amps__gmsh_skip(L, G->sec);
 }
 
@@ -11114,6 +11199,8 @@ AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size
         s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no tetrahedra (element type 4) in the file");
     m = amps__rd_end(&G.R, s);
     amps__free(ctx, G.tags);
+    amps__free(ctx, G.vol_tag);
+    amps__free(ctx, G.vol_phys);
     return m;
 }
 
@@ -11154,7 +11241,8 @@ static amps_status amps__medit_vertices(amps__rd *R) {
     return s;
 }
 
-/* One tetrahedron "v1 v2 v3 v4 ref" (vertex indices from 1): nodes and the line of v1 into r. */
+/* One tetrahedron "v1 v2 v3 v4 ref" (vertex indices from 1): nodes, the line of v1 and the
+   region ref into r. */
 static amps_status amps__medit_tet(amps__rd *R, amps__tetrec *r) {
     long long ref;
     int q;
@@ -11163,7 +11251,8 @@ static amps_status amps__medit_tet(amps__rd *R, amps__tetrec *r) {
         s = amps__lx_index(&R->L, 1, "vertex index", 1, R->nn, r->v + q);
         if (q == 0) r->line = R->L.tline;
     }
-    return s ? s : amps__lx_int(&R->L, 1, &ref, "tetrahedron reference");
+    if (!s) s = amps__lx_int(&R->L, 1, &ref, "tetrahedron reference");
+    return s ? s : amps__lx_region(&R->L, ref, &r->region);
 }
 
 /* Tetrahedra, after the keyword (after Vertices, once: *seen): the count, then the tets into R->tb. */
@@ -11369,19 +11458,20 @@ AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const 
     amps__pr(&o, "<?xml version=\"1.0\"?>\n"
                  "<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n");
     amps__pr(&o, "<UnstructuredGrid>\n<Piece NumberOfPoints=\"%lld\" NumberOfCells=\"%lld\">\n", (long long)m->nnode,
-             (long long)m->ntet);
+             (long long)(m->ntet - m->nremoved));
     amps__pr(&o, "<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n");
     for (v = 0; v < m->nnode; v++)
         amps__pr(&o, "%.17g %.17g %.17g\n", m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
     amps__pr(&o,
              "</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
     for (t = 0; t < m->ntet; t++)
-        amps__pr(&o, "%lld %lld %lld %lld\n", (long long)m->tet[4 * t], (long long)m->tet[4 * t + 1],
-                 (long long)m->tet[4 * t + 2], (long long)m->tet[4 * t + 3]);
+        if (!m->removed[t])
+            amps__pr(&o, "%lld %lld %lld %lld\n", (long long)m->tet[4 * t], (long long)m->tet[4 * t + 1],
+                     (long long)m->tet[4 * t + 2], (long long)m->tet[4 * t + 3]);
     amps__pr(&o, "</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
-    for (t = 0; t < m->ntet; t++) amps__pr(&o, "%lld\n", 4 * (long long)(t + 1));
+    for (t = 0; t < m->ntet - m->nremoved; t++) amps__pr(&o, "%lld\n", 4 * (long long)(t + 1));
     amps__pr(&o, "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
-    for (t = 0; t < m->ntet; t++) amps__pr(&o, "10\n");
+    for (t = 0; t < m->ntet - m->nremoved; t++) amps__pr(&o, "10\n");
     amps__pr(&o, "</DataArray>\n</Cells>\n");
     amps__pr(&o, "<PointData%s>\n", disp ? " Vectors=\"displacement\"" : "");
     if (disp) {
@@ -11396,21 +11486,26 @@ AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const 
     amps__pr(&o, "<CellData%s>\n", von_mises ? " Scalars=\"von_mises\"" : "");
     if (von_mises) {
         amps__pr(&o, "<DataArray type=\"Float64\" Name=\"von_mises\" format=\"ascii\">\n");
-        for (t = 0; t < m->ntet; t++) amps__pr(&o, "%.17g\n", von_mises[t]);
+        for (t = 0; t < m->ntet; t++)
+            if (!m->removed[t]) amps__pr(&o, "%.17g\n", von_mises[t]);
         amps__pr(&o, "</DataArray>\n");
     }
     if (principal) {
         amps__pr(&o,
                  "<DataArray type=\"Float64\" Name=\"principal_stress\" NumberOfComponents=\"3\" format=\"ascii\">\n");
         for (t = 0; t < m->ntet; t++)
-            amps__pr(&o, "%.17g %.17g %.17g\n", principal[3 * t], principal[3 * t + 1], principal[3 * t + 2]);
+            if (!m->removed[t])
+                amps__pr(&o, "%.17g %.17g %.17g\n", principal[3 * t], principal[3 * t + 1], principal[3 * t + 2]);
         amps__pr(&o, "</DataArray>\n");
     }
-    amps__pr(&o, "<DataArray type=\"UInt8\" Name=\"cut\" format=\"ascii\">\n");
+    amps__pr(&o, "<DataArray type=\"Int64\" Name=\"region\" format=\"ascii\">\n");
+    for (t = 0; t < m->ntet; t++)
+        if (!m->removed[t]) amps__pr(&o, "%lld\n", (long long)m->region[t]);
+    amps__pr(&o, "</DataArray>\n<DataArray type=\"UInt8\" Name=\"cut\" format=\"ascii\">\n");
     for (t = 0; t < m->ntet; t++) {
         const amps_int *tv = m->tet + 4 * t;
         int cut = tv[0] >= m->nfile || tv[1] >= m->nfile || tv[2] >= m->nfile || tv[3] >= m->nfile;
-        amps__pr(&o, "%d\n", cut);
+        if (!m->removed[t]) amps__pr(&o, "%d\n", cut);
     }
     amps__pr(&o, "</DataArray>\n</CellData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
     return amps__close_out(ctx, fn, path, &o);
@@ -11444,50 +11539,140 @@ AMPS_API amps_status amps_mesh_write_tetgen(amps_ctx *ctx, const char *base, con
         s = amps__open_out(ctx, fn, path, &o);
     }
     if (!s) {
-        amps__pr(&o, "%lld 4 0\n", (long long)m->ntet);
-        for (t = 0; t < m->ntet; t++)
-            amps__pr(&o, "%lld %lld %lld %lld %lld\n", (long long)t + first_index,
-                     (long long)m->tet[4 * t] + first_index, (long long)m->tet[4 * t + 1] + first_index,
-                     (long long)m->tet[4 * t + 2] + first_index, (long long)m->tet[4 * t + 3] + first_index);
+        int nat = 0;
+        long long k = first_index;
+        for (t = 0; t < m->ntet; t++) nat |= !m->removed[t] && m->region[t] != 0;
+        amps__pr(&o, "%lld 4 %d\n", (long long)(m->ntet - m->nremoved), nat);
+        for (t = 0; t < m->ntet; t++) {
+            if (m->removed[t]) continue;
+            amps__pr(&o, "%lld %lld %lld %lld %lld", k++, (long long)m->tet[4 * t] + first_index,
+                     (long long)m->tet[4 * t + 1] + first_index, (long long)m->tet[4 * t + 2] + first_index,
+                     (long long)m->tet[4 * t + 3] + first_index);
+            if (nat) amps__pr(&o, " %lld", (long long)m->region[t]);
+            amps__pr(&o, "\n");
+        }
         s = amps__close_out(ctx, fn, path, &o);
     }
     amps__free(ctx, path);
     return s;
 }
 
+/* The distinct regions of the live tets of m, ascending, into a new array *reg (*n of them). */
+static amps_status amps__live_regions(amps_ctx *ctx, const amps_mesh *m, amps_int **reg, amps_int *n) {
+    amps_int t, k = 0, *r = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m->ntet, sizeof(amps_int)));
+    *reg = r;
+    *n = 0;
+    if (!r) return AMPS_ERR_OOM;
+    for (t = 0; t < m->ntet; t++)
+        if (!m->removed[t]) r[k++] = m->region[t];
+    if (k > 1) qsort(r, (size_t)k, sizeof(amps_int), amps__int_cmp);
+    for (t = 0; t < k; t++)
+        if (*n == 0 || r[t] != r[*n - 1]) r[(*n)++] = r[t];
+    return AMPS_OK;
+}
+
+/* Index of region id in the ascending reg[0..n-1] (present). */
+static amps_int amps__region_index(const amps_int *reg, amps_int n, amps_int id) {
+    amps_int lo = 0, hi = n - 1;
+    while (lo < hi) {
+        amps_int mid = lo + (hi - lo) / 2;
+        if (reg[mid] < id) lo = mid + 1;
+        else hi = mid;
+    }
+    return lo;
+}
+
+/* Gmsh 4.1 $Entities: volume entity k + 1 per region reg[k] (physical tag reg[k]; none for
+   region 0), all with the bounding box of the nodes; at least volume 1, which holds the nodes. */
+static void amps__gmsh_write_entities(amps__out *o, const amps_mesh *m, const amps_int *reg, amps_int nreg) {
+    double lo[3], hi[3];
+    amps_int v, k;
+    int c;
+    for (c = 0; c < 3; c++) lo[c] = hi[c] = m->xyz[c];
+    for (v = 0; v < m->nnode; v++)
+        for (c = 0; c < 3; c++) {
+            if (m->xyz[3 * v + c] < lo[c]) lo[c] = m->xyz[3 * v + c];
+            if (m->xyz[3 * v + c] > hi[c]) hi[c] = m->xyz[3 * v + c];
+        }
+    amps__pr(o, "$Entities\n0 0 0 %lld\n", (long long)(nreg > 0 ? nreg : 1));
+    for (k = 0; k < (nreg > 0 ? nreg : 1); k++) {
+        amps__pr(o, "%lld %.17g %.17g %.17g %.17g %.17g %.17g", (long long)k + 1, lo[0], lo[1], lo[2], hi[0], hi[1],
+                 hi[2]);
+        if (nreg > 0 && reg[k] != 0) amps__pr(o, " 1 %lld 0\n", (long long)reg[k]);
+        else amps__pr(o, " 0 0\n");
+    }
+    amps__pr(o, "$EndEntities\n");
+}
+
+/* Gmsh 4.1 $Elements of the live tets in index order: one block per run of equal regions, in
+   the region's volume entity. */
+static void amps__gmsh_write_blocks4(amps__out *o, const amps_mesh *m, const amps_int *reg, amps_int nreg) {
+    amps_int t, u, nblk = 0, prev = 0;
+    long long k = 1;
+    for (t = 0, u = 0; t < m->ntet; t++)
+        if (!m->removed[t]) {
+            if (u == 0 || m->region[t] != prev) nblk++;
+            prev = m->region[t];
+            u = 1;
+        }
+    amps__pr(o, "$Elements\n%lld %lld 1 %lld\n", (long long)nblk, (long long)(m->ntet - m->nremoved),
+             (long long)(m->ntet - m->nremoved));
+    for (t = 0; t < m->ntet; t = u) {
+        amps_int cnt = 0;
+        if (m->removed[t]) {
+            u = t + 1;
+            continue;
+        }
+        for (u = t; u < m->ntet && (m->removed[u] || m->region[u] == m->region[t]); u++) cnt += !m->removed[u];
+        amps__pr(o, "3 %lld 4 %lld\n", (long long)amps__region_index(reg, nreg, m->region[t]) + 1, (long long)cnt);
+        for (u = t; u < m->ntet && (m->removed[u] || m->region[u] == m->region[t]); u++)
+            if (!m->removed[u])
+                amps__pr(o, "%lld %lld %lld %lld %lld\n", k++, (long long)m->tet[4 * u] + 1,
+                         (long long)m->tet[4 * u + 1] + 1, (long long)m->tet[4 * u + 2] + 1,
+                         (long long)m->tet[4 * u + 3] + 1);
+    }
+}
+
 AMPS_API amps_status amps_mesh_write_gmsh(amps_ctx *ctx, const char *path, const amps_mesh *m, int version) {
     const char *fn = "amps_mesh_write_gmsh";
     amps__out o;
-    amps_int v, t;
+    amps_int v, t, *reg = NULL, nreg = 0;
     amps_status s;
-    long long nn, nt;
+    long long nn, nt, k;
     if (!m || (version != 2 && version != 4))
         return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL mesh or version not 2 or 4", fn);
     s = amps__open_out(ctx, fn, path, &o);
     if (s) return s;
     nn = (long long)m->nnode;
-    nt = (long long)m->ntet;
-    amps__pr(&o, "$MeshFormat\n%s 0 8\n$EndMeshFormat\n$Nodes\n", version == 2 ? "2.2" : "4.1");
+    nt = (long long)(m->ntet - m->nremoved);
+    if (version == 4) {
+        s = amps__live_regions(ctx, m, &reg, &nreg);
+        if (s) {
+            fclose(o.f);
+            return s;
+        }
+    }
+    amps__pr(&o, "$MeshFormat\n%s 0 8\n$EndMeshFormat\n", version == 2 ? "2.2" : "4.1");
     if (version == 2) {
-        amps__pr(&o, "%lld\n", nn);
+        amps__pr(&o, "$Nodes\n%lld\n", nn);
         for (v = 0; v < m->nnode; v++)
             amps__pr(&o, "%lld %.17g %.17g %.17g\n", (long long)v + 1, m->xyz[3 * v], m->xyz[3 * v + 1],
                      m->xyz[3 * v + 2]);
         amps__pr(&o, "$EndNodes\n$Elements\n%lld\n", nt);
-        for (t = 0; t < m->ntet; t++)
-            amps__pr(&o, "%lld 4 2 0 1 %lld %lld %lld %lld\n", (long long)t + 1, (long long)m->tet[4 * t] + 1,
-                     (long long)m->tet[4 * t + 1] + 1, (long long)m->tet[4 * t + 2] + 1,
-                     (long long)m->tet[4 * t + 3] + 1);
+        for (t = 0, k = 1; t < m->ntet; t++)
+            if (!m->removed[t])
+                amps__pr(&o, "%lld 4 2 %lld 1 %lld %lld %lld %lld\n", k++, (long long)m->region[t],
+                         (long long)m->tet[4 * t] + 1, (long long)m->tet[4 * t + 1] + 1,
+                         (long long)m->tet[4 * t + 2] + 1, (long long)m->tet[4 * t + 3] + 1);
     } else {
-        amps__pr(&o, "1 %lld 1 %lld\n3 1 0 %lld\n", nn, nn, nn);
+        amps__gmsh_write_entities(&o, m, reg, nreg);
+        amps__pr(&o, "$Nodes\n1 %lld 1 %lld\n3 1 0 %lld\n", nn, nn, nn);
         for (v = 0; v < m->nnode; v++) amps__pr(&o, "%lld\n", (long long)v + 1);
         for (v = 0; v < m->nnode; v++)
             amps__pr(&o, "%.17g %.17g %.17g\n", m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
-        amps__pr(&o, "$EndNodes\n$Elements\n1 %lld 1 %lld\n3 1 4 %lld\n", nt, nt, nt);
-        for (t = 0; t < m->ntet; t++)
-            amps__pr(&o, "%lld %lld %lld %lld %lld\n", (long long)t + 1, (long long)m->tet[4 * t] + 1,
-                     (long long)m->tet[4 * t + 1] + 1, (long long)m->tet[4 * t + 2] + 1,
-                     (long long)m->tet[4 * t + 3] + 1);
+        amps__pr(&o, "$EndNodes\n");
+        amps__gmsh_write_blocks4(&o, m, reg, nreg);
+        amps__free(ctx, reg);
     }
     amps__pr(&o, "$EndElements\n");
     return amps__close_out(ctx, fn, path, &o);
@@ -11504,11 +11689,49 @@ AMPS_API amps_status amps_mesh_write_medit(amps_ctx *ctx, const char *path, cons
     amps__pr(&o, "MeshVersionFormatted 2\nDimension 3\nVertices\n%lld\n", (long long)m->nnode);
     for (v = 0; v < m->nnode; v++)
         amps__pr(&o, "%.17g %.17g %.17g 0\n", m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
-    amps__pr(&o, "Tetrahedra\n%lld\n", (long long)m->ntet);
+    amps__pr(&o, "Tetrahedra\n%lld\n", (long long)(m->ntet - m->nremoved));
     for (t = 0; t < m->ntet; t++)
-        amps__pr(&o, "%lld %lld %lld %lld 1\n", (long long)m->tet[4 * t] + 1, (long long)m->tet[4 * t + 1] + 1,
-                 (long long)m->tet[4 * t + 2] + 1, (long long)m->tet[4 * t + 3] + 1);
+        if (!m->removed[t])
+            amps__pr(&o, "%lld %lld %lld %lld %lld\n", (long long)m->tet[4 * t] + 1, (long long)m->tet[4 * t + 1] + 1,
+                     (long long)m->tet[4 * t + 2] + 1, (long long)m->tet[4 * t + 3] + 1, (long long)m->region[t]);
     amps__pr(&o, "End\n");
+    return amps__close_out(ctx, fn, path, &o);
+}
+
+/* s with the XML special characters as entities. */
+static void amps__pr_xml(amps__out *o, const char *s) {
+    for (; *s; s++) {
+        if (*s == '&') amps__pr(o, "&amp;");
+        else if (*s == '<') amps__pr(o, "&lt;");
+        else if (*s == '>') amps__pr(o, "&gt;");
+        else if (*s == '"') amps__pr(o, "&quot;");
+        else amps__pr(o, "%c", *s);
+    }
+}
+
+AMPS_API amps_status amps_pvd_write(amps_ctx *ctx, const char *path, amps_int n, const char *const *vtu_files,
+                                    const double *times) {
+    const char *fn = "amps_pvd_write";
+    amps__out o;
+    amps_int k;
+    amps_status s;
+    if (!path || n < 0 || (n > 0 && (!vtu_files || !times)))
+        return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL path or array, or n < 0", fn);
+    for (k = 0; k < n; k++) {
+        if (!vtu_files[k]) return amps__err(ctx, AMPS_ERR_ARG, "%s: file name %lld is NULL", fn, (long long)k);
+        if (!amps__isfinite(times[k]))
+            return amps__err(ctx, AMPS_ERR_VALUE, "%s: time %lld is not finite", fn, (long long)k);
+    }
+    s = amps__open_out(ctx, fn, path, &o);
+    if (s) return s;
+    amps__pr(&o, "<?xml version=\"1.0\"?>\n"
+                 "<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n");
+    for (k = 0; k < n; k++) {
+        amps__pr(&o, "<DataSet timestep=\"%.17g\" group=\"\" part=\"0\" file=\"", times[k]);
+        amps__pr_xml(&o, vtu_files[k]);
+        amps__pr(&o, "\"/>\n");
+    }
+    amps__pr(&o, "</Collection>\n</VTKFile>\n");
     return amps__close_out(ctx, fn, path, &o);
 }
 #endif /* AMPS_NO_STDIO */
