@@ -668,6 +668,8 @@ AMPS_API amps_status amps_mesh_set_tet_density(amps_ctx *ctx, amps_mesh *m, amps
    AMPS_ERR_ARG "no tetrahedron has region id" when none has it. */
 AMPS_API amps_status amps_mesh_set_region_material(amps_ctx *ctx, amps_mesh *m, amps_int id, double E, double nu,
                                                    double rho);
+/* Sets region[t] = id (for meshes built in code). AMPS_ERR_INDEX for t out of range. */
+AMPS_API amps_status amps_mesh_set_tet_region(amps_ctx *ctx, amps_mesh *m, amps_int t, amps_int id);
 /* Lumped mass m_i = sum over the non-removed tets t containing node i of rho_t |V_t| / 4
    (mass has nnode entries; a node in no live tet gets 0). */
 AMPS_API void amps_mesh_lumped_mass(const amps_mesh *m, double *mass);
@@ -9029,6 +9031,15 @@ AMPS_API amps_status amps_mesh_set_region_material(amps_ctx *ctx, amps_mesh *m, 
             m->nu[t] = nu;
             if (rho > 0.0) m->rho[t] = rho;
         }
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_mesh_set_tet_region(amps_ctx *ctx, amps_mesh *m, amps_int t, amps_int id) {
+    if (!m) return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_set_tet_region: NULL mesh");
+    if (t < 0 || t >= m->ntet)
+        return amps__err(ctx, AMPS_ERR_INDEX, "amps_mesh_set_tet_region: tetrahedron %lld out of range [0, %lld)",
+                         (long long)t, (long long)m->ntet);
+    m->region[t] = id;
     return AMPS_OK;
 }
 
