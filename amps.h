@@ -9186,15 +9186,20 @@ static amps_int amps__rm_groups(amps_ctx *ctx, const amps_mesh *m, struct amps__
 
 /* Saves the slot of node v before its first change (copies made by this removal need none). */
 static amps_status amps__rm_save(amps_ctx *ctx, const amps_mesh *m, struct amps__removal *R, amps_int v) {
+    size_t n0 = R->saved.n, s0 = R->slot.n;
     amps_int j;
     if (v >= R->nnode0 || R->flag[v]) return AMPS_OK;
-    R->flag[v] = 1;
-    if (amps__iv_push(ctx, &R->saved, v) || amps__iv_push(ctx, &R->saved, m->inc_ptr[v]) ||
-        amps__iv_push(ctx, &R->saved, m->inc_len[v]) || amps__iv_push(ctx, &R->saved, (amps_int)R->slot.n))
-        return AMPS_ERR_OOM;
     for (j = 0; j < m->inc_len[v]; j++)
-        if (amps__iv_push(ctx, &R->slot, m->inc[m->inc_ptr[v] + j])) return AMPS_ERR_OOM;
+        if (amps__iv_push(ctx, &R->slot, m->inc[m->inc_ptr[v] + j])) goto oom;
+    if (amps__iv_push(ctx, &R->saved, v) || amps__iv_push(ctx, &R->saved, m->inc_ptr[v]) ||
+        amps__iv_push(ctx, &R->saved, m->inc_len[v]) || amps__iv_push(ctx, &R->saved, (amps_int)s0))
+        goto oom;
+    R->flag[v] = 1;
     return AMPS_OK;
+oom: /* a partial record is dropped */
+    R->saved.n = n0;
+    R->slot.n = s0;
+    return AMPS_ERR_OOM;
 }
 
 /* Queues the 4 vertices and 6 edges of tet t. */

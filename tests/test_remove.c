@@ -3,6 +3,7 @@
    checked with the from-scratch singularity queries, node separation, exact undo, assembly
    after removal against a mesh built without the removed tets, and bad input. */
 #include <string.h>
+#include "t_alloc.h"
 #define AMPS_IMPLEMENTATION
 #include "amps.h"
 #include "amps_test.h"
@@ -404,11 +405,52 @@ static void test_assembly(void) {
     amps_mesh_free(&ctx, m);
 }
 
+/* Every allocation of a removal with separations fails in turn: AMPS_ERR_OOM, mesh unchanged. */
+static void test_oom(void) {
+    amps_ctx ctx;
+    amps_mesh *m;
+    amps_mesh_removal r;
+    amps_int t[3] = {140, 141, 148}, live;
+    long base, k, bad = 0, done = 0;
+    amps_ctx_init(&ctx);
+    ctx.alloc_user = &t_al;
+    base = t_al.live;
+    m = amps_mesh_brick(&ctx, 3);
+    if (!m) {
+        CHECK(0, "brick");
+        return;
+    }
+    for (k = 0; k < 400 && !done; k++) {
+        t_snap s = t_take(m);
+        amps_status st;
+        t_al.fail_at = k;
+        st = amps_mesh_remove(&ctx, m, 3, t, AMPS_SINGULAR_SEPARATE, &r);
+        t_al.fail_at = -1;
+        if (st == AMPS_OK) done = 1;
+        else if (st != AMPS_ERR_OOM || !t_same(&s, m) || amps_mesh_check(&ctx, m) != AMPS_OK) {
+            bad++;
+            if (getenv("T_VERBOSE")) printf("k %ld: status %d same %d: %s\n", k, (int)st, t_same(&s, m), ctx.msg);
+        }
+        t_drop(&s);
+    }
+    CHECK(done && bad == 0 && k > 3 && r.nsep > 0 && r.ntet > 3, "allocation failures: %ld bad of %ld", bad, k);
+    CHECK(amps_mesh_singular_vertices(&ctx, m, NULL) == 0 && amps_mesh_singular_edges(&ctx, m, NULL) == 0,
+          "clean after the successful try");
+    live = t_al.live;
+    t_al.fail_at = 0;
+    CHECK(amps_mesh_singular_edges(&ctx, m, NULL) == -1 && ctx.status == AMPS_ERR_OOM, "query OOM");
+    t_al.fail_at = -1;
+    CHECK(t_al.live == live, "query OOM leaks nothing");
+    amps_mesh_free(&ctx, m);
+    CHECK(t_al.live == base, "no leak: %ld blocks", t_al.live - base);
+}
+
 int main(void) {
     test_mass();
     test_vertex_case();
     test_edge_case();
     test_random();
     test_assembly();
+    test_oom();
     return amps_t_end("test_remove");
 }
