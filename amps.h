@@ -582,10 +582,11 @@ typedef struct amps_mesh {
     amps_int *inc_ptr; /* node_cap */
     amps_int *inc_len; /* node_cap */
     amps_int *inc;     /* 4 * ntet tet indices */
-    amps_int *region;        /* ntet: region attribute (0 when the file has none) */
-    double *rho;             /* ntet: density (default 1) */
-    unsigned char *removed;  /* ntet: 1 = removed (indices never shift) */
-    amps_int nremoved;       /* tets with removed[t] = 1 */
+
+    amps_int *region;                   /* ntet: region attribute (0 when the file has none) */
+    double *rho;                        /* ntet: density (default 1) */
+    unsigned char *removed;             /* ntet: 1 = removed (indices never shift) */
+    amps_int nremoved;                  /* tets with removed[t] = 1 */
     struct amps__removal *last_removal; /* internal: record and undo log of the last amps_mesh_remove */
 } amps_mesh;
 
@@ -683,14 +684,14 @@ typedef enum amps_singular_policy {
 /* What a removal did; arrays are mesh-owned, valid until the next change of the mesh. */
 typedef struct amps_mesh_removal {
     amps_int ntet;
-    const amps_int *tets;       /* every tet removed (the given ones first, in the given order) */
-    amps_int nsep;              /* separations, in the order made: node sep_node[k] ... */
+    const amps_int *tets; /* every tet removed (the given ones first, in the given order) */
+    amps_int nsep;        /* separations, in the order made: node sep_node[k] ... */
     const amps_int *sep_node;
-    const amps_int *sep_copy;   /* ... got the copy sep_copy[k] (origin as a cut copy) ... */
-    const amps_int *sep_ptr;    /* ... and the tets sep_tets[sep_ptr[k] .. sep_ptr[k+1]-1] (ascending) */
-    const amps_int *sep_tets;   /*     moved from sep_node[k] to it; sep_ptr has nsep + 1 entries */
+    const amps_int *sep_copy; /* ... got the copy sep_copy[k] (origin as a cut copy) ... */
+    const amps_int *sep_ptr;  /* ... and the tets sep_tets[sep_ptr[k] .. sep_ptr[k+1]-1] (ascending) */
+    const amps_int *sep_tets; /*     moved from sep_node[k] to it; sep_ptr has nsep + 1 entries */
     amps_int norphan;
-    const amps_int *orphans;    /* nodes that had a live tet before and have none now, ascending */
+    const amps_int *orphans; /* nodes left in no live tet (copies made by this removal included), ascending */
 } amps_mesh_removal;
 /* Removes tets[0..n-1]: marks them removed and takes them out of the incidence lists; then,
    unless policy is AMPS_SINGULAR_IGNORE, resolves singularities at the vertices and edges of
@@ -8355,8 +8356,8 @@ static amps_mesh *amps__mesh_alloc(amps_ctx *ctx, amps_int node_cap, amps_int nt
     m->region = AMPS__CAST(amps_int *, amps__calloc(ctx, nt, sizeof(amps_int)));
     m->rho = AMPS__CAST(double *, amps__malloc(ctx, nt, sizeof(double)));
     m->removed = AMPS__CAST(unsigned char *, amps__calloc(ctx, nt, 1));
-    if (!m->xyz || !m->origin || !m->inc_ptr || !m->inc_len || !m->tet || !m->inc || !m->E || !m->nu ||
-        !m->region || !m->rho || !m->removed) {
+    if (!m->xyz || !m->origin || !m->inc_ptr || !m->inc_len || !m->tet || !m->inc || !m->E || !m->nu || !m->region ||
+        !m->rho || !m->removed) {
         amps_mesh_free(ctx, m);
         return NULL;
     }
@@ -9080,16 +9081,16 @@ static amps_status amps__iv_push(amps_ctx *ctx, amps__ivec *v, amps_int x) {
 /* The record of the last amps_mesh_remove and its undo log. A node's slot is saved (once)
    before its first change; restoring the saved slots, the tet entries and nnode undoes it. */
 struct amps__removal {
-    int valid;                /* 1 while the removal is the last change of the mesh */
-    amps_int nnode0;          /* nnode before */
-    amps__ivec tets;          /* tets removed, in order */
+    int valid;       /* 1 while the removal is the last change of the mesh */
+    amps_int nnode0; /* nnode before */
+    amps__ivec tets; /* tets removed, in order */
     amps__ivec sep_node, sep_copy, sep_ptr, sep_tets, orphans;
-    amps__ivec saved;         /* per saved node: node, inc_ptr, inc_len, offset into slot */
-    amps__ivec slot;          /* the saved slot contents */
-    amps__ivec edits;         /* per changed tet entry: 4 t + q, the old node */
-    amps__ivec queue;         /* work items (a, b): vertex a (b = -1) or edge a < b */
+    amps__ivec saved;                  /* per saved node: node, inc_ptr, inc_len, offset into slot */
+    amps__ivec slot;                   /* the saved slot contents */
+    amps__ivec edits;                  /* per changed tet entry: 4 t + q, the old node */
+    amps__ivec queue;                  /* work items (a, b): vertex a (b = -1) or edge a < b */
     amps__ivec star, grp, aux, ed, eg; /* scratch of the singularity tests */
-    unsigned char *flag;      /* flag_cap: node saved */
+    unsigned char *flag;               /* flag_cap: node saved */
     size_t flag_cap;
 };
 
@@ -9293,8 +9294,8 @@ static amps_int amps__star_find(const amps_int *star, amps_int n, amps_int t) {
    at the first endpoint x whose star, grouped through shared faces, holds the kept group and
    another group in different parts: each such part without the kept group gets its own copy
    of x. *done = 0 when neither endpoint separates them. */
-static amps_status amps__rm_separate_edge(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R, amps_int a,
-                                          amps_int b, amps_int k, int *done) {
+static amps_status amps__rm_separate_edge(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R, amps_int a, amps_int b,
+                                          amps_int k, int *done) {
     amps_int i, j, n = (amps_int)R->star.n, kept, x, K;
     amps_status s = AMPS_OK;
     int e;
@@ -9308,8 +9309,7 @@ static amps_status amps__rm_separate_edge(amps_ctx *ctx, amps_mesh *m, struct am
         x = e ? b : a;
         (void)amps__rm_groups(ctx, m, R, x, -1, 3, &kept, &s);
         if (s) break;
-        for (i = 0; !R->eg.a[i]; i++) {
-        }
+        for (i = 0; !R->eg.a[i]; i++) {}
         K = R->grp.a[amps__star_find(R->star.a, (amps_int)R->star.n, R->ed.a[i])];
         for (i = 0; i < n && !s; i++) {
             amps_int t = R->ed.a[i], L;
@@ -9328,8 +9328,7 @@ static amps_status amps__rm_separate_edge(amps_ctx *ctx, amps_mesh *m, struct am
 }
 
 /* Resolves the queued vertices and edges until none is singular (policy REMOVE or SEPARATE). */
-static amps_status amps__rm_resolve(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R,
-                                    amps_singular_policy policy) {
+static amps_status amps__rm_resolve(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R, amps_singular_policy policy) {
     size_t h;
     for (h = 0; h < R->queue.n; h += 2) {
         amps_int a = R->queue.a[h], b = R->queue.a[h + 1], kept, ng, i, n;
@@ -10866,7 +10865,7 @@ typedef struct amps__gmsh {
     amps__gtag *tags; /* R.nn node tags with file position and line; sorted by tag after $Nodes */
     int version;      /* 2 (2.x) or 4 (4.1) after $MeshFormat, else 0 */
     int have_nodes, have_elems;
-    char sec[24]; /* name of the current section, without '$' */
+    char sec[24];       /* name of the current section, without '$' */
     long long *vol_tag; /* 4.1 $Entities: the nvol volume entities and the first physical tag of */
     amps_int *vol_phys; /* each (0 if none) */
     long long nvol;

@@ -623,6 +623,15 @@ static long t_array_count(const char *s, const char *name, double *sum) {
     return n;
 }
 
+/* A fresh context and the beam 5 x 5 x 4 (NULL, with a failed check, if it cannot be made). */
+static amps_mesh *t_beam4(amps_ctx *ctx) {
+    amps_mesh *m;
+    amps_ctx_init(ctx);
+    m = amps_mesh_beam(ctx, 4);
+    CHECK(m != NULL, "beam: %s", ctx->msg);
+    return m;
+}
+
 static void test_vtu(void) {
     amps_ctx ctx;
     amps_mesh *m;
@@ -631,12 +640,8 @@ static void test_vtu(void) {
     amps_int moved[64], nm, vc, v, t, ncut = 0;
     size_t len;
     char *txt;
-    amps_ctx_init(&ctx);
-    m = amps_mesh_beam(&ctx, 4);
-    if (!m) {
-        CHECK(0, "beam");
-        return;
-    }
+    m = t_beam4(&ctx);
+    if (!m) return;
     for (v = 50; v < 55; v++) amps_mesh_cut(&ctx, m, v, p, n, &vc, moved, &nm);
     for (t = 0; t < m->ntet; t++) {
         int k, c = 0;
@@ -944,12 +949,8 @@ static void test_vtu_frames(void) {
     amps_int rm[4] = {0, 7, 8, 50}, v, t, live, rsum = 0;
     size_t len;
     char *txt;
-    amps_ctx_init(&ctx);
-    m = amps_mesh_beam(&ctx, 4);
-    if (!m) {
-        CHECK(0, "beam");
-        return;
-    }
+    m = t_beam4(&ctx);
+    if (!m) return;
     for (t = 0; t < m->ntet; t++) amps_mesh_set_tet_region(&ctx, m, t, t % 4);
     CHECK(amps_mesh_remove(&ctx, m, 4, rm, AMPS_SINGULAR_IGNORE, NULL) == AMPS_OK, "remove");
     live = m->ntet - m->nremoved;
@@ -1028,8 +1029,7 @@ static void test_tetgen_regions(void) {
         else if (m->region[t] == 20) v20 += vol;
         else other++;
     }
-    CHECK(m && other == 0 && fabs(v10 - 1) < 1e-12 && fabs(v20 - 1) < 1e-12, "tetgen regions: volumes %g %g", v10,
-          v20);
+    CHECK(m && other == 0 && fabs(v10 - 1) < 1e-12 && fabs(v20 - 1) < 1e-12, "tetgen regions: volumes %g %g", v10, v20);
     amps_mesh_free(&ctx, m);
     remove(path);
     remove(out);

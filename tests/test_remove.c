@@ -378,8 +378,7 @@ static void test_assembly(void) {
     pr = (double *)malloc(sizeof(double) * 3 * m->ntet);
     for (v = 0; v < m->nnode; v++) u[3 * v + 2] = 0.1 * m->xyz[3 * v + 2];
     CHECK(amps_mesh_stress(&ctx, m, u, NULL, vm, pr) == AMPS_OK, "stress");
-    for (t = 0, k = 0; t < m->ntet; t++)
-        k += m->removed[t] ? (vm[t] != 0 || pr[3 * t] != 0) : !(vm[t] > 0);
+    for (t = 0, k = 0; t < m->ntet; t++) k += m->removed[t] ? (vm[t] != 0 || pr[3 * t] != 0) : !(vm[t] > 0);
     CHECK(k == 0, "stress zero exactly on removed tets");
     /* a cut after a removal: incidence stays consistent; the removal can no longer be undone */
     v = 0;
@@ -410,8 +409,8 @@ static void test_oom(void) {
     amps_ctx ctx;
     amps_mesh *m;
     amps_mesh_removal r;
-    amps_int t[3] = {140, 141, 148}, live;
-    long base, k, bad = 0, done = 0;
+    amps_int t[3] = {140, 141, 148};
+    long base, k, bad = 0, done = 0, live;
     amps_ctx_init(&ctx);
     ctx.alloc_user = &t_al;
     base = t_al.live;
