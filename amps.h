@@ -682,6 +682,8 @@ AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U);
    Incidence: the tets containing node v are inc[inc_ptr[v] .. inc_ptr[v] + inc_len[v] - 1],
    in ascending order. The slots of all nodes partition inc[0 .. 4*ntet-1]; a cut splits the
    slot of v into the slots of v and its copy, so incidence never needs more memory.
+   Removed tets (amps_mesh_remove) keep their index and nodes but are in no incidence list; the
+   slots of the nodes then cover only part of inc.
    Fields are read-only for callers: change a mesh only through amps_mesh_* functions. */
 typedef struct amps_mesh {
     amps_int nnode;    /* nodes in use */
@@ -695,6 +697,12 @@ typedef struct amps_mesh {
     amps_int *inc_ptr; /* node_cap */
     amps_int *inc_len; /* node_cap */
     amps_int *inc;     /* 4 * ntet tet indices */
+
+    amps_int *region;                   /* ntet: region attribute (0 when the file has none) */
+    double *rho;                        /* ntet: density (default 1) */
+    unsigned char *removed;             /* ntet: 1 = removed (indices never shift) */
+    amps_int nremoved;                  /* tets with removed[t] = 1 */
+    struct amps__removal *last_removal; /* internal: record and undo log of the last amps_mesh_remove */
 } amps_mesh;
 
 /* Mesh with nnode nodes (xyz: 3 per node) and ntet tets (tet: 4 node indices each), copied.
@@ -720,7 +728,8 @@ AMPS_API amps_status amps_mesh_reserve(amps_ctx *ctx, amps_mesh *m, amps_int nod
 AMPS_API amps_int amps_mesh_degree(const amps_mesh *m, amps_int v);
 /* The tets containing v, ascending; *deg receives their number (NULL and 0 if v is invalid). */
 AMPS_API const amps_int *amps_mesh_incident(const amps_mesh *m, amps_int v, amps_int *deg);
-/* Verifies the mesh invariants (indices, origins, incidence slots against tet). O(nnode + ntet). */
+/* Verifies the mesh invariants (indices, origins, incidence slots against tet and the removed
+   flags, densities). O(nnode + ntet). */
 AMPS_API amps_status amps_mesh_check(amps_ctx *ctx, const amps_mesh *m);
 
 typedef enum amps_cmp { AMPS_LT = 0, AMPS_GT = 1 } amps_cmp;
@@ -736,7 +745,7 @@ AMPS_API amps_int amps_mesh_number_dofs(const amps_mesh *m, const unsigned char 
 AMPS_API void amps_mesh_tet_coords(const amps_mesh *m, amps_int t, double X[12]);
 /* amps_tet_stiffness of tet t with its material; returns its volume. */
 AMPS_API double amps_mesh_tet_stiffness(const amps_mesh *m, amps_int t, double Ke[144]);
-/* Upper triangle of the stiffness matrix K = sum_t Ke(t) over all tets, in equations: the DOF
+/* Upper triangle of the stiffness matrix K = sum_t Ke(t) over the live tets, in equations: the DOF
    d of node v is equation dof[3v+d] (0 <= dof < ndof) or eliminated (-1; its rows and columns
    are dropped). dof has 3 * nnode entries and uses each equation at most once; an equation
    used by no DOF gives an empty column. Rows are sorted in each column, duplicates summed. */
@@ -760,9 +769,71 @@ AMPS_API amps_status amps_mesh_cut(amps_ctx *ctx, amps_mesh *m, amps_int v, cons
 AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, amps_int vc, const amps_int *moved,
                                      amps_int nmoved);
 /* Per-tet stress for displacements disp (3 per node): sigma (6 per tet), von_mises (1 per tet),
-   principal (3 per tet, descending); each output may be NULL. */
+   principal (3 per tet, descending); each output may be NULL. Removed tets get zeros. */
 AMPS_API amps_status amps_mesh_stress(amps_ctx *ctx, const amps_mesh *m, const double *disp, double *sigma,
                                       double *von_mises, double *principal);
+
+/* ---- density, regions, lumped mass, element removal ---- */
+
+/* Density of all tets / of tet t. Requires rho > 0 finite (AMPS_ERR_VALUE for NaN/Inf,
+   AMPS_ERR_ARG otherwise; AMPS_ERR_INDEX for t); on error m is unchanged. */
+AMPS_API amps_status amps_mesh_set_density(amps_ctx *ctx, amps_mesh *m, double rho);
+AMPS_API amps_status amps_mesh_set_tet_density(amps_ctx *ctx, amps_mesh *m, amps_int t, double rho);
+/* E, nu and rho of every tet t with region[t] = id (removed ones included); rho <= 0 keeps the
+   densities. Errors (m unchanged): the checks of amps_mesh_set_material, a NaN rho, and
+   AMPS_ERR_ARG "no tetrahedron has region id" when none has it. */
+AMPS_API amps_status amps_mesh_set_region_material(amps_ctx *ctx, amps_mesh *m, amps_int id, double E, double nu,
+                                                   double rho);
+/* Sets region[t] = id (for meshes built in code). AMPS_ERR_INDEX for t out of range. */
+AMPS_API amps_status amps_mesh_set_tet_region(amps_ctx *ctx, amps_mesh *m, amps_int t, amps_int id);
+/* Lumped mass m_i = sum over the non-removed tets t containing node i of rho_t |V_t| / 4
+   (mass has nnode entries; a node in no live tet gets 0). */
+AMPS_API void amps_mesh_lumped_mass(const amps_mesh *m, double *mass);
+
+/* What amps_mesh_remove does at a singular vertex or edge (see there). */
+typedef enum amps_singular_policy {
+    AMPS_SINGULAR_REMOVE = 0,   /* default: keep the largest group, remove the others */
+    AMPS_SINGULAR_SEPARATE = 1, /* give every other group its own copy of the vertex */
+    AMPS_SINGULAR_IGNORE = 2    /* remove only the given tets */
+} amps_singular_policy;
+/* What a removal did; arrays are mesh-owned, valid until the next change of the mesh. */
+typedef struct amps_mesh_removal {
+    amps_int ntet;
+    const amps_int *tets; /* every tet removed (the given ones first, in the given order) */
+    amps_int nsep;        /* separations, in the order made: node sep_node[k] ... */
+    const amps_int *sep_node;
+    const amps_int *sep_copy; /* ... got the copy sep_copy[k] (origin as a cut copy) ... */
+    const amps_int *sep_ptr;  /* ... and the tets sep_tets[sep_ptr[k] .. sep_ptr[k+1]-1] (ascending) */
+    const amps_int *sep_tets; /*     moved from sep_node[k] to it; sep_ptr has nsep + 1 entries */
+    amps_int norphan;
+    const amps_int *orphans; /* nodes left in no live tet (copies made by this removal included), ascending */
+} amps_mesh_removal;
+/* Removes tets[0..n-1]: marks them removed and takes them out of the incidence lists; then,
+   unless policy is AMPS_SINGULAR_IGNORE, resolves singularities at the vertices and edges of
+   every tet removed or changed, repeatedly, until none of those is singular. A vertex is
+   singular when its tets are not connected through shared edges (two are adjacent when they
+   share a vertex besides it); an edge when its tets are not connected through shared faces.
+   The group with most tets is kept (a tie keeps the group holding the lowest tet index).
+   AMPS_SINGULAR_REMOVE removes the tets of the other groups. AMPS_SINGULAR_SEPARATE gives each
+   other group of a singular vertex its own copy of the vertex (a cut-like copy: origin, xyz,
+   split incidence slot, node capacity growth as amps_mesh_cut); at a singular edge (a, b) it
+   copies the endpoint a (else b) whose tets, grouped by shared faces, put the edge's groups in
+   different face-connected parts, giving each part that does not hold the kept group its own
+   copy; when neither endpoint separates them (the edge is pinched from both sides) the other
+   groups are removed as with AMPS_SINGULAR_REMOVE.
+   out (may be NULL) describes the result. Errors (m unchanged): AMPS_ERR_ARG (NULL mesh or
+   array, n < 1, a tet given twice or already removed), AMPS_ERR_INDEX (a tet out of range),
+   AMPS_ERR_OOM / AMPS_ERR_CAPACITY. */
+AMPS_API amps_status amps_mesh_remove(amps_ctx *ctx, amps_mesh *m, amps_int n, const amps_int *tets,
+                                      amps_singular_policy policy, amps_mesh_removal *out);
+/* Undoes the last amps_mesh_remove exactly (tets, incidence, nnode, removed flags), r being its
+   record. AMPS_ERR_ARG (m unchanged) if r is not the record of the last change of m. */
+AMPS_API amps_status amps_mesh_unremove(amps_ctx *ctx, amps_mesh *m, const amps_mesh_removal *r);
+/* Singular vertices / edges of the current mesh (definitions of amps_mesh_remove), from scratch:
+   out (may be NULL to count) receives the vertices ascending / the edges as pairs a < b, sorted.
+   Returns their number, or -1 (NULL mesh, AMPS_ERR_OOM). */
+AMPS_API amps_int amps_mesh_singular_vertices(amps_ctx *ctx, const amps_mesh *m, amps_int *out);
+AMPS_API amps_int amps_mesh_singular_edges(amps_ctx *ctx, const amps_mesh *m, amps_int *out);
 
 /* ---- linear tetrahedron (P1) elasticity ----
    X[3a+c]: coordinate c of node a (a = 0..3). Voigt order for strain and stress:
@@ -1009,12 +1080,16 @@ AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int np
    failure, with AMPS_ERR_PARSE and "file:line: message" in ctx for malformed input (AMPS_ERR_IO
    if a file cannot be read, AMPS_ERR_MESH "file:line: ..." for a degenerate tet).
    TetGen .node/.ele: index base = first point number in .node (0 or 1), point numbers
-     consecutive; attributes and boundary markers ignored; 4 or 10 nodes per tet (first 4 used).
+     consecutive; node attributes and boundary markers ignored; 4 or 10 nodes per tet (first 4
+     used); region = the first tet attribute (an integer, as tetgen -A writes it).
    Gmsh .msh ASCII 2.x and 4.1: tetrahedra are element type 4; surface, line and point elements
      are skipped; hexahedra, prisms and pyramids (any order) are an error, AMPS_ERR_MESH with
      their counts and the line of the first; node tags may be any distinct integers. Binary
-     files are rejected.
-   MEDIT .mesh (ASCII): Dimension 3, Vertices, Tetrahedra; other keywords are skipped.
+     files are rejected. Region: 2.x the first (physical) tag; 4.1 the first physical tag of the
+     element's volume entity ($Entities).
+   MEDIT .mesh (ASCII): Dimension 3, Vertices, Tetrahedra; other keywords are skipped. Region:
+     the reference number of each tetrahedron.
+   A tet without a region attribute gets region 0.
    amps_mesh_read picks the reader by extension: .node (and the .ele of the same name), .ele
    (and the .node), .msh, .mesh. The *_mem variants parse a buffer of len bytes (no NUL needed);
    name is used in messages. With AMPS_NO_STDIO only the *_mem variants exist. */
@@ -1030,17 +1105,27 @@ AMPS_API amps_mesh *amps_mesh_read_gmsh(amps_ctx *ctx, const char *path);
 AMPS_API amps_mesh *amps_mesh_read_medit(amps_ctx *ctx, const char *path);
 
 /* VTK XML UnstructuredGrid (ASCII) of the mesh in its reference configuration (copies are
-   separate points, so a cut opens under "Warp By Vector"). Point data: "displacement" (disp,
-   3 per node, if given) and "origin". Cell data: "von_mises" (1 per tet, if given),
-   "principal_stress" (3 per tet, if given) and "cut" (1 if the tet uses a cut copy node). */
+   separate points, so a cut opens under "Warp By Vector"). Removed tets are left out. Point
+   data: "displacement" (disp, 3 per node, if given) and "origin". Cell data of the kept tets:
+   "von_mises" (von_mises has 1 per tet of m, if given), "principal_stress" (3 per tet, if
+   given), "region" and "cut" (1 if the tet uses a cut copy node). */
 AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const amps_mesh *m, const double *disp,
                                          const double *von_mises, const double *principal);
-/* Writers of all nnode nodes and the tets (copies become ordinary nodes; materials are not
-   written). TetGen: base.node and base.ele with numbering from first_index (0 or 1).
-   Gmsh: version 2 (2.2) or 4 (4.1), ASCII. MEDIT: .mesh, version 2. */
+/* Writers of all nnode nodes and the live tets in index order (copies become ordinary nodes;
+   removed tets are left out, so the tets of a mesh with removals are renumbered; materials
+   and densities are not written). Regions are written so that every reader gives them back.
+   TetGen: base.node and base.ele with numbering from first_index (0 or 1), one tet attribute
+   (the region) when any region is not 0. Gmsh: version 2 (2.2: the region as the physical tag)
+   or 4 (4.1: a volume entity per region with the region as its physical tag), ASCII.
+   MEDIT: .mesh, version 2, the region as the tet reference. */
 AMPS_API amps_status amps_mesh_write_tetgen(amps_ctx *ctx, const char *base, const amps_mesh *m, int first_index);
 AMPS_API amps_status amps_mesh_write_gmsh(amps_ctx *ctx, const char *path, const amps_mesh *m, int version);
 AMPS_API amps_status amps_mesh_write_medit(amps_ctx *ctx, const char *path, const amps_mesh *m);
+/* ParaView .pvd collection of n frames: frame k is the file vtu_files[k] (written as given, so
+   relative to the folder of the .pvd) at time times[k]. Errors: AMPS_ERR_ARG (NULL path or
+   array, n < 0), AMPS_ERR_VALUE (non-finite time), AMPS_ERR_IO. */
+AMPS_API amps_status amps_pvd_write(amps_ctx *ctx, const char *path, amps_int n, const char *const *vtu_files,
+                                    const double *times);
 #endif /* AMPS_NO_STDIO */
 #endif /* AMPS_NO_FEM */
 
@@ -9163,6 +9248,10 @@ AMPS_API double amps_tet_stress(const double X[12], double E, double nu, const d
 
 /* ---- mesh ---- */
 
+static void amps__removal_free(amps_ctx *ctx, struct amps__removal *r);
+static void amps__removal_forget(amps_mesh *m);
+static amps_status amps__mesh_grow(amps_ctx *ctx, amps_mesh *m, const char *fn);
+
 AMPS_API void amps_mesh_free(amps_ctx *ctx, amps_mesh *m) {
     if (!m) return;
     amps__free(ctx, m->xyz);
@@ -9173,6 +9262,10 @@ AMPS_API void amps_mesh_free(amps_ctx *ctx, amps_mesh *m) {
     amps__free(ctx, m->inc_ptr);
     amps__free(ctx, m->inc_len);
     amps__free(ctx, m->inc);
+    amps__free(ctx, m->region);
+    amps__free(ctx, m->rho);
+    amps__free(ctx, m->removed);
+    amps__removal_free(ctx, m->last_removal);
     amps__free(ctx, m);
 }
 
@@ -9211,7 +9304,11 @@ static amps_mesh *amps__mesh_alloc(amps_ctx *ctx, amps_int node_cap, amps_int nt
     m->inc = AMPS__CAST(amps_int *, amps__malloc(ctx, 4 * nt, sizeof(amps_int)));
     m->E = AMPS__CAST(double *, amps__malloc(ctx, nt, sizeof(double)));
     m->nu = AMPS__CAST(double *, amps__malloc(ctx, nt, sizeof(double)));
-    if (!m->xyz || !m->origin || !m->inc_ptr || !m->inc_len || !m->tet || !m->inc || !m->E || !m->nu) {
+    m->region = AMPS__CAST(amps_int *, amps__calloc(ctx, nt, sizeof(amps_int)));
+    m->rho = AMPS__CAST(double *, amps__malloc(ctx, nt, sizeof(double)));
+    m->removed = AMPS__CAST(unsigned char *, amps__calloc(ctx, nt, 1));
+    if (!m->xyz || !m->origin || !m->inc_ptr || !m->inc_len || !m->tet || !m->inc || !m->E || !m->nu || !m->region ||
+        !m->rho || !m->removed) {
         amps_mesh_free(ctx, m);
         return NULL;
     }
@@ -9268,6 +9365,7 @@ static amps_mesh *amps__mesh_new(amps_ctx *ctx, const char *fn, amps_int nnode, 
     for (t = 0; t < ntet; t++) {
         m->E[t] = 1.0;
         m->nu[t] = 0.3;
+        m->rho[t] = 1.0;
     }
     /* incidence by counting sort over tets, so each list is ascending */
     for (v = 0; v < nnode; v++) {
@@ -9456,6 +9554,15 @@ AMPS_API amps_status amps_mesh_check(amps_ctx *ctx, const amps_mesh *m) {
     if (!m) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL mesh", fn);
     if (m->ntet < 1 || m->nfile < 0 || m->nfile > m->nnode || m->nnode > m->node_cap)
         return amps__err(ctx, AMPS_ERR_MESH, "%s: inconsistent counts", fn);
+    for (t = 0, r = 0; t < m->ntet; t++) {
+        if (m->removed[t] > 1 || !(m->rho[t] > 0.0) || !amps__isfinite(m->rho[t]))
+            return amps__err(ctx, AMPS_ERR_MESH, "%s: tetrahedron %lld: invalid removed flag or density", fn,
+                             (long long)t);
+        r += m->removed[t];
+    }
+    if (r != m->nremoved)
+        return amps__err(ctx, AMPS_ERR_MESH, "%s: %lld tetrahedra are marked removed, nremoved is %lld", fn,
+                         (long long)r, (long long)m->nremoved);
     for (t = 0; t < m->ntet; t++)
         for (q = 0; q < 4; q++) {
             v = m->tet[4 * t + q];
@@ -9490,6 +9597,7 @@ AMPS_API amps_status amps_mesh_check(amps_ctx *ctx, const amps_mesh *m) {
             t = m->inc[p + j];
             if (seen[p + j]) why = "overlaps another slot";
             else if (t < 0 || t >= m->ntet) why = "lists an invalid tetrahedron";
+            else if (m->removed[t]) why = "lists a removed tetrahedron";
             else if (j > 0 && t <= m->inc[p + j - 1]) why = "is not strictly ascending";
             else if (m->tet[4 * t] != v && m->tet[4 * t + 1] != v && m->tet[4 * t + 2] != v && m->tet[4 * t + 3] != v)
                 why = "lists a tetrahedron without the node";
@@ -9502,9 +9610,9 @@ AMPS_API amps_status amps_mesh_check(amps_ctx *ctx, const amps_mesh *m) {
         total += n;
     }
     amps__free(ctx, seen);
-    if (total != 4 * m->ntet)
+    if (total != 4 * (m->ntet - m->nremoved))
         return amps__err(ctx, AMPS_ERR_MESH, "%s: incidence lists hold %lld entries, expected %lld", fn,
-                         (long long)total, (long long)(4 * m->ntet));
+                         (long long)total, (long long)(4 * (m->ntet - m->nremoved)));
     return AMPS_OK;
 }
 
@@ -9562,6 +9670,12 @@ AMPS_API amps_status amps_mesh_stress(amps_ctx *ctx, const amps_mesh *m, const d
     for (t = 0; t < m->ntet; t++) {
         double X[12], u[12], s[6], vm, pr[3];
         int a, c;
+        if (m->removed[t]) {
+            if (sigma) memset(sigma + 6 * t, 0, sizeof(s));
+            if (von_mises) von_mises[t] = 0.0;
+            if (principal) memset(principal + 3 * t, 0, sizeof(pr));
+            continue;
+        }
         amps_mesh_tet_coords(m, t, X);
         for (a = 0; a < 4; a++)
             for (c = 0; c < 3; c++) u[3 * a + c] = disp[3 * m->tet[4 * t + a] + c];
@@ -9711,6 +9825,7 @@ AMPS_API amps_csc *amps_mesh_assemble(amps_ctx *ctx, const amps_mesh *m, const a
         double Ke[144];
         amps_int rd[12];
         int a;
+        if (m->removed[t]) continue;
         amps_mesh_tet_stiffness(m, t, Ke);
         for (a = 0; a < 12; a++) rd[a] = dof[3 * m->tet[4 * t + a / 3] + a % 3];
         amps__csc_add_element(A, rd, Ke);
@@ -9763,14 +9878,10 @@ AMPS_API amps_status amps_mesh_cut(amps_ctx *ctx, amps_mesh *m, amps_int v, cons
                          "%s: all %lld tetrahedra at node %lld lie on one side of the plane; nothing cut", fn,
                          (long long)deg, (long long)v);
     if (m->nnode == m->node_cap) {
-        amps_int cap = m->node_cap + m->node_cap / 2 + 16;
-        amps_status s;
-        if (cap > AMPS__IMAX / 3 || cap < m->node_cap) cap = AMPS__IMAX / 3;
-        if (cap <= m->nnode)
-            return amps__err(ctx, AMPS_ERR_CAPACITY, "%s: node count at the limit of the index type", fn);
-        s = amps_mesh_reserve(ctx, m, cap);
+        amps_status s = amps__mesh_grow(ctx, m, fn);
         if (s) return s;
     }
+    amps__removal_forget(m);
     vc = m->nnode;
     for (c = 0; c < 3; c++) m->xyz[3 * vc + c] = m->xyz[3 * v + c];
     m->origin[vc] = m->origin[v];
@@ -9818,6 +9929,7 @@ AMPS_API amps_status amps_mesh_uncut(amps_ctx *ctx, amps_mesh *m, amps_int v, am
     m->inc_len[vc] = 0;
     m->inc_ptr[vc] = 0;
     m->nnode--;
+    amps__removal_forget(m);
     return AMPS_OK;
 }
 
@@ -9924,6 +10036,551 @@ AMPS_API amps_int amps_mesh_boundary(amps_ctx *ctx, const amps_mesh *m, amps_int
     amps__free(ctx, order);
     amps__free(ctx, bnd);
     return n;
+}
+
+/* ---- density, regions, lumped mass ---- */
+
+static amps_status amps__check_density(amps_ctx *ctx, const char *fn, double rho) {
+    if (!amps__isfinite(rho)) return amps__err(ctx, AMPS_ERR_VALUE, "%s: non-finite density %g", fn, rho);
+    if (!(rho > 0.0)) return amps__err(ctx, AMPS_ERR_ARG, "%s: density rho = %g must be positive", fn, rho);
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_mesh_set_density(amps_ctx *ctx, amps_mesh *m, double rho) {
+    amps_int t;
+    amps_status s;
+    if (!m) return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_set_density: NULL mesh");
+    s = amps__check_density(ctx, "amps_mesh_set_density", rho);
+    if (s) return s;
+    for (t = 0; t < m->ntet; t++) m->rho[t] = rho;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_mesh_set_tet_density(amps_ctx *ctx, amps_mesh *m, amps_int t, double rho) {
+    amps_status s;
+    if (!m) return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_set_tet_density: NULL mesh");
+    if (t < 0 || t >= m->ntet)
+        return amps__err(ctx, AMPS_ERR_INDEX, "amps_mesh_set_tet_density: tetrahedron %lld out of range [0, %lld)",
+                         (long long)t, (long long)m->ntet);
+    s = amps__check_density(ctx, "amps_mesh_set_tet_density", rho);
+    if (s) return s;
+    m->rho[t] = rho;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_mesh_set_region_material(amps_ctx *ctx, amps_mesh *m, amps_int id, double E, double nu,
+                                                   double rho) {
+    const char *fn = "amps_mesh_set_region_material";
+    amps_int t, n = 0;
+    amps_status s;
+    if (!m) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL mesh", fn);
+    s = amps__check_material(ctx, fn, E, nu);
+    if (s) return s;
+    if (rho > 0.0 || rho != rho) {
+        s = amps__check_density(ctx, fn, rho);
+        if (s) return s;
+    }
+    for (t = 0; t < m->ntet; t++) n += m->region[t] == id;
+    if (n == 0) return amps__err(ctx, AMPS_ERR_ARG, "%s: no tetrahedron has region %lld", fn, (long long)id);
+    for (t = 0; t < m->ntet; t++)
+        if (m->region[t] == id) {
+            m->E[t] = E;
+            m->nu[t] = nu;
+            if (rho > 0.0) m->rho[t] = rho;
+        }
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_mesh_set_tet_region(amps_ctx *ctx, amps_mesh *m, amps_int t, amps_int id) {
+    if (!m) return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_set_tet_region: NULL mesh");
+    if (t < 0 || t >= m->ntet)
+        return amps__err(ctx, AMPS_ERR_INDEX, "amps_mesh_set_tet_region: tetrahedron %lld out of range [0, %lld)",
+                         (long long)t, (long long)m->ntet);
+    m->region[t] = id;
+    return AMPS_OK;
+}
+
+AMPS_API void amps_mesh_lumped_mass(const amps_mesh *m, double *mass) {
+    amps_int v, t;
+    int a;
+    if (!m || !mass) return;
+    for (v = 0; v < m->nnode; v++) mass[v] = 0.0;
+    for (t = 0; t < m->ntet; t++) {
+        double X[12], G[12], q;
+        if (m->removed[t]) continue;
+        amps_mesh_tet_coords(m, t, X);
+        q = 0.25 * m->rho[t] * fabs(amps_tet_gradients(X, G));
+        for (a = 0; a < 4; a++) mass[m->tet[4 * t + a]] += q;
+    }
+}
+
+/* ---- element removal and topological singularities ---- */
+
+/* Growable array of amps_int. */
+typedef struct amps__ivec {
+    amps_int *a;
+    size_t n, cap;
+} amps__ivec;
+
+static amps_status amps__iv_push(amps_ctx *ctx, amps__ivec *v, amps_int x) {
+    if (v->n == v->cap) {
+        void *p = v->a;
+        size_t cap = v->cap ? 2 * v->cap : 64;
+        if (amps__realloc(ctx, &p, cap, sizeof(amps_int))) return AMPS_ERR_OOM;
+        v->a = AMPS__CAST(amps_int *, p);
+        v->cap = cap;
+    }
+    v->a[v->n++] = x;
+    return AMPS_OK;
+}
+
+/* The record of the last amps_mesh_remove and its undo log. A node's slot is saved (once)
+   before its first change; restoring the saved slots, the tet entries and nnode undoes it. */
+struct amps__removal {
+    int valid;       /* 1 while the removal is the last change of the mesh */
+    amps_int nnode0; /* nnode before */
+    amps__ivec tets; /* tets removed, in order */
+    amps__ivec sep_node, sep_copy, sep_ptr, sep_tets, orphans;
+    amps__ivec saved;                  /* per saved node: node, inc_ptr, inc_len, offset into slot */
+    amps__ivec slot;                   /* the saved slot contents */
+    amps__ivec edits;                  /* per changed tet entry: 4 t + q, the old node */
+    amps__ivec queue;                  /* work items (a, b): vertex a (b = -1) or edge a < b */
+    amps__ivec star, grp, aux, ed, eg; /* scratch of the singularity tests */
+    unsigned char *flag;               /* flag_cap: node saved */
+    size_t flag_cap;
+};
+
+static void amps__removal_free(amps_ctx *ctx, struct amps__removal *r) {
+    amps__ivec *v[15];
+    int k;
+    if (!r) return;
+    v[0] = &r->tets, v[1] = &r->sep_node, v[2] = &r->sep_copy, v[3] = &r->sep_ptr, v[4] = &r->sep_tets;
+    v[5] = &r->orphans, v[6] = &r->saved, v[7] = &r->slot, v[8] = &r->edits, v[9] = &r->queue;
+    v[10] = &r->star, v[11] = &r->grp, v[12] = &r->aux, v[13] = &r->ed, v[14] = &r->eg;
+    for (k = 0; k < 15; k++) amps__free(ctx, v[k]->a);
+    amps__free(ctx, r->flag);
+    amps__free(ctx, r);
+}
+
+static void amps__removal_forget(amps_mesh *m) {
+    if (m->last_removal) m->last_removal->valid = 0;
+}
+
+/* Grows the node capacity of m by half when it is full (amps_mesh_cut's growth). */
+static amps_status amps__mesh_grow(amps_ctx *ctx, amps_mesh *m, const char *fn) {
+    amps_int cap = m->node_cap + m->node_cap / 2 + 16;
+    if (m->nnode < m->node_cap) return AMPS_OK;
+    if (cap > AMPS__IMAX / 3 || cap < m->node_cap) cap = AMPS__IMAX / 3;
+    if (cap <= m->nnode) return amps__err(ctx, AMPS_ERR_CAPACITY, "%s: node count at the limit of the index type", fn);
+    return amps_mesh_reserve(ctx, m, cap);
+}
+
+/* Number of nodes tets p and q share. */
+static int amps__tet_shared(const amps_mesh *m, amps_int p, amps_int q) {
+    const amps_int *a = m->tet + 4 * p, *b = m->tet + 4 * q;
+    int i, j, n = 0;
+    for (i = 0; i < 4; i++)
+        for (j = 0; j < 4; j++) n += a[i] == b[j];
+    return n;
+}
+
+/* star = the live tets containing a (and b if b >= 0), ascending. */
+static amps_status amps__star(amps_ctx *ctx, const amps_mesh *m, amps_int a, amps_int b, amps__ivec *star) {
+    const amps_int *lst = m->inc + m->inc_ptr[a];
+    amps_int j;
+    star->n = 0;
+    for (j = 0; j < m->inc_len[a]; j++) {
+        const amps_int *tv = m->tet + 4 * lst[j];
+        if (b >= 0 && tv[0] != b && tv[1] != b && tv[2] != b && tv[3] != b) continue;
+        if (amps__iv_push(ctx, star, lst[j])) return AMPS_ERR_OOM;
+    }
+    return AMPS_OK;
+}
+
+static amps_int amps__uf_root(amps_int *g, amps_int i) {
+    while (g[i] != i) i = g[i] = g[g[i]];
+    return i;
+}
+
+/* Connected groups of the tets star[0..n-1], two adjacent when they share at least need nodes:
+   grp[i] = the first (lowest) member of i's group. Returns the number of groups; *kept = the
+   root of the largest group, a tie the one with the lowest tet. */
+static amps_int amps__groups(const amps_mesh *m, const amps_int *star, amps_int n, int need, amps_int *grp,
+                             amps_int *kept) {
+    amps_int i, j, ng = 0, best = -1, bsize = 0;
+    for (i = 0; i < n; i++) grp[i] = i;
+    for (i = 0; i < n; i++)
+        for (j = i + 1; j < n; j++) {
+            amps_int ri, rj;
+            if (amps__tet_shared(m, star[i], star[j]) < need) continue;
+            ri = amps__uf_root(grp, i);
+            rj = amps__uf_root(grp, j);
+            if (ri < rj) grp[rj] = ri;
+            else if (rj < ri) grp[ri] = rj;
+        }
+    for (i = 0; i < n; i++) grp[i] = amps__uf_root(grp, i);
+    for (i = 0; i < n; i++) {
+        amps_int size = 0;
+        if (grp[i] != i) continue;
+        ng++;
+        for (j = i; j < n; j++) size += grp[j] == i;
+        if (size > bsize) bsize = size, best = i;
+    }
+    *kept = best;
+    return ng;
+}
+
+/* Groups of the tets containing a (and b if b >= 0), adjacent when they share need nodes, into
+   R->star / R->grp (see amps__groups); returns their number. */
+static amps_int amps__rm_groups(amps_ctx *ctx, const amps_mesh *m, struct amps__removal *R, amps_int a, amps_int b,
+                                int need, amps_int *kept, amps_status *s) {
+    *s = amps__star(ctx, m, a, b, &R->star);
+    if (*s) return 0;
+    while (R->grp.cap < R->star.n)
+        if ((*s = amps__iv_push(ctx, &R->grp, 0)) != AMPS_OK) return 0;
+    return amps__groups(m, R->star.a, (amps_int)R->star.n, need, R->grp.a, kept);
+}
+
+/* Saves the slot of node v before its first change (copies made by this removal need none). */
+static amps_status amps__rm_save(amps_ctx *ctx, const amps_mesh *m, struct amps__removal *R, amps_int v) {
+    size_t n0 = R->saved.n, s0 = R->slot.n;
+    amps_int j;
+    if (v >= R->nnode0 || R->flag[v]) return AMPS_OK;
+    for (j = 0; j < m->inc_len[v]; j++)
+        if (amps__iv_push(ctx, &R->slot, m->inc[m->inc_ptr[v] + j])) goto oom;
+    if (amps__iv_push(ctx, &R->saved, v) || amps__iv_push(ctx, &R->saved, m->inc_ptr[v]) ||
+        amps__iv_push(ctx, &R->saved, m->inc_len[v]) || amps__iv_push(ctx, &R->saved, (amps_int)s0))
+        goto oom;
+    R->flag[v] = 1;
+    return AMPS_OK;
+oom: /* a partial record is dropped */
+    R->saved.n = n0;
+    R->slot.n = s0;
+    return AMPS_ERR_OOM;
+}
+
+/* Queues the 4 vertices and 6 edges of tet t. */
+static amps_status amps__rm_queue_tet(amps_ctx *ctx, const amps_mesh *m, struct amps__removal *R, amps_int t) {
+    const amps_int *tv = m->tet + 4 * t;
+    int i, j;
+    for (i = 0; i < 4; i++) {
+        if (amps__iv_push(ctx, &R->queue, tv[i]) || amps__iv_push(ctx, &R->queue, -1)) return AMPS_ERR_OOM;
+        for (j = i + 1; j < 4; j++) {
+            amps_int a = tv[i] < tv[j] ? tv[i] : tv[j], b = tv[i] < tv[j] ? tv[j] : tv[i];
+            if (amps__iv_push(ctx, &R->queue, a) || amps__iv_push(ctx, &R->queue, b)) return AMPS_ERR_OOM;
+        }
+    }
+    return AMPS_OK;
+}
+
+/* Removes the live tet t: flag, incidence lists of its nodes, the record; queues its items. */
+static amps_status amps__rm_take(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R, amps_int t) {
+    int q;
+    for (q = 0; q < 4; q++)
+        if (amps__rm_save(ctx, m, R, m->tet[4 * t + q])) return AMPS_ERR_OOM;
+    if (amps__iv_push(ctx, &R->tets, t)) return AMPS_ERR_OOM;
+    for (q = 0; q < 4; q++) {
+        amps_int v = m->tet[4 * t + q], *lst = m->inc + m->inc_ptr[v], n = m->inc_len[v], j = 0;
+        while (lst[j] != t) j++;
+        for (; j + 1 < n; j++) lst[j] = lst[j + 1];
+        m->inc_len[v] = n - 1;
+    }
+    m->removed[t] = 1;
+    m->nremoved++;
+    return amps__rm_queue_tet(ctx, m, R, t);
+}
+
+/* Gives the tets star[i] with grp[i] == g (ascending, all containing v) a new copy of v: the
+   stable partition of v's slot of amps_mesh_cut, recorded as a separation; queues the items of
+   the moved tets before and after. */
+static amps_status amps__rm_separate(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R, amps_int v,
+                                     const amps_int *star, const amps_int *grp, amps_int n, amps_int g) {
+    amps_int base, deg, keep = 0, nm = 0, vc, j, i;
+    int q;
+    amps_status s = amps__rm_save(ctx, m, R, v);
+    if (!s) s = amps__mesh_grow(ctx, m, "amps_mesh_remove");
+    while (!s && R->aux.cap < (size_t)m->inc_len[v]) s = amps__iv_push(ctx, &R->aux, 0);
+    if (s) return s;
+    vc = m->nnode;
+    if (amps__iv_push(ctx, &R->sep_node, v) || amps__iv_push(ctx, &R->sep_copy, vc)) return AMPS_ERR_OOM;
+    for (i = 0; i < n; i++)
+        if (grp[i] == g && (amps__iv_push(ctx, &R->sep_tets, star[i]) || amps__rm_queue_tet(ctx, m, R, star[i])))
+            return AMPS_ERR_OOM;
+    if (amps__iv_push(ctx, &R->sep_ptr, (amps_int)R->sep_tets.n)) return AMPS_ERR_OOM;
+    for (q = 0; q < 3; q++) m->xyz[3 * vc + q] = m->xyz[3 * v + q];
+    m->origin[vc] = m->origin[v];
+    base = m->inc_ptr[v];
+    deg = m->inc_len[v];
+    for (j = 0, i = 0; j < deg; j++) { /* kept tets first, the moved ones (the slot of vc) after */
+        amps_int t = m->inc[base + j];
+        while (i < n && star[i] < t) i++;
+        if (i < n && star[i] == t && grp[i] == g) R->aux.a[nm++] = t;
+        else m->inc[base + keep++] = t;
+    }
+    for (j = 0; j < nm; j++) m->inc[base + keep + j] = R->aux.a[j];
+    m->inc_len[v] = keep;
+    m->inc_ptr[vc] = base + keep;
+    m->inc_len[vc] = nm;
+    m->nnode++;
+    for (j = 0; j < nm; j++) {
+        amps_int t = m->inc[base + keep + j];
+        for (q = 0; q < 4; q++)
+            if (m->tet[4 * t + q] == v) {
+                if (amps__iv_push(ctx, &R->edits, 4 * t + q) || amps__iv_push(ctx, &R->edits, v)) return AMPS_ERR_OOM;
+                m->tet[4 * t + q] = vc;
+            }
+        if (amps__rm_queue_tet(ctx, m, R, t)) return AMPS_ERR_OOM;
+    }
+    return amps__iv_push(ctx, &R->queue, v) || amps__iv_push(ctx, &R->queue, -1) ? AMPS_ERR_OOM : AMPS_OK;
+}
+
+/* Position of tet t in the ascending star[0..n-1] (-1 if absent). */
+static amps_int amps__star_find(const amps_int *star, amps_int n, amps_int t) {
+    amps_int lo = 0, hi = n - 1;
+    while (lo <= hi) {
+        amps_int mid = lo + (hi - lo) / 2;
+        if (star[mid] < t) lo = mid + 1;
+        else if (star[mid] > t) hi = mid - 1;
+        else return mid;
+    }
+    return -1;
+}
+
+/* Separates the singular edge (a, b), its tets and groups in R->star / R->grp (kept root k),
+   at the first endpoint x whose star, grouped through shared faces, holds the kept group and
+   another group in different parts: each such part without the kept group gets its own copy
+   of x. *done = 0 when neither endpoint separates them. */
+static amps_status amps__rm_separate_edge(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R, amps_int a, amps_int b,
+                                          amps_int k, int *done) {
+    amps_int i, j, n = (amps_int)R->star.n, kept, x, K;
+    amps_status s = AMPS_OK;
+    int e;
+    *done = 0;
+    R->ed.n = R->eg.n = 0;
+    for (i = 0; i < n && !s; i++) {
+        s = amps__iv_push(ctx, &R->ed, R->star.a[i]);
+        if (!s) s = amps__iv_push(ctx, &R->eg, R->grp.a[i] == R->grp.a[k]);
+    }
+    for (e = 0; e < 2 && !s && !*done; e++) {
+        x = e ? b : a;
+        (void)amps__rm_groups(ctx, m, R, x, -1, 3, &kept, &s);
+        if (s) break;
+        for (i = 0; !R->eg.a[i]; i++) {}
+        K = R->grp.a[amps__star_find(R->star.a, (amps_int)R->star.n, R->ed.a[i])];
+        for (i = 0; i < n && !s; i++) {
+            amps_int t = R->ed.a[i], L;
+            if (R->eg.a[i]) continue;
+            j = amps__star_find(R->star.a, (amps_int)R->star.n, t);
+            if (j < 0) continue;
+            L = R->grp.a[j];
+            if (m->tet[4 * t] != x && m->tet[4 * t + 1] != x && m->tet[4 * t + 2] != x && m->tet[4 * t + 3] != x)
+                continue; /* its part already has a copy of x */
+            if (L == K) continue;
+            s = amps__rm_separate(ctx, m, R, x, R->star.a, R->grp.a, (amps_int)R->star.n, L);
+            *done = 1;
+        }
+    }
+    return s;
+}
+
+/* Resolves the queued vertices and edges until none is singular (policy REMOVE or SEPARATE). */
+static amps_status amps__rm_resolve(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R, amps_singular_policy policy) {
+    size_t h;
+    for (h = 0; h < R->queue.n; h += 2) {
+        amps_int a = R->queue.a[h], b = R->queue.a[h + 1], kept, ng, i, n;
+        amps_status s = AMPS_OK;
+        int done = 0;
+        ng = amps__rm_groups(ctx, m, R, a, b, b < 0 ? 2 : 3, &kept, &s);
+        if (s) return s;
+        if (ng < 2) continue;
+        n = (amps_int)R->star.n;
+        if (policy == AMPS_SINGULAR_SEPARATE && b < 0) {
+            for (i = 0; i < n && !s; i++)
+                if (R->grp.a[i] == i && i != kept) s = amps__rm_separate(ctx, m, R, a, R->star.a, R->grp.a, n, i);
+            if (s) return s;
+            continue;
+        }
+        if (policy == AMPS_SINGULAR_SEPARATE) {
+            s = amps__rm_separate_edge(ctx, m, R, a, b, kept, &done);
+            if (!s && !done) ng = amps__rm_groups(ctx, m, R, a, b, 3, &kept, &s);
+            if (s) return s;
+            if (done) continue;
+            n = (amps_int)R->star.n;
+        }
+        /* take a copy of the doomed tets first: amps__rm_take changes the stars */
+        R->aux.n = 0;
+        for (i = 0; i < n && !s; i++)
+            if (R->grp.a[i] != R->grp.a[kept]) s = amps__iv_push(ctx, &R->aux, R->star.a[i]);
+        for (i = 0; i < (amps_int)R->aux.n && !s; i++) s = amps__rm_take(ctx, m, R, R->aux.a[i]);
+        if (s) return s;
+    }
+    return AMPS_OK;
+}
+
+/* Restores m to its state before the removal R recorded. */
+static void amps__rm_undo(amps_mesh *m, struct amps__removal *R) {
+    size_t k;
+    amps_int v;
+    for (k = R->edits.n; k >= 2; k -= 2) m->tet[R->edits.a[k - 2]] = R->edits.a[k - 1];
+    for (k = 0; k + 4 <= R->saved.n; k += 4) {
+        amps_int *sv = R->saved.a + k;
+        m->inc_ptr[sv[0]] = sv[1];
+        m->inc_len[sv[0]] = sv[2];
+        if (sv[2] > 0) memcpy(m->inc + sv[1], R->slot.a + sv[3], sizeof(amps_int) * (size_t)sv[2]);
+    }
+    for (v = R->nnode0; v < m->nnode; v++) m->inc_ptr[v] = m->inc_len[v] = 0;
+    m->nnode = R->nnode0;
+    for (k = 0; k < R->tets.n; k++) m->removed[R->tets.a[k]] = 0;
+    m->nremoved -= (amps_int)R->tets.n;
+    R->valid = 0;
+}
+
+/* Checks the tets of amps_mesh_remove: in range, live, none twice (marked 2 while checking). */
+static amps_status amps__rm_check_input(amps_ctx *ctx, amps_mesh *m, amps_int n, const amps_int *tets) {
+    const char *fn = "amps_mesh_remove";
+    amps_status s = AMPS_OK;
+    amps_int i, k;
+    for (i = 0; i < n && !s; i++) {
+        amps_int t = tets[i];
+        if (t < 0 || t >= m->ntet)
+            s = amps__err(ctx, AMPS_ERR_INDEX, "%s: tetrahedron %lld out of range [0, %lld)", fn, (long long)t,
+                          (long long)m->ntet);
+        else if (m->removed[t] == 1)
+            s = amps__err(ctx, AMPS_ERR_ARG, "%s: tetrahedron %lld is already removed", fn, (long long)t);
+        else if (m->removed[t] == 2)
+            s = amps__err(ctx, AMPS_ERR_ARG, "%s: tetrahedron %lld is given twice", fn, (long long)t);
+        else m->removed[t] = 2;
+    }
+    for (k = 0; k < i; k++)
+        if (m->removed[tets[k]] == 2) m->removed[tets[k]] = 0;
+    return s;
+}
+
+/* Resets the record R for a removal from the current state of m. */
+static amps_status amps__rm_begin(amps_ctx *ctx, amps_mesh *m, struct amps__removal *R) {
+    R->valid = 0;
+    R->nnode0 = m->nnode;
+    R->tets.n = R->sep_node.n = R->sep_copy.n = R->sep_ptr.n = R->sep_tets.n = R->orphans.n = 0;
+    R->saved.n = R->slot.n = R->edits.n = R->queue.n = 0;
+    if (R->flag_cap < (size_t)m->nnode) {
+        void *p = R->flag;
+        if (amps__realloc(ctx, &p, (size_t)m->nnode, 1)) return AMPS_ERR_OOM;
+        R->flag = AMPS__CAST(unsigned char *, p);
+        memset(R->flag, 0, (size_t)m->nnode);
+        R->flag_cap = (size_t)m->nnode;
+    }
+    return amps__iv_push(ctx, &R->sep_ptr, 0);
+}
+
+/* Orphans of the removal R (saved nodes and new copies left in no tet), ascending. */
+static amps_status amps__rm_orphans(amps_ctx *ctx, const amps_mesh *m, struct amps__removal *R) {
+    size_t k;
+    amps_int v;
+    for (k = 0; k + 4 <= R->saved.n; k += 4)
+        if (m->inc_len[R->saved.a[k]] == 0 && amps__iv_push(ctx, &R->orphans, R->saved.a[k])) return AMPS_ERR_OOM;
+    for (v = R->nnode0; v < m->nnode; v++)
+        if (m->inc_len[v] == 0 && amps__iv_push(ctx, &R->orphans, v)) return AMPS_ERR_OOM;
+    if (R->orphans.n > 1) qsort(R->orphans.a, R->orphans.n, sizeof(amps_int), amps__int_cmp);
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_mesh_remove(amps_ctx *ctx, amps_mesh *m, amps_int n, const amps_int *tets,
+                                      amps_singular_policy policy, amps_mesh_removal *out) {
+    const char *fn = "amps_mesh_remove";
+    struct amps__removal *R;
+    amps_status s;
+    amps_int i;
+    size_t k;
+    if (out) memset(out, 0, sizeof(*out));
+    if (!m || !tets || n < 1) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL mesh or tets, or n < 1", fn);
+    if (policy != AMPS_SINGULAR_REMOVE && policy != AMPS_SINGULAR_SEPARATE && policy != AMPS_SINGULAR_IGNORE)
+        return amps__err(ctx, AMPS_ERR_ARG, "%s: unknown singularity policy %d", fn, (int)policy);
+    s = amps__rm_check_input(ctx, m, n, tets);
+    if (s) return s;
+    if (!m->last_removal) {
+        m->last_removal = AMPS__CAST(struct amps__removal *, amps__calloc(ctx, 1, sizeof(struct amps__removal)));
+        if (!m->last_removal) return AMPS_ERR_OOM;
+    }
+    R = m->last_removal;
+    s = amps__rm_begin(ctx, m, R);
+    for (i = 0; i < n && !s; i++) s = amps__rm_take(ctx, m, R, tets[i]);
+    if (!s && policy != AMPS_SINGULAR_IGNORE) s = amps__rm_resolve(ctx, m, R, policy);
+    if (!s) s = amps__rm_orphans(ctx, m, R);
+    for (k = 0; k + 4 <= R->saved.n; k += 4) R->flag[R->saved.a[k]] = 0;
+    if (s) {
+        amps__rm_undo(m, R);
+        return s;
+    }
+    R->valid = 1;
+    if (out) {
+        out->ntet = (amps_int)R->tets.n;
+        out->tets = R->tets.a;
+        out->nsep = (amps_int)R->sep_node.n;
+        out->sep_node = R->sep_node.a;
+        out->sep_copy = R->sep_copy.a;
+        out->sep_ptr = R->sep_ptr.a;
+        out->sep_tets = R->sep_tets.a;
+        out->norphan = (amps_int)R->orphans.n;
+        out->orphans = R->orphans.a;
+    }
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_mesh_unremove(amps_ctx *ctx, amps_mesh *m, const amps_mesh_removal *r) {
+    struct amps__removal *R = m ? m->last_removal : NULL;
+    if (!R || !R->valid || !r || r->tets != R->tets.a || r->ntet != (amps_int)R->tets.n)
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_unremove: not the record of the last change of the mesh");
+    amps__rm_undo(m, R);
+    return AMPS_OK;
+}
+
+/* Singular vertices (edges 0) or edges (edges 1) of m, see amps_mesh_singular_vertices. */
+static amps_int amps__singular(amps_ctx *ctx, const amps_mesh *m, int edges, amps_int *out) {
+    struct amps__removal R;
+    amps_int a, j, cnt = 0, kept;
+    amps_status s = AMPS_OK;
+    size_t k;
+    int q;
+    if (!m) {
+        amps__err(ctx, AMPS_ERR_ARG, "amps_mesh_singular_%s: NULL mesh", edges ? "edges" : "vertices");
+        return -1;
+    }
+    memset(&R, 0, sizeof(R));
+    for (a = 0; a < m->nnode && !s; a++) {
+        const amps_int *lst = m->inc + m->inc_ptr[a];
+        if (!edges) {
+            if (m->inc_len[a] > 1 && amps__rm_groups(ctx, m, &R, a, -1, 2, &kept, &s) > 1) {
+                if (out) out[cnt] = a;
+                cnt++;
+            }
+            continue;
+        }
+        R.aux.n = 0; /* the neighbours b > a, ascending and distinct */
+        for (j = 0; j < m->inc_len[a] && !s; j++)
+            for (q = 0; q < 4 && !s; q++)
+                if (m->tet[4 * lst[j] + q] > a) s = amps__iv_push(ctx, &R.aux, m->tet[4 * lst[j] + q]);
+        if (s) break;
+        if (R.aux.n > 1) qsort(R.aux.a, R.aux.n, sizeof(amps_int), amps__int_cmp);
+        for (k = 0; k < R.aux.n && !s; k++) {
+            if (k > 0 && R.aux.a[k] == R.aux.a[k - 1]) continue;
+            if (amps__rm_groups(ctx, m, &R, a, R.aux.a[k], 3, &kept, &s) > 1) {
+                if (out) out[2 * cnt] = a, out[2 * cnt + 1] = R.aux.a[k];
+                cnt++;
+            }
+        }
+    }
+    amps__free(ctx, R.star.a);
+    amps__free(ctx, R.grp.a);
+    amps__free(ctx, R.aux.a);
+    return s ? -1 : cnt;
+}
+
+AMPS_API amps_int amps_mesh_singular_vertices(amps_ctx *ctx, const amps_mesh *m, amps_int *out) {
+    return amps__singular(ctx, m, 0, out);
+}
+
+AMPS_API amps_int amps_mesh_singular_edges(amps_ctx *ctx, const amps_mesh *m, amps_int *out) {
+    return amps__singular(ctx, m, 1, out);
 }
 
 #endif /* AMPS_NO_FEM */
@@ -11877,6 +12534,7 @@ static amps_status amps__lx_index(amps__lex *L, int cross, const char *what, lon
 typedef struct amps__tetrec {
     amps_int v[4];
     long long line;
+    amps_int region; /* region attribute (0 if none) */
 } amps__tetrec;
 
 /* Growable list of tets with the line each came from. */
@@ -11884,6 +12542,7 @@ typedef struct amps__tetbuf {
     amps_int *tet;
     long long *line;
     amps_int n, cap;
+    amps_int *region;
 } amps__tetbuf;
 
 static amps_status amps__tb_reserve(amps_ctx *ctx, amps__tetbuf *b, amps_int cap) {
@@ -11896,6 +12555,9 @@ static amps_status amps__tb_reserve(amps_ctx *ctx, amps__tetbuf *b, amps_int cap
     p = b->line;
     if (amps__realloc(ctx, &p, (size_t)cap, sizeof(long long))) return AMPS_ERR_OOM;
     b->line = AMPS__CAST(long long *, p);
+    p = b->region;
+    if (amps__realloc(ctx, &p, (size_t)cap, sizeof(amps_int))) return AMPS_ERR_OOM;
+    b->region = AMPS__CAST(amps_int *, p);
     b->cap = cap;
     return AMPS_OK;
 }
@@ -11910,6 +12572,7 @@ static amps_status amps__tb_push(amps_ctx *ctx, amps__tetbuf *b, const amps__tet
         if (b->n == b->cap) return amps__err(ctx, AMPS_ERR_OOM, "too many tetrahedra for the index type");
     }
     memcpy(b->tet + 4 * (size_t)b->n, r->v, 4 * sizeof(amps_int));
+    b->region[b->n] = r->region;
     b->line[b->n++] = r->line;
     return AMPS_OK;
 }
@@ -11917,6 +12580,15 @@ static amps_status amps__tb_push(amps_ctx *ctx, amps__tetbuf *b, const amps__tet
 static void amps__tb_free(amps_ctx *ctx, amps__tetbuf *b) {
     amps__free(ctx, b->tet);
     amps__free(ctx, b->line);
+    amps__free(ctx, b->region);
+}
+
+/* Region attribute v of the last token as an amps_int into *out. */
+static amps_status amps__lx_region(amps__lex *L, long long v, amps_int *out) {
+    if (v < -(long long)AMPS__IMAX || v > (long long)AMPS__IMAX)
+        return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "region attribute %lld out of range", v);
+    *out = (amps_int)v;
+    return AMPS_OK;
 }
 
 /* State of a mesh reader: the lexer, nn points (3 coordinates each, file order) and the tets. */
@@ -11955,6 +12627,7 @@ static amps_mesh *amps__rd_mesh(amps__rd *R) {
                      "degenerate tetrahedron (file nodes %lld %lld %lld %lld, 0-based)", (long long)tv[0],
                      (long long)tv[1], (long long)tv[2], (long long)tv[3]);
     }
+    if (m) memcpy(m->region, R->tb.region, sizeof(amps_int) * (size_t)R->tb.n);
     return m;
 }
 
@@ -12020,27 +12693,35 @@ static amps_status amps__tetgen_ele_head(amps__lex *L, long long *ne, long long 
     return AMPS_OK;
 }
 
-/* One .ele line "<number> <nper node indices in [base, base + np - 1]> [attributes]": the first
-   4 nodes (0-based) and the line into r. Moves to the next line. */
-static amps_status amps__tetgen_tet(amps__lex *L, long long nper, long long base, long long np, amps__tetrec *r) {
+/* One .ele line "<number> <nper node indices in [base, base + np - 1]> [nat attributes]": the
+   first 4 nodes (0-based), the first attribute (an integer: the region, as tetgen -A writes it;
+   0 if nat = 0) and the line into r. Moves to the next line. */
+static amps_status amps__tetgen_tet(amps__lex *L, long long nper, long long nat, long long base, long long np,
+                                    amps__tetrec *r) {
     long long idx, q;
     amps_int extra;
+    double at = 0.0;
     amps_status s = amps__lx_int(L, 1, &idx, "tetrahedron number");
     r->line = L->tline;
+    r->region = 0;
     for (q = 0; !s && q < nper; q++) s = amps__lx_index(L, 0, "node index", base, np, q < 4 ? r->v + q : &extra);
-    if (!s) amps__lx_eol(L); /* attributes */
+    if (!s && nat > 0) s = amps__lx_num(L, 0, &at, "region attribute");
+    if (!s && nat > 0 && (at != floor(at) || fabs(at) > (double)AMPS__IMAX))
+        s = amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "region attribute %g is not an integer", at);
+    if (!s) r->region = (amps_int)at;
+    if (!s) amps__lx_eol(L); /* other attributes */
     return s;
 }
 
-/* The ne tet lines of .ele, node indices from base; nothing may follow. Fills R->tb. */
-static amps_status amps__tetgen_tets(amps__rd *R, long long ne, long long nper, long long base) {
+/* The ne tet lines of .ele (nat attributes), node indices from base; nothing may follow. Fills R->tb. */
+static amps_status amps__tetgen_tets(amps__rd *R, long long ne, long long nper, long long nat, long long base) {
     amps__lex *L = &R->L;
     amps__tetrec r;
     long long k;
     amps_status s = amps__tb_reserve(L->ctx, &R->tb, (amps_int)(ne > 0 ? ne : 1));
     for (k = 0; !s && k < ne; k++) {
         s = amps__lx_rec(L, k, ne, "tetrahedra");
-        if (!s) s = amps__tetgen_tet(L, nper, base, R->nn, &r);
+        if (!s) s = amps__tetgen_tet(L, nper, nat, base, R->nn, &r);
         if (!s) s = amps__tb_push(L->ctx, &R->tb, &r);
     }
     return s ? s : amps__lx_trail(L, ne, "tetrahedra");
@@ -12059,7 +12740,7 @@ AMPS_API amps_mesh *amps_mesh_read_tetgen_mem(amps_ctx *ctx, const char *node_bu
         amps__lx_init(&R.L, ctx, ele_buf, ele_len, ele_name ? ele_name : "<ele>", '#');
         s = amps__tetgen_ele_head(&R.L, &ne, &nper, &nat);
     }
-    if (!s) s = amps__tetgen_tets(&R, ne, nper, base);
+    if (!s) s = amps__tetgen_tets(&R, ne, nper, nat, base);
     return amps__rd_end(&R, s);
 }
 
@@ -12083,7 +12764,10 @@ typedef struct amps__gmsh {
     int have_nodes, have_elems;
     char sec[24]; /* name of the current section, without '$' */
     /* hexahedra, prisms, pyramids (not read) and the line of the first */
-    long long nvol[3], vol_line;
+    long long nother[3], vol_line;
+    long long *vol_tag; /* 4.1 $Entities: the nvol volume entities and the first physical tag of */
+    amps_int *vol_phys; /* each (0 if none) */
+    long long nvol;
 } amps__gmsh;
 
 /* Counts an element of Gmsh type type on line line if it is a hexahedron, prism or pyramid (of
@@ -12094,8 +12778,8 @@ static void amps__gmsh_volume(amps__gmsh *G, long long type, long long line, lon
     for (a = 0; a < 3; a++)
         for (b = 0; b < 5; b++)
             if (type == kind[a][b]) {
-                if (!G->nvol[0] && !G->nvol[1] && !G->nvol[2]) G->vol_line = line;
-                G->nvol[a] += n;
+                if (!G->nother[0] && !G->nother[1] && !G->nother[2]) G->vol_line = line;
+                G->nother[a] += n;
             }
 }
 
@@ -12311,7 +12995,8 @@ static amps_status amps__gmsh_tet(amps__gmsh *G, amps__tetrec *r) {
     return s ? s : amps__tb_push(G->R.L.ctx, &G->R.tb, r);
 }
 
-/* 2.x element lines "number type ntags <tags> <nodes>"; the tets (type 4) join R.tb. */
+/* 2.x element lines "number type ntags <tags> <nodes>"; the tets (type 4) join R.tb, their
+   region the first tag (the physical one; 0 without tags). */
 static amps_status amps__gmsh_elems2(amps__gmsh *G, long long total) {
     amps__lex *L = &G->R.L;
     amps__tetrec r;
@@ -12323,7 +13008,11 @@ static amps_status amps__gmsh_elems2(amps__gmsh *G, long long total) {
         if (!s) s = amps__lx_int(L, 0, &type, "element type");
         if (!s) s = amps__lx_int(L, 0, &c, "tag count");
         if (!s && c < 0) s = amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "negative tag count %lld", c);
-        for (i = 0; !s && type == 4 && i < c; i++) s = amps__lx_int(L, 0, &a, "element tag");
+        r.region = 0;
+        for (i = 0; !s && type == 4 && i < c; i++) {
+            s = amps__lx_int(L, 0, &a, "element tag");
+            if (!s && i == 0) s = amps__lx_region(L, a, &r.region); /* the physical tag */
+        }
         if (!s && type == 4) s = amps__gmsh_tet(G, &r);
         if (!s) amps__gmsh_volume(G, type, r.line, 1);
         if (!s) amps__lx_eol(L);
@@ -12332,7 +13021,7 @@ static amps_status amps__gmsh_elems2(amps__gmsh *G, long long total) {
 }
 
 /* 4.1 element blocks: a header, then one element a line "tag <nodes>"; the tets (type 4) join
-   R.tb; together total elements. */
+   R.tb, their region the physical tag of the block's volume entity; together total elements. */
 static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long total) {
     amps__lex *L = &G->R.L;
     amps__gblk h;
@@ -12341,6 +13030,9 @@ static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long to
     for (b = 0; b < nblk; b++) {
         amps_status s = amps__gmsh_block(L, 1, total, got, &h);
         if (!s) amps__gmsh_volume(G, h.kind, L->tline, h.n);
+        r.region = 0;
+        for (i = 0; h.dim == 3 && i < G->nvol; i++)
+            if (G->vol_tag[i] == h.tag) r.region = G->vol_phys[i];
         for (i = 0; !s && i < h.n; i++) {
             if (h.kind == 4) {
                 s = amps__lx_int(L, 1, &a, "element tag");
@@ -12355,6 +13047,41 @@ static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long to
         got += h.n;
     }
     return amps__gmsh_held(L, 1, total, got);
+}
+
+/* 4.1 $Entities up to $EndEntities: "numPoints numCurves numSurfaces numVolumes", one entity a
+   line; of a volume "tag minX minY minZ maxX maxY maxZ numPhysicalTags physicalTag ... ..."
+   keeps the tag and its first physical tag. Other versions skip the section. */
+static amps_status amps__gmsh_entities(amps__gmsh *G) {
+    amps__lex *L = &G->R.L;
+    long long cnt[4], k, i, nph, tag, ph;
+    double x;
+    amps_status s = AMPS_OK;
+    if (G->version != 4 || G->vol_tag) return amps__gmsh_skip(L, G->sec);
+    for (k = 0; k < 4 && !s; k++) s = amps__lx_nrec(L, k == 0, cnt + k, "entity count", "entity", 1);
+    if (s) return s;
+    amps__lx_eol(L);
+    G->vol_tag = AMPS__CAST(long long *, amps__malloc(L->ctx, (size_t)cnt[3], sizeof(long long)));
+    G->vol_phys = AMPS__CAST(amps_int *, amps__malloc(L->ctx, (size_t)cnt[3], sizeof(amps_int)));
+    if (!G->vol_tag || !G->vol_phys) return AMPS_ERR_OOM;
+    for (k = 0; k < cnt[0] + cnt[1] + cnt[2] && !s; k++) {
+        s = amps__lx_int(L, 1, &tag, "entity tag");
+        if (!s) amps__lx_eol(L);
+    }
+    for (k = 0; k < cnt[3] && !s; k++) {
+        s = amps__lx_int(L, 1, &tag, "volume tag");
+        for (i = 0; i < 6 && !s; i++) s = amps__lx_num(L, 0, &x, "bounding box coordinate");
+        if (!s) s = amps__lx_int(L, 0, &nph, "physical tag count");
+        G->vol_tag[k] = tag;
+        G->vol_phys[k] = 0;
+        G->nvol = k + 1;
+        for (i = 0; i < nph && !s; i++) {
+            s = amps__lx_int(L, 0, &ph, "physical tag");
+            if (!s && i == 0) s = amps__lx_region(L, ph, G->vol_phys + k);
+        }
+        if (!s) amps__lx_eol(L); /* bounding surfaces */
+    }
+    return s ? s : amps__gmsh_end(L, "Entities", " (entity count mismatch?)");
 }
 
 /* $Elements (after $Nodes) up to $EndElements. */
@@ -12383,6 +13110,7 @@ static amps_status amps__gmsh_section(amps__gmsh *G) {
     if (!strcmp(G->sec, "MeshFormat")) return amps__gmsh_format(G);
     if (!strcmp(G->sec, "Nodes")) return amps__gmsh_nodes(G);
     if (!strcmp(G->sec, "Elements")) return amps__gmsh_elements(G);
+    if (!strcmp(G->sec, "Entities")) return amps__gmsh_entities(G);
     return amps__gmsh_skip(L, G->sec);
 }
 
@@ -12396,16 +13124,18 @@ AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size
     while (!s && amps__lx_tok(L, 1)) s = amps__gmsh_section(&G);
     if (!s && !G.version) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "empty file (no $MeshFormat)");
     if (!s && !G.have_nodes) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no $Nodes section");
-    if (!s && (G.nvol[0] || G.nvol[1] || G.nvol[2]))
+    if (!s && (G.nother[0] || G.nother[1] || G.nother[2]))
         s = amps__lx_err(L, G.vol_line, AMPS_ERR_MESH,
                          "%lld hexahedr%s, %lld prism%s, %lld pyramid%s: amps reads tetrahedra only (type 4); "
                          "mesh with tetrahedra only",
-                         G.nvol[0], G.nvol[0] == 1 ? "on" : "a", G.nvol[1], G.nvol[1] == 1 ? "" : "s", G.nvol[2],
-                         G.nvol[2] == 1 ? "" : "s");
+                         G.nother[0], G.nother[0] == 1 ? "on" : "a", G.nother[1], G.nother[1] == 1 ? "" : "s", G.nother[2],
+                         G.nother[2] == 1 ? "" : "s");
     if (!s && G.R.tb.n == 0)
         s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no tetrahedra (element type 4) in the file");
     m = amps__rd_end(&G.R, s);
     amps__free(ctx, G.tags);
+    amps__free(ctx, G.vol_tag);
+    amps__free(ctx, G.vol_phys);
     return m;
 }
 
@@ -12446,7 +13176,8 @@ static amps_status amps__medit_vertices(amps__rd *R) {
     return s;
 }
 
-/* One tetrahedron "v1 v2 v3 v4 ref" (vertex indices from 1): nodes and the line of v1 into r. */
+/* One tetrahedron "v1 v2 v3 v4 ref" (vertex indices from 1): nodes, the line of v1 and the
+   region ref into r. */
 static amps_status amps__medit_tet(amps__rd *R, amps__tetrec *r) {
     long long ref;
     int q;
@@ -12455,7 +13186,8 @@ static amps_status amps__medit_tet(amps__rd *R, amps__tetrec *r) {
         s = amps__lx_index(&R->L, 1, "vertex index", 1, R->nn, r->v + q);
         if (q == 0) r->line = R->L.tline;
     }
-    return s ? s : amps__lx_int(&R->L, 1, &ref, "tetrahedron reference");
+    if (!s) s = amps__lx_int(&R->L, 1, &ref, "tetrahedron reference");
+    return s ? s : amps__lx_region(&R->L, ref, &r->region);
 }
 
 /* Tetrahedra, after the keyword (after Vertices, once: *seen): the count, then the tets into R->tb. */
@@ -12661,19 +13393,20 @@ AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const 
     amps__pr(&o, "<?xml version=\"1.0\"?>\n"
                  "<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n");
     amps__pr(&o, "<UnstructuredGrid>\n<Piece NumberOfPoints=\"%lld\" NumberOfCells=\"%lld\">\n", (long long)m->nnode,
-             (long long)m->ntet);
+             (long long)(m->ntet - m->nremoved));
     amps__pr(&o, "<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n");
     for (v = 0; v < m->nnode; v++)
         amps__pr(&o, "%.17g %.17g %.17g\n", m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
     amps__pr(&o,
              "</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
     for (t = 0; t < m->ntet; t++)
-        amps__pr(&o, "%lld %lld %lld %lld\n", (long long)m->tet[4 * t], (long long)m->tet[4 * t + 1],
-                 (long long)m->tet[4 * t + 2], (long long)m->tet[4 * t + 3]);
+        if (!m->removed[t])
+            amps__pr(&o, "%lld %lld %lld %lld\n", (long long)m->tet[4 * t], (long long)m->tet[4 * t + 1],
+                     (long long)m->tet[4 * t + 2], (long long)m->tet[4 * t + 3]);
     amps__pr(&o, "</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
-    for (t = 0; t < m->ntet; t++) amps__pr(&o, "%lld\n", 4 * (long long)(t + 1));
+    for (t = 0; t < m->ntet - m->nremoved; t++) amps__pr(&o, "%lld\n", 4 * (long long)(t + 1));
     amps__pr(&o, "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
-    for (t = 0; t < m->ntet; t++) amps__pr(&o, "10\n");
+    for (t = 0; t < m->ntet - m->nremoved; t++) amps__pr(&o, "10\n");
     amps__pr(&o, "</DataArray>\n</Cells>\n");
     amps__pr(&o, "<PointData%s>\n", disp ? " Vectors=\"displacement\"" : "");
     if (disp) {
@@ -12688,21 +13421,26 @@ AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const 
     amps__pr(&o, "<CellData%s>\n", von_mises ? " Scalars=\"von_mises\"" : "");
     if (von_mises) {
         amps__pr(&o, "<DataArray type=\"Float64\" Name=\"von_mises\" format=\"ascii\">\n");
-        for (t = 0; t < m->ntet; t++) amps__pr(&o, "%.17g\n", von_mises[t]);
+        for (t = 0; t < m->ntet; t++)
+            if (!m->removed[t]) amps__pr(&o, "%.17g\n", von_mises[t]);
         amps__pr(&o, "</DataArray>\n");
     }
     if (principal) {
         amps__pr(&o,
                  "<DataArray type=\"Float64\" Name=\"principal_stress\" NumberOfComponents=\"3\" format=\"ascii\">\n");
         for (t = 0; t < m->ntet; t++)
-            amps__pr(&o, "%.17g %.17g %.17g\n", principal[3 * t], principal[3 * t + 1], principal[3 * t + 2]);
+            if (!m->removed[t])
+                amps__pr(&o, "%.17g %.17g %.17g\n", principal[3 * t], principal[3 * t + 1], principal[3 * t + 2]);
         amps__pr(&o, "</DataArray>\n");
     }
-    amps__pr(&o, "<DataArray type=\"UInt8\" Name=\"cut\" format=\"ascii\">\n");
+    amps__pr(&o, "<DataArray type=\"Int64\" Name=\"region\" format=\"ascii\">\n");
+    for (t = 0; t < m->ntet; t++)
+        if (!m->removed[t]) amps__pr(&o, "%lld\n", (long long)m->region[t]);
+    amps__pr(&o, "</DataArray>\n<DataArray type=\"UInt8\" Name=\"cut\" format=\"ascii\">\n");
     for (t = 0; t < m->ntet; t++) {
         const amps_int *tv = m->tet + 4 * t;
         int cut = tv[0] >= m->nfile || tv[1] >= m->nfile || tv[2] >= m->nfile || tv[3] >= m->nfile;
-        amps__pr(&o, "%d\n", cut);
+        if (!m->removed[t]) amps__pr(&o, "%d\n", cut);
     }
     amps__pr(&o, "</DataArray>\n</CellData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
     return amps__close_out(ctx, fn, path, &o);
@@ -12736,50 +13474,140 @@ AMPS_API amps_status amps_mesh_write_tetgen(amps_ctx *ctx, const char *base, con
         s = amps__open_out(ctx, fn, path, &o);
     }
     if (!s) {
-        amps__pr(&o, "%lld 4 0\n", (long long)m->ntet);
-        for (t = 0; t < m->ntet; t++)
-            amps__pr(&o, "%lld %lld %lld %lld %lld\n", (long long)t + first_index,
-                     (long long)m->tet[4 * t] + first_index, (long long)m->tet[4 * t + 1] + first_index,
-                     (long long)m->tet[4 * t + 2] + first_index, (long long)m->tet[4 * t + 3] + first_index);
+        int nat = 0;
+        long long k = first_index;
+        for (t = 0; t < m->ntet; t++) nat |= !m->removed[t] && m->region[t] != 0;
+        amps__pr(&o, "%lld 4 %d\n", (long long)(m->ntet - m->nremoved), nat);
+        for (t = 0; t < m->ntet; t++) {
+            if (m->removed[t]) continue;
+            amps__pr(&o, "%lld %lld %lld %lld %lld", k++, (long long)m->tet[4 * t] + first_index,
+                     (long long)m->tet[4 * t + 1] + first_index, (long long)m->tet[4 * t + 2] + first_index,
+                     (long long)m->tet[4 * t + 3] + first_index);
+            if (nat) amps__pr(&o, " %lld", (long long)m->region[t]);
+            amps__pr(&o, "\n");
+        }
         s = amps__close_out(ctx, fn, path, &o);
     }
     amps__free(ctx, path);
     return s;
 }
 
+/* The distinct regions of the live tets of m, ascending, into a new array *reg (*n of them). */
+static amps_status amps__live_regions(amps_ctx *ctx, const amps_mesh *m, amps_int **reg, amps_int *n) {
+    amps_int t, k = 0, *r = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m->ntet, sizeof(amps_int)));
+    *reg = r;
+    *n = 0;
+    if (!r) return AMPS_ERR_OOM;
+    for (t = 0; t < m->ntet; t++)
+        if (!m->removed[t]) r[k++] = m->region[t];
+    if (k > 1) qsort(r, (size_t)k, sizeof(amps_int), amps__int_cmp);
+    for (t = 0; t < k; t++)
+        if (*n == 0 || r[t] != r[*n - 1]) r[(*n)++] = r[t];
+    return AMPS_OK;
+}
+
+/* Index of region id in the ascending reg[0..n-1] (present). */
+static amps_int amps__region_index(const amps_int *reg, amps_int n, amps_int id) {
+    amps_int lo = 0, hi = n - 1;
+    while (lo < hi) {
+        amps_int mid = lo + (hi - lo) / 2;
+        if (reg[mid] < id) lo = mid + 1;
+        else hi = mid;
+    }
+    return lo;
+}
+
+/* Gmsh 4.1 $Entities: volume entity k + 1 per region reg[k] (physical tag reg[k]; none for
+   region 0), all with the bounding box of the nodes; at least volume 1, which holds the nodes. */
+static void amps__gmsh_write_entities(amps__out *o, const amps_mesh *m, const amps_int *reg, amps_int nreg) {
+    double lo[3], hi[3];
+    amps_int v, k;
+    int c;
+    for (c = 0; c < 3; c++) lo[c] = hi[c] = m->xyz[c];
+    for (v = 0; v < m->nnode; v++)
+        for (c = 0; c < 3; c++) {
+            if (m->xyz[3 * v + c] < lo[c]) lo[c] = m->xyz[3 * v + c];
+            if (m->xyz[3 * v + c] > hi[c]) hi[c] = m->xyz[3 * v + c];
+        }
+    amps__pr(o, "$Entities\n0 0 0 %lld\n", (long long)(nreg > 0 ? nreg : 1));
+    for (k = 0; k < (nreg > 0 ? nreg : 1); k++) {
+        amps__pr(o, "%lld %.17g %.17g %.17g %.17g %.17g %.17g", (long long)k + 1, lo[0], lo[1], lo[2], hi[0], hi[1],
+                 hi[2]);
+        if (nreg > 0 && reg[k] != 0) amps__pr(o, " 1 %lld 0\n", (long long)reg[k]);
+        else amps__pr(o, " 0 0\n");
+    }
+    amps__pr(o, "$EndEntities\n");
+}
+
+/* Gmsh 4.1 $Elements of the live tets in index order: one block per run of equal regions, in
+   the region's volume entity. */
+static void amps__gmsh_write_blocks4(amps__out *o, const amps_mesh *m, const amps_int *reg, amps_int nreg) {
+    amps_int t, u, nblk = 0, prev = 0;
+    long long k = 1;
+    for (t = 0, u = 0; t < m->ntet; t++)
+        if (!m->removed[t]) {
+            if (u == 0 || m->region[t] != prev) nblk++;
+            prev = m->region[t];
+            u = 1;
+        }
+    amps__pr(o, "$Elements\n%lld %lld 1 %lld\n", (long long)nblk, (long long)(m->ntet - m->nremoved),
+             (long long)(m->ntet - m->nremoved));
+    for (t = 0; t < m->ntet; t = u) {
+        amps_int cnt = 0;
+        if (m->removed[t]) {
+            u = t + 1;
+            continue;
+        }
+        for (u = t; u < m->ntet && (m->removed[u] || m->region[u] == m->region[t]); u++) cnt += !m->removed[u];
+        amps__pr(o, "3 %lld 4 %lld\n", (long long)amps__region_index(reg, nreg, m->region[t]) + 1, (long long)cnt);
+        for (u = t; u < m->ntet && (m->removed[u] || m->region[u] == m->region[t]); u++)
+            if (!m->removed[u])
+                amps__pr(o, "%lld %lld %lld %lld %lld\n", k++, (long long)m->tet[4 * u] + 1,
+                         (long long)m->tet[4 * u + 1] + 1, (long long)m->tet[4 * u + 2] + 1,
+                         (long long)m->tet[4 * u + 3] + 1);
+    }
+}
+
 AMPS_API amps_status amps_mesh_write_gmsh(amps_ctx *ctx, const char *path, const amps_mesh *m, int version) {
     const char *fn = "amps_mesh_write_gmsh";
     amps__out o;
-    amps_int v, t;
+    amps_int v, t, *reg = NULL, nreg = 0;
     amps_status s;
-    long long nn, nt;
+    long long nn, nt, k;
     if (!m || (version != 2 && version != 4))
         return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL mesh or version not 2 or 4", fn);
     s = amps__open_out(ctx, fn, path, &o);
     if (s) return s;
     nn = (long long)m->nnode;
-    nt = (long long)m->ntet;
-    amps__pr(&o, "$MeshFormat\n%s 0 8\n$EndMeshFormat\n$Nodes\n", version == 2 ? "2.2" : "4.1");
+    nt = (long long)(m->ntet - m->nremoved);
+    if (version == 4) {
+        s = amps__live_regions(ctx, m, &reg, &nreg);
+        if (s) {
+            fclose(o.f);
+            return s;
+        }
+    }
+    amps__pr(&o, "$MeshFormat\n%s 0 8\n$EndMeshFormat\n", version == 2 ? "2.2" : "4.1");
     if (version == 2) {
-        amps__pr(&o, "%lld\n", nn);
+        amps__pr(&o, "$Nodes\n%lld\n", nn);
         for (v = 0; v < m->nnode; v++)
             amps__pr(&o, "%lld %.17g %.17g %.17g\n", (long long)v + 1, m->xyz[3 * v], m->xyz[3 * v + 1],
                      m->xyz[3 * v + 2]);
         amps__pr(&o, "$EndNodes\n$Elements\n%lld\n", nt);
-        for (t = 0; t < m->ntet; t++)
-            amps__pr(&o, "%lld 4 2 0 1 %lld %lld %lld %lld\n", (long long)t + 1, (long long)m->tet[4 * t] + 1,
-                     (long long)m->tet[4 * t + 1] + 1, (long long)m->tet[4 * t + 2] + 1,
-                     (long long)m->tet[4 * t + 3] + 1);
+        for (t = 0, k = 1; t < m->ntet; t++)
+            if (!m->removed[t])
+                amps__pr(&o, "%lld 4 2 %lld 1 %lld %lld %lld %lld\n", k++, (long long)m->region[t],
+                         (long long)m->tet[4 * t] + 1, (long long)m->tet[4 * t + 1] + 1,
+                         (long long)m->tet[4 * t + 2] + 1, (long long)m->tet[4 * t + 3] + 1);
     } else {
-        amps__pr(&o, "1 %lld 1 %lld\n3 1 0 %lld\n", nn, nn, nn);
+        amps__gmsh_write_entities(&o, m, reg, nreg);
+        amps__pr(&o, "$Nodes\n1 %lld 1 %lld\n3 1 0 %lld\n", nn, nn, nn);
         for (v = 0; v < m->nnode; v++) amps__pr(&o, "%lld\n", (long long)v + 1);
         for (v = 0; v < m->nnode; v++)
             amps__pr(&o, "%.17g %.17g %.17g\n", m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
-        amps__pr(&o, "$EndNodes\n$Elements\n1 %lld 1 %lld\n3 1 4 %lld\n", nt, nt, nt);
-        for (t = 0; t < m->ntet; t++)
-            amps__pr(&o, "%lld %lld %lld %lld %lld\n", (long long)t + 1, (long long)m->tet[4 * t] + 1,
-                     (long long)m->tet[4 * t + 1] + 1, (long long)m->tet[4 * t + 2] + 1,
-                     (long long)m->tet[4 * t + 3] + 1);
+        amps__pr(&o, "$EndNodes\n");
+        amps__gmsh_write_blocks4(&o, m, reg, nreg);
+        amps__free(ctx, reg);
     }
     amps__pr(&o, "$EndElements\n");
     return amps__close_out(ctx, fn, path, &o);
@@ -12796,11 +13624,49 @@ AMPS_API amps_status amps_mesh_write_medit(amps_ctx *ctx, const char *path, cons
     amps__pr(&o, "MeshVersionFormatted 2\nDimension 3\nVertices\n%lld\n", (long long)m->nnode);
     for (v = 0; v < m->nnode; v++)
         amps__pr(&o, "%.17g %.17g %.17g 0\n", m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
-    amps__pr(&o, "Tetrahedra\n%lld\n", (long long)m->ntet);
+    amps__pr(&o, "Tetrahedra\n%lld\n", (long long)(m->ntet - m->nremoved));
     for (t = 0; t < m->ntet; t++)
-        amps__pr(&o, "%lld %lld %lld %lld 1\n", (long long)m->tet[4 * t] + 1, (long long)m->tet[4 * t + 1] + 1,
-                 (long long)m->tet[4 * t + 2] + 1, (long long)m->tet[4 * t + 3] + 1);
+        if (!m->removed[t])
+            amps__pr(&o, "%lld %lld %lld %lld %lld\n", (long long)m->tet[4 * t] + 1, (long long)m->tet[4 * t + 1] + 1,
+                     (long long)m->tet[4 * t + 2] + 1, (long long)m->tet[4 * t + 3] + 1, (long long)m->region[t]);
     amps__pr(&o, "End\n");
+    return amps__close_out(ctx, fn, path, &o);
+}
+
+/* s with the XML special characters as entities. */
+static void amps__pr_xml(amps__out *o, const char *s) {
+    for (; *s; s++) {
+        if (*s == '&') amps__pr(o, "&amp;");
+        else if (*s == '<') amps__pr(o, "&lt;");
+        else if (*s == '>') amps__pr(o, "&gt;");
+        else if (*s == '"') amps__pr(o, "&quot;");
+        else amps__pr(o, "%c", *s);
+    }
+}
+
+AMPS_API amps_status amps_pvd_write(amps_ctx *ctx, const char *path, amps_int n, const char *const *vtu_files,
+                                    const double *times) {
+    const char *fn = "amps_pvd_write";
+    amps__out o;
+    amps_int k;
+    amps_status s;
+    if (!path || n < 0 || (n > 0 && (!vtu_files || !times)))
+        return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL path or array, or n < 0", fn);
+    for (k = 0; k < n; k++) {
+        if (!vtu_files[k]) return amps__err(ctx, AMPS_ERR_ARG, "%s: file name %lld is NULL", fn, (long long)k);
+        if (!amps__isfinite(times[k]))
+            return amps__err(ctx, AMPS_ERR_VALUE, "%s: time %lld is not finite", fn, (long long)k);
+    }
+    s = amps__open_out(ctx, fn, path, &o);
+    if (s) return s;
+    amps__pr(&o, "<?xml version=\"1.0\"?>\n"
+                 "<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n");
+    for (k = 0; k < n; k++) {
+        amps__pr(&o, "<DataSet timestep=\"%.17g\" group=\"\" part=\"0\" file=\"", times[k]);
+        amps__pr_xml(&o, vtu_files[k]);
+        amps__pr(&o, "\"/>\n");
+    }
+    amps__pr(&o, "</Collection>\n</VTKFile>\n");
     return amps__close_out(ctx, fn, path, &o);
 }
 #endif /* AMPS_NO_STDIO */

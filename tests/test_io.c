@@ -623,6 +623,15 @@ static long t_array_count(const char *s, const char *name, double *sum) {
     return n;
 }
 
+/* A fresh context and the beam 5 x 5 x 4 (NULL, with a failed check, if it cannot be made). */
+static amps_mesh *t_beam4(amps_ctx *ctx) {
+    amps_mesh *m;
+    amps_ctx_init(ctx);
+    m = amps_mesh_beam(ctx, 4);
+    CHECK(m != NULL, "beam: %s", ctx->msg);
+    return m;
+}
+
 static void test_vtu(void) {
     amps_ctx ctx;
     amps_mesh *m;
@@ -631,12 +640,8 @@ static void test_vtu(void) {
     amps_int moved[64], nm, vc, v, t, ncut = 0;
     size_t len;
     char *txt;
-    amps_ctx_init(&ctx);
-    m = amps_mesh_beam(&ctx, 4);
-    if (!m) {
-        CHECK(0, "beam");
-        return;
-    }
+    m = t_beam4(&ctx);
+    if (!m) return;
     for (v = 50; v < 55; v++) amps_mesh_cut(&ctx, m, v, p, n, &vc, moved, &nm);
     for (t = 0; t < m->ntet; t++) {
         int k, c = 0;
@@ -826,6 +831,217 @@ static void test_reader_oom(void) {
     }
 }
 
+/* ---- region attributes ---- */
+
+static const char *G41_REGIONS =
+        "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$PhysicalNames\n2\n3 5 \"body\"\n3 9 \"fissure\"\n$EndPhysicalNames\n"
+        "$Entities\n1 1 0 3\n1 0 0 0 0\n1 0 0 0 1 1 1 0 2 1 -1\n"
+        "7 0 0 0 1 1 1 1 5 0\n8 0 0 0 1 1 1 2 9 5 0\n4 0 0 0 1 1 1 0 0\n$EndEntities\n"
+        "$Nodes\n1 6 1 6\n3 7 0 6\n1\n2\n3\n4\n5\n6\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 1\n0.5 0.5 -1\n$EndNodes\n"
+        "$Elements\n3 3 1 3\n3 8 4 1\n1 1 2 3 4\n3 4 4 1\n2 2 3 4 5\n3 7 4 1\n3 1 3 2 6\n$EndElements\n";
+
+static int t_regions_are(const amps_mesh *m, amps_int a, amps_int b, amps_int c) {
+    return m && m->ntet == 3 && m->region[0] == a && m->region[1] == b && m->region[2] == c;
+}
+
+/* Regions of every reader on hand-written files. */
+static void test_region_readers(void) {
+    amps_ctx ctx;
+    amps_mesh *m;
+    amps_ctx_init(&ctx);
+    m = t_gmsh(&ctx, G22_MIXED);
+    CHECK(t_regions_are(m, 2, 2, 0), "gmsh 2.2 physical tags (0 without tags)");
+    amps_mesh_free(&ctx, m);
+    m = t_gmsh(&ctx, G41_MIXED);
+    CHECK(t_regions_are(m, 0, 0, 0), "gmsh 4.1 entity without physical tag");
+    amps_mesh_free(&ctx, m);
+    m = t_gmsh(&ctx, G41_REGIONS);
+    CHECK(t_regions_are(m, 9, 0, 5), "gmsh 4.1 first physical tag of the volume entity: %s", ctx.msg);
+    amps_mesh_free(&ctx, m);
+    m = t_gmsh(&ctx, G22);
+    CHECK(m && m->region[0] == 0, "gmsh 2.2 physical tag 0");
+    amps_mesh_free(&ctx, m);
+    m = t_medit(&ctx, M_MIXED);
+    CHECK(t_regions_are(m, 1, 7, 7), "medit references");
+    amps_mesh_free(&ctx, m);
+    /* as tetgen -A writes it: one attribute column, integer valued */
+    m = t_tetgen(&ctx, "6 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 1 1 1\n5 0.5 0.5 -1\n",
+                 "3 4 1\n0 0 1 2 3 1\n1 1 2 3 4 2\n2 0 2 1 5 1.0 # comment\n");
+    CHECK(t_regions_are(m, 1, 2, 1), "tetgen -A attribute: %s", ctx.msg);
+    amps_mesh_free(&ctx, m);
+    m = t_tetgen(&ctx, T_NODE4, "1 4 2\n0 0 1 2 3 -4 0.5\n");
+    CHECK(m && m->region[0] == -4, "tetgen: first of two attributes");
+    amps_mesh_free(&ctx, m);
+    m = t_tetgen(&ctx, T_NODE4, T_ELE1);
+    CHECK(m && m->region[0] == 0, "tetgen without attributes");
+    amps_mesh_free(&ctx, m);
+    m = t_tetgen(&ctx, T_NODE4, "1 4 1\n0 0 1 2 3 1.5\n");
+    t_expect(&ctx, m, AMPS_ERR_PARSE, "t.ele:2: region attribute 1.5 is not an integer", "fractional attribute");
+    m = t_tetgen(&ctx, T_NODE4, "1 4 1\n0 0 1 2 3\n");
+    t_expect(&ctx, m, AMPS_ERR_PARSE, "t.ele:2:", "missing attribute");
+}
+
+#ifndef AMPS_NO_STDIO
+/* m2 is m with the removed tets left out, regions kept. */
+static int t_same_live(const amps_mesh *m, const amps_mesh *m2) {
+    amps_int t, k = 0;
+    if (!m2 || m2->nnode != m->nnode || m2->ntet != m->ntet - m->nremoved) return 0;
+    if (t_reldiff((int)(3 * m->nnode), m->xyz, m2->xyz) != 0) return 0;
+    for (t = 0; t < m->ntet; t++) {
+        if (m->removed[t]) continue;
+        if (memcmp(m->tet + 4 * t, m2->tet + 4 * k, 4 * sizeof(amps_int)) || m->region[t] != m2->region[k]) return 0;
+        k++;
+    }
+    return 1;
+}
+
+/* Regions round-trip through every writer and reader; removed tets are not written. */
+static void test_region_roundtrip(void) {
+    amps_ctx ctx;
+    amps_mesh *m, *r;
+    char p1[700], p2[700];
+    amps_int t, rm[3] = {4, 30, 31};
+    int ver, pass;
+    amps_ctx_init(&ctx);
+    m = amps_mesh_brick(&ctx, 2);
+    if (!m) {
+        CHECK(0, "brick");
+        return;
+    }
+    for (pass = 0; pass < 3; pass++) {
+        if (pass == 1) /* regions in runs and scattered, one negative */
+            for (t = 0; t < m->ntet; t++) amps_mesh_set_tet_region(&ctx, m, t, t < 20 ? 3 : (t % 5 == 0 ? -2 : t % 3));
+        if (pass == 2) CHECK(amps_mesh_remove(&ctx, m, 3, rm, AMPS_SINGULAR_IGNORE, NULL) == AMPS_OK, "remove");
+        t_path(p1, "reg");
+        CHECK(amps_mesh_write_tetgen(&ctx, p1, m, pass == 1) == AMPS_OK, "write tetgen");
+        t_path(p1, "reg.node");
+        t_path(p2, "reg.ele");
+        r = amps_mesh_read(&ctx, p1);
+        CHECK(t_same_live(m, r), "tetgen pass %d: %s", pass, ctx.msg);
+        amps_mesh_free(&ctx, r);
+        remove(p1);
+        remove(p2);
+        for (ver = 2; ver <= 4; ver += 2) {
+            t_path(p1, "reg.msh");
+            CHECK(amps_mesh_write_gmsh(&ctx, p1, m, ver) == AMPS_OK, "write gmsh %d", ver);
+            r = amps_mesh_read(&ctx, p1);
+            CHECK(t_same_live(m, r), "gmsh %d pass %d: %s", ver, pass, ctx.msg);
+            amps_mesh_free(&ctx, r);
+            remove(p1);
+        }
+        t_path(p1, "reg.mesh");
+        CHECK(amps_mesh_write_medit(&ctx, p1, m) == AMPS_OK, "write medit");
+        r = amps_mesh_read(&ctx, p1);
+        CHECK(t_same_live(m, r), "medit pass %d: %s", pass, ctx.msg);
+        amps_mesh_free(&ctx, r);
+        remove(p1);
+    }
+    amps_mesh_free(&ctx, m);
+}
+
+/* VTU of a mesh with removed tets, and a .pvd time series. */
+static void test_vtu_frames(void) {
+    amps_ctx ctx;
+    amps_mesh *m;
+    char path[700], pvd[700];
+    const char *files[3] = {"f0.vtu", "dir/f1.vtu", "a&b<\"c\">.vtu"};
+    double times[3] = {0.0, 0.01, 0.25}, *u, *vm, *pr, sum, bad[1] = {NAN};
+    amps_int rm[4] = {0, 7, 8, 50}, v, t, live, rsum = 0;
+    size_t len;
+    char *txt;
+    m = t_beam4(&ctx);
+    if (!m) return;
+    for (t = 0; t < m->ntet; t++) amps_mesh_set_tet_region(&ctx, m, t, t % 4);
+    CHECK(amps_mesh_remove(&ctx, m, 4, rm, AMPS_SINGULAR_IGNORE, NULL) == AMPS_OK, "remove");
+    live = m->ntet - m->nremoved;
+    for (t = 0; t < m->ntet; t++) rsum += m->removed[t] ? 0 : m->region[t];
+    u = (double *)calloc(3 * (size_t)m->nnode, sizeof(double));
+    vm = (double *)malloc(sizeof(double) * m->ntet);
+    pr = (double *)malloc(sizeof(double) * 3 * m->ntet);
+    for (v = 0; v < m->nnode; v++) u[3 * v] = 0.01 * m->xyz[3 * v + 2] * m->xyz[3 * v + 2];
+    amps_mesh_stress(&ctx, m, u, NULL, vm, pr);
+    t_path(path, "frame.vtu");
+    CHECK(amps_mesh_write_vtu(&ctx, path, m, u, vm, pr) == AMPS_OK, "write vtu: %s", ctx.msg);
+    txt = t_slurp(path, &len);
+    if (txt) {
+        char head[200];
+        CHECK(t_xml_ok(txt, "VTKFile"), "vtu not well-formed");
+        snprintf(head, sizeof(head), "NumberOfPoints=\"%ld\" NumberOfCells=\"%ld\"", (long)m->nnode, (long)live);
+        CHECK(strstr(txt, head) != NULL, "piece header counts the kept tets");
+        CHECK(t_array_count(txt, "connectivity", &sum) == 4 * live, "connectivity");
+        CHECK(t_array_count(txt, "offsets", &sum) == live, "offsets");
+        CHECK(t_array_count(txt, "von_mises", &sum) == live, "von_mises");
+        CHECK(t_array_count(txt, "principal_stress", &sum) == 3 * live, "principal");
+        CHECK(t_array_count(txt, "region", &sum) == live && sum == (double)rsum, "region cell data");
+        CHECK(t_array_count(txt, "cut", &sum) == live, "cut");
+        free(txt);
+    } else {
+        CHECK(0, "read back vtu");
+    }
+    remove(path);
+    t_path(pvd, "series.pvd");
+    CHECK(amps_pvd_write(&ctx, pvd, 3, files, times) == AMPS_OK, "write pvd: %s", ctx.msg);
+    txt = t_slurp(pvd, &len);
+    CHECK(txt && t_xml_ok(txt, "VTKFile") && strstr(txt, "type=\"Collection\"") &&
+                  strstr(txt, "<DataSet timestep=\"0.01\" group=\"\" part=\"0\" file=\"dir/f1.vtu\"/>") &&
+                  strstr(txt, "file=\"a&amp;b&lt;&quot;c&quot;&gt;.vtu\""),
+          "pvd contents");
+    free(txt);
+    CHECK(amps_pvd_write(&ctx, pvd, 0, NULL, NULL) == AMPS_OK, "empty pvd");
+    CHECK(amps_pvd_write(&ctx, pvd, 1, files, bad) == AMPS_ERR_VALUE, "NaN time");
+    CHECK(amps_pvd_write(&ctx, pvd, -1, files, times) == AMPS_ERR_ARG, "negative count");
+    CHECK(amps_pvd_write(&ctx, NULL, 1, files, times) == AMPS_ERR_ARG, "NULL path");
+    remove(pvd);
+    free(u);
+    free(vm);
+    free(pr);
+    amps_mesh_free(&ctx, m);
+}
+
+/* Regions of a real `tetgen -A` run (two stacked unit cubes, regions 10 and 20), when tetgen
+   is installed; skipped otherwise. */
+static void test_tetgen_regions(void) {
+    static const char *poly =
+            "12 3 0 0\n1 0 0 0\n2 1 0 0\n3 1 1 0\n4 0 1 0\n5 0 0 1\n6 1 0 1\n7 1 1 1\n8 0 1 1\n9 0 0 2\n10 1 0 2\n"
+            "11 1 1 2\n12 0 1 2\n11 0\n1\n4 1 2 3 4\n1\n4 5 6 7 8\n1\n4 9 10 11 12\n1\n4 1 2 6 5\n1\n4 2 3 7 6\n"
+            "1\n4 3 4 8 7\n1\n4 4 1 5 8\n1\n4 5 6 10 9\n1\n4 6 7 11 10\n1\n4 7 8 12 11\n1\n4 8 5 9 12\n0\n"
+            "2\n1 0.5 0.5 0.5 10 -1\n2 0.5 0.5 1.5 20 -1\n";
+    char path[700], out[700], cmd[1600];
+    amps_ctx ctx;
+    amps_mesh *m;
+    amps_int t;
+    double v10 = 0, v20 = 0;
+    int other = 0;
+    if (system("command -v tetgen >/dev/null 2>&1") != 0) return;
+    t_path(path, "tg_regions.poly");
+    if (!t_write(path, poly, strlen(poly))) return;
+    snprintf(cmd, sizeof(cmd), "tetgen -pqAQ '%s' >/dev/null 2>&1", path);
+    CHECK(system(cmd) == 0, "tetgen run");
+    amps_ctx_init(&ctx);
+    t_path(out, "tg_regions.1.ele");
+    m = amps_mesh_read(&ctx, out);
+    CHECK(m != NULL, "read tetgen -A output: %s", ctx.msg);
+    for (t = 0; m && t < m->ntet; t++) {
+        double X[12], G[12], vol;
+        amps_mesh_tet_coords(m, t, X);
+        vol = fabs(amps_tet_gradients(X, G));
+        if (m->region[t] == 10) v10 += vol;
+        else if (m->region[t] == 20) v20 += vol;
+        else other++;
+    }
+    CHECK(m && other == 0 && fabs(v10 - 1) < 1e-12 && fabs(v20 - 1) < 1e-12, "tetgen regions: volumes %g %g", v10, v20);
+    amps_mesh_free(&ctx, m);
+    remove(path);
+    remove(out);
+    t_path(out, "tg_regions.1.node");
+    remove(out);
+    t_path(out, "tg_regions.1.face");
+    remove(out);
+    t_path(out, "tg_regions.1.edge");
+    remove(out);
+}
+#endif
+
 int main(int argc, char **argv) {
     const char *slash = argc > 0 ? strrchr(argv[0], '/') : NULL;
     if (slash) snprintf(g_dir, sizeof(g_dir), "%.*s", (int)(slash - argv[0]), argv[0]);
@@ -835,9 +1051,13 @@ int main(int argc, char **argv) {
     test_malformed_gmsh();
     test_malformed_medit();
     test_messages();
+    test_region_readers();
 #ifndef AMPS_NO_STDIO
     test_roundtrip();
     test_vtu();
+    test_region_roundtrip();
+    test_vtu_frames();
+    test_tetgen_regions();
 #endif
     test_corruption();
     test_reader_oom();
