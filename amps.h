@@ -839,6 +839,9 @@ AMPS_API amps_status amps_scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n,
 /* Fracture: after each step, tets with max |principal stress| > sigma_max are removed (default
    policy) before the next step; sigma_max <= 0 turns it off. AMPS_ERR_VALUE for NaN. */
 AMPS_API amps_status amps_scene_fracture(amps_ctx *ctx, amps_scene *S, double sigma_max);
+/* The threshold of the tets of region id only (<= 0: none fracture there), over the one of
+   amps_scene_fracture. AMPS_ERR_ARG (no tet has region id), AMPS_ERR_VALUE (NaN). */
+AMPS_API amps_status amps_scene_fracture_region(amps_ctx *ctx, amps_scene *S, amps_int id, double sigma_max);
 /* Tets fractured by the last step; *total (may be NULL) receives those of all steps. */
 AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
 #endif /* AMPS_NO_FEM */
@@ -9139,6 +9142,9 @@ typedef struct amps__scene_dyn {
     double *val;               /* scratch: 3 per node */
     unsigned char *orphan;     /* 1: the node lies in no tet and is held where it is */
     double sigma_max;          /* fracture threshold (<= 0: off) */
+    amps_int nfreg;            /* regions with their own threshold */
+    amps_int *freg_id;         /* nfreg region ids */
+    double *freg_sigma;        /* their thresholds (<= 0: no fracture there) */
     amps_int nstep, nfractured, nfractured_total; /* steps taken; tets fractured by the last step, in all */
 } amps__scene_dyn;
 
@@ -9216,6 +9222,8 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->dyn.idx);
     amps__free(ctx, S->dyn.val);
     amps__free(ctx, S->dyn.orphan);
+    amps__free(ctx, S->dyn.freg_id);
+    amps__free(ctx, S->dyn.freg_sigma);
     amps__free(ctx, S);
 }
 
@@ -10407,14 +10415,18 @@ static amps_status amps__scene_fracture_step(amps_ctx *ctx, amps_scene *S) {
     list = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m->ntet, sizeof(amps_int)));
     if (!list) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory");
     for (t = 0; t < m->ntet; t++) {
-        double X[12], u[12], sg[6], pr[3], mx;
+        double X[12], u[12], sg[6], pr[3], mx, smax = S->dyn.sigma_max;
+        amps_int k;
         int a;
         if (m->removed && m->removed[t]) continue;
+        for (k = 0; k < S->dyn.nfreg; k++)
+            if (S->dyn.freg_id[k] == (m->region ? m->region[t] : 0)) smax = S->dyn.freg_sigma[k];
+        if (smax <= 0) continue;
         amps_mesh_tet_coords(m, t, X);
         for (a = 0; a < 12; a++) u[a] = S->node.disp[3 * m->tet[4 * t + a / 3] + a % 3];
         amps_tet_stress(X, m->E[t], m->nu[t], u, sg, NULL, pr);
         mx = fabs(pr[0]) > fabs(pr[2]) ? fabs(pr[0]) : fabs(pr[2]);
-        if (mx > S->dyn.sigma_max) list[n++] = t;
+        if (mx > smax) list[n++] = t;
     }
     if (n > 0 && (s = amps__scene_remove(ctx, S, n, list, AMPS_SINGULAR_REMOVE, &r)) == AMPS_OK) {
         S->dyn.nfractured = r.ntet;
@@ -10447,7 +10459,8 @@ AMPS_API amps_status amps_scene_step(amps_ctx *ctx, amps_scene *S, amps_int nste
             }
         S->dyn.nstep++;
         S->dyn.nfractured = 0;
-        if (S->dyn.sigma_max > 0 && (s = amps__scene_fracture_step(ctx, S)) != AMPS_OK) return s;
+        if ((S->dyn.sigma_max > 0 || S->dyn.nfreg > 0) && (s = amps__scene_fracture_step(ctx, S)) != AMPS_OK)
+            return s;
     }
     return w;
 }
@@ -10456,6 +10469,24 @@ AMPS_API amps_status amps_scene_fracture(amps_ctx *ctx, amps_scene *S, double si
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_fracture: NULL scene");
     if (sigma_max != sigma_max) return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_fracture: NaN threshold");
     S->dyn.sigma_max = sigma_max > 0 ? sigma_max : 0.0;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_fracture_region(amps_ctx *ctx, amps_scene *S, amps_int id, double sigma_max) {
+    amps_int k, n;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_fracture_region: NULL scene");
+    if (sigma_max != sigma_max) return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_fracture_region: NaN threshold");
+    for (k = 0, n = 0; k < S->m->ntet && !n; k++) n = (S->m->region ? S->m->region[k] : 0) == id;
+    if (!n) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_fracture_region: no tetrahedron has region %ld", (long)id);
+    for (k = 0; k < S->dyn.nfreg && S->dyn.freg_id[k] != id; k++) {}
+    if (k == S->dyn.nfreg) {
+        if (amps__realloc(ctx, (void **)&S->dyn.freg_id, (size_t)k + 1, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&S->dyn.freg_sigma, (size_t)k + 1, sizeof(double)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_fracture_region: out of memory");
+        S->dyn.freg_id[k] = id;
+        S->dyn.nfreg++;
+    }
+    S->dyn.freg_sigma[k] = sigma_max > 0 ? sigma_max : 0.0;
     return AMPS_OK;
 }
 

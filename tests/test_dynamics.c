@@ -218,9 +218,25 @@ static amps_int free_node(const amps_mesh *m, const tstate *w) {
     return -1;
 }
 
+/* Statics: a solve of the scene against the reference. */
+static void check_solve(amps_ctx *ctx, amps_scene *S, tstate *w, const char *what, int step) {
+    const amps_mesh *m = amps_scene_mesh(S);
+    int nn = m->nnode;
+    double *u0 = (double *)malloc(sizeof(double) * 3 * nn), *ur = (double *)calloc(3 * nn, sizeof(double)), eu;
+    memcpy(u0, amps_scene_displacements(S), sizeof(double) * 3 * nn);
+    CHECK(ref_step(ctx, m, w, u0, NULL, ur, NULL, NULL) == 0, "%s solve %d: reference failed", what, step);
+    CHECK(amps_scene_solve(ctx, S) == AMPS_OK, "%s solve %d: %s", what, step, ctx->msg);
+    eu = relerr(3 * nn, amps_scene_displacements(S), ur, 1e-300);
+    CHECK(eu < 1e-10, "%s solve %d: error u %.2e", what, step, eu);
+    if (eu > worst_err) worst_err = eu;
+    free(u0);
+    free(ur);
+}
+
 /* Random sequence of nops operations on mesh m (fixed below z = zfix), regions: tets with
-   centroid z above zreg get region 1. */
-static void random_sequence(const char *what, amps_mesh *m, double zfix, double zreg, int nops, unsigned long long seed) {
+   centroid z above zreg get region 1; dyn = 0: statics (solves instead of steps). */
+static void random_sequence(const char *what, amps_mesh *m, double zfix, double zreg, int nops, unsigned long long seed,
+                            int dyn) {
     amps_ctx ctx;
     amps_scene *S;
     tstate w;
@@ -244,8 +260,8 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
     S = amps_scene_create(&ctx, m, NULL);
     amps_scene_fix_where(&ctx, S, 2, AMPS_LT, zfix, NULL);
     CHECK(amps_scene_set_region(&ctx, S, 1, 2.0, 0.35, 1.5) == AMPS_OK, "%s: region: %s", what, ctx.msg);
-    CHECK(amps_scene_dynamics(&ctx, S, 0.05, 0.1, 0.01) == AMPS_OK, "%s: dynamics: %s", what, ctx.msg);
-    w.dyn = 1;
+    if (dyn) CHECK(amps_scene_dynamics(&ctx, S, 0.05, 0.1, 0.01) == AMPS_OK, "%s: dynamics: %s", what, ctx.msg);
+    w.dyn = dyn;
     w.dt = 0.05;
     w.alpha = 0.1;
     w.beta = 0.01;
@@ -254,7 +270,8 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
         int kind = t_int(10);
         ts_grow(&w, mm->nnode + 1);
         if (kind <= 2) {
-            check_step(&ctx, S, &w, what, step++);
+            if (dyn) check_step(&ctx, S, &w, what, step++);
+            else check_solve(&ctx, S, &w, what, step++);
         } else if (kind == 3) { /* cut */
             double p[3], nrm[3] = {t_unif() - 0.5, t_unif() - 0.5, t_unif() - 0.5};
             amps_int vc;
@@ -262,8 +279,12 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
             if (v < 0) continue;
             memcpy(p, mm->xyz + 3 * v, sizeof(p));
             if (amps_scene_cut(&ctx, S, v, p, nrm, &vc) == AMPS_OK && vc >= 0) {
+                const double *uu = amps_scene_displacements(S), *ww = amps_scene_velocities(S);
                 ts_grow(&w, (int)vc + 1);
                 ncut++;
+                CHECK(!memcmp(uu + 3 * v, uu + 3 * vc, 3 * sizeof(double)) &&
+                              (!dyn || !memcmp(ww + 3 * v, ww + 3 * vc, 3 * sizeof(double))),
+                      "%s: the copy of node %d does not start with its u and w", what, v);
             }
         } else if (kind == 4) { /* removal */
             amps_int tt[2];
@@ -312,7 +333,8 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
             }
         }
     }
-    check_step(&ctx, S, &w, what, step++);
+    if (dyn) check_step(&ctx, S, &w, what, step++);
+    else check_solve(&ctx, S, &w, what, step++);
     printf("  %-22s steps %d, cuts %d, removals %d, pins %d, nodes %ld, worst error %.2e\n", what, step, ncut, nrem,
            npin, (long)amps_scene_mesh(S)->nnode, worst_err);
     amps_scene_free(&ctx, S);
@@ -587,9 +609,39 @@ static void test_fracture(void) {
                   amps_scene_fractured(S, NULL) == 0,
           "fracture off still removes");
     printf("  fracture: %ld tets over sigma_max removed after one step\n", (long)got);
-    free(pr);
     amps_scene_free(&ctx, S);
     ts_free(&w);
+    /* per region: only the tets of region 1 (centroid z > 3) tear */
+    {
+        amps_mesh *mm = amps_mesh_beam(&ctx, 6);
+        amps_int r1 = 0;
+        amps_mesh_set_density(&ctx, mm, 1.0);
+        for (t = 0; t < mm->ntet; t++) {
+            double zc = 0;
+            int a;
+            for (a = 0; a < 4; a++) zc += 0.25 * mm->xyz[3 * mm->tet[4 * t + a] + 2];
+            mm->region[t] = zc > 3;
+        }
+        S = make_scene(&ctx, mm, 0.5, &w);
+        m = amps_scene_mesh(S);
+        amps_scene_gravity(&ctx, S, g);
+        amps_scene_dynamics(&ctx, S, 0.2, 0.1, 0);
+        amps_scene_step(&ctx, S, 3);
+        CHECK(amps_scene_fracture_region(&ctx, S, 7, 1.0) == AMPS_ERR_ARG, "fracture of an unknown region accepted");
+        CHECK(amps_scene_fracture_region(&ctx, S, 1, 1e-9) == AMPS_OK, "region fracture: %s", ctx.msg);
+        CHECK(amps_scene_step(&ctx, S, 1) == AMPS_OK, "region fracture step: %s", ctx.msg);
+        for (t = 0; t < m->ntet; t++) {
+            r1 += m->region[t] == 1;
+            CHECK(m->removed[t] == (m->region[t] == 1), "tet %ld of region %ld: removed %d", (long)t,
+                  (long)m->region[t], (int)m->removed[t]);
+        }
+        CHECK(amps_scene_fractured(S, NULL) == r1, "region fracture removed %ld of %ld", 
+              (long)amps_scene_fractured(S, NULL), (long)r1);
+        CHECK(amps_scene_step(&ctx, S, 2) == AMPS_OK, "steps with a free piece: %s", ctx.msg);
+        amps_scene_free(&ctx, S);
+        ts_free(&w);
+    }
+    free(pr);
 }
 
 /* Bad input is an error and changes nothing. */
@@ -626,8 +678,10 @@ int main(void) {
     test_physics();
     test_removal();
     test_fracture();
-    random_sequence("beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 120, 1);
-    random_sequence("brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 2);
-    random_sequence("beam 5x5x6 seed 3", amps_mesh_beam(&ctx, 6), 0.5, 3.0, 150, 3);
+    random_sequence("beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 120, 1, 1);
+    random_sequence("brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 2, 1);
+    random_sequence("beam 5x5x6 seed 3", amps_mesh_beam(&ctx, 6), 0.5, 3.0, 150, 3, 1);
+    random_sequence("statics beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 120, 4, 0);
+    random_sequence("statics brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 5, 0);
     return amps_t_end("test_dynamics");
 }
