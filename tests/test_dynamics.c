@@ -7,36 +7,17 @@
 #include "amps.h"
 #include "amps_test.h"
 #include "cholmod_ref.h"
+#include "scene_ref.h"
 #include <string.h>
 
-/* What the test knows independently of the scene. */
+/* What the test knows independently of the scene: the shadow of scene_ref.h (fixed file
+   nodes, pins, forces) and the gravity and time integration. */
 typedef struct tstate {
-    unsigned char *fixed0; /* fixed flag of the file nodes */
-    unsigned char *pinned; /* per node */
-    double *pinval, *force;
-    int cap;
+    shadow sh;
     double g[3];
     int dyn;
     double dt, alpha, beta;
 } tstate;
-
-static void ts_grow(tstate *w, int n) {
-    if (n <= w->cap) return;
-    w->pinned = (unsigned char *)realloc(w->pinned, n);
-    w->pinval = (double *)realloc(w->pinval, sizeof(double) * 3 * n);
-    w->force = (double *)realloc(w->force, sizeof(double) * 3 * n);
-    memset(w->pinned + w->cap, 0, n - w->cap);
-    memset(w->pinval + 3 * w->cap, 0, sizeof(double) * 3 * (n - w->cap));
-    memset(w->force + 3 * w->cap, 0, sizeof(double) * 3 * (n - w->cap));
-    w->cap = n;
-}
-
-static void ts_free(tstate *w) {
-    free(w->fixed0);
-    free(w->pinned);
-    free(w->pinval);
-    free(w->force);
-}
 
 /* The reference of one solve of the current mesh m: statics K u = f + M g (pins u = g), or one
    step from (u, w): A w+ = M w + dt (f + M g - K u) (pins w = (g - u)/dt), u+ = u + dt w+.
@@ -50,7 +31,7 @@ static int ref_step(amps_ctx *ctx, const amps_mesh *m, const tstate *w, const do
     double *mass = (double *)malloc(sizeof(double) * (nn + 1)), *b, *ue, *gv, *rhs, *x, *tx, *ax;
     double cM = w->dyn ? 1 + w->alpha * w->dt : 0, cK = w->dyn ? w->beta * w->dt + w->dt * w->dt : 1;
     amps_csc *K, *R;
-    for (v = 0; v < nn; v++) fixed[v] = w->fixed0[m->origin[v]];
+    for (v = 0; v < nn; v++) fixed[v] = w->sh.fixed0[m->origin[v]];
     n = (int)amps_mesh_number_dofs(m, fixed, dof);
     K = amps_mesh_assemble(ctx, m, dof, n);
     amps_mesh_lumped_mass(m, mass);
@@ -64,20 +45,14 @@ static int ref_step(amps_ctx *ctx, const amps_mesh *m, const tstate *w, const do
             int e = dof[3 * v + d];
             if (e < 0) continue;
             ue[e] = u[3 * v + d];
-            b[e] = w->force[3 * v + d] + mass[v] * w->g[d];
-            if (w->pinned[v]) {
+            b[e] = w->sh.force[3 * v + d] + mass[v] * w->g[d];
+            if (w->sh.pinned[v]) {
                 map[e] = -1;
-                gv[e] = w->dyn ? (w->pinval[3 * v + d] - u[3 * v + d]) / w->dt : w->pinval[3 * v + d];
+                gv[e] = w->dyn ? (w->sh.pinval[3 * v + d] - u[3 * v + d]) / w->dt : w->sh.pinval[3 * v + d];
             }
         }
     if (w->dyn) { /* b = M w + dt (f + M g - K u) */
-        for (j = 0; j < n; j++) ax[j] = 0;
-        for (j = 0; j < n; j++)
-            for (p = K->p[j]; p < K->p[j + 1]; p++) {
-                int i = K->i[p];
-                ax[i] += K->x[p] * ue[j];
-                if (i != j) ax[j] += K->x[p] * ue[i];
-            }
+        amps_csc_symv(K, AMPS_UPPER, ue, ax);
         for (v = 0; v < nn; v++)
             for (d = 0; d < 3; d++) {
                 int e = dof[3 * v + d];
@@ -96,29 +71,21 @@ static int ref_step(amps_ctx *ctx, const amps_mesh *m, const tstate *w, const do
     ti = (int *)calloc(K->p[n] + 1, sizeof(int));
     tj = (int *)calloc(K->p[n] + 1, sizeof(int));
     tx = (double *)calloc(K->p[n] + 1, sizeof(double));
+    amps_csc_symv(K, AMPS_UPPER, gv, ax); /* the prescribed values move to the right-hand side */
     for (k = 0; k < n; k++)
-        if (map[k] >= 0) rhs[map[k]] = b[k];
-    for (j = 0; j < n; j++)
-        for (p = K->p[j]; p < K->p[j + 1]; p++) {
-            int i = K->i[p];
-            double val = K->x[p];
-            if (map[i] >= 0 && map[j] >= 0) {
-                ti[nz] = map[i];
+        if (map[k] >= 0) rhs[map[k]] = b[k] - ax[k];
+    for (j = 0; j < n; j++) /* the free block */
+        for (p = K->p[j]; p < K->p[j + 1]; p++)
+            if (map[K->i[p]] >= 0 && map[j] >= 0) {
+                ti[nz] = map[K->i[p]];
                 tj[nz] = map[j];
-                tx[nz++] = val;
-            } else if (map[i] >= 0) rhs[map[i]] -= val * gv[j];
-            else if (map[j] >= 0 && i != j) rhs[map[j]] -= val * gv[i];
-        }
+                tx[nz++] = K->x[p];
+            }
     R = amps_csc_from_triplets(ctx, nf, nz, ti, tj, tx, AMPS_UPPER);
     ok = R && ref_solve_refined(nf, R->p, R->i, R->x, rhs, x, 2, NULL) == 0;
     for (k = 0; k < n; k++) ue[k] = map[k] < 0 ? gv[k] : x[map[k]]; /* the solution on every equation */
-    for (j = 0; j < n; j++) ax[j] = -b[j];                         /* A x - b */
-    for (j = 0; j < n; j++)
-        for (p = K->p[j]; p < K->p[j + 1]; p++) {
-            int i = K->i[p];
-            ax[i] += K->x[p] * ue[j];
-            if (i != j) ax[j] += K->x[p] * ue[i];
-        }
+    amps_csc_symv(K, AMPS_UPPER, ue, ax); /* A x - b */
+    for (j = 0; j < n; j++) ax[j] -= b[j];
     for (v = 0; v < nn; v++)
         for (d = 0; d < 3; d++) {
             int e = dof[3 * v + d];
@@ -129,7 +96,7 @@ static int ref_step(amps_ctx *ctx, const amps_mesh *m, const tstate *w, const do
             } else {
                 uo[3 * v + d] = e >= 0 ? s : (fixed[v] ? 0.0 : u[3 * v + d]);
             }
-            if (react) react[3 * v + d] = (e >= 0 && w->pinned[v]) ? ax[e] / (w->dyn ? w->dt : 1.0) : 0.0;
+            if (react) react[3 * v + d] = (e >= 0 && w->sh.pinned[v]) ? ax[e] / (w->dyn ? w->dt : 1.0) : 0.0;
         }
     amps_csc_free(ctx, R);
     amps_csc_free(ctx, K);
@@ -213,7 +180,7 @@ static amps_int free_node(const amps_mesh *m, const tstate *w) {
     int k;
     for (k = 0; k < 100; k++) {
         amps_int v = t_int((int)m->nnode);
-        if (amps_mesh_degree(m, v) > 0 && !w->fixed0[m->origin[v]]) return v;
+        if (amps_mesh_degree(m, v) > 0 && !w->sh.fixed0[m->origin[v]]) return v;
     }
     return -1;
 }
@@ -254,9 +221,9 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
             for (a = 0; a < 4; a++) zc += 0.25 * m->xyz[3 * m->tet[4 * t + a] + 2];
             m->region[t] = zc > zreg;
         }
-    w.fixed0 = (unsigned char *)calloc(m->nnode, 1);
-    for (v = 0; v < m->nnode; v++) w.fixed0[v] = m->xyz[3 * v + 2] < zfix;
-    ts_grow(&w, m->nnode);
+    w.sh.fixed0 = (unsigned char *)calloc(m->nnode, 1);
+    for (v = 0; v < m->nnode; v++) w.sh.fixed0[v] = m->xyz[3 * v + 2] < zfix;
+    shadow_grow(&w.sh, m->nnode);
     S = amps_scene_create(&ctx, m, NULL);
     amps_scene_fix_where(&ctx, S, 2, AMPS_LT, zfix, NULL);
     CHECK(amps_scene_set_region(&ctx, S, 1, 2.0, 0.35, 1.5) == AMPS_OK, "%s: region: %s", what, ctx.msg);
@@ -268,7 +235,7 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
     for (op = 0; op < nops; op++) {
         const amps_mesh *mm = amps_scene_mesh(S);
         int kind = t_int(10);
-        ts_grow(&w, mm->nnode + 1);
+        shadow_grow(&w.sh, mm->nnode + 1);
         if (kind <= 2) {
             if (dyn) check_step(&ctx, S, &w, what, step++);
             else check_solve(&ctx, S, &w, what, step++);
@@ -280,7 +247,7 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
             memcpy(p, mm->xyz + 3 * v, sizeof(p));
             if (amps_scene_cut(&ctx, S, v, p, nrm, &vc) == AMPS_OK && vc >= 0) {
                 const double *uu = amps_scene_displacements(S), *ww = amps_scene_velocities(S);
-                ts_grow(&w, (int)vc + 1);
+                shadow_grow(&w.sh, (int)vc + 1);
                 ncut++;
                 CHECK(!memcmp(uu + 3 * v, uu + 3 * vc, 3 * sizeof(double)) &&
                               (!dyn || !memcmp(ww + 3 * v, ww + 3 * vc, 3 * sizeof(double))),
@@ -298,7 +265,7 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
                 for (k = 0; k < 2; k++) /* orphans are released */
                     for (q = 0; q < 4; q++) {
                         amps_int x = mm->tet[4 * tt[k] + q];
-                        if (amps_mesh_degree(mm, x) == 0) w.pinned[x] = 0;
+                        if (amps_mesh_degree(mm, x) == 0) w.sh.pinned[x] = 0;
                     }
             }
         } else if (kind == 5) { /* pin (also of copies) near the current displacement */
@@ -308,17 +275,17 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
             if (v < 0) continue;
             for (d = 0; d < 3; d++) g[d] = amps_scene_displacements(S)[3 * v + d] + 0.01 * (t_unif() - 0.5);
             if (amps_scene_pin(&ctx, S, v, g) == AMPS_OK) {
-                w.pinned[v] = 1;
-                memcpy(w.pinval + 3 * v, g, sizeof(g));
+                w.sh.pinned[v] = 1;
+                memcpy(w.sh.pinval + 3 * v, g, sizeof(g));
                 npin++;
             }
         } else if (kind == 6) { /* release */
-            for (v = 0; v < mm->nnode && !w.pinned[v]; v++) {}
-            if (v < mm->nnode && amps_scene_release(&ctx, S, v) == AMPS_OK) w.pinned[v] = 0;
+            for (v = 0; v < mm->nnode && !w.sh.pinned[v]; v++) {}
+            if (v < mm->nnode && amps_scene_release(&ctx, S, v) == AMPS_OK) w.sh.pinned[v] = 0;
         } else if (kind == 7) { /* force */
             double f[3] = {0.05 * (t_unif() - 0.5), 0.05 * (t_unif() - 0.5), 0.05 * (t_unif() - 0.5)};
             v = free_node(mm, &w);
-            if (v >= 0 && amps_scene_force(&ctx, S, v, f) == AMPS_OK) memcpy(w.force + 3 * v, f, sizeof(f));
+            if (v >= 0 && amps_scene_force(&ctx, S, v, f) == AMPS_OK) memcpy(w.sh.force + 3 * v, f, sizeof(f));
         } else if (kind == 8) { /* gravity */
             gz[0] = 0.01 * (t_unif() - 0.5);
             CHECK(amps_scene_gravity(&ctx, S, gz) == AMPS_OK, "%s: gravity: %s", what, ctx.msg);
@@ -338,7 +305,7 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
     printf("  %-22s steps %d, cuts %d, removals %d, pins %d, nodes %ld, worst error %.2e\n", what, step, ncut, nrem,
            npin, (long)amps_scene_mesh(S)->nnode, worst_err);
     amps_scene_free(&ctx, S);
-    ts_free(&w);
+    shadow_free(&w.sh);
 }
 
 /* A scene over mesh m fixed below z = zfix (tstate filled alike). */
@@ -346,9 +313,9 @@ static amps_scene *make_scene(amps_ctx *ctx, amps_mesh *m, double zfix, tstate *
     amps_scene *S;
     int v;
     memset(w, 0, sizeof(*w));
-    w->fixed0 = (unsigned char *)calloc(m->nnode, 1);
-    for (v = 0; v < m->nnode; v++) w->fixed0[v] = m->xyz[3 * v + 2] < zfix;
-    ts_grow(w, m->nnode);
+    w->sh.fixed0 = (unsigned char *)calloc(m->nnode, 1);
+    for (v = 0; v < m->nnode; v++) w->sh.fixed0[v] = m->xyz[3 * v + 2] < zfix;
+    shadow_grow(&w->sh, m->nnode);
     S = amps_scene_create(ctx, m, NULL);
     amps_scene_fix_where(ctx, S, 2, AMPS_LT, zfix, NULL);
     return S;
@@ -361,7 +328,7 @@ static double energy(amps_ctx *ctx, const amps_mesh *m, const tstate *w, const d
     amps_int *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * nn);
     double *mass = (double *)malloc(sizeof(double) * nn), *ue, e = 0;
     amps_csc *K;
-    for (v = 0; v < nn; v++) fixed[v] = w->fixed0[m->origin[v]];
+    for (v = 0; v < nn; v++) fixed[v] = w->sh.fixed0[m->origin[v]];
     n = (int)amps_mesh_number_dofs(m, fixed, dof);
     K = amps_mesh_assemble(ctx, m, dof, n);
     amps_mesh_lumped_mass(m, mass);
@@ -390,7 +357,7 @@ static double first_eig(amps_ctx *ctx, const amps_mesh *m, const tstate *w) {
     amps_int *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * nn);
     double *mass = (double *)malloc(sizeof(double) * nn), *md, *x, *y, *kx, lam = 0;
     amps_csc *K;
-    for (v = 0; v < nn; v++) fixed[v] = w->fixed0[v];
+    for (v = 0; v < nn; v++) fixed[v] = w->sh.fixed0[v];
     n = (int)amps_mesh_number_dofs(m, fixed, dof);
     K = amps_mesh_assemble(ctx, m, dof, n);
     amps_mesh_lumped_mass(m, mass);
@@ -447,7 +414,7 @@ static void test_physics(void) {
     for (k = 0; k < 3 * amps_scene_mesh(S)->nnode; k++) e += fabs(amps_scene_velocities(S)[k]);
     CHECK(e == 0.0, "free-free body at rest moves: sum |w| = %g", e);
     amps_scene_free(&ctx, S);
-    ts_free(&w);
+    shadow_free(&w.sh);
     /* energy and frequency: beam 5 x 5 x 12, fixed at z = 0, tip force along (1, -1, 0), then released (the
        Kuhn split makes bending about the cell diagonals differ; (1, -1, 0) is the first mode's direction) */
     S = make_scene(&ctx, amps_mesh_beam(&ctx, 12), 0.5, &w);
@@ -478,7 +445,7 @@ static void test_physics(void) {
     printf("  cantilever: period %.5g against 2 pi / sqrt(lambda_1) = %.5g (%.2f%%), energy never grew\n",
            (tc[6] - tc[2]) / 2, T, 100 * ((tc[6] - tc[2]) / (2 * T) - 1));
     amps_scene_free(&ctx, S);
-    ts_free(&w);
+    shadow_free(&w.sh);
     /* gravity sag of the clamped beam: the damped motion converges to the static solution */
     {
         double *us, *ur, err;
@@ -507,7 +474,7 @@ static void test_physics(void) {
         free(us);
         free(ur);
         amps_scene_free(&ctx, S);
-        ts_free(&w);
+        shadow_free(&w.sh);
     }
     (void)v;
 }
@@ -529,7 +496,7 @@ static void test_removal(void) {
     nn = (int)m->nnode;
     v = 5 * 5 * 5 + 7;
     amps_scene_force(&ctx, S, v, f);
-    memcpy(w.force + 3 * v, f, sizeof(f));
+    memcpy(w.sh.force + 3 * v, f, sizeof(f));
     CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "solve: %s", ctx.msg);
     u0 = (double *)malloc(sizeof(double) * 3 * nn);
     ur = (double *)malloc(sizeof(double) * 3 * nn);
@@ -558,7 +525,7 @@ static void test_removal(void) {
     err = relerr(3 * nn, amps_scene_displacements(S), ur, 1e-300);
     CHECK(err < 1e-10, "statics removal + runtime material against CHOLMOD: %.2e", err);
     amps_scene_free(&ctx, S);
-    ts_free(&w);
+    shadow_free(&w.sh);
     /* dynamics: the whole layer goes; the free piece falls */
     S = make_scene(&ctx, amps_mesh_beam(&ctx, 6), 0.5, &w);
     w.dyn = 1;
@@ -574,7 +541,7 @@ static void test_removal(void) {
     v = 5 * 5 * 6 - 1; /* a top node: falls freely, dz = -g t^2 ... in backward Euler */
     CHECK(amps_scene_velocities(S)[3 * v + 2] < 0, "the free piece does not fall");
     amps_scene_free(&ctx, S);
-    ts_free(&w);
+    shadow_free(&w.sh);
     free(u0);
     free(ur);
 }
@@ -610,7 +577,7 @@ static void test_fracture(void) {
           "fracture off still removes");
     printf("  fracture: %ld tets over sigma_max removed after one step\n", (long)got);
     amps_scene_free(&ctx, S);
-    ts_free(&w);
+    shadow_free(&w.sh);
     /* per region: only the tets of region 1 (centroid z > 3) tear */
     {
         amps_mesh *mm = amps_mesh_beam(&ctx, 6);
@@ -639,7 +606,7 @@ static void test_fracture(void) {
               (long)amps_scene_fractured(S, NULL), (long)r1);
         CHECK(amps_scene_step(&ctx, S, 2) == AMPS_OK, "steps with a free piece: %s", ctx.msg);
         amps_scene_free(&ctx, S);
-        ts_free(&w);
+        shadow_free(&w.sh);
     }
     free(pr);
 }
@@ -668,7 +635,7 @@ static void test_args(void) {
     CHECK(amps_scene_step(&ctx, S, -1) == AMPS_ERR_ARG, "negative step count accepted");
     CHECK(amps_scene_set_density(&ctx, S, 2) == AMPS_ERR_STATE, "density after the factorization accepted");
     amps_scene_free(&ctx, S);
-    ts_free(&w);
+    shadow_free(&w.sh);
 }
 
 int main(void) {
