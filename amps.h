@@ -9140,6 +9140,9 @@ typedef struct amps__scene_dyn {
     double *mass, *ku;         /* scratch per node (mass) / per DOF (K u) */
     amps_int *idx;             /* scratch: 3 per node */
     double *val;               /* scratch: 3 per node */
+    double *vol;               /* ntet: |V| of each tet (reference configuration), NULL until the first step */
+    double *xe, *ye;           /* scratch per equation (ncap): u and A u */
+    amps_int ncap;
     unsigned char *orphan;     /* 1: the node lies in no tet and is held where it is */
     double sigma_max;          /* fracture threshold (<= 0: off) */
     amps_int nfreg;            /* regions with their own threshold */
@@ -9222,6 +9225,9 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->dyn.idx);
     amps__free(ctx, S->dyn.val);
     amps__free(ctx, S->dyn.orphan);
+    amps__free(ctx, S->dyn.vol);
+    amps__free(ctx, S->dyn.xe);
+    amps__free(ctx, S->dyn.ye);
     amps__free(ctx, S->dyn.freg_id);
     amps__free(ctx, S->dyn.freg_sigma);
     amps__free(ctx, S);
@@ -10078,35 +10084,60 @@ static void amps__scene_dyn_cut(amps_ctx *ctx, amps_scene *S, amps_int v, amps_i
     }
 }
 
-/* The right-hand side and pins of the next step (paper 003 Eq. 27): b = M w + dt (f + M g - K u)
-   on every equation, w_P = (g_P - u_P) / dt at the pins (orphans stay at w = 0). K u and M are
-   summed over the live tets: one element stiffness per tet, O(144 ntet) flops besides. */
-static amps_status amps__scene_dyn_load(amps_ctx *ctx, amps_scene *S) {
+/* Lumped masses of the nodes (dyn.mass) from the cached tet volumes, and K u on every DOF
+   (dyn.ku) as (A u - cM M u) / cK with one product by the engine's committed matrix A. */
+static amps_status amps__scene_dyn_ku(amps_ctx *ctx, amps_scene *S) {
     const amps_mesh *m = S->m;
-    amps_int nn = m->nnode, v, t, n = 0;
+    amps_int nn = m->nnode, v, t, e, N;
+    int a, d;
+    if (S->U->pending.n_delta || S->U->pending.n_dofs) {
+        amps_status s = amps_update_commit(ctx, S->U);
+        if (s != AMPS_OK) return s;
+    }
+    N = amps_update_dim(S->U);
+    if (!S->dyn.vol) {
+        S->dyn.vol = AMPS__CAST(double *, amps__malloc(ctx, (size_t)m->ntet + 1, sizeof(double)));
+        if (!S->dyn.vol) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory");
+        for (t = 0; t < m->ntet; t++) {
+            double X[12], G[12];
+            amps_mesh_tet_coords(m, t, X);
+            S->dyn.vol[t] = fabs(amps_tet_gradients(X, G));
+        }
+    }
+    if (N > S->dyn.ncap) {
+        if (amps__realloc(ctx, (void **)&S->dyn.xe, (size_t)N, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&S->dyn.ye, (size_t)N, sizeof(double)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory");
+        S->dyn.ncap = N;
+    }
+    for (v = 0; v < nn; v++) S->dyn.mass[v] = 0.0;
+    for (t = 0; t < m->ntet; t++)
+        if (!(m->removed && m->removed[t]))
+            for (a = 0; a < 4; a++) S->dyn.mass[m->tet[4 * t + a]] += (m->rho ? m->rho[t] : 1.0) * S->dyn.vol[t] / 4;
+    for (e = 0; e < N; e++) S->dyn.xe[e] = 0.0;
+    for (v = 0; v < 3 * nn; v++)
+        if ((e = S->node.dof[v]) >= 0) S->dyn.xe[e] = S->node.disp[v];
+    amps__kmul(S->U, S->dyn.xe, S->dyn.ye);
+    for (v = 0; v < nn; v++)
+        for (d = 0; d < 3; d++) {
+            e = S->node.dof[3 * v + d];
+            S->dyn.ku[3 * v + d] =
+                    e >= 0 ? (S->dyn.ye[e] - S->dyn.cM * S->dyn.mass[v] * S->node.disp[3 * v + d]) / S->dyn.cK : 0.0;
+        }
+    return AMPS_OK;
+}
+
+/* The right-hand side and pins of the next step (paper 003 Eq. 27): b = M w + dt (f + M g - K u)
+   on every equation, w_P = (g_P - u_P) / dt at the pins (orphans stay at w = 0). Cost: one
+   product with the engine's matrix and O(ntet) for the masses (amps__scene_dyn_ku). */
+static amps_status amps__scene_dyn_load(amps_ctx *ctx, amps_scene *S) {
+    amps_int nn = S->m->nnode, v, n = 0;
     double dt = S->dyn.dt, *u = S->node.disp, *ku, *mass;
-    int a, b, d;
+    int d;
     amps_status s;
-    if ((s = amps__scene_dyn_room(ctx, S, nn)) != AMPS_OK) return s;
+    if ((s = amps__scene_dyn_room(ctx, S, nn)) != AMPS_OK || (s = amps__scene_dyn_ku(ctx, S)) != AMPS_OK) return s;
     ku = S->dyn.ku;
     mass = S->dyn.mass;
-    for (v = 0; v < nn; v++) {
-        mass[v] = 0.0;
-        ku[3 * v] = ku[3 * v + 1] = ku[3 * v + 2] = 0.0;
-    }
-    for (t = 0; t < m->ntet; t++) {
-        double Ke[144], ue[12], V;
-        const amps_int *tv = m->tet + 4 * t;
-        if (m->removed && m->removed[t]) continue;
-        V = amps_mesh_tet_stiffness(m, t, Ke);
-        for (a = 0; a < 12; a++) ue[a] = u[3 * tv[a / 3] + a % 3];
-        for (a = 0; a < 12; a++) {
-            double sum = 0.0;
-            for (b = 0; b < 12; b++) sum += Ke[12 * a + b] * ue[b];
-            ku[3 * tv[a / 3] + a % 3] += sum;
-        }
-        for (a = 0; a < 4; a++) mass[tv[a]] += (m->rho ? m->rho[t] : 1.0) * V / 4;
-    }
     for (v = 0; v < nn; v++)
         for (d = 0; d < 3; d++)
             if (S->node.dof[3 * v + d] >= 0) {
