@@ -818,8 +818,8 @@ AMPS_API amps_status amps_scene_gravity(amps_ctx *ctx, amps_scene *S, const doub
 AMPS_API amps_status amps_scene_dynamics(amps_ctx *ctx, amps_scene *S, double dt, double alpha, double beta);
 /* nsteps time steps: A w+ = M w + dt (f + M g - K u), u+ = u + dt w+; fixed DOFs w+ = 0, a pin
    with target g has w+ = (g - u)/dt, an orphan node w+ = 0; the free DOFs solve the reduced
-   system (one engine solve). K u and M are summed over the live tets per step (one element
-   stiffness per tet). Reactions (amps_scene_reaction) are (A w+ - b)_P / dt; the haptic path
+   system (one engine solve). K u = (A u - cM M u) / cK takes one product with the engine's
+   matrix, M one pass over the tets (about 0.4 of a solve's instructions on brick R=6). Reactions (amps_scene_reaction) are (A w+ - b)_P / dt; the haptic path
    amps_scene_solve_reactions gives those of the step that would be taken now. With fracture on,
    after each step the tets over the threshold are removed (amps_scene_fracture). AMPS_ERR_STATE
    in statics; a failing step returns its error with the earlier steps done. */
