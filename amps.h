@@ -904,8 +904,7 @@ AMPS_API void amps_scene_opts_default(amps_scene_opts *o);
 AMPS_API amps_scene *amps_scene_create(amps_ctx *ctx, amps_mesh *m, const amps_scene_opts *opts);
 AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S);
 AMPS_API const amps_mesh *amps_scene_mesh(const amps_scene *S);
-/* Sets the material of every tet; before the factorization only: AMPS_ERR_STATE after it (the
-   run-time change of materials is amps_scene_set_tet_material's). */
+/* Sets the material of every tet (after the factorization: one update, see amps_scene_set_tet_material). */
 AMPS_API amps_status amps_scene_set_material(amps_ctx *ctx, amps_scene *S, double E, double nu);
 /* Fixes nodes (zero displacement, eliminated from the system); before the factorization only.
    amps_scene_fix_where fixes the nodes whose coordinate axis (0, 1, 2) is below / above value. */
@@ -1072,6 +1071,62 @@ typedef struct amps_scene_stroke_result {
 } amps_scene_stroke_result;
 AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int npts, const double *pts,
                                        const double blade[3], double radius, amps_scene_stroke_result *out);
+/* ---- dynamics, removal, runtime materials, fracture ----
+   Mass: lumped, m_v = sum over the live tets t containing v of rho_t |V_t| / 4. The system
+   matrix is A = cM M + cK K: statics cM = 0, cK = 1 (A = K); dynamics cM = 1 + alpha dt,
+   cK = beta dt + dt^2. Every change of A (cut, removal, material) is an update of the engine. */
+
+/* Density of every tet (rho > 0 finite, else AMPS_ERR_VALUE); before the factorization only
+   (AMPS_ERR_STATE). */
+AMPS_API amps_status amps_scene_set_density(amps_ctx *ctx, amps_scene *S, double rho);
+/* E, nu and (rho > 0; 0 keeps) of the tets whose region attribute is id. Before the
+   factorization it sets the mesh; after, the change of their element matrices is one update
+   (O(tets of the region) element matrices; allocates). Errors: AMPS_ERR_ARG (no tet has region
+   id), AMPS_ERR_VALUE (material, rho < 0 or not finite), a failed commit; the scene unchanged. */
+AMPS_API amps_status amps_scene_set_region(amps_ctx *ctx, amps_scene *S, amps_int id, double E, double nu,
+                                           double rho);
+/* Material of tet t at any time (after the factorization: an update of its nodes' rows, as
+   amps_scene_set_region; amps_scene_set_material likewise updates every tet). AMPS_ERR_INDEX. */
+AMPS_API amps_status amps_scene_set_tet_material(amps_ctx *ctx, amps_scene *S, amps_int t, double E, double nu);
+/* Gravity: body force f_v += m_v g on every node (default 0), statics and dynamics, any time.
+   In statics after the factorization it sets the force of every equation (O(nnode)); the loads
+   follow the masses through cuts and removals. AMPS_ERR_VALUE (not finite). */
+AMPS_API amps_status amps_scene_gravity(amps_ctx *ctx, amps_scene *S, const double g[3]);
+/* Implicit dynamics from now on (paper "GPU-accelerated surgery simulation for opening a brain
+   fissure", Eq. 27): backward Euler in velocity form with Rayleigh damping C = alpha M + beta K.
+   dt > 0, alpha, beta >= 0, finite (AMPS_ERR_VALUE). The state (u, w) starts at the current
+   displacements and zero velocity. Called after the factorization with new values it re-factors
+   A (a full amps_scene_prepare; if that fails the scene is left unprepared, prepared again by
+   the next call). Then amps_scene_solve / amps_scene_solve_watched are AMPS_ERR_STATE. */
+AMPS_API amps_status amps_scene_dynamics(amps_ctx *ctx, amps_scene *S, double dt, double alpha, double beta);
+/* nsteps time steps: A w+ = M w + dt (f + M g - K u), u+ = u + dt w+; fixed DOFs w+ = 0, a pin
+   with target g has w+ = (g - u)/dt, an orphan node w+ = 0; the free DOFs solve the reduced
+   system (one engine solve). K u = (A u - cM M u) / cK takes one product with the engine's
+   matrix, M one pass over the tets (about 0.4 of a solve's instructions on brick R=6). Reactions (amps_scene_reaction) are (A w+ - b)_P / dt; the haptic path
+   amps_scene_solve_reactions gives those of the step that would be taken now. With fracture on,
+   after each step the tets over the threshold are removed (amps_scene_fracture). AMPS_ERR_STATE
+   in statics; a failing step returns its error with the earlier steps done. */
+AMPS_API amps_status amps_scene_step(amps_ctx *ctx, amps_scene *S, amps_int nsteps);
+/* Velocities w, 3 per node (NULL before amps_scene_dynamics). */
+AMPS_API const double *amps_scene_velocities(const amps_scene *S);
+/* Removes tets[0..n-1] with the mesh removal (amps_mesh_remove, policy for singular vertices and
+   edges; report may be NULL), then updates A on the rows of the affected nodes: minus the element
+   matrices of the removed tets, separated nodes as new equations (like cut copies, with their
+   origin's u and w). Orphans (nodes left in no tet) are held: statics at their displacement,
+   dynamics at w = 0. In statics a removal that leaves a node-connected piece with no fixed or
+   pinned node, or a piece the engine finds singular (a hinge), is AMPS_ERR_SINGULAR_UPDATE with
+   the piece named, and the scene is as it was (amps_mesh_unremove); in dynamics a free piece is
+   legal. Errors of amps_mesh_remove (index, removed twice) change nothing. Allocates. */
+AMPS_API amps_status amps_scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, const amps_int *tets,
+                                       amps_singular_policy policy, amps_mesh_removal *report);
+/* Fracture: after each step, tets with max |principal stress| > sigma_max are removed (default
+   policy) before the next step; sigma_max <= 0 turns it off. AMPS_ERR_VALUE for NaN. */
+AMPS_API amps_status amps_scene_fracture(amps_ctx *ctx, amps_scene *S, double sigma_max);
+/* The threshold of the tets of region id only (<= 0: none fracture there), over the one of
+   amps_scene_fracture. AMPS_ERR_ARG (no tet has region id), AMPS_ERR_VALUE (NaN). */
+AMPS_API amps_status amps_scene_fracture_region(amps_ctx *ctx, amps_scene *S, amps_int id, double sigma_max);
+/* Tets fractured by the last step; *total (may be NULL) receives those of all steps. */
+AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
 #endif /* AMPS_NO_FEM */
 
 /* ==== [amps:io] mesh readers and writers ====================================================== */
@@ -10670,6 +10725,39 @@ typedef struct amps__scene_batch {
     amps__scene_op *ops;
     amps_int *moved;
 } amps__scene_batch;
+/* Lumped mass of node v: sum of rho |V| / 4 over the tets that contain it. */
+static double amps__scene_node_mass(const amps_mesh *m, amps_int v) {
+    double mv = 0.0, X[12], G[12];
+    amps_int k;
+    for (k = 0; k < m->inc_len[v]; k++) {
+        amps_int t = m->inc[m->inc_ptr[v] + k];
+        amps_mesh_tet_coords(m, t, X);
+        mv += (m->rho ? m->rho[t] : 1.0) * fabs(amps_tet_gradients(X, G)) / 4;
+    }
+    return mv;
+}
+
+/* Dynamics, gravity and fracture (amps_scene_dynamics, amps_scene_gravity, amps_scene_fracture). */
+typedef struct amps__scene_dyn {
+    int on;                    /* implicit dynamics: system A = cM M + cK K */
+    double dt, alpha, beta;    /* time step, Rayleigh damping C = alpha M + beta K */
+    double cM, cK;             /* 1 + alpha dt, beta dt + dt^2 (used only when on) */
+    double g[3];               /* gravity: body force per unit mass */
+    amps_int cap;              /* node capacity of the arrays below */
+    double *vel;               /* 3 per node: velocity w */
+    double *mass, *ku;         /* scratch per node (mass) / per DOF (K u) */
+    amps_int *idx;             /* scratch: 3 per node */
+    double *val;               /* scratch: 3 per node */
+    double *vol;               /* ntet: |V| of each tet (reference configuration), NULL until the first step */
+    double *xe, *ye;           /* scratch per equation (ncap): u and A u */
+    amps_int ncap;
+    unsigned char *orphan;     /* 1: the node lies in no tet and is held where it is */
+    double sigma_max;          /* fracture threshold (<= 0: off) */
+    amps_int nfreg;            /* regions with their own threshold */
+    amps_int *freg_id;         /* nfreg region ids */
+    double *freg_sigma;        /* their thresholds (<= 0: no fracture there) */
+    amps_int nstep, nfractured, nfractured_total; /* steps taken; tets fractured by the last step, in all */
+} amps__scene_dyn;
 
 struct amps_scene {
     amps_mesh *m;
@@ -10686,7 +10774,25 @@ struct amps_scene {
     amps__scene_render rd;
     amps__scene_grid grid;
     amps__scene_batch batch;
+    amps__scene_dyn dyn;
 };
+
+/* Ae = cK Ke + cM Me of tet t, Me = diag(rho |V| / 4) (statics: Ae = Ke): every element matrix
+   of the scene's system. Returns |V|. */
+static double amps__scene_tet_matrix(const amps_scene *S, amps_int t, double Ae[144]) {
+    double V = amps_mesh_tet_stiffness(S->m, t, Ae), mv;
+    int a;
+    if (!S->dyn.on) return V;
+    mv = S->dyn.cM * (S->m->rho ? S->m->rho[t] : 1.0) * V / 4;
+    for (a = 0; a < 144; a++) Ae[a] *= S->dyn.cK;
+    for (a = 0; a < 12; a++) Ae[13 * a] += mv;
+    return V;
+}
+static double amps__scene_body_force(const amps_scene *S, amps_int v, int d);
+static amps_status amps__scene_dyn_room(amps_ctx *ctx, amps_scene *S, amps_int nnode);
+static void amps__scene_dyn_cut(amps_ctx *ctx, amps_scene *S, amps_int v, amps_int vc);
+static amps_status amps__scene_dyn_load(amps_ctx *ctx, amps_scene *S);
+static amps_status amps__scene_set_material_all(amps_ctx *ctx, amps_scene *S, double E, double nu);
 
 AMPS_API void amps_scene_opts_default(amps_scene_opts *o) {
     if (!o) return;
@@ -10727,6 +10833,17 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__scene_render_free(ctx, S);
     amps__free(ctx, S->batch.ops);
     amps__free(ctx, S->batch.moved);
+    amps__free(ctx, S->dyn.vel);
+    amps__free(ctx, S->dyn.mass);
+    amps__free(ctx, S->dyn.ku);
+    amps__free(ctx, S->dyn.idx);
+    amps__free(ctx, S->dyn.val);
+    amps__free(ctx, S->dyn.orphan);
+    amps__free(ctx, S->dyn.vol);
+    amps__free(ctx, S->dyn.xe);
+    amps__free(ctx, S->dyn.ye);
+    amps__free(ctx, S->dyn.freg_id);
+    amps__free(ctx, S->dyn.freg_sigma);
     amps__free(ctx, S);
 }
 
@@ -10787,10 +10904,7 @@ AMPS_API amps_int amps_scene_ndof(const amps_scene *S) {
 
 AMPS_API amps_status amps_scene_set_material(amps_ctx *ctx, amps_scene *S, double E, double nu) {
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_set_material: NULL scene");
-    if (S->prepared)
-        return amps__err(ctx, AMPS_ERR_STATE,
-                         "amps_scene_set_material: the system is already factored; materials at run time: "
-                         "amps_scene_set_tet_material");
+    if (S->prepared) return amps__scene_set_material_all(ctx, S, E, nu);
     return amps_mesh_set_material(ctx, S->m, E, nu);
 }
 
@@ -10825,6 +10939,18 @@ AMPS_API amps_status amps_scene_fix_where(amps_ctx *ctx, amps_scene *S, int axis
     return AMPS_OK;
 }
 
+/* K (upper triangle over node.dof) becomes cK K + cM M, M the lumped mass: the system of
+   amps__scene_tet_matrix summed. */
+static void amps__scene_mass_diag(amps_scene *S, amps_csc *K) {
+    amps_int v, p, j;
+    int d;
+    for (p = 0; p < K->p[K->ncol]; p++) K->x[p] *= S->dyn.cK;
+    for (v = 0; v < S->m->nnode; v++)
+        for (d = 0; d < 3; d++)
+            if ((j = S->node.dof[3 * v + d]) >= 0 && K->p[j + 1] > K->p[j] && K->i[K->p[j + 1] - 1] == j)
+                K->x[K->p[j + 1] - 1] += S->dyn.cM * amps__scene_node_mass(S->m, v);
+}
+
 /* K = the stiffness matrix of the free DOFs (node.dof numbered), its factor F (ordered with the
    free nodes' coordinates unless opts.order gives some) and the engine U over them. */
 static amps_status amps__scene_factor(amps_ctx *ctx, amps_scene *S, amps_int n) {
@@ -10834,6 +10960,7 @@ static amps_status amps__scene_factor(amps_ctx *ctx, amps_scene *S, amps_int n) 
     amps_update_opts uo = S->opts.update;
     S->K = amps_mesh_assemble(ctx, S->m, S->node.dof, n);
     if (!S->K) return AMPS_ERR_OOM;
+    if (S->dyn.on) amps__scene_mass_diag(S, S->K);
     /* coordinates of the free nodes, one per block of 3 equations, for the ordering */
     coords = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
     if (!coords) return AMPS_ERR_OOM;
@@ -10945,9 +11072,10 @@ AMPS_API amps_status amps_scene_prepare(amps_ctx *ctx, amps_scene *S) {
     /* forces and pins set before the factorization */
     for (v = 0; v < S->m->nnode; v++)
         for (k = 0; k < 3; k++)
-            if (S->node.dof[3 * v + k] >= 0 && S->node.force[3 * v + k] != 0.0) {
+            if (S->node.dof[3 * v + k] >= 0 && (S->node.force[3 * v + k] != 0.0 || S->dyn.g[k] != 0.0)) {
                 amps_int i = S->node.dof[3 * v + k];
-                if (amps_update_set_force(ctx, S->U, 1, &i, S->node.force + 3 * v + k)) goto fail;
+                double f = S->node.force[3 * v + k] + amps__scene_body_force(S, v, (int)k);
+                if (amps_update_set_force(ctx, S->U, 1, &i, &f)) goto fail;
             }
     for (v = 0; v < S->m->nnode; v++)
         if (S->node.pinned[v] && amps_update_constrain(ctx, S->U, 3, S->node.dof + 3 * v, S->node.pin_value + 3 * v))
@@ -10979,7 +11107,7 @@ AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, 
     for (k = 0; k < 3; k++)
         if (S->prepared && S->node.dof[3 * v + k] >= 0) {
             idx[m] = S->node.dof[3 * v + k];
-            val[m] = f[k];
+            val[m] = f[k] + amps__scene_body_force(S, v, (int)k);
             m++;
         }
     if (S->prepared && (s = amps_update_set_force(ctx, S->U, m, idx, val)) != AMPS_OK) return s;
@@ -11290,8 +11418,8 @@ static amps_int amps__cut_local_dofs(amps_scene *S, amps_int v, amps_int vc, amp
     return nl;
 }
 
-/* cut.local_K (nl x nl over cut.local_dof) = sum over the moved tets of Ke scattered with vc
-   minus Ke scattered with v: the change of K^ the cut makes. */
+/* cut.local_K (nl x nl over cut.local_dof) = sum over the moved tets of Ae (amps__scene_tet_matrix)
+   scattered with vc minus Ae scattered with v: the change of the system matrix the cut makes. */
 static void amps__cut_local_K(amps_scene *S, amps_int v, amps_int vc, amps_int nmoved, amps_int nl) {
     const amps_mesh *m = S->m;
     const amps_int *ld = S->cut.local_dof;
@@ -11302,7 +11430,7 @@ static void amps__cut_local_K(amps_scene *S, amps_int v, amps_int vc, amps_int n
         double Ke[144];
         amps_int loc_new[12], loc_old[12];
         int q, d, pass;
-        amps_mesh_tet_stiffness(m, S->cut.moved[k], Ke);
+        amps__scene_tet_matrix(S, S->cut.moved[k], Ke);
         for (q = 0; q < 4; q++) {
             amps_int node = m->tet[4 * S->cut.moved[k] + q];
             for (d = 0; d < 3; d++) {
@@ -11402,9 +11530,11 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
         return s; /* earlier changes first */
     if ((s = amps__scene_cut_room(ctx, S, v, &watched)) != AMPS_OK) return s;
     if (S->batch.open && (s = amps__scene_batch_room(ctx, S, amps_mesh_degree(S->m, v))) != AMPS_OK) return s;
+    if ((s = amps__scene_dyn_room(ctx, S, S->m->nnode + 1)) != AMPS_OK) return s;
     s = S->prepared ? amps__scene_cut_update(ctx, S, v, p, nrm, &vc) : amps__scene_cut_topology(ctx, S, v, p, nrm, &vc);
     if (s != AMPS_OK) return s;
     amps__scene_cut_recorded(ctx, S, v, vc);
+    amps__scene_dyn_cut(ctx, S, v, vc);
     if (new_node) *new_node = vc;
     if (watched) {
         S->watch.nodes[S->watch.n++] = vc;
@@ -11419,6 +11549,7 @@ static void amps__scene_gather(amps_scene *S, amps_int nv, const amps_int *nodes
 AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve: NULL scene");
+    if (S->dyn.on) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_solve: the scene is dynamic (use amps_scene_step)");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
     if ((s = amps_update_solve(ctx, S->U, NULL)) < 0) return s;
@@ -11463,6 +11594,8 @@ static void amps__scene_gather(amps_scene *S, amps_int nv, const amps_int *nodes
 AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_watched: NULL scene");
+    if (S->dyn.on)
+        return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_solve_watched: the scene is dynamic (use amps_scene_step)");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
     if (S->watch.stale) {
@@ -11491,6 +11624,7 @@ AMPS_API amps_status amps_scene_solve_reactions(amps_ctx *ctx, amps_scene *S) {
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_reactions: NULL scene");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
+    if (S->dyn.on && (s = amps__scene_dyn_load(ctx, S)) != AMPS_OK) return s;
     return amps_update_solve_reactions(ctx, S->U);
 }
 
@@ -11517,6 +11651,8 @@ AMPS_API amps_status amps_scene_reaction(amps_ctx *ctx, const amps_scene *S, amp
         return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_reaction: node %ld out of range", (long)v);
     for (k = 0; k < 3; k++)
         r[k] = (S->U && S->node.pinned[v]) ? amps_update_reaction(S->U, S->node.dof[3 * v + k]) : 0.0;
+    if (S->dyn.on)
+        for (k = 0; k < 3; k++) r[k] /= S->dyn.dt; /* (A w+ - b)_P / dt */
     return AMPS_OK;
 }
 
@@ -12292,6 +12428,594 @@ AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int np
 done:
     amps__free(ctx, nrm);
     amps__free(ctx, L);
+    return s;
+}
+
+/* ---- dynamics, gravity, removal, runtime materials, fracture ---- */
+
+/* Gravity load of DOF d of node v: m_v g_d (0 without gravity). */
+static double amps__scene_body_force(const amps_scene *S, amps_int v, int d) {
+    return S->dyn.g[d] == 0.0 ? 0.0 : S->dyn.g[d] * amps__scene_node_mass(S->m, v);
+}
+
+/* Room for nnode nodes in the dynamics arrays (new velocities zero, not orphans). */
+static amps_status amps__scene_dyn_room(amps_ctx *ctx, amps_scene *S, amps_int nnode) {
+    amps_int v, cap = nnode > S->node.cap ? nnode : S->node.cap;
+    size_t c = (size_t)cap;
+    if (nnode <= S->dyn.cap) return AMPS_OK;
+    if (amps__realloc(ctx, (void **)&S->dyn.vel, 3 * c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&S->dyn.mass, c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&S->dyn.ku, 3 * c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&S->dyn.idx, 3 * c, sizeof(amps_int)) ||
+        amps__realloc(ctx, (void **)&S->dyn.val, 3 * c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&S->dyn.orphan, c, 1))
+        return amps__err(ctx, AMPS_ERR_OOM, "amps_scene: out of memory for %ld nodes", (long)nnode);
+    for (v = S->dyn.cap; v < cap; v++) {
+        S->dyn.vel[3 * v] = S->dyn.vel[3 * v + 1] = S->dyn.vel[3 * v + 2] = 0.0;
+        S->dyn.orphan[v] = 0;
+    }
+    S->dyn.cap = cap;
+    return AMPS_OK;
+}
+
+/* Engine forces of node v: its force plus its gravity load (statics; dynamics loads each step). */
+static amps_status amps__scene_refresh_force(amps_ctx *ctx, amps_scene *S, amps_int v) {
+    amps_int idx[3], m = 0;
+    double val[3];
+    int d;
+    if (!S->prepared || S->dyn.on) return AMPS_OK;
+    for (d = 0; d < 3; d++)
+        if (S->node.dof[3 * v + d] >= 0) {
+            idx[m] = S->node.dof[3 * v + d];
+            val[m++] = S->node.force[3 * v + d] + amps__scene_body_force(S, v, d);
+        }
+    return amps_update_set_force(ctx, S->U, m, idx, val);
+}
+
+/* After the cut of v into v and vc: vc moves with v's velocity; the gravity loads of both follow
+   their masses. */
+static void amps__scene_dyn_cut(amps_ctx *ctx, amps_scene *S, amps_int v, amps_int vc) {
+    int d;
+    if (vc < 0 || vc >= S->dyn.cap) return;
+    for (d = 0; d < 3; d++) S->dyn.vel[3 * vc + d] = S->dyn.vel[3 * v + d];
+    S->dyn.orphan[vc] = 0;
+    if (S->dyn.g[0] != 0.0 || S->dyn.g[1] != 0.0 || S->dyn.g[2] != 0.0) {
+        (void)amps__scene_refresh_force(ctx, S, v);
+        (void)amps__scene_refresh_force(ctx, S, vc);
+    }
+}
+
+/* Lumped masses of the nodes (dyn.mass) from the cached tet volumes, and K u on every DOF
+   (dyn.ku) as (A u - cM M u) / cK with one product by the engine's committed matrix A. */
+static amps_status amps__scene_dyn_ku(amps_ctx *ctx, amps_scene *S) {
+    const amps_mesh *m = S->m;
+    amps_int nn = m->nnode, v, t, e, N;
+    int a, d;
+    if (S->U->pending.n_delta || S->U->pending.n_dofs) {
+        amps_status s = amps_update_commit(ctx, S->U);
+        if (s != AMPS_OK) return s;
+    }
+    N = amps_update_dim(S->U);
+    if (!S->dyn.vol) {
+        S->dyn.vol = AMPS__CAST(double *, amps__malloc(ctx, (size_t)m->ntet + 1, sizeof(double)));
+        if (!S->dyn.vol) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory");
+        for (t = 0; t < m->ntet; t++) {
+            double X[12], G[12];
+            amps_mesh_tet_coords(m, t, X);
+            S->dyn.vol[t] = fabs(amps_tet_gradients(X, G));
+        }
+    }
+    if (N > S->dyn.ncap) {
+        if (amps__realloc(ctx, (void **)&S->dyn.xe, (size_t)N, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&S->dyn.ye, (size_t)N, sizeof(double)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory");
+        S->dyn.ncap = N;
+    }
+    for (v = 0; v < nn; v++) S->dyn.mass[v] = 0.0;
+    for (t = 0; t < m->ntet; t++)
+        if (!(m->removed && m->removed[t]))
+            for (a = 0; a < 4; a++) S->dyn.mass[m->tet[4 * t + a]] += (m->rho ? m->rho[t] : 1.0) * S->dyn.vol[t] / 4;
+    for (e = 0; e < N; e++) S->dyn.xe[e] = 0.0;
+    for (v = 0; v < 3 * nn; v++)
+        if ((e = S->node.dof[v]) >= 0) S->dyn.xe[e] = S->node.disp[v];
+    amps__kmul(S->U, S->dyn.xe, S->dyn.ye);
+    for (v = 0; v < nn; v++)
+        for (d = 0; d < 3; d++) {
+            e = S->node.dof[3 * v + d];
+            S->dyn.ku[3 * v + d] =
+                    e >= 0 ? (S->dyn.ye[e] - S->dyn.cM * S->dyn.mass[v] * S->node.disp[3 * v + d]) / S->dyn.cK : 0.0;
+        }
+    return AMPS_OK;
+}
+
+/* The right-hand side and pins of the next step (paper 003 Eq. 27): b = M w + dt (f + M g - K u)
+   on every equation, w_P = (g_P - u_P) / dt at the pins (orphans stay at w = 0). Cost: one
+   product with the engine's matrix and O(ntet) for the masses (amps__scene_dyn_ku). */
+static amps_status amps__scene_dyn_load(amps_ctx *ctx, amps_scene *S) {
+    amps_int nn = S->m->nnode, v, n = 0;
+    double dt = S->dyn.dt, *u = S->node.disp, *ku, *mass;
+    int d;
+    amps_status s;
+    if ((s = amps__scene_dyn_room(ctx, S, nn)) != AMPS_OK || (s = amps__scene_dyn_ku(ctx, S)) != AMPS_OK) return s;
+    ku = S->dyn.ku;
+    mass = S->dyn.mass;
+    for (v = 0; v < nn; v++)
+        for (d = 0; d < 3; d++)
+            if (S->node.dof[3 * v + d] >= 0) {
+                amps_int k = 3 * v + d;
+                S->dyn.idx[n] = S->node.dof[k];
+                S->dyn.val[n++] = mass[v] * S->dyn.vel[k] + dt * (S->node.force[k] + mass[v] * S->dyn.g[d] - ku[k]);
+            }
+    if ((s = amps_update_set_force(ctx, S->U, n, S->dyn.idx, S->dyn.val)) != AMPS_OK) return s;
+    for (n = 0, v = 0; v < nn; v++)
+        if (S->node.pinned[v] && !S->dyn.orphan[v])
+            for (d = 0; d < 3; d++) {
+                S->dyn.idx[n] = S->node.dof[3 * v + d];
+                S->dyn.val[n++] = (S->node.pin_value[3 * v + d] - u[3 * v + d]) / dt;
+            }
+    return n ? amps_update_constrain(ctx, S->U, n, S->dyn.idx, S->dyn.val) : AMPS_OK;
+}
+
+/* Triplets of a change of the system matrix (upper triangle in equations). */
+typedef struct amps__trip {
+    amps_int r, c;
+    double v;
+} amps__trip;
+typedef struct amps__trips {
+    amps__trip *e;
+    size_t n, cap;
+} amps__trips;
+
+/* Appends sign * Ae(t) scattered on the equations of its nodes (node w read as rename[w] when
+   rename is given). */
+static amps_status amps__trips_tet(amps_ctx *ctx, const amps_scene *S, amps__trips *T, amps_int t, double sign,
+                                   const amps_int *rename) {
+    double Ae[144];
+    amps_int e[12];
+    int a, b;
+    if (T->n + 78 > T->cap) {
+        size_t cap = 2 * T->cap + 78 * 16;
+        if (amps__realloc(ctx, (void **)&T->e, cap, sizeof(amps__trip)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene: out of memory");
+        T->cap = cap;
+    }
+    amps__scene_tet_matrix(S, t, Ae);
+    for (a = 0; a < 12; a++) {
+        amps_int w = S->m->tet[4 * t + a / 3];
+        e[a] = S->node.dof[3 * (rename ? rename[w] : w) + a % 3];
+    }
+    for (a = 0; a < 12; a++)
+        for (b = 0; b < 12; b++) {
+            amps__trip *x;
+            if (e[a] < 0 || e[b] < 0 || e[a] > e[b] || (e[a] == e[b] && a > b)) continue;
+            x = T->e + T->n++;
+            x->r = e[a];
+            x->c = e[b];
+            x->v = sign * Ae[12 * a + b];
+        }
+    return AMPS_OK;
+}
+
+static int amps__trip_cmp(const void *x, const void *y) {
+    const amps__trip *a = (const amps__trip *)x, *b = (const amps__trip *)y;
+    if (a->c != b->c) return a->c < b->c ? -1 : 1;
+    return a->r < b->r ? -1 : a->r > b->r;
+}
+
+/* Records the change T (duplicates summed) with amps_update_add; frees T. */
+static amps_status amps__trips_add(amps_ctx *ctx, amps_scene *S, amps__trips *T) {
+    size_t k, nz = 0;
+    amps_int *r = NULL, *c = NULL;
+    double *v = NULL;
+    amps_status s = AMPS_OK;
+    if (T->n > 0) {
+        qsort(T->e, T->n, sizeof(amps__trip), amps__trip_cmp);
+        for (k = 1; k < T->n; k++) {
+            if (T->e[k].r == T->e[nz].r && T->e[k].c == T->e[nz].c) T->e[nz].v += T->e[k].v;
+            else T->e[++nz] = T->e[k];
+        }
+        nz++;
+        r = AMPS__CAST(amps_int *, amps__malloc(ctx, nz, sizeof(amps_int)));
+        c = AMPS__CAST(amps_int *, amps__malloc(ctx, nz, sizeof(amps_int)));
+        v = AMPS__CAST(double *, amps__malloc(ctx, nz, sizeof(double)));
+        if (!r || !c || !v) s = amps__err(ctx, AMPS_ERR_OOM, "amps_scene: out of memory");
+        for (k = 0; !s && k < nz; k++) {
+            r[k] = T->e[k].r;
+            c[k] = T->e[k].c;
+            v[k] = T->e[k].v;
+        }
+        if (!s) s = amps_update_add(ctx, S->U, (amps_int)nz, r, c, v);
+    }
+    amps__free(ctx, r);
+    amps__free(ctx, c);
+    amps__free(ctx, v);
+    amps__free(ctx, T->e);
+    T->e = NULL;
+    T->n = T->cap = 0;
+    return s;
+}
+
+AMPS_API const double *amps_scene_velocities(const amps_scene *S) { return S ? S->dyn.vel : NULL; }
+
+AMPS_API amps_status amps_scene_set_density(amps_ctx *ctx, amps_scene *S, double rho) {
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_set_density: NULL scene");
+    if (!amps__isfinite(rho) || !(rho > 0))
+        return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_set_density: density %g is not > 0", rho);
+    if (S->prepared) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_set_density: the system is already factored");
+    return amps_mesh_set_density(ctx, S->m, rho);
+}
+
+AMPS_API amps_status amps_scene_gravity(amps_ctx *ctx, amps_scene *S, const double g[3]) {
+    amps_int v;
+    amps_status s;
+    int d;
+    if (!S || !g) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_gravity: NULL argument");
+    for (d = 0; d < 3; d++)
+        if (!amps__isfinite(g[d])) return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_gravity: non-finite gravity");
+    for (d = 0; d < 3; d++) S->dyn.g[d] = g[d];
+    for (v = 0; v < S->m->nnode; v++)
+        if ((s = amps__scene_refresh_force(ctx, S, v)) != AMPS_OK) return s;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_dynamics(amps_ctx *ctx, amps_scene *S, double dt, double alpha, double beta) {
+    amps_status s;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_dynamics: NULL scene");
+    if (!amps__isfinite(dt) || !(dt > 0) || !amps__isfinite(alpha) || !(alpha >= 0) || !amps__isfinite(beta) ||
+        !(beta >= 0))
+        return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_dynamics: need dt > 0, alpha >= 0, beta >= 0 (finite)");
+    if ((s = amps__scene_dyn_room(ctx, S, S->m->nnode)) != AMPS_OK) return s;
+    if (S->dyn.on && S->dyn.dt == dt && S->dyn.alpha == alpha && S->dyn.beta == beta) return AMPS_OK;
+    S->dyn.on = 1;
+    S->dyn.dt = dt;
+    S->dyn.alpha = alpha;
+    S->dyn.beta = beta;
+    S->dyn.cM = 1.0 + alpha * dt;
+    S->dyn.cK = beta * dt + dt * dt;
+    if (!S->prepared) return AMPS_OK;
+    amps__scene_unprepare(ctx, S); /* a new system matrix: factor it again */
+    S->prepared = 0;
+    S->watch.stale = 1;
+    return amps_scene_prepare(ctx, S);
+}
+
+/* The tets of a removal: statics requires every node-connected piece around them to keep a fixed
+   or pinned node (AMPS_ERR_SINGULAR_UPDATE naming the first loose piece). Cost: the tets of the
+   pieces explored (a piece stops at its first held node). */
+static amps_status amps__scene_removal_held(amps_ctx *ctx, amps_scene *S, const amps_mesh_removal *r) {
+    const amps_mesh *m = S->m;
+    amps_int nn = m->nnode, k, q, head, tail, *queue;
+    unsigned char *seen;
+    amps_status s = AMPS_OK;
+    seen = AMPS__CAST(unsigned char *, amps__calloc(ctx, (size_t)nn + 1, 1));
+    queue = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nn + 1, sizeof(amps_int)));
+    if (!seen || !queue) s = amps__err(ctx, AMPS_ERR_OOM, "amps_scene_remove: out of memory");
+    for (k = 0; !s && k < 4 * r->ntet; k++) {
+        amps_int seed = m->tet[4 * r->tets[k / 4] + k % 4], ntet = 0;
+        int held = 0;
+        if (seen[seed] || m->inc_len[seed] == 0) continue;
+        seen[seed] = 1;
+        head = tail = 0;
+        queue[tail++] = seed;
+        while (head < tail && !held) {
+            amps_int v = queue[head++], j;
+            held = S->node.fixed[v] || (S->node.pinned[v] && !S->dyn.orphan[v]);
+            ntet += m->inc_len[v];
+            for (j = 0; j < m->inc_len[v]; j++)
+                for (q = 0; q < 4; q++) {
+                    amps_int w = m->tet[4 * m->inc[m->inc_ptr[v] + j] + q];
+                    if (!seen[w]) {
+                        seen[w] = 1;
+                        queue[tail++] = w;
+                    }
+                }
+        }
+        if (!held)
+            s = amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
+                          "amps_scene_remove: the removal leaves a piece of %ld tets (node %ld) held by nothing; "
+                          "the removal was undone",
+                          (long)(ntet / 4 > 0 ? ntet / 4 : 1), (long)seed);
+    }
+    amps__free(ctx, seen);
+    amps__free(ctx, queue);
+    return s;
+}
+
+/* The engine side of the removal r (the mesh already changed): new equations for the separated
+   copies, minus Ae of the removed tets, Ae of the moved tets on their copies minus Ae on the
+   originals, orphans held (statics: at u, dynamics: w = 0), gravity loads of the nodes whose
+   mass changed; one commit. *nflag receives the orphans flagged (undo: amps__scene_removal_undo). */
+static amps_status amps__scene_removal_update(amps_ctx *ctx, amps_scene *S, const amps_mesh_removal *r,
+                                              amps_int *rename, amps_int *flagged, amps_int *nflag) {
+    const amps_mesh *m = S->m;
+    amps__trips T = {NULL, 0, 0};
+    amps_int k, j, first;
+    amps_status s = AMPS_OK;
+    int d;
+    *nflag = 0;
+    for (k = 0; k < r->nsep && !s; k++) {
+        amps_int v = r->sep_node[k], c = r->sep_copy[k];
+        if (S->node.fixed[v] || S->node.dof[3 * v] < 0) continue;
+        if ((s = amps_update_add_dofs(ctx, S->U, 3, &first)) == AMPS_OK)
+            for (d = 0; d < 3; d++) S->node.dof[3 * c + d] = first + d;
+    }
+    for (k = 0; k < r->ntet && !s; k++) s = amps__trips_tet(ctx, S, &T, r->tets[k], -1.0, NULL);
+    for (k = 0; k < r->nsep && !s; k++)
+        for (j = r->sep_ptr[k]; j < r->sep_ptr[k + 1] && !s; j++)
+            if ((s = amps__trips_tet(ctx, S, &T, r->sep_tets[j], 1.0, NULL)) == AMPS_OK)
+                s = amps__trips_tet(ctx, S, &T, r->sep_tets[j], -1.0, rename);
+    if (!s) s = amps__trips_add(ctx, S, &T);
+    else amps__free(ctx, T.e);
+    for (k = 0; k < 4 * r->ntet && !s; k++) { /* orphans */
+        amps_int v = m->tet[4 * r->tets[k / 4] + k % 4];
+        double val[3];
+        if (m->inc_len[v] > 0 || S->dyn.orphan[v] || S->node.dof[3 * v] < 0) continue;
+        for (d = 0; d < 3; d++) val[d] = S->dyn.on ? 0.0 : S->node.disp[3 * v + d];
+        if ((s = amps_update_constrain(ctx, S->U, 3, S->node.dof + 3 * v, val)) != AMPS_OK) break;
+        S->dyn.orphan[v] = 1 + S->node.pinned[v];
+        S->node.pinned[v] = 0;
+        flagged[(*nflag)++] = v;
+    }
+    for (k = 0; k < 4 * r->ntet && !s; k++) s = amps__scene_refresh_force(ctx, S, m->tet[4 * r->tets[k / 4] + k % 4]);
+    for (k = 0; k < r->nsep && !s; k++)
+        if ((s = amps__scene_refresh_force(ctx, S, r->sep_node[k])) == AMPS_OK)
+            s = amps__scene_refresh_force(ctx, S, r->sep_copy[k]);
+    if (s) {
+        amps_update_discard(S->U);
+        return s;
+    }
+    if (!S->dyn.on && (s = amps__scene_removal_held(ctx, S, r)) != AMPS_OK) {
+        amps_update_discard(S->U);
+        return s;
+    }
+    if ((s = amps_update_commit(ctx, S->U)) == AMPS_ERR_SINGULAR_UPDATE)
+        amps__err(ctx, s, "amps_scene_remove: the removal leaves a piece held by nothing or by a hinge; undone");
+    return s;
+}
+
+/* Node state of the copies of r (the origin's fixed flag, displacement and velocity). */
+static void amps__scene_removal_copies(amps_scene *S, const amps_mesh_removal *r) {
+    amps_int k;
+    int d;
+    for (k = 0; k < r->nsep; k++) {
+        amps_int v = r->sep_node[k], c = r->sep_copy[k];
+        S->node.fixed[c] = S->node.fixed[v];
+        S->node.pinned[c] = 0;
+        S->dyn.orphan[c] = 0;
+        for (d = 0; d < 3; d++) {
+            S->node.pin_value[3 * c + d] = S->node.force[3 * c + d] = 0.0;
+            S->node.disp[3 * c + d] = S->node.disp[3 * v + d];
+            S->dyn.vel[3 * c + d] = S->dyn.vel[3 * v + d];
+            S->node.dof[3 * c + d] = -1;
+        }
+    }
+}
+
+/* Removal with the report in *out (see amps_scene_remove). */
+static amps_status amps__scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, const amps_int *tets,
+                                      amps_singular_policy policy, amps_mesh_removal *out) {
+    amps_int k, nflag = 0, nn0 = S->m->nnode, *rename = NULL, *flagged = NULL;
+    amps_status s;
+    amps_ctx c2;
+    if (S->prepared && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
+    if ((s = amps__scene_dyn_room(ctx, S, nn0)) != AMPS_OK) return s;
+    if ((s = amps_mesh_remove(ctx, S->m, n, tets, policy, out)) != AMPS_OK) return s;
+    if (S->m->nnode > S->node.cap && amps__scene_grow(ctx, S, S->m->node_cap > S->m->nnode ? S->m->node_cap : S->m->nnode))
+        s = amps__err(ctx, AMPS_ERR_OOM, "amps_scene_remove: out of memory");
+    if (!s) s = amps__scene_dyn_room(ctx, S, S->m->nnode);
+    if (!s) {
+        amps__scene_removal_copies(S, out);
+        flagged = AMPS__CAST(amps_int *, amps__malloc(ctx, 4 * (size_t)out->ntet + 1, sizeof(amps_int)));
+        rename = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)S->m->nnode + 1, sizeof(amps_int)));
+        if (!flagged || !rename) s = amps__err(ctx, AMPS_ERR_OOM, "amps_scene_remove: out of memory");
+    }
+    for (k = 0; !s && !S->prepared && k < 4 * out->ntet; k++) /* before the factorization: topology only */
+        if (S->m->inc_len[S->m->tet[4 * out->tets[k / 4] + k % 4]] == 0) S->node.pinned[S->m->tet[4 * out->tets[k / 4] + k % 4]] = 0;
+    if (!s && S->prepared) {
+        for (k = 0; k < S->m->nnode; k++) rename[k] = k;
+        for (k = 0; k < out->nsep; k++) rename[out->sep_copy[k]] = out->sep_node[k];
+        s = amps__scene_removal_update(ctx, S, out, rename, flagged, &nflag);
+    }
+    if (s) { /* the scene as it was */
+        for (k = 0; k < nflag; k++) {
+            S->node.pinned[flagged[k]] = (unsigned char)(S->dyn.orphan[flagged[k]] == 2);
+            S->dyn.orphan[flagged[k]] = 0;
+        }
+        for (k = 3 * nn0; k < 3 * S->m->nnode && k < 3 * S->node.cap; k++) S->node.dof[k] = -1;
+        amps_ctx_init(&c2);
+        (void)amps_mesh_unremove(&c2, S->m, out);
+    } else { /* rendering data: the separations' copies, then the faces around the removed tets */
+        for (k = 0; k < out->nsep; k++) amps__scene_cut_recorded(ctx, S, out->sep_node[k], out->sep_copy[k]);
+        amps__scene_faces_changed(ctx, S, out->tets, out->ntet);
+    }
+    amps__free(ctx, flagged);
+    amps__free(ctx, rename);
+    return s;
+}
+
+AMPS_API amps_status amps_scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, const amps_int *tets,
+                                       amps_singular_policy policy, amps_mesh_removal *report) {
+    amps_mesh_removal r;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_remove: NULL scene");
+    return amps__scene_remove(ctx, S, n, tets, policy, report ? report : &r);
+}
+
+/* Tets whose largest principal stress magnitude exceeds sigma_max are removed (default policy). */
+static amps_status amps__scene_fracture_step(amps_ctx *ctx, amps_scene *S) {
+    const amps_mesh *m = S->m;
+    amps_int t, n = 0, *list;
+    amps_mesh_removal r;
+    amps_status s = AMPS_OK;
+    S->dyn.nfractured = 0;
+    list = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m->ntet, sizeof(amps_int)));
+    if (!list) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory");
+    for (t = 0; t < m->ntet; t++) {
+        double X[12], u[12], sg[6], pr[3], mx, smax = S->dyn.sigma_max;
+        amps_int k;
+        int a;
+        if (m->removed && m->removed[t]) continue;
+        for (k = 0; k < S->dyn.nfreg; k++)
+            if (S->dyn.freg_id[k] == (m->region ? m->region[t] : 0)) smax = S->dyn.freg_sigma[k];
+        if (smax <= 0) continue;
+        amps_mesh_tet_coords(m, t, X);
+        for (a = 0; a < 12; a++) u[a] = S->node.disp[3 * m->tet[4 * t + a / 3] + a % 3];
+        amps_tet_stress(X, m->E[t], m->nu[t], u, sg, NULL, pr);
+        mx = fabs(pr[0]) > fabs(pr[2]) ? fabs(pr[0]) : fabs(pr[2]);
+        if (mx > smax) list[n++] = t;
+    }
+    if (n > 0 && (s = amps__scene_remove(ctx, S, n, list, AMPS_SINGULAR_REMOVE, &r)) == AMPS_OK) {
+        S->dyn.nfractured = r.ntet;
+        S->dyn.nfractured_total += r.ntet;
+    }
+    amps__free(ctx, list);
+    return s;
+}
+
+AMPS_API amps_status amps_scene_step(amps_ctx *ctx, amps_scene *S, amps_int nsteps) {
+    amps_int k, v;
+    amps_status s = AMPS_OK, w = AMPS_OK;
+    if (!S || nsteps < 0) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_step: NULL scene or negative step count");
+    if (!S->dyn.on)
+        return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_step: the scene is static (call amps_scene_dynamics first)");
+    if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    for (k = 0; k < nsteps; k++) {
+        const double *x;
+        int d;
+        if ((s = amps__scene_dyn_load(ctx, S)) != AMPS_OK) return s;
+        if ((s = amps_update_solve(ctx, S->U, NULL)) < 0) return s;
+        if (s > 0) w = s;
+        x = amps_update_solution(S->U);
+        for (v = 0; v < S->m->nnode; v++)
+            for (d = 0; d < 3; d++) {
+                amps_int e = S->node.dof[3 * v + d];
+                double wv = e >= 0 ? x[e] : 0.0;
+                S->dyn.vel[3 * v + d] = wv;
+                S->node.disp[3 * v + d] += S->dyn.dt * wv;
+            }
+        S->dyn.nstep++;
+        S->dyn.nfractured = 0;
+        if ((S->dyn.sigma_max > 0 || S->dyn.nfreg > 0) && (s = amps__scene_fracture_step(ctx, S)) != AMPS_OK)
+            return s;
+    }
+    return w;
+}
+
+AMPS_API amps_status amps_scene_fracture(amps_ctx *ctx, amps_scene *S, double sigma_max) {
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_fracture: NULL scene");
+    if (sigma_max != sigma_max) return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_fracture: NaN threshold");
+    S->dyn.sigma_max = sigma_max > 0 ? sigma_max : 0.0;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_fracture_region(amps_ctx *ctx, amps_scene *S, amps_int id, double sigma_max) {
+    amps_int k, n;
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_fracture_region: NULL scene");
+    if (sigma_max != sigma_max) return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_fracture_region: NaN threshold");
+    for (k = 0, n = 0; k < S->m->ntet && !n; k++) n = (S->m->region ? S->m->region[k] : 0) == id;
+    if (!n) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_fracture_region: no tetrahedron has region %ld", (long)id);
+    for (k = 0; k < S->dyn.nfreg && S->dyn.freg_id[k] != id; k++) {}
+    if (k == S->dyn.nfreg) {
+        if (amps__realloc(ctx, (void **)&S->dyn.freg_id, (size_t)k + 1, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&S->dyn.freg_sigma, (size_t)k + 1, sizeof(double)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_fracture_region: out of memory");
+        S->dyn.freg_id[k] = id;
+        S->dyn.nfreg++;
+    }
+    S->dyn.freg_sigma[k] = sigma_max > 0 ? sigma_max : 0.0;
+    return AMPS_OK;
+}
+
+AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total) {
+    if (total) *total = S ? S->dyn.nfractured_total : 0;
+    return S ? S->dyn.nfractured : 0;
+}
+
+/* Runtime material change of tets[0..n-1] to (E, nu) and, if rho > 0, rho: the change of their
+   element matrices as one update (statics: the gravity loads of their nodes follow). The mesh
+   values are restored on failure. */
+static amps_status amps__scene_retet(amps_ctx *ctx, amps_scene *S, amps_int n, const amps_int *tets, double E,
+                                     double nu, double rho, const char *fn) {
+    amps_mesh *m = S->m;
+    amps__trips T = {NULL, 0, 0};
+    amps_int k;
+    double *old;
+    amps_status s;
+    if ((s = amps__check_material(ctx, fn, E, nu)) != AMPS_OK) return s;
+    if (!amps__isfinite(rho)) return amps__err(ctx, AMPS_ERR_VALUE, "%s: non-finite density", fn);
+    if (rho > 0 && !m->rho && (s = amps_mesh_set_density(ctx, m, 1.0)) != AMPS_OK) return s;
+    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
+    old = AMPS__CAST(double *, amps__malloc(ctx, 3 * (size_t)n + 1, sizeof(double)));
+    if (!old) return amps__err(ctx, AMPS_ERR_OOM, "%s: out of memory", fn);
+    for (k = 0; k < n && !s; k++)
+        if (!(m->removed && m->removed[tets[k]])) s = amps__trips_tet(ctx, S, &T, tets[k], -1.0, NULL);
+    for (k = 0; k < n; k++) {
+        amps_int t = tets[k];
+        old[3 * k] = m->E[t];
+        old[3 * k + 1] = m->nu[t];
+        old[3 * k + 2] = m->rho ? m->rho[t] : 1.0;
+        m->E[t] = E;
+        m->nu[t] = nu;
+        if (rho > 0) m->rho[t] = rho;
+    }
+    for (k = 0; k < n && !s; k++)
+        if (!(m->removed && m->removed[tets[k]])) s = amps__trips_tet(ctx, S, &T, tets[k], 1.0, NULL);
+    if (!s) s = amps__trips_add(ctx, S, &T);
+    else amps__free(ctx, T.e);
+    for (k = 0; k < 4 * n && !s && rho > 0; k++) s = amps__scene_refresh_force(ctx, S, m->tet[4 * tets[k / 4] + k % 4]);
+    if (s) amps_update_discard(S->U);
+    else s = amps_update_commit(ctx, S->U);
+    if (s)
+        for (k = 0; k < n; k++) {
+            m->E[tets[k]] = old[3 * k];
+            m->nu[tets[k]] = old[3 * k + 1];
+            if (rho > 0) m->rho[tets[k]] = old[3 * k + 2];
+        }
+    amps__free(ctx, old);
+    return s;
+}
+
+AMPS_API amps_status amps_scene_set_tet_material(amps_ctx *ctx, amps_scene *S, amps_int t, double E, double nu) {
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_set_tet_material: NULL scene");
+    if (t < 0 || t >= S->m->ntet)
+        return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_set_tet_material: tetrahedron %ld out of range [0, %ld)",
+                         (long)t, (long)S->m->ntet);
+    if (!S->prepared) return amps_mesh_set_tet_material(ctx, S->m, t, E, nu);
+    return amps__scene_retet(ctx, S, 1, &t, E, nu, 0.0, "amps_scene_set_tet_material");
+}
+
+/* The tets of region id (ascending) into a new array; *n their number. */
+static amps_int *amps__scene_region_tets(amps_ctx *ctx, const amps_mesh *m, amps_int id, amps_int *n) {
+    amps_int t, *list = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m->ntet, sizeof(amps_int)));
+    *n = 0;
+    if (!list) return NULL;
+    for (t = 0; t < m->ntet; t++)
+        if ((m->region ? m->region[t] : 0) == id || id == AMPS__IMAX) list[(*n)++] = t;
+    return list;
+}
+
+AMPS_API amps_status amps_scene_set_region(amps_ctx *ctx, amps_scene *S, amps_int id, double E, double nu,
+                                           double rho) {
+    amps_int n, *list;
+    amps_status s;
+    const char *fn = "amps_scene_set_region";
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL scene", fn);
+    if ((s = amps__check_material(ctx, fn, E, nu)) != AMPS_OK) return s;
+    if (!amps__isfinite(rho) || rho < 0) return amps__err(ctx, AMPS_ERR_VALUE, "%s: density %g is not >= 0", fn, rho);
+    if (!S->prepared) return amps_mesh_set_region_material(ctx, S->m, id, E, nu, rho);
+    if (!(list = amps__scene_region_tets(ctx, S->m, id, &n))) return amps__err(ctx, AMPS_ERR_OOM, "%s: out of memory", fn);
+    s = n ? amps__scene_retet(ctx, S, n, list, E, nu, rho, fn)
+          : amps__err(ctx, AMPS_ERR_ARG, "%s: no tetrahedron has region %ld", fn, (long)id);
+    amps__free(ctx, list);
+    return s;
+}
+
+/* amps_scene_set_material after the factorization: every tet, as one update. */
+static amps_status amps__scene_set_material_all(amps_ctx *ctx, amps_scene *S, double E, double nu) {
+    amps_int n, *list = amps__scene_region_tets(ctx, S->m, AMPS__IMAX, &n);
+    amps_status s;
+    if (!list) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_set_material: out of memory");
+    s = amps__scene_retet(ctx, S, n, list, E, nu, 0.0, "amps_scene_set_material");
+    amps__free(ctx, list);
     return s;
 }
 #endif /* AMPS_NO_FEM */

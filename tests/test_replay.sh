@@ -40,7 +40,19 @@ missing|mesh nosuchfile.node\n|1|
 badmat|mesh beam 4\nmaterial -1 0.3\n|2|material
 args|mesh beam 4\ncut 3 0 0 0\n|2|usage
 unspd|mesh beam 4\nsolve\n|2|solve
+stepstatic|mesh beam 4\nfix z lt 0.5\nstep\n|3|needs dynamics
+solvedyn|mesh beam 4\nfix z lt 0.5\ndynamics 0.1 0 0\nsolve\n|4|dynamic
+dynlate|mesh beam 4\nfix z lt 0.5\nsolve\ndynamics 0.1 0 0\n|4|only before
+regionunknown|mesh beam 4\nregion 5 1 0.3\n|2|no tetrahedron
+densityneg|mesh beam 4\ndensity -1\n|2|density
+removetwice|mesh beam 4\nfix z lt 0.5\ndynamics 0.1 0 0\nremove 3\nremove 3\n|5|already removed
+removerange|mesh beam 4\nremove 100000\n|2|out of range
+fracturebad|mesh beam 4\nfracture x\n|2|usage
+stepnan|mesh beam 4\ndynamics nan 0 0\n|2|bad number
 CASES
+# the dynamic examples dump displacements and velocities
+head -1 "$tmp/cantilever_drop_state.csv" 2>/dev/null | grep -q '^node,ux,uy,uz,vx,vy,vz$' && ok || bad "dynamic dump header"
+grep -q 'tore' "$tmp/tissue_tear.out" && ok || bad "tissue_tear: no tet torn by fracture"
 # comments and blank lines anywhere; release of an unpinned node does nothing
 printf 'mesh beam 4 # comment\n\n# whole-line comment\nfix z lt 0.5\nrelease 60\nforce 99 0 0 1 # tip\nsolve\n' > "$tmp/ok.scn"
 "$R" "$tmp/ok.scn" > "$tmp/ok.out" 2>&1 && ok || bad "comments: $(cat "$tmp/ok.out")"

@@ -308,7 +308,8 @@ static void test_args(void) {
     CHECK(amps_scene_force(&ctx, S, 60, nan3) == AMPS_ERR_VALUE, "NaN force accepted");
     CHECK(amps_scene_cut(&ctx, S, 60, z, nrm0, &vc) == AMPS_ERR_ARG, "zero normal accepted");
     CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "solve: %s", ctx.msg);
-    CHECK(amps_scene_set_material(&ctx, S, 1, 0.3) == AMPS_ERR_STATE, "material after factorization accepted");
+    CHECK(amps_scene_set_material(&ctx, S, 1, 0.3) == AMPS_OK, "material after factorization (an update): %s", ctx.msg);
+    CHECK(amps_scene_set_material(&ctx, S, -1, 0.3) == AMPS_ERR_ARG, "negative E after factorization accepted");
     CHECK(amps_scene_fix_where(&ctx, S, 2, AMPS_LT, 0.5, NULL) == AMPS_ERR_STATE, "fix after factorization accepted");
     amps_scene_free(&ctx, S);
     /* nothing fixed: not positive definite */

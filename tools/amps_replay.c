@@ -34,7 +34,16 @@
      haptic <n>               n haptic steps (pin reactions from the dense system); prints the
                               median and worst step
      boundary <file>          the boundary triangles at their deformed positions: an OBJ file
-                              if the name ends in .obj, else the --surface format */
+                              if the name ends in .obj, else the --surface format
+   Dynamics (tetrahedron indices 0-based in file order; removed ones keep their index):
+     density <rho>            all tetrahedra (default 1); before the first solve or step
+     region <id> <E> <nu> [<rho>]  tetrahedra with region attribute id; before the first solve or step
+     gravity <gx> <gy> <gz>   body force per unit mass (default 0); any time
+     dynamics <dt> <alpha> <beta>  implicit dynamics from now on; before the first solve or step
+     step [<n>]               n time steps (default 1); dynamics only (solve is an error there)
+     remove <tet> [<tet> ...] element removal with the default singularity avoidance
+     fracture <sigma_max> | off  automatic removal after each step
+   In dynamics dump writes node,ux,uy,uz,vx,vy,vz. */
 #define AMPS_IMPLEMENTATION
 #include "amps.h"
 #include <stdio.h>
@@ -58,6 +67,7 @@ typedef struct replay {
     char last_cmd[64];
     double E, nu;
     int have_material;
+    int dynamic; /* 'dynamics' given */
     int sandbox; /* fuzzing: no file access (mesh files, dump, write), small meshes only */
 } replay;
 
@@ -309,6 +319,42 @@ static int cmd_batch(replay *R, int nt, char **t, double t0) {
     R->step_time += amps_now() - t0;
     return 0;
 }
+/* After a solve or a step that started at t0: the factorization (first time), the residual,
+   the timing and the step line. */
+static int report_solve(replay *R, double t0) {
+    double res = -1, dt;
+    amps_update_stats st;
+    int first = !R->solved;
+    dt = R->step_time + amps_now() - t0;
+    if (first) print_factor_info(R, dt);
+    R->solved = 1;
+    if (R->residual_on) {
+        if (amps_scene_residual(&R->ctx, R->S, &res)) return lib_fail(R, "residual");
+        if (res > R->worst_res) R->worst_res = res;
+    }
+    amps_update_get_stats(amps_scene_engine(R->S), &st);
+    R->steps++;
+    if (!first) {
+        if (R->ntimes == R->captimes) {
+            R->captimes = 2 * R->captimes + 64;
+            R->times = (double *)realloc(R->times, sizeof(double) * R->captimes);
+        }
+        R->times[R->ntimes++] = dt;
+    }
+    if (!R->quiet) {
+        printf("step %4d  %-14s dofs %7ld  |S|%6ld  %9.3f ms  %9.1f Hz", R->steps,
+               R->last_cmd[0] ? R->last_cmd : "solve", (long)st.dim, (long)st.nsys, 1e3 * dt,
+               dt > 0 ? 1.0 / dt : 0.0);
+        if (res >= 0) printf("  residual %.2e", res);
+        printf("%s\n", first ? "  (includes the factorization)" : "");
+    }
+    R->step_time = 0;
+    R->last_cmd[0] = 0;
+    return 0;
+}
+
+static int run_dynamics_line(replay *R, int nt, char **t);
+static int dump_dynamic(replay *R, FILE *f, const char *path);
 
 static int run_line(replay *R, int nt, char **t) {
     const char *c = t[0];
@@ -385,37 +431,9 @@ static int run_line(replay *R, int nt, char **t) {
     if (!strcmp(c, "stroke")) return cmd_stroke(R, nt, t, t0);
     if (!strcmp(c, "batch") || !strcmp(c, "commit")) return cmd_batch(R, nt, t, t0);
     if (!strcmp(c, "solve")) {
-        double res = -1, dt;
-        amps_update_stats st;
-        int first = !R->solved;
         if (nt != 1) return fail(R, "%s", "usage: solve");
         if (amps_scene_solve(&R->ctx, R->S) != AMPS_OK) return lib_fail(R, "solve");
-        dt = R->step_time + amps_now() - t0;
-        if (first) { print_factor_info(R, dt); }
-        R->solved = 1;
-        if (R->residual_on) {
-            if (amps_scene_residual(&R->ctx, R->S, &res)) return lib_fail(R, "residual");
-            if (res > R->worst_res) R->worst_res = res;
-        }
-        amps_update_get_stats(amps_scene_engine(R->S), &st);
-        R->steps++;
-        if (!first) {
-            if (R->ntimes == R->captimes) {
-                R->captimes = 2 * R->captimes + 64;
-                R->times = (double *)realloc(R->times, sizeof(double) * R->captimes);
-            }
-            R->times[R->ntimes++] = dt;
-        }
-        if (!R->quiet) {
-            printf("step %4d  %-14s dofs %7ld  |S|%6ld  %9.3f ms  %9.1f Hz", R->steps,
-                   R->last_cmd[0] ? R->last_cmd : "solve", (long)st.dim, (long)st.nsys, 1e3 * dt,
-                   dt > 0 ? 1.0 / dt : 0.0);
-            if (res >= 0) printf("  residual %.2e", res);
-            printf("%s\n", first ? "  (includes the factorization)" : "");
-        }
-        R->step_time = 0;
-        R->last_cmd[0] = 0;
-        return 0;
+        return report_solve(R, t0);
     }
     if (!strcmp(c, "residual")) {
         if (nt != 2 || (strcmp(t[1], "on") && strcmp(t[1], "off"))) return fail(R, "%s", "usage: residual on|off");
@@ -431,6 +449,7 @@ static int run_line(replay *R, int nt, char **t) {
         if (R->sandbox) return 0;
         f = fopen(t[1], "w");
         if (!f) return fail(R, "cannot write '%s'", t[1]);
+        if (R->dynamic) return dump_dynamic(R, f, t[1]);
         fprintf(f, "node,ux,uy,uz\n");
         for (i = 0; i < m->nnode; i++)
             fprintf(f, "%ld,%.17g,%.17g,%.17g\n", (long)i, d[3 * i], d[3 * i + 1], d[3 * i + 2]);
@@ -454,7 +473,120 @@ static int run_line(replay *R, int nt, char **t) {
         if (!R->quiet) printf("write: %s\n", t[1]);
         return 0;
     }
+    if ((k = run_dynamics_line(R, nt, t)) >= 0) return k;
     return fail(R, "unknown command '%s'", c);
+}
+
+/* dump in dynamics: node,ux,uy,uz,vx,vy,vz (f open for writing; closed here). */
+static int dump_dynamic(replay *R, FILE *f, const char *path) {
+    const amps_mesh *m = amps_scene_mesh(R->S);
+    const double *d = amps_scene_displacements(R->S), *w = amps_scene_velocities(R->S);
+    amps_int i;
+    fprintf(f, "node,ux,uy,uz,vx,vy,vz\n");
+    for (i = 0; i < m->nnode; i++)
+        fprintf(f, "%ld,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", (long)i, d[3 * i], d[3 * i + 1], d[3 * i + 2],
+                w[3 * i], w[3 * i + 1], w[3 * i + 2]);
+    if (fclose(f)) return fail(R, "cannot write '%s'", path);
+    if (!R->quiet) printf("dump: %s (%ld nodes)\n", path, (long)m->nnode);
+    return 0;
+}
+
+/* density <rho> | region <id> <E> <nu> [<rho>]: before the first solve or step. */
+static int cmd_material_dyn(replay *R, int nt, char **t) {
+    double x[4];
+    amps_int id;
+    int k;
+    if (!strcmp(t[0], "density")) {
+        if (nt != 2 || !parse_num(t[1], &x[0])) return fail(R, "%s", "usage: density <rho>");
+        if (R->solved) return fail(R, "%s", "density is allowed only before the first solve or step");
+        return amps_scene_set_density(&R->ctx, R->S, x[0]) ? lib_fail(R, "density") : 0;
+    }
+    if ((nt != 4 && nt != 5) || !parse_node(t[1], &id))
+        return fail(R, "%s", "usage: region <id> <E> <nu> [<rho>]");
+    x[2] = 0;
+    for (k = 2; k < nt; k++)
+        if (!parse_num(t[k], &x[k - 2])) return fail(R, "bad number '%s'", t[k]);
+    if (R->solved) return fail(R, "%s", "region is allowed only before the first solve or step");
+    return amps_scene_set_region(&R->ctx, R->S, id, x[0], x[1], x[2]) ? lib_fail(R, "region") : 0;
+}
+
+/* gravity <gx> <gy> <gz> | dynamics <dt> <alpha> <beta> | fracture <sigma_max>|off */
+static int cmd_dynamics(replay *R, int nt, char **t) {
+    double x[3];
+    int k;
+    if (!strcmp(t[0], "fracture")) {
+        if (nt != 2 || (strcmp(t[1], "off") && !parse_num(t[1], &x[0])))
+            return fail(R, "%s", "usage: fracture <sigma_max> | off");
+        return amps_scene_fracture(&R->ctx, R->S, strcmp(t[1], "off") ? x[0] : 0.0) ? lib_fail(R, "fracture") : 0;
+    }
+    if (nt != 4) return fail(R, "usage: %s", !strcmp(t[0], "gravity") ? "gravity <gx> <gy> <gz>" : "dynamics <dt> <alpha> <beta>");
+    for (k = 0; k < 3; k++)
+        if (!parse_num(t[1 + k], &x[k])) return fail(R, "bad number '%s'", t[1 + k]);
+    if (!strcmp(t[0], "gravity")) return amps_scene_gravity(&R->ctx, R->S, x) ? lib_fail(R, "gravity") : 0;
+    if (R->solved) return fail(R, "%s", "dynamics is allowed only before the first solve or step");
+    if (amps_scene_dynamics(&R->ctx, R->S, x[0], x[1], x[2])) return lib_fail(R, "dynamics");
+    R->dynamic = 1;
+    return 0;
+}
+
+/* step [<n>]: n time steps, one report line each. */
+static int cmd_step(replay *R, int nt, char **t) {
+    amps_int n = 1, k;
+    if (nt > 2 || (nt == 2 && !parse_node(t[1], &n))) return fail(R, "%s", "usage: step [<n>]");
+    if (!R->dynamic) return fail(R, "%s", "step needs dynamics (use solve in statics)");
+    for (k = 0; k < n; k++) {
+        double t0 = amps_now();
+        amps_int nf;
+        if (amps_scene_step(&R->ctx, R->S, 1) < 0) return lib_fail(R, "step");
+        nf = amps_scene_fractured(R->S, NULL);
+        if (!R->last_cmd[0]) snprintf(R->last_cmd, sizeof(R->last_cmd), "step");
+        if (nf > 0) snprintf(R->last_cmd, sizeof(R->last_cmd), "step (tore %ld)", (long)nf);
+        if (nf > 0) { /* the tear changed the system after the solve: no residual for this step */
+            int on = R->residual_on, rc;
+            R->residual_on = 0;
+            rc = report_solve(R, t0);
+            R->residual_on = on;
+            if (rc) return 1;
+        } else if (report_solve(R, t0))
+            return 1;
+    }
+    return 0;
+}
+
+/* remove <tet> [<tet> ...]: a removal that would leave a loose piece is undone (reported). */
+static int cmd_remove(replay *R, int nt, char **t) {
+    amps_int tets[MAXTOK];
+    amps_mesh_removal rep;
+    amps_status s;
+    int k;
+    double t0 = amps_now();
+    if (nt < 2) return fail(R, "%s", "usage: remove <tet> [<tet> ...]");
+    for (k = 1; k < nt; k++) {
+        if (!parse_node(t[k], &tets[k - 1])) return fail(R, "bad tetrahedron '%s'", t[k]);
+        if (tets[k - 1] >= amps_scene_mesh(R->S)->ntet) return fail(R, "tetrahedron %s out of range", t[k]);
+    }
+    s = amps_scene_remove(&R->ctx, R->S, nt - 1, tets, AMPS_SINGULAR_REMOVE, &rep);
+    if (s == AMPS_ERR_SINGULAR_UPDATE) {
+        printf("%s:%d: remove undone: %s\n", R->file, R->line, R->ctx.msg);
+        return 0;
+    }
+    if (s != AMPS_OK) return lib_fail(R, "remove");
+    if (!R->quiet)
+        printf("remove: %ld tetrahedra, %ld nodes separated, %ld removed in all\n", (long)rep.ntet, (long)rep.nsep,
+               (long)amps_scene_mesh(R->S)->nremoved);
+    snprintf(R->last_cmd, sizeof(R->last_cmd), "remove %ld", (long)tets[0]);
+    R->step_time += amps_now() - t0;
+    return 0;
+}
+
+/* The dynamics commands; -1 if t[0] is none of them. */
+static int run_dynamics_line(replay *R, int nt, char **t) {
+    const char *c = t[0];
+    if (!strcmp(c, "density") || !strcmp(c, "region")) return cmd_material_dyn(R, nt, t);
+    if (!strcmp(c, "gravity") || !strcmp(c, "dynamics") || !strcmp(c, "fracture")) return cmd_dynamics(R, nt, t);
+    if (!strcmp(c, "step")) return cmd_step(R, nt, t);
+    if (!strcmp(c, "remove")) return cmd_remove(R, nt, t);
+    return -1;
 }
 
 /* Runs the scenario text buf[0..len-1] (no NUL needed) line by line; returns 0 or 1 after the

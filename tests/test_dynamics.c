@@ -1,0 +1,654 @@
+/* Scene dynamics (paper "GPU-accelerated surgery simulation for opening a brain fissure", Eq. 27),
+   gravity, element removal, runtime materials and fracture. Every step of random sequences of
+   steps, cuts, removals, pins (also on copies), releases, forces, gravity and region materials
+   equals CHOLMOD's solve of the same step with A and b assembled from scratch; physics checks
+   (rest, energy, first eigenfrequency, gravity sag); refused removals and bad input. */
+#define AMPS_IMPLEMENTATION
+#include "amps.h"
+#include "amps_test.h"
+#include "cholmod_ref.h"
+#include "scene_ref.h"
+#include <string.h>
+
+/* What the test knows independently of the scene: the shadow of scene_ref.h (fixed file
+   nodes, pins, forces) and the gravity and time integration. */
+typedef struct tstate {
+    shadow sh;
+    double g[3];
+    int dyn;
+    double dt, alpha, beta;
+} tstate;
+
+/* The reference of one solve of the current mesh m: statics K u = f + M g (pins u = g), or one
+   step from (u, w): A w+ = M w + dt (f + M g - K u) (pins w = (g - u)/dt), u+ = u + dt w+.
+   uo, wo (3 per node) receive the result (statics: wo untouched, may be NULL), react (may be
+   NULL) the pin reactions. Orphans (nodes in no tet) keep u, w = 0. Returns 0 on success. */
+static int ref_step(amps_ctx *ctx, const amps_mesh *m, const tstate *w, const double *u, const double *vel,
+                    double *uo, double *wo, double *react) {
+    int nn = m->nnode, v, d, n, nf = 0, k, j, p, nz = 0, ok, *map, *ti, *tj;
+    unsigned char *fixed = (unsigned char *)calloc(nn + 1, 1);
+    amps_int *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * nn);
+    double *mass = (double *)malloc(sizeof(double) * (nn + 1)), *b, *ue, *gv, *rhs, *x, *tx, *ax;
+    double cM = w->dyn ? 1 + w->alpha * w->dt : 0, cK = w->dyn ? w->beta * w->dt + w->dt * w->dt : 1;
+    amps_csc *K, *R;
+    for (v = 0; v < nn; v++) fixed[v] = w->sh.fixed0[m->origin[v]];
+    n = (int)amps_mesh_number_dofs(m, fixed, dof);
+    K = amps_mesh_assemble(ctx, m, dof, n);
+    amps_mesh_lumped_mass(m, mass);
+    b = (double *)calloc(n + 1, sizeof(double));
+    ue = (double *)calloc(n + 1, sizeof(double));
+    gv = (double *)calloc(n + 1, sizeof(double));
+    ax = (double *)calloc(n + 1, sizeof(double));
+    map = (int *)calloc(n + 1, sizeof(int));
+    for (v = 0; v < nn; v++)
+        for (d = 0; d < 3; d++) {
+            int e = dof[3 * v + d];
+            if (e < 0) continue;
+            ue[e] = u[3 * v + d];
+            b[e] = w->sh.force[3 * v + d] + mass[v] * w->g[d];
+            if (w->sh.pinned[v]) {
+                map[e] = -1;
+                gv[e] = w->dyn ? (w->sh.pinval[3 * v + d] - u[3 * v + d]) / w->dt : w->sh.pinval[3 * v + d];
+            }
+        }
+    if (w->dyn) { /* b = M w + dt (f + M g - K u) */
+        amps_csc_symv(K, AMPS_UPPER, ue, ax);
+        for (v = 0; v < nn; v++)
+            for (d = 0; d < 3; d++) {
+                int e = dof[3 * v + d];
+                if (e >= 0) b[e] = mass[v] * vel[3 * v + d] + w->dt * (b[e] - ax[e]);
+            }
+    }
+    for (p = 0; p < K->p[n]; p++) K->x[p] *= cK; /* A = cK K + cM M */
+    for (v = 0; v < nn; v++)
+        for (d = 0; d < 3; d++) {
+            int e = dof[3 * v + d];
+            if (e >= 0) K->x[K->p[e + 1] - 1] += cM * mass[v];
+        }
+    for (k = 0; k < n; k++) map[k] = map[k] < 0 ? -1 : nf++;
+    rhs = (double *)calloc(nf + 1, sizeof(double));
+    x = (double *)calloc(nf + 1, sizeof(double));
+    ti = (int *)calloc(K->p[n] + 1, sizeof(int));
+    tj = (int *)calloc(K->p[n] + 1, sizeof(int));
+    tx = (double *)calloc(K->p[n] + 1, sizeof(double));
+    amps_csc_symv(K, AMPS_UPPER, gv, ax); /* the prescribed values move to the right-hand side */
+    for (k = 0; k < n; k++)
+        if (map[k] >= 0) rhs[map[k]] = b[k] - ax[k];
+    for (j = 0; j < n; j++) /* the free block */
+        for (p = K->p[j]; p < K->p[j + 1]; p++)
+            if (map[K->i[p]] >= 0 && map[j] >= 0) {
+                ti[nz] = map[K->i[p]];
+                tj[nz] = map[j];
+                tx[nz++] = K->x[p];
+            }
+    R = amps_csc_from_triplets(ctx, nf, nz, ti, tj, tx, AMPS_UPPER);
+    ok = R && ref_solve_refined(nf, R->p, R->i, R->x, rhs, x, 2, NULL) == 0;
+    for (k = 0; k < n; k++) ue[k] = map[k] < 0 ? gv[k] : x[map[k]]; /* the solution on every equation */
+    amps_csc_symv(K, AMPS_UPPER, ue, ax); /* A x - b */
+    for (j = 0; j < n; j++) ax[j] -= b[j];
+    for (v = 0; v < nn; v++)
+        for (d = 0; d < 3; d++) {
+            int e = dof[3 * v + d];
+            double s = e >= 0 ? ue[e] : 0.0;
+            if (w->dyn) {
+                wo[3 * v + d] = s;
+                uo[3 * v + d] = u[3 * v + d] + w->dt * s;
+            } else {
+                uo[3 * v + d] = e >= 0 ? s : (fixed[v] ? 0.0 : u[3 * v + d]);
+            }
+            if (react) react[3 * v + d] = (e >= 0 && w->sh.pinned[v]) ? ax[e] / (w->dyn ? w->dt : 1.0) : 0.0;
+        }
+    amps_csc_free(ctx, R);
+    amps_csc_free(ctx, K);
+    free(fixed);
+    free(dof);
+    free(mass);
+    free(b);
+    free(ue);
+    free(gv);
+    free(ax);
+    free(map);
+    free(rhs);
+    free(x);
+    free(ti);
+    free(tj);
+    free(tx);
+    return ok ? 0 : 1;
+}
+
+/* ||x - y|| / max(||y||, floor) over n entries. */
+static double relerr(int n, const double *x, const double *y, double floor) {
+    double s = 0, t = 0;
+    int i;
+    for (i = 0; i < n; i++) {
+        s += (x[i] - y[i]) * (x[i] - y[i]);
+        t += y[i] * y[i];
+    }
+    t = sqrt(t);
+    return sqrt(s) / (t > floor ? t : floor);
+}
+
+static double worst_err = 0;
+
+/* One step of the scene against the reference from the scene's state before it. */
+static void check_step(amps_ctx *ctx, amps_scene *S, tstate *w, const char *what, int step) {
+    const amps_mesh *m = amps_scene_mesh(S);
+    int nn = m->nnode, v;
+    double *u0 = (double *)malloc(sizeof(double) * 3 * nn), *w0 = (double *)malloc(sizeof(double) * 3 * nn);
+    double *ur = (double *)malloc(sizeof(double) * 3 * nn), *wr = (double *)malloc(sizeof(double) * 3 * nn);
+    double *rr = (double *)calloc(3 * nn, sizeof(double)), *rs = (double *)calloc(3 * nn, sizeof(double));
+    double *rh = (double *)calloc(3 * nn, sizeof(double)), eu, ew, er, erh;
+    amps_status s;
+    memcpy(u0, amps_scene_displacements(S), sizeof(double) * 3 * nn);
+    memcpy(w0, amps_scene_velocities(S), sizeof(double) * 3 * nn);
+    CHECK(ref_step(ctx, m, w, u0, w0, ur, wr, rr) == 0, "%s step %d: reference failed", what, step);
+    /* the haptic path: the reactions of the step about to be taken */
+    CHECK(amps_scene_solve_reactions(ctx, S) == AMPS_OK, "%s step %d: reactions: %s", what, step, ctx->msg);
+    for (v = 0; v < nn; v++) amps_scene_reaction(ctx, S, v, rh + 3 * v);
+    s = amps_scene_step(ctx, S, 1);
+    CHECK(s == AMPS_OK, "%s step %d: step: %s", what, step, ctx->msg);
+    for (v = 0; v < nn; v++) amps_scene_reaction(ctx, S, v, rs + 3 * v);
+    eu = relerr(3 * nn, amps_scene_displacements(S), ur, 1e-300);
+    ew = relerr(3 * nn, amps_scene_velocities(S), wr, 1e-12);
+    er = relerr(3 * nn, rs, rr, 1e-12 + t_norm(3 * nn, rr) + 1e-9 * t_norm(3 * nn, wr));
+    erh = relerr(3 * nn, rh, rr, 1e-12 + t_norm(3 * nn, rr) + 1e-9 * t_norm(3 * nn, wr));
+    CHECK(eu < 1e-10 && ew < 1e-10, "%s step %d: error u %.2e w %.2e", what, step, eu, ew);
+    CHECK(er < 1e-9 && erh < 1e-9, "%s step %d: reactions error %.2e (haptic %.2e)", what, step, er, erh);
+    if (ew > worst_err) worst_err = ew;
+    if (eu > worst_err) worst_err = eu;
+    free(u0);
+    free(w0);
+    free(ur);
+    free(wr);
+    free(rr);
+    free(rs);
+    free(rh);
+}
+
+/* A random live tet (-1 if none). */
+static amps_int live_tet(const amps_mesh *m) {
+    amps_int k, t;
+    for (k = 0; k < 50; k++) {
+        t = t_int((int)m->ntet);
+        if (!(m->removed && m->removed[t])) return t;
+    }
+    return -1;
+}
+
+/* A random node in some tet and not fixed. */
+static amps_int free_node(const amps_mesh *m, const tstate *w) {
+    int k;
+    for (k = 0; k < 100; k++) {
+        amps_int v = t_int((int)m->nnode);
+        if (amps_mesh_degree(m, v) > 0 && !w->sh.fixed0[m->origin[v]]) return v;
+    }
+    return -1;
+}
+
+/* Statics: a solve of the scene against the reference. */
+static void check_solve(amps_ctx *ctx, amps_scene *S, tstate *w, const char *what, int step) {
+    const amps_mesh *m = amps_scene_mesh(S);
+    int nn = m->nnode;
+    double *u0 = (double *)malloc(sizeof(double) * 3 * nn), *ur = (double *)calloc(3 * nn, sizeof(double)), eu;
+    memcpy(u0, amps_scene_displacements(S), sizeof(double) * 3 * nn);
+    CHECK(ref_step(ctx, m, w, u0, NULL, ur, NULL, NULL) == 0, "%s solve %d: reference failed", what, step);
+    CHECK(amps_scene_solve(ctx, S) == AMPS_OK, "%s solve %d: %s", what, step, ctx->msg);
+    eu = relerr(3 * nn, amps_scene_displacements(S), ur, 1e-300);
+    CHECK(eu < 1e-10, "%s solve %d: error u %.2e", what, step, eu);
+    if (eu > worst_err) worst_err = eu;
+    free(u0);
+    free(ur);
+}
+
+/* Random sequence of nops operations on mesh m (fixed below z = zfix), regions: tets with
+   centroid z above zreg get region 1; dyn = 0: statics (solves instead of steps). */
+static void random_sequence(const char *what, amps_mesh *m, double zfix, double zreg, int nops, unsigned long long seed,
+                            int dyn) {
+    amps_ctx ctx;
+    amps_scene *S;
+    tstate w;
+    int op, v, step = 0, ncut = 0, nrem = 0, npin = 0;
+    amps_int t;
+    double gz[3] = {0, 0, -0.02};
+    memset(&w, 0, sizeof(w));
+    amps_ctx_init(&ctx);
+    t_seed(seed);
+    amps_mesh_set_density(&ctx, m, 1.0);
+    if (m->region)
+        for (t = 0; t < m->ntet; t++) {
+            double zc = 0;
+            int a;
+            for (a = 0; a < 4; a++) zc += 0.25 * m->xyz[3 * m->tet[4 * t + a] + 2];
+            m->region[t] = zc > zreg;
+        }
+    w.sh.fixed0 = (unsigned char *)calloc(m->nnode, 1);
+    for (v = 0; v < m->nnode; v++) w.sh.fixed0[v] = m->xyz[3 * v + 2] < zfix;
+    shadow_grow(&w.sh, m->nnode);
+    S = amps_scene_create(&ctx, m, NULL);
+    amps_scene_fix_where(&ctx, S, 2, AMPS_LT, zfix, NULL);
+    CHECK(amps_scene_set_region(&ctx, S, 1, 2.0, 0.35, 1.5) == AMPS_OK, "%s: region: %s", what, ctx.msg);
+    if (dyn) CHECK(amps_scene_dynamics(&ctx, S, 0.05, 0.1, 0.01) == AMPS_OK, "%s: dynamics: %s", what, ctx.msg);
+    w.dyn = dyn;
+    w.dt = 0.05;
+    w.alpha = 0.1;
+    w.beta = 0.01;
+    for (op = 0; op < nops; op++) {
+        const amps_mesh *mm = amps_scene_mesh(S);
+        int kind = t_int(10);
+        shadow_grow(&w.sh, mm->nnode + 1);
+        if (kind <= 2) {
+            if (dyn) check_step(&ctx, S, &w, what, step++);
+            else check_solve(&ctx, S, &w, what, step++);
+        } else if (kind == 3) { /* cut */
+            double p[3], nrm[3] = {t_unif() - 0.5, t_unif() - 0.5, t_unif() - 0.5};
+            amps_int vc;
+            v = free_node(mm, &w);
+            if (v < 0) continue;
+            memcpy(p, mm->xyz + 3 * v, sizeof(p));
+            if (amps_scene_cut(&ctx, S, v, p, nrm, &vc) == AMPS_OK && vc >= 0) {
+                const double *uu = amps_scene_displacements(S), *ww = amps_scene_velocities(S);
+                shadow_grow(&w.sh, (int)vc + 1);
+                ncut++;
+                CHECK(!memcmp(uu + 3 * v, uu + 3 * vc, 3 * sizeof(double)) &&
+                              (!dyn || !memcmp(ww + 3 * v, ww + 3 * vc, 3 * sizeof(double))),
+                      "%s: the copy of node %d does not start with its u and w", what, v);
+            }
+        } else if (kind == 4) { /* removal */
+            amps_int tt[2];
+            tt[0] = live_tet(mm);
+            tt[1] = live_tet(mm);
+            if (tt[0] < 0) continue;
+            if (amps_scene_remove(&ctx, S, tt[1] >= 0 && tt[1] != tt[0] ? 2 : 1, tt, AMPS_SINGULAR_REMOVE, NULL) ==
+                AMPS_OK) {
+                int q, k;
+                nrem++;
+                for (k = 0; k < 2; k++) /* orphans are released */
+                    for (q = 0; q < 4; q++) {
+                        amps_int x = mm->tet[4 * tt[k] + q];
+                        if (amps_mesh_degree(mm, x) == 0) w.sh.pinned[x] = 0;
+                    }
+            }
+        } else if (kind == 5) { /* pin (also of copies) near the current displacement */
+            double g[3];
+            int d;
+            v = free_node(mm, &w);
+            if (v < 0) continue;
+            for (d = 0; d < 3; d++) g[d] = amps_scene_displacements(S)[3 * v + d] + 0.01 * (t_unif() - 0.5);
+            if (amps_scene_pin(&ctx, S, v, g) == AMPS_OK) {
+                w.sh.pinned[v] = 1;
+                memcpy(w.sh.pinval + 3 * v, g, sizeof(g));
+                npin++;
+            }
+        } else if (kind == 6) { /* release */
+            for (v = 0; v < mm->nnode && !w.sh.pinned[v]; v++) {}
+            if (v < mm->nnode && amps_scene_release(&ctx, S, v) == AMPS_OK) w.sh.pinned[v] = 0;
+        } else if (kind == 7) { /* force */
+            double f[3] = {0.05 * (t_unif() - 0.5), 0.05 * (t_unif() - 0.5), 0.05 * (t_unif() - 0.5)};
+            v = free_node(mm, &w);
+            if (v >= 0 && amps_scene_force(&ctx, S, v, f) == AMPS_OK) memcpy(w.sh.force + 3 * v, f, sizeof(f));
+        } else if (kind == 8) { /* gravity */
+            gz[0] = 0.01 * (t_unif() - 0.5);
+            CHECK(amps_scene_gravity(&ctx, S, gz) == AMPS_OK, "%s: gravity: %s", what, ctx.msg);
+            memcpy(w.g, gz, sizeof(gz));
+        } else { /* runtime material of a region or a tet */
+            if (t_int(2)) {
+                CHECK(amps_scene_set_region(&ctx, S, 1, 1.0 + t_unif(), 0.3, 1.0 + t_unif()) == AMPS_OK,
+                      "%s: runtime region: %s", what, ctx.msg);
+            } else if ((t = live_tet(mm)) >= 0) {
+                CHECK(amps_scene_set_tet_material(&ctx, S, t, 0.5 + t_unif(), 0.25) == AMPS_OK,
+                      "%s: runtime tet material: %s", what, ctx.msg);
+            }
+        }
+    }
+    if (dyn) check_step(&ctx, S, &w, what, step++);
+    else check_solve(&ctx, S, &w, what, step++);
+    printf("  %-22s steps %d, cuts %d, removals %d, pins %d, nodes %ld, worst error %.2e\n", what, step, ncut, nrem,
+           npin, (long)amps_scene_mesh(S)->nnode, worst_err);
+    amps_scene_free(&ctx, S);
+    shadow_free(&w.sh);
+}
+
+/* A scene over mesh m fixed below z = zfix (tstate filled alike). */
+static amps_scene *make_scene(amps_ctx *ctx, amps_mesh *m, double zfix, tstate *w) {
+    amps_scene *S;
+    int v;
+    memset(w, 0, sizeof(*w));
+    w->sh.fixed0 = (unsigned char *)calloc(m->nnode, 1);
+    for (v = 0; v < m->nnode; v++) w->sh.fixed0[v] = m->xyz[3 * v + 2] < zfix;
+    shadow_grow(&w->sh, m->nnode);
+    S = amps_scene_create(ctx, m, NULL);
+    amps_scene_fix_where(ctx, S, 2, AMPS_LT, zfix, NULL);
+    return S;
+}
+
+/* K and M of the beam fixed at z = 0 (reduced), for energies and eigenvalues. */
+static double energy(amps_ctx *ctx, const amps_mesh *m, const tstate *w, const double *u, const double *vel) {
+    int nn = m->nnode, v, d, n, j, p;
+    unsigned char *fixed = (unsigned char *)calloc(nn, 1);
+    amps_int *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * nn);
+    double *mass = (double *)malloc(sizeof(double) * nn), *ue, e = 0;
+    amps_csc *K;
+    for (v = 0; v < nn; v++) fixed[v] = w->sh.fixed0[m->origin[v]];
+    n = (int)amps_mesh_number_dofs(m, fixed, dof);
+    K = amps_mesh_assemble(ctx, m, dof, n);
+    amps_mesh_lumped_mass(m, mass);
+    ue = (double *)calloc(n, sizeof(double));
+    for (v = 0; v < nn; v++)
+        for (d = 0; d < 3; d++)
+            if (dof[3 * v + d] >= 0) {
+                ue[dof[3 * v + d]] = u[3 * v + d];
+                e += 0.5 * mass[v] * vel[3 * v + d] * vel[3 * v + d];
+            }
+    for (j = 0; j < n; j++)
+        for (p = K->p[j]; p < K->p[j + 1]; p++)
+            e += (K->i[p] == j ? 0.5 : 1.0) * K->x[p] * ue[K->i[p]] * ue[j];
+    amps_csc_free(ctx, K);
+    free(fixed);
+    free(dof);
+    free(mass);
+    free(ue);
+    return e;
+}
+
+/* Smallest eigenvalue of K x = lambda M x by inverse iteration (CHOLMOD solves). */
+static double first_eig(amps_ctx *ctx, const amps_mesh *m, const tstate *w) {
+    int nn = m->nnode, v, d, n, it, k;
+    unsigned char *fixed = (unsigned char *)calloc(nn, 1);
+    amps_int *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * nn);
+    double *mass = (double *)malloc(sizeof(double) * nn), *md, *x, *y, *kx, lam = 0;
+    amps_csc *K;
+    for (v = 0; v < nn; v++) fixed[v] = w->sh.fixed0[v];
+    n = (int)amps_mesh_number_dofs(m, fixed, dof);
+    K = amps_mesh_assemble(ctx, m, dof, n);
+    amps_mesh_lumped_mass(m, mass);
+    md = (double *)calloc(n, sizeof(double));
+    x = (double *)calloc(n, sizeof(double));
+    y = (double *)calloc(n, sizeof(double));
+    kx = (double *)calloc(n, sizeof(double));
+    for (v = 0; v < nn; v++)
+        for (d = 0; d < 3; d++)
+            if (dof[3 * v + d] >= 0) {
+                md[dof[3 * v + d]] = mass[v];
+                x[dof[3 * v + d]] = d == 0 ? m->xyz[3 * v + 2] : 0.0;
+            }
+    for (it = 0; it < 40; it++) {
+        double xkx = 0, xmx = 0, nx;
+        for (k = 0; k < n; k++) y[k] = md[k] * x[k];
+        ref_solve_refined(n, K->p, K->i, K->x, y, x, 0, NULL);
+        amps_csc_symv(K, AMPS_UPPER, x, kx);
+        for (k = 0; k < n; k++) {
+            xkx += x[k] * kx[k];
+            xmx += x[k] * md[k] * x[k];
+        }
+        lam = xkx / xmx;
+        nx = t_norm(n, x);
+        for (k = 0; k < n; k++) x[k] /= nx;
+    }
+    amps_csc_free(ctx, K);
+    free(fixed);
+    free(dof);
+    free(mass);
+    free(md);
+    free(x);
+    free(y);
+    free(kx);
+    return lam;
+}
+
+/* A free-free body under no force stays at rest; with alpha = beta = 0 and no external work the
+   energy never increases; a cantilever released from a static deflection swings at its first
+   eigenfrequency; gravity sag converges to the static solution. */
+static void test_physics(void) {
+    amps_ctx ctx;
+    amps_scene *S;
+    tstate w;
+    int k, v, ncross = 0, tip;
+    double e0, e, emax = 0, f[3] = {0.05, -0.05, 0}, zero[3] = {0, 0, 0}, lam, T, dt, prev = 0, tc[8] = {0};
+    double g[3] = {0, -0.01, 0};
+    amps_ctx_init(&ctx);
+    /* rest */
+    S = make_scene(&ctx, amps_mesh_brick(&ctx, 2), -1.0, &w);
+    CHECK(amps_scene_dynamics(&ctx, S, 0.1, 0, 0) == AMPS_OK, "free-free dynamics: %s", ctx.msg);
+    CHECK(amps_scene_step(&ctx, S, 10) == AMPS_OK, "free-free steps: %s", ctx.msg);
+    e = 0;
+    for (k = 0; k < 3 * amps_scene_mesh(S)->nnode; k++) e += fabs(amps_scene_velocities(S)[k]);
+    CHECK(e == 0.0, "free-free body at rest moves: sum |w| = %g", e);
+    amps_scene_free(&ctx, S);
+    shadow_free(&w.sh);
+    /* energy and frequency: beam 5 x 5 x 12, fixed at z = 0, tip force along (1, -1, 0), then released (the
+       Kuhn split makes bending about the cell diagonals differ; (1, -1, 0) is the first mode's direction) */
+    S = make_scene(&ctx, amps_mesh_beam(&ctx, 12), 0.5, &w);
+    lam = first_eig(&ctx, amps_scene_mesh(S), &w);
+    T = 2 * 3.14159265358979323846 / sqrt(lam);
+    dt = T / 400;
+    tip = 5 * 5 * 11 + 12; /* the centre node of the tip face */
+    CHECK(amps_scene_force(&ctx, S, tip, f) == AMPS_OK, "tip force: %s", ctx.msg);
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "static deflection: %s", ctx.msg);
+    CHECK(amps_scene_dynamics(&ctx, S, dt, 0, 0) == AMPS_OK, "dynamics after statics: %s", ctx.msg);
+    CHECK(amps_scene_force(&ctx, S, tip, zero) == AMPS_OK, "release the force: %s", ctx.msg);
+    w.dyn = 1;
+    e0 = energy(&ctx, amps_scene_mesh(S), &w, amps_scene_displacements(S), amps_scene_velocities(S));
+    prev = amps_scene_displacements(S)[3 * tip] - amps_scene_displacements(S)[3 * tip + 1];
+    for (k = 1; k <= 2000 && ncross < 7; k++) {
+        double x;
+        amps_scene_step(&ctx, S, 1);
+        e = energy(&ctx, amps_scene_mesh(S), &w, amps_scene_displacements(S), amps_scene_velocities(S));
+        if (e > e0 * (1 + 1e-12)) emax = e / e0 - 1 > emax ? e / e0 - 1 : emax;
+        e0 = e;
+        x = amps_scene_displacements(S)[3 * tip] - amps_scene_displacements(S)[3 * tip + 1];
+        if ((x < 0) != (prev < 0)) tc[ncross++] = (k - 1 + prev / (prev - x)) * dt; /* zero crossings */
+        prev = x;
+    }
+    CHECK(emax == 0.0, "energy grew by %.2e relative in a step", emax);
+    CHECK(ncross == 7 && fabs((tc[6] - tc[2]) / (2 * T) - 1) < 0.02, "period %.5g, first eigenfrequency gives %.5g",
+          (tc[6] - tc[2]) / 2, T);
+    printf("  cantilever: period %.5g against 2 pi / sqrt(lambda_1) = %.5g (%.2f%%), energy never grew\n",
+           (tc[6] - tc[2]) / 2, T, 100 * ((tc[6] - tc[2]) / (2 * T) - 1));
+    amps_scene_free(&ctx, S);
+    shadow_free(&w.sh);
+    /* gravity sag of the clamped beam: the damped motion converges to the static solution */
+    {
+        double *us, *ur, err;
+        int nn;
+        S = make_scene(&ctx, amps_mesh_beam(&ctx, 6), 0.5, &w);
+        memcpy(w.g, g, sizeof(g));
+        CHECK(amps_scene_gravity(&ctx, S, g) == AMPS_OK, "gravity: %s", ctx.msg);
+        CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "static sag: %s", ctx.msg);
+        nn = (int)amps_scene_mesh(S)->nnode;
+        us = (double *)malloc(sizeof(double) * 3 * nn);
+        ur = (double *)calloc(3 * nn, sizeof(double));
+        memcpy(us, amps_scene_displacements(S), sizeof(double) * 3 * nn);
+        ref_step(&ctx, amps_scene_mesh(S), &w, ur, NULL, ur, NULL, NULL);
+        err = relerr(3 * nn, us, ur, 1e-300);
+        CHECK(err < 1e-10, "static gravity sag against CHOLMOD: %.2e", err);
+        amps_scene_free(&ctx, S);
+        S = make_scene(&ctx, amps_mesh_beam(&ctx, 6), 0.5, &w);
+        amps_scene_gravity(&ctx, S, g);
+        lam = first_eig(&ctx, amps_scene_mesh(S), &w);
+        CHECK(amps_scene_dynamics(&ctx, S, 0.3 / sqrt(lam), 2 * sqrt(lam), 0) == AMPS_OK, "damped dynamics: %s",
+              ctx.msg);
+        CHECK(amps_scene_step(&ctx, S, 300) == AMPS_OK, "300 steps: %s", ctx.msg);
+        err = relerr(3 * nn, amps_scene_displacements(S), us, 1e-300);
+        CHECK(err < 1e-6, "gravity sag after 300 damped steps off the static one by %.2e", err);
+        printf("  gravity sag: dynamic after 300 steps against static %.2e\n", err);
+        free(us);
+        free(ur);
+        amps_scene_free(&ctx, S);
+        shadow_free(&w.sh);
+    }
+    (void)v;
+}
+
+/* Statics: a removal that frees a piece is refused with the scene unchanged; a removal of a
+   held part equals CHOLMOD; runtime materials equal CHOLMOD; dynamics: the same removal is legal. */
+static void test_removal(void) {
+    amps_ctx ctx;
+    amps_scene *S;
+    tstate w;
+    amps_int layer[200], n = 0, t, v;
+    const amps_mesh *m;
+    double f[3] = {0.01, 0.02, 0}, *u0, *ur, err;
+    int nn;
+    amps_status s;
+    amps_ctx_init(&ctx);
+    S = make_scene(&ctx, amps_mesh_beam(&ctx, 6), 0.5, &w);
+    m = amps_scene_mesh(S);
+    nn = (int)m->nnode;
+    v = 5 * 5 * 5 + 7;
+    amps_scene_force(&ctx, S, v, f);
+    memcpy(w.sh.force + 3 * v, f, sizeof(f));
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "solve: %s", ctx.msg);
+    u0 = (double *)malloc(sizeof(double) * 3 * nn);
+    ur = (double *)malloc(sizeof(double) * 3 * nn);
+    memcpy(u0, amps_scene_displacements(S), sizeof(double) * 3 * nn);
+    for (t = 0; t < m->ntet; t++) { /* the cell layer 2 < z < 3 */
+        double zc = 0;
+        int a;
+        for (a = 0; a < 4; a++) zc += 0.25 * m->xyz[3 * m->tet[4 * t + a] + 2];
+        if (zc > 2 && zc < 3) layer[n++] = t;
+    }
+    s = amps_scene_remove(&ctx, S, n, layer, AMPS_SINGULAR_REMOVE, NULL);
+    CHECK(s == AMPS_ERR_SINGULAR_UPDATE, "statics removal freeing a piece accepted (%d)", (int)s);
+    CHECK(strstr(ctx.msg, "held by nothing") != NULL, "message: %s", ctx.msg);
+    CHECK(m->nremoved == 0 && amps_mesh_degree(m, 5 * 5 * 3 + 12) > 0, "refused removal changed the mesh");
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "solve after refusal: %s", ctx.msg);
+    err = relerr(3 * nn, amps_scene_displacements(S), u0, 1e-300);
+    CHECK(err < 1e-12, "refused removal changed the solution by %.2e", err);
+    /* a held removal (half the layer), then a runtime material: both against CHOLMOD */
+    CHECK(amps_scene_remove(&ctx, S, n / 2, layer, AMPS_SINGULAR_REMOVE, NULL) == AMPS_OK, "removal: %s", ctx.msg);
+    CHECK(amps_scene_remove(&ctx, S, 1, layer, AMPS_SINGULAR_REMOVE, NULL) == AMPS_ERR_ARG, "removed twice accepted");
+    t = -1;
+    CHECK(amps_scene_remove(&ctx, S, 1, &t, AMPS_SINGULAR_REMOVE, NULL) == AMPS_ERR_INDEX, "tet -1 accepted");
+    CHECK(amps_scene_set_tet_material(&ctx, S, 3, 5.0, 0.2) == AMPS_OK, "runtime material: %s", ctx.msg);
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "solve after removal: %s", ctx.msg);
+    ref_step(&ctx, m, &w, u0, NULL, ur, NULL, NULL);
+    err = relerr(3 * nn, amps_scene_displacements(S), ur, 1e-300);
+    CHECK(err < 1e-10, "statics removal + runtime material against CHOLMOD: %.2e", err);
+    amps_scene_free(&ctx, S);
+    shadow_free(&w.sh);
+    /* dynamics: the whole layer goes; the free piece falls */
+    S = make_scene(&ctx, amps_mesh_beam(&ctx, 6), 0.5, &w);
+    w.dyn = 1;
+    w.dt = 0.1;
+    w.g[2] = -0.01;
+    amps_scene_gravity(&ctx, S, w.g);
+    amps_scene_dynamics(&ctx, S, 0.1, 0, 0);
+    check_step(&ctx, S, &w, "dyn removal", 0);
+    CHECK(amps_scene_remove(&ctx, S, n, layer, AMPS_SINGULAR_REMOVE, NULL) == AMPS_OK, "dynamic removal: %s",
+          ctx.msg);
+    check_step(&ctx, S, &w, "dyn removal", 1);
+    check_step(&ctx, S, &w, "dyn removal", 2);
+    v = 5 * 5 * 6 - 1; /* a top node: falls freely, dz = -g t^2 ... in backward Euler */
+    CHECK(amps_scene_velocities(S)[3 * v + 2] < 0, "the free piece does not fall");
+    amps_scene_free(&ctx, S);
+    shadow_free(&w.sh);
+    free(u0);
+    free(ur);
+}
+
+/* Fracture: after a step the tets over the threshold go. */
+static void test_fracture(void) {
+    amps_ctx ctx;
+    amps_scene *S;
+    tstate w;
+    const amps_mesh *m;
+    double g[3] = {0.05, 0, 0}, *pr, smax = 0;
+    amps_int t, over = 0, total = 0, got;
+    amps_ctx_init(&ctx);
+    S = make_scene(&ctx, amps_mesh_beam(&ctx, 6), 0.5, &w);
+    m = amps_scene_mesh(S);
+    amps_scene_gravity(&ctx, S, g);
+    amps_scene_dynamics(&ctx, S, 0.2, 0.1, 0);
+    amps_scene_step(&ctx, S, 3);
+    pr = (double *)malloc(sizeof(double) * 3 * m->ntet);
+    amps_mesh_stress(&ctx, m, amps_scene_displacements(S), NULL, NULL, pr);
+    for (t = 0; t < 3 * m->ntet; t++) smax = fabs(pr[t]) > smax ? fabs(pr[t]) : smax;
+    smax *= 0.9;
+    CHECK(amps_scene_fracture(&ctx, S, smax) == AMPS_OK, "fracture on: %s", ctx.msg);
+    CHECK(amps_scene_step(&ctx, S, 1) == AMPS_OK, "fracture step: %s", ctx.msg);
+    amps_mesh_stress(&ctx, m, amps_scene_displacements(S), NULL, NULL, pr);
+    for (t = 0; t < m->ntet; t++)
+        over += (fabs(pr[3 * t]) > smax || fabs(pr[3 * t + 2]) > smax);
+    got = amps_scene_fractured(S, &total);
+    CHECK(got > 0 && got == over && total == got && m->nremoved == got, "fractured %ld, over the threshold %ld",
+          (long)got, (long)over);
+    CHECK(amps_scene_fracture(&ctx, S, 0) == AMPS_OK && amps_scene_step(&ctx, S, 1) == AMPS_OK &&
+                  amps_scene_fractured(S, NULL) == 0,
+          "fracture off still removes");
+    printf("  fracture: %ld tets over sigma_max removed after one step\n", (long)got);
+    amps_scene_free(&ctx, S);
+    shadow_free(&w.sh);
+    /* per region: only the tets of region 1 (centroid z > 3) tear */
+    {
+        amps_mesh *mm = amps_mesh_beam(&ctx, 6);
+        amps_int r1 = 0;
+        amps_mesh_set_density(&ctx, mm, 1.0);
+        for (t = 0; t < mm->ntet; t++) {
+            double zc = 0;
+            int a;
+            for (a = 0; a < 4; a++) zc += 0.25 * mm->xyz[3 * mm->tet[4 * t + a] + 2];
+            mm->region[t] = zc > 3;
+        }
+        S = make_scene(&ctx, mm, 0.5, &w);
+        m = amps_scene_mesh(S);
+        amps_scene_gravity(&ctx, S, g);
+        amps_scene_dynamics(&ctx, S, 0.2, 0.1, 0);
+        amps_scene_step(&ctx, S, 3);
+        CHECK(amps_scene_fracture_region(&ctx, S, 7, 1.0) == AMPS_ERR_ARG, "fracture of an unknown region accepted");
+        CHECK(amps_scene_fracture_region(&ctx, S, 1, 1e-9) == AMPS_OK, "region fracture: %s", ctx.msg);
+        CHECK(amps_scene_step(&ctx, S, 1) == AMPS_OK, "region fracture step: %s", ctx.msg);
+        for (t = 0; t < m->ntet; t++) {
+            r1 += m->region[t] == 1;
+            CHECK(m->removed[t] == (m->region[t] == 1), "tet %ld of region %ld: removed %d", (long)t,
+                  (long)m->region[t], (int)m->removed[t]);
+        }
+        CHECK(amps_scene_fractured(S, NULL) == r1, "region fracture removed %ld of %ld", 
+              (long)amps_scene_fractured(S, NULL), (long)r1);
+        CHECK(amps_scene_step(&ctx, S, 2) == AMPS_OK, "steps with a free piece: %s", ctx.msg);
+        amps_scene_free(&ctx, S);
+        shadow_free(&w.sh);
+    }
+    free(pr);
+}
+
+/* Bad input is an error and changes nothing. */
+static void test_args(void) {
+    amps_ctx ctx;
+    amps_scene *S;
+    tstate w;
+    double nan3[3] = {NAN, 0, 0};
+    amps_ctx_init(&ctx);
+    S = make_scene(&ctx, amps_mesh_beam(&ctx, 4), 0.5, &w);
+    CHECK(amps_scene_step(&ctx, S, 1) == AMPS_ERR_STATE, "step before dynamics accepted");
+    CHECK(amps_scene_set_density(&ctx, S, -1) == AMPS_ERR_VALUE, "negative density accepted");
+    CHECK(amps_scene_set_region(&ctx, S, 7, 1, 0.3, 1) == AMPS_ERR_ARG, "unknown region accepted");
+    CHECK(amps_scene_set_region(&ctx, S, 0, 1, 0.3, -2) == AMPS_ERR_VALUE, "negative region density accepted");
+    CHECK(amps_scene_dynamics(&ctx, S, NAN, 0, 0) == AMPS_ERR_VALUE, "NaN dt accepted");
+    CHECK(amps_scene_dynamics(&ctx, S, 0.1, -1, 0) == AMPS_ERR_VALUE, "negative alpha accepted");
+    CHECK(amps_scene_gravity(&ctx, S, nan3) == AMPS_ERR_VALUE, "NaN gravity accepted");
+    CHECK(amps_scene_fracture(&ctx, S, NAN) == AMPS_ERR_VALUE, "NaN fracture threshold accepted");
+    CHECK(amps_scene_set_tet_material(&ctx, S, 100000, 1, 0.3) == AMPS_ERR_INDEX, "tet out of range accepted");
+    CHECK(amps_scene_velocities(S) == NULL, "velocities before dynamics");
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "statics solve: %s", ctx.msg);
+    CHECK(amps_scene_dynamics(&ctx, S, 0.1, 0, 0) == AMPS_OK, "dynamics after the factorization: %s", ctx.msg);
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_ERR_STATE, "solve in dynamics accepted");
+    CHECK(amps_scene_step(&ctx, S, -1) == AMPS_ERR_ARG, "negative step count accepted");
+    CHECK(amps_scene_set_density(&ctx, S, 2) == AMPS_ERR_STATE, "density after the factorization accepted");
+    amps_scene_free(&ctx, S);
+    shadow_free(&w.sh);
+}
+
+int main(void) {
+    amps_ctx ctx;
+    amps_ctx_init(&ctx);
+    test_args();
+    test_physics();
+    test_removal();
+    test_fracture();
+    random_sequence("beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 120, 1, 1);
+    random_sequence("brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 2, 1);
+    random_sequence("beam 5x5x6 seed 3", amps_mesh_beam(&ctx, 6), 0.5, 3.0, 150, 3, 1);
+    random_sequence("statics beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 120, 4, 0);
+    random_sequence("statics brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 5, 0);
+    return amps_t_end("test_dynamics");
+}
