@@ -588,9 +588,11 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U);
 AMPS_API amps_status amps_update_commit_begin(amps_ctx *ctx, amps_update *U);
 AMPS_API void amps_update_commit_run(amps_update *U);
 AMPS_API amps_status amps_update_commit_end(amps_ctx *ctx, amps_update *U);
-/* Commits, then solves (Step 6): x (room for amps_update_dim, may be NULL) receives the solution.
-   A failed commit: see amps_update_commit. AMPS_WARN_INACCURATE (accuracy guard) is a warning:
-   the solution is stored, and the guard may have re-factored. */
+/* Commits, then solves (Step 6): x (room for amps_update_dim, may be NULL) receives the solution,
+   refined until its backward error on the current K^ is at most opts.refine_tol (default: that
+   of a fresh direct solve; stats.backward_error). A failed commit: see amps_update_commit.
+   AMPS_WARN_INACCURATE (accuracy guard) is a warning: the solution is stored, and the guard may
+   have re-factored. */
 AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *x);
 /* Watch set: the indices amps_update_solve_watched computes (replaces the previous set; m = 0
    clears it). closure_L of the watched indices is computed here, once. Allocates the set (and
