@@ -150,8 +150,7 @@ typedef void amps_task_fn(amps_int begin, amps_int end, int worker, void *task_c
    counter (so does the calling thread meanwhile): an item that starts late finds the work done
    and returns at once, and finish waits only for chunks already claimed, provided the host runs
    queued items itself in finish or has free workers. */
-typedef void *amps_enqueue_task_fn(amps_task_fn *task, amps_int n, amps_int min_range, void *task_ctx,
-                                   void *user);
+typedef void *amps_enqueue_task_fn(amps_task_fn *task, amps_int n, amps_int min_range, void *task_ctx, void *user);
 typedef void amps_finish_task_fn(void *handle, void *user);
 
 /* Caller-owned context: allocator user pointer, threads or the host's task system, and the last
@@ -162,8 +161,8 @@ typedef struct amps_ctx {
     int nthreads;                       /* OpenMP threads used by amps kernels; 0 = OpenMP default, 1 = serial */
     amps_enqueue_task_fn *enqueue_task; /* host back end (both or neither); NULL = OpenMP/serial */
     amps_finish_task_fn *finish_task;
-    void *task_user;                    /* passed as user to both */
-    int worker_count;                   /* workers of the host system (>= 1; worker indices < it); 0 = 1 */
+    void *task_user;  /* passed as user to both */
+    int worker_count; /* workers of the host system (>= 1; worker indices < it); 0 = 1 */
     /* optional: warnings (AMPS_WARN_*), accuracy refinements and re-factorizations, and failures
        of the background re-factorization, as they happen (s: their status, AMPS_OK for a
        remark); called on the caller's thread only (see THREAD SAFETY); NULL: none */
@@ -475,7 +474,7 @@ typedef struct amps_update_opts {
                                a forward and a backward solve; at most 3, stopping when eta no longer
                                halves); above 64 refine_tol after them a synchronous
                                re-factorization (unless refactor is OFF) and the solve again.
-                               Default 2.2e-16 (1 eps: the level of a fresh direct solve);
+                               Default 1.1e-16 (eps / 2; 1 eps left a sliver mesh at 12x CHOLMOD's residual);
                                0 = off (solves then cost no product with K^) */
     amps_int refactor_size;         /* AUTO: start after a commit that grows |S u C| past its size at the
                                       last base plus this; default 384 */
@@ -1085,8 +1084,7 @@ AMPS_API amps_status amps_scene_set_density(amps_ctx *ctx, amps_scene *S, double
    factorization it sets the mesh; after, the change of their element matrices is one update
    (O(tets of the region) element matrices; allocates). Errors: AMPS_ERR_ARG (no tet has region
    id), AMPS_ERR_VALUE (material, rho < 0 or not finite), a failed commit; the scene unchanged. */
-AMPS_API amps_status amps_scene_set_region(amps_ctx *ctx, amps_scene *S, amps_int id, double E, double nu,
-                                           double rho);
+AMPS_API amps_status amps_scene_set_region(amps_ctx *ctx, amps_scene *S, amps_int id, double E, double nu, double rho);
 /* Material of tet t at any time (after the factorization: an update of its nodes' rows, as
    amps_scene_set_region; amps_scene_set_material likewise updates every tet). AMPS_ERR_INDEX. */
 AMPS_API amps_status amps_scene_set_tet_material(amps_ctx *ctx, amps_scene *S, amps_int t, double E, double nu);
@@ -1688,8 +1686,7 @@ static void amps__par_note(amps__parbo *bo, double t0, double tm, double t1) {
         if (len > AMPS__PAR_QUIET_MAX) len = AMPS__PAR_QUIET_MAX;
         amps__dstore(&bo->until, t1 + len);
         amps__dstore(&bo->len, len);
-    } else if (len > 0)
-        amps__dstore(&bo->len, len > AMPS__PAR_QUIET ? len / 2 : 0);
+    } else if (len > 0) amps__dstore(&bo->len, len > AMPS__PAR_QUIET ? len / 2 : 0);
 }
 
 static void amps__par_for(const amps__par *par, int nt, amps_int n, amps_int chunk, amps__chunk_fn *fn, void *arg) {
@@ -5083,8 +5080,7 @@ static void amps__ltsolve_par(const amps_factor *F, double *x, const amps__par *
         amps_ltsolve(F, x);
         return;
     }
-    for (i = P->ntop - 1; i >= 0; i--)
-        amps__bwd_par(F, P->gs[P->topg[i]], P->gs[P->topg[i] + 1] - 1, x, par, nthr);
+    for (i = P->ntop - 1; i >= 0; i--) amps__bwd_par(F, P->gs[P->topg[i]], P->gs[P->topg[i] + 1] - 1, x, par, nthr);
     j.F = F;
     j.x = x;
     amps__par_for(par, nthr, P->nsub, 1, amps__bw_sub, &j);
@@ -5572,19 +5568,19 @@ struct amps_update {
     amps_update_stats stats;
     amps__par par; /* the kernels' back end (from the ctx at create; bo points at this handle's bo) */
     amps__parbo bo;
-    struct {                            /* the two-phase commit (amps_update_commit_begin) */
-        int state;                      /* 0 none, 1 begun, 2 run */
-        amps_int u_old, nlist;          /* |U| before it; the new base positions (list) */
-        struct amps_update *J;          /* the copy of the engine the run phase works on */
-        amps__pdelta *delta;            /* its matrix changes and appended DOFs */
-        amps__pcon *con;                /* its structural constraint changes */
+    struct {                   /* the two-phase commit (amps_update_commit_begin) */
+        int state;             /* 0 none, 1 begun, 2 run */
+        amps_int u_old, nlist; /* |U| before it; the new base positions (list) */
+        struct amps_update *J; /* the copy of the engine the run phase works on */
+        amps__pdelta *delta;   /* its matrix changes and appended DOFs */
+        amps__pcon *con;       /* its structural constraint changes */
         amps_int n_delta, n_con, n_dofs, cap_delta, cap_con;
-        amps_int *list, cap_list;       /* the new base positions (Step 1) */
-        double *chunk;                  /* the run phase's Step 1-2 workspace (as work.*) */
-        amps_int *row_map, *closure;    /* row_map -1 between uses */
-        amps_int ws_n;                  /* base order the workspace is sized for (0: none) */
-        size_t vused_old;               /* memo.used before it */
-        double t_wcols, t_gram;         /* the run phase's step times */
+        amps_int *list, cap_list;    /* the new base positions (Step 1) */
+        double *chunk;               /* the run phase's Step 1-2 workspace (as work.*) */
+        amps_int *row_map, *closure; /* row_map -1 between uses */
+        amps_int ws_n;               /* base order the workspace is sized for (0: none) */
+        size_t vused_old;            /* memo.used before it */
+        double t_wcols, t_gram;      /* the run phase's step times */
     } cjob;
 };
 
@@ -5606,7 +5602,7 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
     o->refactor_order.block = 0;
     o->refactor_threads = 1;
     o->refactor_ratio = 0.25;
-    o->refine_tol = 2.220446049250313e-16;
+    o->refine_tol = 1.1102230246251565e-16;
     o->refactor_size = 384;
     o->refactor_every = 32;
 }
@@ -8067,7 +8063,7 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    forces the rest reaches 370 eps (beam 5x5x256, stress suite).
    The fix: the residual of the explicit current system, one product with K^ (nnz(K^); measured
    +5.7% instructions on a brick:14 cut step), its normwise backward error eta, and while
-   eta > refine_tol (default 1 eps) refinement steps through the augmented solve with the same
+   eta > refine_tol (default eps / 2) refinement steps through the augmented solve with the same
    factors (the correction is driven by a residual of size eps ||H w||, so its own w is small):
    on 5x5x1024, 17 steps over the 25 cut solves bring eta from 3.1 to 0.1 eps; bricks and bunnies
    meet 1 eps without a step. At most 3 steps; they stop when eta no longer halves. If eta is still
@@ -8094,7 +8090,7 @@ static int amps__accuracy(amps_update *U, int pass) {
     U->stats.backward_error = eta;
     if (gtol > 0) {
         U->stats.relres = rel;
-        U->stats.guard_result = !(rel <= gtol)            ? AMPS_GUARD_NOT_MET
+        U->stats.guard_result = !(rel <= gtol)             ? AMPS_GUARD_NOT_MET
                                 : pass                     ? AMPS_GUARD_REFACTORED
                                 : U->stats.guard_steps > 0 ? AMPS_GUARD_REFINED
                                                            : AMPS_GUARD_MET;
@@ -8124,13 +8120,13 @@ again:
         /* the augmentation is the suspect: a fresh base, then the same solve again */
         pass = 1;
         if ((s = amps_update_refactor(ctx, U)) == AMPS_OK) {
-            amps__log(ctx, AMPS_OK, "amps_update_solve: backward error %.3g above tolerance: re-factored",
-                      U->stats.backward_error);
+            amps__log(ctx, AMPS_OK, "amps_update_solve: %s not reached with the augmentation: re-factored",
+                      U->guard.tol > 0 ? "the accuracy guard's tolerance" : "the backward error tolerance");
             goto again;
         }
         amps__log(ctx, s, "amps_update_solve: the accuracy re-factorization failed (%s)", ctx ? ctx->msg : "");
     }
-    if (U->stats.guard_result == AMPS_GUARD_REFINED || U->stats.guard_result == AMPS_GUARD_REFACTORED)
+    if (U->guard.tol > 0 && U->stats.guard_steps > 0)
         amps__log(ctx, AMPS_OK, "amps_update_solve: accuracy guard: %d refinement step(s)%s, relative residual %.3g",
                   (int)U->stats.guard_steps, pass ? " after a re-factorization" : "", U->stats.relres);
     /* reactions (K^ x - f^)_C */
@@ -8662,7 +8658,7 @@ static amps_status amps__bg_engine(amps_ctx *c2, amps__bg *b) {
     amps_status s;
     o2.grow = 1;
     o2.refactor = AMPS_REFACTOR_OFF;
-    c2->nthreads = b->snap.nthr; /* per-thread buffers for the owner's threads */
+    c2->nthreads = b->snap.nthr;            /* per-thread buffers for the owner's threads */
     c2->enqueue_task = b->snap.par.enqueue; /* ... or the owner's task system, used only after */
     c2->finish_task = b->snap.par.finish;   /* the swap, on the owner's thread (nthr = 1 here) */
     c2->task_user = b->snap.par.user;
@@ -10715,11 +10711,11 @@ static void amps__scene_cut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v, a
 /* An open batch (amps_scene_begin_batch): the changes it recorded, to undo them if its commit
    fails. moved holds the tets each cut moved, op k's at moved[op.moved_at..+op.nmoved]. */
 typedef struct amps__scene_op {
-    int kind;                    /* 0 cut, 1 pin, 2 release */
-    int watched, was_pinned;     /* cut: its copy joined the watch set; pin: v was pinned */
-    amps_int v, vc;              /* the node, the cut's copy */
-    amps_int moved_at, nmoved;   /* cut: its moved tets */
-    double old[3];               /* pin: the previous pin value */
+    int kind;                  /* 0 cut, 1 pin, 2 release */
+    int watched, was_pinned;   /* cut: its copy joined the watch set; pin: v was pinned */
+    amps_int v, vc;            /* the node, the cut's copy */
+    amps_int moved_at, nmoved; /* cut: its moved tets */
+    double old[3];             /* pin: the previous pin value */
 } amps__scene_op;
 typedef struct amps__scene_batch {
     int open, committing; /* a batch records; a two-phase commit of it is in progress */
@@ -10741,23 +10737,23 @@ static double amps__scene_node_mass(const amps_mesh *m, amps_int v) {
 
 /* Dynamics, gravity and fracture (amps_scene_dynamics, amps_scene_gravity, amps_scene_fracture). */
 typedef struct amps__scene_dyn {
-    int on;                    /* implicit dynamics: system A = cM M + cK K */
-    double dt, alpha, beta;    /* time step, Rayleigh damping C = alpha M + beta K */
-    double cM, cK;             /* 1 + alpha dt, beta dt + dt^2 (used only when on) */
-    double g[3];               /* gravity: body force per unit mass */
-    amps_int cap;              /* node capacity of the arrays below */
-    double *vel;               /* 3 per node: velocity w */
-    double *mass, *ku;         /* scratch per node (mass) / per DOF (K u) */
-    amps_int *idx;             /* scratch: 3 per node */
-    double *val;               /* scratch: 3 per node */
-    double *vol;               /* ntet: |V| of each tet (reference configuration), NULL until the first step */
-    double *xe, *ye;           /* scratch per equation (ncap): u and A u */
+    int on;                 /* implicit dynamics: system A = cM M + cK K */
+    double dt, alpha, beta; /* time step, Rayleigh damping C = alpha M + beta K */
+    double cM, cK;          /* 1 + alpha dt, beta dt + dt^2 (used only when on) */
+    double g[3];            /* gravity: body force per unit mass */
+    amps_int cap;           /* node capacity of the arrays below */
+    double *vel;            /* 3 per node: velocity w */
+    double *mass, *ku;      /* scratch per node (mass) / per DOF (K u) */
+    amps_int *idx;          /* scratch: 3 per node */
+    double *val;            /* scratch: 3 per node */
+    double *vol;            /* ntet: |V| of each tet (reference configuration), NULL until the first step */
+    double *xe, *ye;        /* scratch per equation (ncap): u and A u */
     amps_int ncap;
-    unsigned char *orphan;     /* 1: the node lies in no tet and is held where it is */
-    double sigma_max;          /* fracture threshold (<= 0: off) */
-    amps_int nfreg;            /* regions with their own threshold */
-    amps_int *freg_id;         /* nfreg region ids */
-    double *freg_sigma;        /* their thresholds (<= 0: no fracture there) */
+    unsigned char *orphan;                        /* 1: the node lies in no tet and is held where it is */
+    double sigma_max;                             /* fracture threshold (<= 0: off) */
+    amps_int nfreg;                               /* regions with their own threshold */
+    amps_int *freg_id;                            /* nfreg region ids */
+    double *freg_sigma;                           /* their thresholds (<= 0: no fracture there) */
     amps_int nstep, nfractured, nfractured_total; /* steps taken; tets fractured by the last step, in all */
 } amps__scene_dyn;
 
@@ -11551,7 +11547,8 @@ static void amps__scene_gather(amps_scene *S, amps_int nv, const amps_int *nodes
 AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve: NULL scene");
-    if (S->dyn.on) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_solve: the scene is dynamic (use amps_scene_step)");
+    if (S->dyn.on)
+        return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_solve: the scene is dynamic (use amps_scene_step)");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
     if ((s = amps_update_solve(ctx, S->U, NULL)) < 0) return s;
@@ -12197,7 +12194,8 @@ static void amps__scene_batch_undo(amps_scene *S) {
         else {
             for (k = S->watch.n - 1; op->watched && k >= 0; k--)
                 if (S->watch.nodes[k] == op->vc) {
-                    memmove(S->watch.nodes + k, S->watch.nodes + k + 1, sizeof(amps_int) * (size_t)(S->watch.n - k - 1));
+                    memmove(S->watch.nodes + k, S->watch.nodes + k + 1,
+                            sizeof(amps_int) * (size_t)(S->watch.n - k - 1));
                     S->watch.n--;
                     S->watch.stale = 1;
                     break;
@@ -12802,7 +12800,8 @@ static amps_status amps__scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, 
     if (S->prepared && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
     if ((s = amps__scene_dyn_room(ctx, S, nn0)) != AMPS_OK) return s;
     if ((s = amps_mesh_remove(ctx, S->m, n, tets, policy, out)) != AMPS_OK) return s;
-    if (S->m->nnode > S->node.cap && amps__scene_grow(ctx, S, S->m->node_cap > S->m->nnode ? S->m->node_cap : S->m->nnode))
+    if (S->m->nnode > S->node.cap &&
+        amps__scene_grow(ctx, S, S->m->node_cap > S->m->nnode ? S->m->node_cap : S->m->nnode))
         s = amps__err(ctx, AMPS_ERR_OOM, "amps_scene_remove: out of memory");
     if (!s) s = amps__scene_dyn_room(ctx, S, S->m->nnode);
     if (!s) {
@@ -12812,7 +12811,8 @@ static amps_status amps__scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, 
         if (!flagged || !rename) s = amps__err(ctx, AMPS_ERR_OOM, "amps_scene_remove: out of memory");
     }
     for (k = 0; !s && !S->prepared && k < 4 * out->ntet; k++) /* before the factorization: topology only */
-        if (S->m->inc_len[S->m->tet[4 * out->tets[k / 4] + k % 4]] == 0) S->node.pinned[S->m->tet[4 * out->tets[k / 4] + k % 4]] = 0;
+        if (S->m->inc_len[S->m->tet[4 * out->tets[k / 4] + k % 4]] == 0)
+            S->node.pinned[S->m->tet[4 * out->tets[k / 4] + k % 4]] = 0;
     if (!s && S->prepared) {
         for (k = 0; k < S->m->nnode; k++) rename[k] = k;
         for (k = 0; k < out->nsep; k++) rename[out->sep_copy[k]] = out->sep_node[k];
@@ -12896,8 +12896,7 @@ AMPS_API amps_status amps_scene_step(amps_ctx *ctx, amps_scene *S, amps_int nste
             }
         S->dyn.nstep++;
         S->dyn.nfractured = 0;
-        if ((S->dyn.sigma_max > 0 || S->dyn.nfreg > 0) && (s = amps__scene_fracture_step(ctx, S)) != AMPS_OK)
-            return s;
+        if ((S->dyn.sigma_max > 0 || S->dyn.nfreg > 0) && (s = amps__scene_fracture_step(ctx, S)) != AMPS_OK) return s;
     }
     return w;
 }
@@ -12995,8 +12994,7 @@ static amps_int *amps__scene_region_tets(amps_ctx *ctx, const amps_mesh *m, amps
     return list;
 }
 
-AMPS_API amps_status amps_scene_set_region(amps_ctx *ctx, amps_scene *S, amps_int id, double E, double nu,
-                                           double rho) {
+AMPS_API amps_status amps_scene_set_region(amps_ctx *ctx, amps_scene *S, amps_int id, double E, double nu, double rho) {
     amps_int n, *list;
     amps_status s;
     const char *fn = "amps_scene_set_region";
@@ -13004,7 +13002,8 @@ AMPS_API amps_status amps_scene_set_region(amps_ctx *ctx, amps_scene *S, amps_in
     if ((s = amps__check_material(ctx, fn, E, nu)) != AMPS_OK) return s;
     if (!amps__isfinite(rho) || rho < 0) return amps__err(ctx, AMPS_ERR_VALUE, "%s: density %g is not >= 0", fn, rho);
     if (!S->prepared) return amps_mesh_set_region_material(ctx, S->m, id, E, nu, rho);
-    if (!(list = amps__scene_region_tets(ctx, S->m, id, &n))) return amps__err(ctx, AMPS_ERR_OOM, "%s: out of memory", fn);
+    if (!(list = amps__scene_region_tets(ctx, S->m, id, &n)))
+        return amps__err(ctx, AMPS_ERR_OOM, "%s: out of memory", fn);
     s = n ? amps__scene_retet(ctx, S, n, list, E, nu, rho, fn)
           : amps__err(ctx, AMPS_ERR_ARG, "%s: no tetrahedron has region %ld", fn, (long)id);
     amps__free(ctx, list);
@@ -13854,8 +13853,8 @@ AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size
         s = amps__lx_err(L, G.vol_line, AMPS_ERR_MESH,
                          "%lld hexahedr%s, %lld prism%s, %lld pyramid%s: amps reads tetrahedra only (type 4); "
                          "mesh with tetrahedra only",
-                         G.nother[0], G.nother[0] == 1 ? "on" : "a", G.nother[1], G.nother[1] == 1 ? "" : "s", G.nother[2],
-                         G.nother[2] == 1 ? "" : "s");
+                         G.nother[0], G.nother[0] == 1 ? "on" : "a", G.nother[1], G.nother[1] == 1 ? "" : "s",
+                         G.nother[2], G.nother[2] == 1 ? "" : "s");
     if (!s && G.R.tb.n == 0)
         s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no tetrahedra (element type 4) in the file");
     m = amps__rd_end(&G.R, s);

@@ -35,7 +35,7 @@ typedef struct shared {
     double gu[3]; /* the grasper's displacement set by the frame */
     long steps, frame_at, cap;
     double *period, t_last;
-    long swaps; /* re-factorizations swapped in during a haptic step */
+    long swaps;          /* re-factorizations swapped in during a haptic step */
     amps_update_job job; /* the visual solve's job */
     double *y, *xw;
     amps_int ylen;
@@ -275,8 +275,8 @@ int main(int argc, char **argv) {
                              "haptic_max,haptic_swaps,frame_idle,frame_cut,frame_ratio,frame_locked");
     if (csv) {
         fprintf(csv, "%s,%d,%d,%d,%ld,%ld,%ld,%ld,%.6e,%.6e,%.6e,%ld,%.6e,%.6e,%.4f,%.6e\n", name, B.nn, frames, idle,
-                (long)ncut, (long)fi[idle + frames - 1].nsys, (long)fi[idle + frames - 1].nrefactor, sh.steps, p50,
-                p99, pmax, sh.swaps, fi_med, fc_med, fc_med / fi_med, tl_med);
+                (long)ncut, (long)fi[idle + frames - 1].nsys, (long)fi[idle + frames - 1].nrefactor, sh.steps, p50, p99,
+                pmax, sh.swaps, fi_med, fc_med, fc_med / fi_med, tl_med);
         fclose(csv);
     }
     pthread_mutex_destroy(&sh.lock);

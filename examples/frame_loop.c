@@ -34,12 +34,12 @@
 typedef struct shared {
     pthread_mutex_t lock; /* guards every scene call except amps_scene_commit_run */
     amps_scene *S;
-    amps_ctx hctx;         /* the haptic thread's context */
-    amps_int grasper;      /* the pinned node */
-    double grasp[3];       /* its displacement set by the frame */
-    double force[3];       /* its latest reaction */
-    long steps, frame_at;  /* haptic steps so far; at the start of the frame */
-    double worst;          /* longest haptic step (s) */
+    amps_ctx hctx;        /* the haptic thread's context */
+    amps_int grasper;     /* the pinned node */
+    double grasp[3];      /* its displacement set by the frame */
+    double force[3];      /* its latest reaction */
+    long steps, frame_at; /* haptic steps so far; at the start of the frame */
+    double worst;         /* longest haptic step (s) */
     int stop, failed;
 } shared;
 
@@ -163,8 +163,8 @@ int main(int argc, char **argv) {
             amps_update_stats st;
             pthread_mutex_lock(&sh.lock);
             amps_update_get_stats(amps_scene_engine(sh.S), &st);
-            printf("frame %3d: %ld nodes cut so far, |S u C| %ld, grasper force %.4f, frame %.2f ms\n", f,
-                   (long)ncut, (long)st.nsys, sh.force[2], 1e3 * (amps_now() - t0));
+            printf("frame %3d: %ld nodes cut so far, |S u C| %ld, grasper force %.4f, frame %.2f ms\n", f, (long)ncut,
+                   (long)st.nsys, sh.force[2], 1e3 * (amps_now() - t0));
             pthread_mutex_unlock(&sh.lock);
         }
         wait_haptic(&sh);

@@ -62,7 +62,7 @@ static void t_jobs_run(t_jgroup *g, amps_int b, amps_int e, int w) {
         pthread_mutex_unlock(&t_jobs_mu);
         ts.tv_sec = 0;
         ts.tv_nsec = (long)(r % 1000) * 1000L; /* 0..1 ms */
-        if (r % 3 == 0) nanosleep(&ts, NULL); /* a third of the sub-ranges */
+        if (r % 3 == 0) nanosleep(&ts, NULL);  /* a third of the sub-ranges */
     }
     g->fn(b, e, w, g->ctx);
     pthread_mutex_lock(&t_jobs_mu);

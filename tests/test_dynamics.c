@@ -23,8 +23,8 @@ typedef struct tstate {
    step from (u, w): A w+ = M w + dt (f + M g - K u) (pins w = (g - u)/dt), u+ = u + dt w+.
    uo, wo (3 per node) receive the result (statics: wo untouched, may be NULL), react (may be
    NULL) the pin reactions. Orphans (nodes in no tet) keep u, w = 0. Returns 0 on success. */
-static int ref_step(amps_ctx *ctx, const amps_mesh *m, const tstate *w, const double *u, const double *vel,
-                    double *uo, double *wo, double *react) {
+static int ref_step(amps_ctx *ctx, const amps_mesh *m, const tstate *w, const double *u, const double *vel, double *uo,
+                    double *wo, double *react) {
     int nn = m->nnode, v, d, n, nf = 0, k, j, p, nz = 0, ok, *map, *ti, *tj;
     unsigned char *fixed = (unsigned char *)calloc(nn + 1, 1);
     amps_int *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * nn);
@@ -84,7 +84,7 @@ static int ref_step(amps_ctx *ctx, const amps_mesh *m, const tstate *w, const do
     R = amps_csc_from_triplets(ctx, nf, nz, ti, tj, tx, AMPS_UPPER);
     ok = R && ref_solve_refined(nf, R->p, R->i, R->x, rhs, x, 2, NULL) == 0;
     for (k = 0; k < n; k++) ue[k] = map[k] < 0 ? gv[k] : x[map[k]]; /* the solution on every equation */
-    amps_csc_symv(K, AMPS_UPPER, ue, ax); /* A x - b */
+    amps_csc_symv(K, AMPS_UPPER, ue, ax);                           /* A x - b */
     for (j = 0; j < n; j++) ax[j] -= b[j];
     for (v = 0; v < nn; v++)
         for (d = 0; d < 3; d++) {
@@ -255,16 +255,17 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
             }
         } else if (kind == 4) { /* removal */
             amps_int tt[2];
+            amps_mesh_removal rr;
             tt[0] = live_tet(mm);
             tt[1] = live_tet(mm);
             if (tt[0] < 0) continue;
-            if (amps_scene_remove(&ctx, S, tt[1] >= 0 && tt[1] != tt[0] ? 2 : 1, tt, AMPS_SINGULAR_REMOVE, NULL) ==
+            if (amps_scene_remove(&ctx, S, tt[1] >= 0 && tt[1] != tt[0] ? 2 : 1, tt, AMPS_SINGULAR_REMOVE, &rr) ==
                 AMPS_OK) {
                 int q, k;
                 nrem++;
-                for (k = 0; k < 2; k++) /* orphans are released */
+                for (k = 0; k < rr.ntet; k++) /* orphans (also of the tets the avoidance removed) are released */
                     for (q = 0; q < 4; q++) {
-                        amps_int x = mm->tet[4 * tt[k] + q];
+                        amps_int x = mm->tet[4 * rr.tets[k] + q];
                         if (amps_mesh_degree(mm, x) == 0) w.sh.pinned[x] = 0;
                     }
             }
@@ -340,8 +341,7 @@ static double energy(amps_ctx *ctx, const amps_mesh *m, const tstate *w, const d
                 e += 0.5 * mass[v] * vel[3 * v + d] * vel[3 * v + d];
             }
     for (j = 0; j < n; j++)
-        for (p = K->p[j]; p < K->p[j + 1]; p++)
-            e += (K->i[p] == j ? 0.5 : 1.0) * K->x[p] * ue[K->i[p]] * ue[j];
+        for (p = K->p[j]; p < K->p[j + 1]; p++) e += (K->i[p] == j ? 0.5 : 1.0) * K->x[p] * ue[K->i[p]] * ue[j];
     amps_csc_free(ctx, K);
     free(fixed);
     free(dof);
@@ -534,8 +534,7 @@ static void test_removal(void) {
     amps_scene_gravity(&ctx, S, w.g);
     amps_scene_dynamics(&ctx, S, 0.1, 0, 0);
     check_step(&ctx, S, &w, "dyn removal", 0);
-    CHECK(amps_scene_remove(&ctx, S, n, layer, AMPS_SINGULAR_REMOVE, NULL) == AMPS_OK, "dynamic removal: %s",
-          ctx.msg);
+    CHECK(amps_scene_remove(&ctx, S, n, layer, AMPS_SINGULAR_REMOVE, NULL) == AMPS_OK, "dynamic removal: %s", ctx.msg);
     check_step(&ctx, S, &w, "dyn removal", 1);
     check_step(&ctx, S, &w, "dyn removal", 2);
     v = 5 * 5 * 6 - 1; /* a top node: falls freely, dz = -g t^2 ... in backward Euler */
@@ -566,11 +565,20 @@ static void test_fracture(void) {
     smax *= 0.9;
     CHECK(amps_scene_fracture(&ctx, S, smax) == AMPS_OK, "fracture on: %s", ctx.msg);
     CHECK(amps_scene_step(&ctx, S, 1) == AMPS_OK, "fracture step: %s", ctx.msg);
-    amps_mesh_stress(&ctx, m, amps_scene_displacements(S), NULL, NULL, pr);
-    for (t = 0; t < m->ntet; t++)
-        over += (fabs(pr[3 * t]) > smax || fabs(pr[3 * t + 2]) > smax);
+    for (t = 0; t < m->ntet; t++) { /* the criterion on the state the step ended in (removed tets included) */
+        double X[12], u[12], sg[6], p3[3];
+        int a;
+        amps_mesh_tet_coords(m, t, X);
+        for (a = 0; a < 12; a++) u[a] = amps_scene_displacements(S)[3 * m->tet[4 * t + a / 3] + a % 3];
+        amps_tet_stress(X, m->E[t], m->nu[t], u, sg, NULL, p3);
+        if (fabs(p3[0]) > smax || fabs(p3[2]) > smax) {
+            over++;
+            CHECK(m->removed[t], "tet %ld over the threshold was not removed", (long)t);
+        }
+    }
     got = amps_scene_fractured(S, &total);
-    CHECK(got > 0 && got == over && total == got && m->nremoved == got, "fractured %ld, over the threshold %ld",
+    /* the singularity avoidance may remove more than the tets over the threshold */
+    CHECK(over > 0 && got >= over && total == got && m->nremoved == got, "fractured %ld, over the threshold %ld",
           (long)got, (long)over);
     CHECK(amps_scene_fracture(&ctx, S, 0) == AMPS_OK && amps_scene_step(&ctx, S, 1) == AMPS_OK &&
                   amps_scene_fractured(S, NULL) == 0,
@@ -602,7 +610,7 @@ static void test_fracture(void) {
             CHECK(m->removed[t] == (m->region[t] == 1), "tet %ld of region %ld: removed %d", (long)t,
                   (long)m->region[t], (int)m->removed[t]);
         }
-        CHECK(amps_scene_fractured(S, NULL) == r1, "region fracture removed %ld of %ld", 
+        CHECK(amps_scene_fractured(S, NULL) == r1, "region fracture removed %ld of %ld",
               (long)amps_scene_fractured(S, NULL), (long)r1);
         CHECK(amps_scene_step(&ctx, S, 2) == AMPS_OK, "steps with a free piece: %s", ctx.msg);
         amps_scene_free(&ctx, S);
@@ -649,6 +657,6 @@ int main(void) {
     random_sequence("brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 2, 1);
     random_sequence("beam 5x5x6 seed 3", amps_mesh_beam(&ctx, 6), 0.5, 3.0, 150, 3, 1);
     random_sequence("statics beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 120, 4, 0);
-    random_sequence("statics brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 5, 0);
+    random_sequence("statics brick R=3", amps_mesh_brick(&ctx, 3), 0.25, 1.0, 120, 5, 0);
     return amps_t_end("test_dynamics");
 }

@@ -117,8 +117,8 @@ static void test_stroke(void) {
         }
         total += (int)r.ncut;
         CHECK(amps_scene_mesh(A)->nnode == amps_scene_mesh(B)->nnode, "frame %d: node counts differ", fr);
-        CHECK(amps_scene_solve(&ctx, A) == AMPS_OK && amps_scene_solve(&ctx, B) == AMPS_OK, "frame %d: solve: %s",
-              fr, ctx.msg);
+        CHECK(amps_scene_solve(&ctx, A) == AMPS_OK && amps_scene_solve(&ctx, B) == AMPS_OK, "frame %d: solve: %s", fr,
+              ctx.msg);
         {
             amps_int n3 = 3 * amps_scene_mesh(A)->nnode;
             double e = t_reldiff((int)n3, amps_scene_displacements(A), amps_scene_displacements(B)), ea;
@@ -243,8 +243,7 @@ static void test_batch_undo(void) {
         CHECK(s == AMPS_OK, "undo: cut %d: %s", k, ctx.msg);
     }
     CHECK(amps_scene_mesh(S)->nnode == nn + 4, "undo: the batch's cuts did not change the mesh at once");
-    for (k = 0; k < 3; k++)
-        CHECK(amps_scene_release(&ctx, S, pins[k]) == AMPS_OK, "undo: release: %s", ctx.msg);
+    for (k = 0; k < 3; k++) CHECK(amps_scene_release(&ctx, S, pins[k]) == AMPS_OK, "undo: release: %s", ctx.msg);
     s = amps_scene_commit(&ctx, S);
     CHECK(s == AMPS_ERR_SINGULAR_UPDATE, "undo: commit of a loose piece: %d (%s)", (int)s, ctx.msg);
     CHECK(amps_scene_mesh(S)->nnode == nn, "undo: node count not restored");
@@ -316,8 +315,7 @@ static void test_count(void) {
 #ifndef AMPS_NO_THREADS
     { /* AUTO with only watched and reaction solves (plus the final one): the growth starts it */
         count_run(AMPS_REFACTOR_AUTO, d1, &n1, &s1, &e1);
-        CHECK(s1.nrefactor + s1.refactor_running >= 1, "AUTO: no re-factorization after |S u C| = %ld",
-              (long)s1.nsys);
+        CHECK(s1.nrefactor + s1.refactor_running >= 1, "AUTO: no re-factorization after |S u C| = %ld", (long)s1.nsys);
         CHECK(e1 <= 1e-10, "AUTO: vs CHOLMOD %.3e", e1);
         printf("  AUTO by size: %d re-factorizations, error %.2e\n", (int)s1.nrefactor, e1);
     }
@@ -347,8 +345,8 @@ static void test_haptic_no_swap(void) {
               "no swap: haptic: %s", ctx.msg);
     }
     amps_update_get_stats(amps_scene_engine(S), &st);
-    CHECK(st.nrefactor == 0 && st.refactor_running == 1, "no swap: the haptic path swapped (%d, %d)",
-          (int)st.nrefactor, st.refactor_running);
+    CHECK(st.nrefactor == 0 && st.refactor_running == 1, "no swap: the haptic path swapped (%d, %d)", (int)st.nrefactor,
+          st.refactor_running);
     amps_scene_reaction(&ctx, S, top, r0);
     CHECK(amps_scene_solve_watched(&ctx, S) == AMPS_OK, "no swap: watched: %s", ctx.msg);
     amps_update_get_stats(amps_scene_engine(S), &st);
@@ -406,7 +404,8 @@ static void test_two_phase(void) {
         two_phase_batch(&ctx, B, fr);
         CHECK(amps_scene_commit_begin(&ctx, A) == AMPS_OK, "two-phase: begin: %s", ctx.msg);
         CHECK(amps_scene_cut(&ctx, A, 0, p, nrm, &vc) == AMPS_ERR_STATE, "two-phase: a cut during the job accepted");
-        CHECK(amps_scene_pin(&ctx, A, 25 * 15 + 3, u) == AMPS_ERR_STATE, "two-phase: a new pin during the job accepted");
+        CHECK(amps_scene_pin(&ctx, A, 25 * 15 + 3, u) == AMPS_ERR_STATE,
+              "two-phase: a new pin during the job accepted");
         amps_scene_commit_run(A);
         CHECK(amps_scene_commit_end(&ctx, A) == AMPS_OK, "two-phase: end: %s", ctx.msg);
         CHECK(amps_scene_commit(&ctx, B) == AMPS_OK, "two-phase: one-phase commit: %s", ctx.msg);
@@ -435,7 +434,8 @@ static void test_two_phase(void) {
         CHECK(amps_scene_commit_begin(&ctx, A) == AMPS_OK, "two-phase: begin: %s", ctx.msg);
         amps_update_get_stats(amps_scene_engine(A), &st0);
         r_during = haptic_steps(&ctx, A, top, fr, 1);
-        CHECK(fabs(r_during - r_before) <= 1e-12 * fabs(r_before), "two-phase: the haptic step during the job: %.6e vs %.6e", r_during, r_before);
+        CHECK(fabs(r_during - r_before) <= 1e-12 * fabs(r_before),
+              "two-phase: the haptic step during the job: %.6e vs %.6e", r_during, r_before);
 #ifdef _OPENMP
 #pragma omp parallel sections num_threads(2)
         {

@@ -13,10 +13,10 @@
 #include <time.h>
 
 typedef struct tcount {
-    int *hits;  /* per index */
-    int badw;   /* worker ids out of range */
-    int nw;     /* worker_count */
-    int delay;  /* 1: some chunks sleep up to 0.2 ms */
+    int *hits; /* per index */
+    int badw;  /* worker ids out of range */
+    int nw;    /* worker_count */
+    int delay; /* 1: some chunks sleep up to 0.2 ms */
 } tcount;
 
 static void t_task(amps_int b, amps_int e, int worker, void *ctx) {

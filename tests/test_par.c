@@ -28,8 +28,7 @@ static void ctx_variant(amps_ctx *ctx, int v) {
     if (v >= 1 && v <= 4) {
         t_jobs_ctx(ctx, v);
         ctx->enqueue_task = count_enqueue;
-    } else if (v >= 5)
-        ctx->nthreads = v - 3;
+    } else if (v >= 5) ctx->nthreads = v - 3;
 }
 static const char *vname[7] = {"serial", "inline", "pool", "delays", "refuse", "omp2", "omp3"};
 
@@ -86,7 +85,8 @@ static void run_all(int v, const amps_csc *K, const int *perm, result *r, int *n
     amps_update *U;
     amps_marker mk;
     int n = K->ncol, k, nrhs = 11, nreq = 5, ncl, before;
-    int *req = (int *)malloc(sizeof(int) * n), *clo = (int *)malloc(sizeof(int) * n), *iw = (int *)malloc(sizeof(int) * n);
+    int *req = (int *)malloc(sizeof(int) * n), *clo = (int *)malloc(sizeof(int) * n),
+        *iw = (int *)malloc(sizeof(int) * n);
     double *b = (double *)malloc(sizeof(double) * n), *w = (double *)malloc(sizeof(double) * n), *B, *work;
     ctx_variant(&ctx, v);
     memset(&o, 0, sizeof(o));

@@ -981,7 +981,8 @@ static double quad_errors(amps_ctx *ctx, amps_scene *S, const double *f, double 
                 xa[dof[3 * v + d]] = amps_scene_displacements(S)[3 * v + d];
             }
     *err_chol = -1;
-    if (K && (*steps = quad_reference(ctx, K, b, xq)) >= 0 && ref_solve_refined((int)n, K->p, K->i, K->x, b, xc, 0, NULL) == 0) {
+    if (K && (*steps = quad_reference(ctx, K, b, xq)) >= 0 &&
+        ref_solve_refined((int)n, K->p, K->i, K->x, b, xc, 0, NULL) == 0) {
         *err_chol = t_reldiff((int)n, xc, xq);
         e = t_reldiff((int)n, xa, xq);
     }

@@ -866,12 +866,14 @@ static void test_default_accuracy(void) {
         if (off) m.res_ok = 1e-6; /* no contract without the refinement */
         cut_sequence(&m, &mesh, 40, 17, 1e-7);
         amps_update_get_stats(m.U, &st);
-        if (off) CHECK(st.backward_error == -1 && st.refine_solves == 0, "refine_tol 0: backward error %.3e, %d refinement steps",
-                       st.backward_error, (int)st.refine_solves);
-        else CHECK(st.backward_error >= 0 && st.backward_error <= 64 * o.refine_tol && st.relres == -1 &&
-                           st.guard_result == AMPS_GUARD_MET,
-                   "default: backward error %.3e, relres %.3e, guard result %d", st.backward_error, st.relres,
-                   (int)st.guard_result);
+        if (off)
+            CHECK(st.backward_error == -1 && st.refine_solves == 0,
+                  "refine_tol 0: backward error %.3e, %d refinement steps", st.backward_error, (int)st.refine_solves);
+        else
+            CHECK(st.backward_error >= 0 && st.backward_error <= 64 * o.refine_tol && st.relres == -1 &&
+                          st.guard_result == AMPS_GUARD_MET,
+                  "default: backward error %.3e, relres %.3e, guard result %d", st.backward_error, st.relres,
+                  (int)st.guard_result);
         printf("  refine_tol %.1e: %d refinement steps over %d solves, last backward error %.2e\n", o.refine_tol,
                (int)st.refine_solves, (int)st.nsolve, st.backward_error);
         report(off ? "beam 5x5x96 cuts, refine_tol 0" : "beam 5x5x96 cuts, default", &m);
@@ -1089,7 +1091,7 @@ static void test_log(void) {
     char v[32];
     snprintf(v, sizeof(v), "%d.%d.%d", AMPS_VERSION_MAJOR, AMPS_VERSION_MINOR, AMPS_VERSION_PATCH);
     CHECK(!strcmp(amps_version(), AMPS_VERSION_STRING) && !strcmp(v, AMPS_VERSION_STRING) &&
-              !strcmp(amps_version(), "0.3.0"),
+                  !strcmp(amps_version(), "0.3.0"),
           "version %s / %s / %s", amps_version(), AMPS_VERSION_STRING, v);
     {
         model m;

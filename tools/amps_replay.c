@@ -313,8 +313,7 @@ static int cmd_stroke(replay *R, int nt, char **t, double t0) {
 static int cmd_batch(replay *R, int nt, char **t, double t0) {
     int begin = !strcmp(t[0], "batch");
     if (nt != 1) return fail(R, "usage: %s", t[0]);
-    if (begin ? amps_scene_begin_batch(&R->ctx, R->S) : amps_scene_commit(&R->ctx, R->S))
-        return lib_fail(R, t[0]);
+    if (begin ? amps_scene_begin_batch(&R->ctx, R->S) : amps_scene_commit(&R->ctx, R->S)) return lib_fail(R, t[0]);
     if (!begin) snprintf(R->last_cmd, sizeof(R->last_cmd), "commit");
     R->step_time += amps_now() - t0;
     return 0;
@@ -343,8 +342,7 @@ static int report_solve(replay *R, double t0) {
     }
     if (!R->quiet) {
         printf("step %4d  %-14s dofs %7ld  |S|%6ld  %9.3f ms  %9.1f Hz", R->steps,
-               R->last_cmd[0] ? R->last_cmd : "solve", (long)st.dim, (long)st.nsys, 1e3 * dt,
-               dt > 0 ? 1.0 / dt : 0.0);
+               R->last_cmd[0] ? R->last_cmd : "solve", (long)st.dim, (long)st.nsys, 1e3 * dt, dt > 0 ? 1.0 / dt : 0.0);
         if (res >= 0) printf("  residual %.2e", res);
         printf("%s\n", first ? "  (includes the factorization)" : "");
     }
@@ -484,8 +482,8 @@ static int dump_dynamic(replay *R, FILE *f, const char *path) {
     amps_int i;
     fprintf(f, "node,ux,uy,uz,vx,vy,vz\n");
     for (i = 0; i < m->nnode; i++)
-        fprintf(f, "%ld,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", (long)i, d[3 * i], d[3 * i + 1], d[3 * i + 2],
-                w[3 * i], w[3 * i + 1], w[3 * i + 2]);
+        fprintf(f, "%ld,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", (long)i, d[3 * i], d[3 * i + 1], d[3 * i + 2], w[3 * i],
+                w[3 * i + 1], w[3 * i + 2]);
     if (fclose(f)) return fail(R, "cannot write '%s'", path);
     if (!R->quiet) printf("dump: %s (%ld nodes)\n", path, (long)m->nnode);
     return 0;
@@ -501,8 +499,7 @@ static int cmd_material_dyn(replay *R, int nt, char **t) {
         if (R->solved) return fail(R, "%s", "density is allowed only before the first solve or step");
         return amps_scene_set_density(&R->ctx, R->S, x[0]) ? lib_fail(R, "density") : 0;
     }
-    if ((nt != 4 && nt != 5) || !parse_node(t[1], &id))
-        return fail(R, "%s", "usage: region <id> <E> <nu> [<rho>]");
+    if ((nt != 4 && nt != 5) || !parse_node(t[1], &id)) return fail(R, "%s", "usage: region <id> <E> <nu> [<rho>]");
     x[2] = 0;
     for (k = 2; k < nt; k++)
         if (!parse_num(t[k], &x[k - 2])) return fail(R, "bad number '%s'", t[k]);
@@ -519,7 +516,9 @@ static int cmd_dynamics(replay *R, int nt, char **t) {
             return fail(R, "%s", "usage: fracture <sigma_max> | off");
         return amps_scene_fracture(&R->ctx, R->S, strcmp(t[1], "off") ? x[0] : 0.0) ? lib_fail(R, "fracture") : 0;
     }
-    if (nt != 4) return fail(R, "usage: %s", !strcmp(t[0], "gravity") ? "gravity <gx> <gy> <gz>" : "dynamics <dt> <alpha> <beta>");
+    if (nt != 4)
+        return fail(R, "usage: %s",
+                    !strcmp(t[0], "gravity") ? "gravity <gx> <gy> <gz>" : "dynamics <dt> <alpha> <beta>");
     for (k = 0; k < 3; k++)
         if (!parse_num(t[1 + k], &x[k])) return fail(R, "bad number '%s'", t[1 + k]);
     if (!strcmp(t[0], "gravity")) return amps_scene_gravity(&R->ctx, R->S, x) ? lib_fail(R, "gravity") : 0;
@@ -547,8 +546,7 @@ static int cmd_step(replay *R, int nt, char **t) {
             rc = report_solve(R, t0);
             R->residual_on = on;
             if (rc) return 1;
-        } else if (report_solve(R, t0))
-            return 1;
+        } else if (report_solve(R, t0)) return 1;
     }
     return 0;
 }
