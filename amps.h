@@ -474,7 +474,7 @@ typedef struct amps_update_opts {
                                a forward and a backward solve; at most 3, stopping when eta no longer
                                halves); above 64 refine_tol after them a synchronous
                                re-factorization (unless refactor is OFF) and the solve again.
-                               Default 1.1e-16 (eps / 2; 1 eps left a sliver mesh at 12x CHOLMOD's residual);
+                               Default 2.2e-16 (1 eps: the level of a fresh direct solve);
                                0 = off (solves then cost no product with K^) */
     amps_int refactor_size;         /* AUTO: start after a commit that grows |S u C| past its size at the
                                       last base plus this; default 384 */
@@ -5602,7 +5602,7 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
     o->refactor_order.block = 0;
     o->refactor_threads = 1;
     o->refactor_ratio = 0.25;
-    o->refine_tol = 1.1102230246251565e-16;
+    o->refine_tol = 2.220446049250313e-16;
     o->refactor_size = 384;
     o->refactor_every = 32;
 }
@@ -8063,7 +8063,7 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    forces the rest reaches 370 eps (beam 5x5x256, stress suite).
    The fix: the residual of the explicit current system, one product with K^ (nnz(K^); measured
    +5.7% instructions on a brick:14 cut step), its normwise backward error eta, and while
-   eta > refine_tol (default eps / 2) refinement steps through the augmented solve with the same
+   eta > refine_tol (default 1 eps) refinement steps through the augmented solve with the same
    factors (the correction is driven by a residual of size eps ||H w||, so its own w is small):
    on 5x5x1024, 17 steps over the 25 cut solves bring eta from 3.1 to 0.1 eps; bricks and bunnies
    meet 1 eps without a step. At most 3 steps; they stop when eta no longer halves. If eta is still
