@@ -7558,7 +7558,7 @@ static amps_status amps__cjob_take(amps_ctx *ctx, amps_update *U) {
             return AMPS_ERR_OOM;
         U->cjob.cap_con = U->pending.n_con;
     }
-    memcpy(U->cjob.delta, U->pending.delta, sizeof(amps__pdelta) * (size_t)U->pending.n_delta);
+    if (U->pending.n_delta) memcpy(U->cjob.delta, U->pending.delta, sizeof(amps__pdelta) * (size_t)U->pending.n_delta);
     U->cjob.n_delta = U->pending.n_delta;
     U->cjob.n_dofs = U->pending.n_dofs;
     amps_marker_next(mk);
@@ -7662,10 +7662,10 @@ AMPS_API amps_status amps_update_commit_end(amps_ctx *ctx, amps_update *U) {
         amps__rollback(U, u_old, U->cjob.vused_old, U->delta.used);
         return s;
     }
-    memmove(U->pending.con + nc, U->pending.con, sizeof(amps__pcon) * (size_t)left);
-    memcpy(U->pending.con, U->cjob.con, sizeof(amps__pcon) * (size_t)nc);
+    if (nc && left) memmove(U->pending.con + nc, U->pending.con, sizeof(amps__pcon) * (size_t)left);
+    if (nc) memcpy(U->pending.con, U->cjob.con, sizeof(amps__pcon) * (size_t)nc);
     U->pending.n_con = nc + left;
-    memcpy(U->pending.delta, U->cjob.delta, sizeof(amps__pdelta) * (size_t)U->cjob.n_delta);
+    if (U->cjob.n_delta) memcpy(U->pending.delta, U->cjob.delta, sizeof(amps__pdelta) * (size_t)U->cjob.n_delta);
     U->pending.n_delta = U->cjob.n_delta;
     U->pending.n_dofs = U->cjob.n_dofs;
     U->stats.t_step[AMPS_STEP_WCOLS] = U->cjob.t_wcols;
@@ -10504,8 +10504,8 @@ static amps_status amps__rm_check_input(amps_ctx *ctx, amps_mesh *m, amps_int n,
             s = amps__err(ctx, AMPS_ERR_ARG, "%s: tetrahedron %lld is given twice", fn, (long long)t);
         else m->removed[t] = 2;
     }
-    for (k = 0; k < i; k++)
-        if (m->removed[tets[k]] == 2) m->removed[tets[k]] = 0;
+    for (k = 0; k < i; k++) /* tets[i - 1] may be the one out of range */
+        if (tets[k] >= 0 && tets[k] < m->ntet && m->removed[tets[k]] == 2) m->removed[tets[k]] = 0;
     return s;
 }
 
