@@ -462,6 +462,7 @@ static void test_physics(void) {
         err = relerr(3 * nn, us, ur, 1e-300);
         CHECK(err < 1e-10, "static gravity sag against CHOLMOD: %.2e", err);
         amps_scene_free(&ctx, S);
+        shadow_free(&w.sh);
         S = make_scene(&ctx, amps_mesh_beam(&ctx, 6), 0.5, &w);
         amps_scene_gravity(&ctx, S, g);
         lam = first_eig(&ctx, amps_scene_mesh(S), &w);
