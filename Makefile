@@ -11,6 +11,7 @@
 #   make bench         benchmarks; results in bench/RESULTS.md and bench/out/*.csv (tracked)
 #   make bench-quick   a subset of them; results in build/bench/quick
 #   make bench-load    the load benchmark alone (spinning processes, a 1 kHz loop; bench/load.sh)
+#   make bench-dynamics the dynamics benchmark alone (bench/dynamics.sh; its section of RESULTS.md)
 #   make stress        the long stress suite (beams to 5x5x4096, 10,000-step runs; CSV/PNG in build/stress)
 #   make fuzz          libFuzzer targets (clang), FUZZ_TIME seconds each (default 60)
 #   make deps          install (as root) or list the Debian packages the tests need
@@ -48,14 +49,14 @@ TEST_BIN  := $(patsubst tests/%.c,$(BUILD)/%,$(TEST_SRC))
 TEST_SH   := $(wildcard tests/test_*.sh)
 TOOLS     := $(BUILD)/amps_replay $(BUILD)/readme_example $(BUILD)/haptic_loop $(BUILD)/frame_loop
 
-.PHONY: tsan test-tasks all test deps deps-check tools examples demo bench bench-quick bench-load clean distclean cxx switches stress fuzz \
+.PHONY: tsan test-tasks all test deps deps-check tools examples demo bench bench-quick bench-load bench-dynamics clean distclean cxx switches stress fuzz \
         format format-check
 all: tools
 
 tools: $(TOOLS)
 
-$(BUILD)/amps_replay: tools/amps_replay.c amps.h | $(BUILD)
-	$(CC) $(CFLAGS_ALL) -o $@ $< $(LDLIBS)
+$(BUILD)/amps_replay: tools/amps_replay.c examples/jobs.h amps.h | $(BUILD)
+	$(CC) $(CFLAGS_ALL) -o $@ $< -lpthread $(LDLIBS)
 
 $(BUILD)/readme_example: examples/readme_example.c amps.h | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< $(LDLIBS)
@@ -117,7 +118,7 @@ tsan:
 
 # The whole suite on the host-callback back end (tests/jobs_test.h's pool of 4 workers), no OpenMP.
 test-tasks:
-	$(MAKE) test OMP= BUILD=build/tasks EXTRA="-DAMPS_TEST_HOST_TASKS -pthread $(EXTRA)"
+	$(MAKE) test OMP= BUILD=build/tasks EXTRA="-DAMPS_TEST_HOST_TASKS -DAMPS__PAR_ADAPT=0 -pthread $(EXTRA)"
 
 # The compile-time switches, each combination built with -Werror, tested and sized (tests/switches.sh).
 switches: deps-check
@@ -132,6 +133,9 @@ bench-quick:
 # the load benchmark alone (part of make bench): bench/out/load.csv, load_summary.txt
 bench-load:
 	bash bench/load.sh full
+
+bench-dynamics:
+	bash bench/dynamics.sh full bench/out alone
 
 # The sources clang-format keeps in the style of .clang-format (CLANG_FORMAT: version 14 or later).
 CLANG_FORMAT ?= clang-format

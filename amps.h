@@ -75,6 +75,9 @@
      a copy of the changes, constraints and forces taken at the start and the engine's change log
      (under the job's mutex), and writes only the job's new base (matrix, factor, engine); the
      caller's engine calls swap a ready job in or drop a failed one, on the caller's thread.
+     A haptic model (amps_haptic) points into no scene: amps_haptic_eval reads only it, so a
+     haptic thread can evaluate one model while another thread changes the scene and builds the
+     next into a second one (amps_scene_haptic_build; the caller swaps the two).
      An amps_ctx is used by one call at a time (it records the last error).
      Task callbacks (ctx->enqueue_task, ctx->finish_task): enqueue either returns NULL (not
      queued: amps runs [0, n) itself) or a handle, and the host then runs task on sub-ranges that
@@ -432,6 +435,10 @@ typedef enum amps_refactor_policy {
     AMPS_REFACTOR_OFF = 2,    /* never */
     AMPS_REFACTOR_COUNT = 3   /* deterministic: at points fixed by the count of structural commits */
 } amps_refactor_policy;
+/* AUTO and COUNT also commit a change set whose dense work would exceed about four
+   factorizations (thousands of new indices: a fracture that tears a large part away) by a
+   synchronous re-factorization of K^ with the changes applied, inside amps_update_commit
+   (stats.commit_folds; the point depends on the change set only, not on the clock). */
 
 /* Options; amps_update_opts_default gives the defaults. A capacity, refactor_threads or
    refactor_ratio that is 0 or negative means its default. */
@@ -462,23 +469,39 @@ typedef struct amps_update_opts {
                                       couplings a change cancelled exactly leave the pattern too.
                                       AMD often has less fill but a tall elimination tree: long
                                       closures make Steps 1-2 slower */
-    int refactor_threads;           /* OpenMP threads of the background factorization; default 1 */
+    int refactor_threads;           /* OpenMP threads of the background factorization; default 1: the
+                                      worker, and (when the engine's back end has 2 or more participants)
+                                      one helper thread that takes the factorization's parallel chunks
+                                      only while no commit or solve of the engine runs; same bits */
     double refactor_ratio;          /* AUTO: start when the extra time the augmentation has cost since the
                                last base reaches this times the (measured or estimated) time of a
                                re-factorization; default 0.25: it runs on another core, so the steps
                                lose less than its time (1 would be rent or buy; bench/RESULTS.md) */
-    double refine_tol;              /* accuracy of amps_update_solve (and the scene solve): the normwise backward
-                               error eta = ||(f^ - K^ x)_F|| / (||K^||_inf ||x_F|| + ||f^_F||) of
+    double refine_tol;              /* accuracy of amps_update_solve (and the scene solve): the mixed backward
+                               error omega = ||r_F|| / || |K^| |x| + |f^| ||_F, r = f^ - K^ x, of
                                every full solve (F: free indices) from one product with K^, and
-                               while eta > refine_tol refinement steps with the same factors (each
-                               a forward and a backward solve; at most 3, stopping when eta no longer
-                               halves); above 64 refine_tol after them a synchronous
+                               while omega > refine_tol and omega > 4 omega_d (omega_d: what a direct
+                               solve with the base factor reaches on K-bar, measured once per base)
+                               refinement steps with the same factors (each
+                               a forward and a backward solve, the residual in double-double; at
+                               most 3, stopping when omega no longer halves); on a base whose
+                               condition estimate exceeds 9.0e6 (stats.base_cond) every augmented
+                               solve takes one step, for its forward error; when the normwise
+                               eta = ||r_F|| / (||K^||_inf ||x_F|| + ||f^_F||) <= omega is still
+                               above 64 refine_tol after them a synchronous
                                re-factorization (unless refactor is OFF) and the solve again.
                                Default 2.2e-16 (1 eps: the level of a fresh direct solve);
                                0 = off (solves then cost no product with K^) */
     amps_int refactor_size;         /* AUTO: start after a commit that grows |S u C| past its size at the
                                       last base plus this; default 384 */
     amps_int refactor_every;        /* COUNT: structural commits between re-factorizations; default 32 */
+    int refactor_reuse;             /* 1 (default): a re-factorization keeps the base's ordering with each
+                                      appended DOF placed right after its origin (amps_update_set_origin)
+                                      and the base's analysis when the pattern is unchanged; a fresh
+                                      ordering (refactor_order) when the kept one's nnz(L) exceeds 1.2x
+                                      the last fresh one's fill per entry of the matrix, for the first
+                                      and every 16th, and in amps_update_refactor. 0: always a fresh
+                                      ordering */
 } amps_update_opts;
 
 /* The steps of [AMPS] Table 1, indices of amps_update_stats.t_step. */
@@ -520,13 +543,24 @@ typedef struct amps_update_stats {
     double relres;                  /* relative residual of the last solve when the guard is on, else -1 */
     amps_int nrefactor;             /* re-factorizations swapped in */
     amps_int refactor_failed;       /* re-factorizations that failed (the engine kept its factors) */
+    amps_int commit_folds;          /* commits too large for the augmentation, done as a synchronous
+                                       re-factorization with the changes applied (among nrefactor) */
     int refactor_running;           /* 1 while one is in progress (started, not yet swapped) */
     double t_refactor;              /* wall time of the last one, start to ready (background) */
     double t_swap;                  /* time of its swap (inside the call that did it) */
     double refactor_nnzL;           /* nnz(L) of the current base */
-    double backward_error;          /* normwise backward error of the last amps_update_solve (opts.refine_tol),
+    double backward_error;          /* normwise backward error eta of the last amps_update_solve (opts.refine_tol),
                                -1 when neither it nor the guard is on */
     amps_int refine_solves;         /* refinement steps (one forward and one backward solve each) so far */
+    double base_cond;               /* kappa_1(K-bar) of the current base, estimated at its creation when
+                               opts.refine_tol > 0 (amps_condest; it sets the forward refinement) */
+    /* the last re-factorization swapped in, by phase (wall time in the worker): */
+    double t_refactor_order;    /* fresh ordering (0 when the base's was kept) */
+    double t_refactor_symbolic; /* symbolic analysis (or the copy of the base's) */
+    double t_refactor_numeric;  /* numeric factorization */
+    double t_refactor_catchup;  /* the new base's engine and the changes replayed in the worker */
+    int refactor_order_kept;    /* 0 fresh ordering, 1 the base's kept (DOFs placed), 2 its analysis kept */
+    double refactor_fill;       /* its nnz(L) / (nnz(L) per matrix entry of the last fresh ordering x nnz) */
 } amps_update_stats;
 
 AMPS_API void amps_update_opts_default(amps_update_opts *opts);
@@ -564,7 +598,9 @@ AMPS_API void amps_update_discard(amps_update *U);
    recomputed, so later results agree with the earlier ones to rounding, not bitwise. The
    exception to the failure rule: every change recorded since the last successful commit is
    discarded (as by amps_update_discard); record them again, corrected, to retry. A finished
-   re-factorization the call swapped in first stays swapped in. */
+   re-factorization the call swapped in first stays swapped in. A change set too large for the
+   augmentation is committed by a synchronous re-factorization (see amps_refactor_policy: allocates
+   as one, and amps_update_factor changes); if that fails, through the augmentation as usual. */
 AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U);
 /* The same in two phases, for a caller whose haptic thread must not wait for a commit's Steps 1-2
    (the L^{-1} columns of the new indices and the new rows of G: the expensive part):
@@ -589,7 +625,8 @@ AMPS_API void amps_update_commit_run(amps_update *U);
 AMPS_API amps_status amps_update_commit_end(amps_ctx *ctx, amps_update *U);
 /* Commits, then solves (Step 6): x (room for amps_update_dim, may be NULL) receives the solution,
    refined until its backward error on the current K^ is at most opts.refine_tol (default: that
-   of a fresh direct solve; stats.backward_error). A failed commit: see amps_update_commit.
+   of a fresh direct solve; stats.backward_error) or within 4x of what a direct solve with the
+   base factor reaches. A failed commit: see amps_update_commit.
    AMPS_WARN_INACCURATE (accuracy guard) is a warning: the solution is stored, and the guard may
    have re-factored. */
 AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *x);
@@ -664,15 +701,37 @@ AMPS_API amps_status amps_update_refactor_wait(amps_ctx *ctx, amps_update *U);
 /* Stops a running re-factorization and frees it; blocks until the thread has stopped (at most
    one phase: ordering, analysis, factorization or a catch-up commit). */
 AMPS_API void amps_update_refactor_cancel(amps_ctx *ctx, amps_update *U);
-/* Commits, then re-factors synchronously (start + wait). Blocks. A failed commit: see
+/* Commits, then re-factors synchronously (start + wait) with a fresh ordering (opts.refactor_order,
+   never the kept one of opts.refactor_reuse). Blocks. A failed commit: see
    amps_update_commit; a failed re-factorization leaves the changes committed and the engine on
    its old factors. */
 AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U);
+/* Applies the inverse of the committed constrained system to a caller's right-hand side:
+   x_F = K^_FF^-1 rhs_F and x_C = 0 (F: free indices, C: constrained ones; rhs_C is ignored),
+   through the augmented solve (the base factor and the dense system, with the local refinement
+   of opts.refine, no backward-error refinement). rhs and x have amps_update_dim entries (x may
+   be rhs). The engine's forces, solution and reactions do not change. Commits pending changes
+   first (a failed commit: see amps_update_commit; a ready re-factorization may swap in there).
+   Like amps_update_solve it feeds the AUTO re-factorization cost model with its time, which may
+   start a background re-factorization (that allocates); otherwise it allocates nothing after the
+   commit. It uses the engine's workspace: no other call on U may run meanwhile. A
+   preconditioner for iterative solves of nearby matrices (the scene's corotational step). */
+AMPS_API amps_status amps_update_solve_rhs(amps_ctx *ctx, amps_update *U, const double *rhs, double *x);
+/* Declares appended DOFs idx[k] (added, perhaps not yet committed) copies of indices orig[k] < idx[k]
+   (the DOFs of a cut's node copy v' of v): a re-factorization that keeps the base's ordering
+   (opts.refactor_reuse) places each right after its origin; a DOF without one is placed after
+   its neighbour (in the matrix at the start of the re-factorization) eliminated last. Allocates
+   the table (grown with the dimension). Errors: AMPS_ERR_ARG, AMPS_ERR_INDEX (idx[k] not an
+   appended DOF, orig[k] not below it), AMPS_ERR_OOM; a failure changes nothing. */
+AMPS_API amps_status amps_update_set_origin(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx,
+                                            const amps_int *orig);
 
 /* ==== [amps:fem] mesh and P1 elasticity ======================================================= */
 #ifndef AMPS_NO_FEM
 /* The elasticity is linear (small strains, small displacements, isotropic Hooke material): K is
-   the stiffness of the reference configuration and does not follow large deformations. */
+   the stiffness of the reference configuration and does not follow large deformations, except in
+   the scene's corotational dynamics (amps_scene_corotational: element stiffness rotated with each
+   tet, exact for rigid motions). */
 /* ---- tetrahedral mesh ---- */
 
 /* Tetrahedral mesh in the reference configuration, with the node copies made by cuts.
@@ -857,6 +916,14 @@ AMPS_API double amps_tet_stress(const double X[12], double E, double nu, const d
                                 double *von_mises, double principal[3]);
 /* Eigenvalues (descending) of the symmetric matrix [s0 s3 s5; s3 s1 s4; s5 s4 s2] (closed form). */
 AMPS_API void amps_sym3_eig(const double s[6], double lam[3]);
+/* Rotation of a tet's deformation (corotational FEM): F = D_s D_m^-1 (D_s, D_m: the edge vectors
+   x_a - x_0, X_a - X_0, a = 1..3, of the deformed positions x and the reference X), its SVD
+   F = U S V^T (s1 >= s2 >= s3 >= 0) and R = U diag(1, 1, det(U V^T)) V^T, the rotation nearest
+   to F (it maximizes tr(R^T F) = s1 + s2 + sign(det F) s3). Inverted tets (det F < 0) get a
+   rotation too, never a reflection. Where R is not unique (rank F <= 1, or det F < 0 with
+   s2 = s3) R is one of the maximizers; F = 0, a degenerate X or a non-finite F give R = I.
+   Returns det F (0 for a degenerate X). Allocates nothing. */
+AMPS_API double amps_tet_rotation(const double X[12], const double x[12], double R[9]);
 
 /* ---- boundary ---- */
 
@@ -943,6 +1010,43 @@ AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S);
 /* The haptic step: updates the pin reactions (amps_scene_reaction) from the dense system alone,
    without computing displacements (amps_update_solve_reactions). */
 AMPS_API amps_status amps_scene_solve_reactions(amps_ctx *ctx, amps_scene *S);
+/* Haptic model: the pin reactions as an affine function of the pin targets, for a haptic thread
+   that never touches the scene. For the committed system and the pin set P (the pinned nodes
+   node[0..n-1], ascending; entry 3k + d of a vector is component d of node[k]):
+       r(g) = r0 + H (g - g0),
+   g0 the pin targets and r0 the reactions (amps_scene_reaction after amps_scene_solve_reactions)
+   at the build, H (3n x 3n, column major, symmetric) the Schur complement on P of the system
+   matrix: K^ in statics; A / dt^2 in dynamics (the pins' velocities are (g - u_P) / dt and the
+   reactions (A w+ - b)_P / dt: amps_scene_step). Exact while the pin set, forces, materials and
+   topology (dynamics: also the state u, w) are as at the build; a new pin, a release, a cut, a
+   removal or a step needs a rebuild, and evaluating a stale model is the caller's choice. Pins
+   on cut copies are nodes like others. The struct owns its arrays and points into no scene:
+   one thread may evaluate it while another changes the scene and builds into a second one
+   (publish by swapping pointers). Initialize with amps_haptic_init, free with amps_haptic_free. */
+typedef struct amps_haptic {
+    amps_int n;      /* pinned nodes in the model */
+    amps_int cap;    /* capacity in nodes */
+    amps_int *node;  /* n pinned nodes, ascending */
+    amps_int *eq;    /* 3 n: the equation of each entry (amps_scene_node_dofs), -1: none */
+    double *g0, *r0; /* 3 n each: pin targets and reactions at the build */
+    double *H;       /* 3n x 3n, column major: dr/dg */
+    long serial;     /* builds into this struct so far */
+} amps_haptic;
+AMPS_API void amps_haptic_init(amps_haptic *h);
+AMPS_API void amps_haptic_free(amps_ctx *ctx, amps_haptic *h);
+/* Builds h for the current scene (after amps_scene_solve_reactions' commit: moved pins and forces
+   are included). Cost: that haptic step plus one solve with the engine's dense factor per pinned
+   DOF (in blocks of up to 16 that share each pass over the factor), O(3n |S u C|^2) in all,
+   O(9 n^2) to store; allocates only when n exceeds h->cap. Errors (h
+   unchanged): AMPS_ERR_ARG (NULL), AMPS_ERR_STATE (corotational mode, a two-phase commit in
+   progress), AMPS_ERR_OOM, the commit's. No pin: AMPS_WARN_NOOP with h->n = 0. */
+AMPS_API amps_status amps_scene_haptic_build(amps_ctx *ctx, amps_scene *S, amps_haptic *h);
+/* r = r0 + H (g - g0) (3 h->n entries each; g NULL: r = r0). O(9 n^2), allocates nothing, reads
+   only h: callable from any thread concurrently with anything on the scene. AMPS_ERR_ARG (NULL h
+   or r). */
+AMPS_API amps_status amps_haptic_eval(const amps_haptic *h, const double *g, double *r);
+/* The position k of node v in h->node (its entries are 3k..3k+2), or -1. O(log n). */
+AMPS_API amps_int amps_haptic_find(const amps_haptic *h, amps_int v);
 /* Displacements of the last solve, 3 per node (nodes created since: their origin's values). */
 AMPS_API const double *amps_scene_displacements(const amps_scene *S);
 /* Deformed positions (reference + displacement of the last solve) of nodes[0..n-1], or of all
@@ -1105,7 +1209,8 @@ AMPS_API amps_status amps_scene_dynamics(amps_ctx *ctx, amps_scene *S, double dt
    matrix, M one pass over the tets (about 0.4 of a solve's instructions on brick R=6). Reactions (amps_scene_reaction) are (A w+ - b)_P / dt; the haptic path
    amps_scene_solve_reactions gives those of the step that would be taken now. With fracture on,
    after each step the tets over the threshold are removed (amps_scene_fracture). AMPS_ERR_STATE
-   in statics; a failing step returns its error with the earlier steps done. */
+   in statics; a failing step returns its error with the earlier steps done. With
+   amps_scene_corotational on, every step is the corotational one (see there). */
 AMPS_API amps_status amps_scene_step(amps_ctx *ctx, amps_scene *S, amps_int nsteps);
 /* Velocities w, 3 per node (NULL before amps_scene_dynamics). */
 AMPS_API const double *amps_scene_velocities(const amps_scene *S);
@@ -1127,6 +1232,43 @@ AMPS_API amps_status amps_scene_fracture(amps_ctx *ctx, amps_scene *S, double si
 AMPS_API amps_status amps_scene_fracture_region(amps_ctx *ctx, amps_scene *S, amps_int id, double sigma_max);
 /* Tets fractured by the last step; *total (may be NULL) receives those of all steps. */
 AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
+/* Corotational dynamics (paper "GPU-accelerated surgery simulation for opening a brain fissure",
+   Corotational FEM and Appendix A-B; on != 0) or linear (on = 0): each step, from the state
+   (u, w) at its start, R_e = amps_tet_rotation of every live tet at x = X + u,
+   K_e = R_e K0_e R_e^T and the elastic force g_e = R_e K0_e (R_e^T x_e - X_e) (R_e: R four
+   times on the diagonal, K0_e the reference stiffness), assembled to K_R and g; the step solves
+   A_R w+ = M w + dt (f + M g_grav - g), A_R = cM M + cK K_R, with the constraint rules of
+   amps_scene_step (fixed, pins w_P = (g_P - u_P) / dt, orphans w = 0), u+ = u + dt w+; the
+   reactions (amps_scene_reaction) are (A_R w+ - b)_P / dt. With every R_e = I it is the linear
+   step. Nothing is re-factored for it: conjugate gradients on the reduced A_R from w,
+   preconditioned by Rn A^-1 Rn^T (A^-1: the engine's exact solve with the current linear A,
+   amps_update_solve_rhs, so cuts, removals and pins stay updates; Rn: per node the rotation
+   nearest to the volume-weighted mean of its tets' R_e, which makes the preconditioner exact
+   for a rigid rotation), to the relative residual ||(b - A_R w+)_F|| / ||(b - A_R w_C)_F|| <= tol
+   (amps_scene_corotational_tol; amps_scene_residual reports it). Products with A_R are
+   matrix-free per tet, parallel on the engine's threads and bitwise independent of their count.
+   Memory from the first step: 36 doubles per tet (reference gradients, volume, R_e, Lame
+   constants, element results), 15 per node, 6 per equation. Stresses (amps_scene_stress and
+   fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. amps_scene_solve_reactions is
+   AMPS_ERR_STATE in this mode (the reactions come with each step). Dynamics only and before
+   the first step: AMPS_ERR_STATE otherwise (nothing changes). */
+AMPS_API amps_status amps_scene_corotational(amps_ctx *ctx, amps_scene *S, int on);
+/* PCG tolerance (0 < tol < 1, default 1e-10) and iteration cap (maxit >= 1, 0: default 200) of
+   the corotational step; a step that does not reach tol within maxit iterations is still taken
+   and amps_scene_step returns AMPS_WARN_INACCURATE. AMPS_ERR_VALUE otherwise. */
+AMPS_API amps_status amps_scene_corotational_tol(amps_ctx *ctx, amps_scene *S, double tol, amps_int maxit);
+/* What the last step did. */
+typedef struct amps_scene_step_stats {
+    int corotational;          /* 1: the step was corotational */
+    amps_int iterations;       /* PCG iterations (preconditioner solves) of the last step */
+    double relres;             /* its final relative residual (recomputed, not the recursion's); -1: linear */
+    amps_int products;         /* products with A_R */
+    double t_rotation;         /* seconds: rotations, elastic forces, masses */
+    double t_solve;            /* seconds: the PCG */
+    amps_int iterations_total; /* PCG iterations of all steps */
+} amps_scene_step_stats;
+/* Fills st with the last step's statistics (zeros before the first step). AMPS_ERR_ARG for NULL. */
+AMPS_API amps_status amps_scene_step_info(const amps_scene *S, amps_scene_step_stats *st);
 #endif /* AMPS_NO_FEM */
 
 /* ==== [amps:io] mesh readers and writers ====================================================== */
@@ -1225,6 +1367,7 @@ AMPS_API amps_status amps_pvd_write(amps_ctx *ctx, const char *path, amps_int n,
 #endif
 #ifndef AMPS_NO_THREADS
 #include <pthread.h>
+#include <sys/select.h> /* select() as a short sleep: declared without feature macros, unlike nanosleep */
 #endif
 
 #ifndef AMPS_ASSERT
@@ -1561,24 +1704,23 @@ static int amps__isfinite(double v) { return v - v == 0.0; }
    min(nt - 1, chunks - 1) items, each claiming chunks under slot = its item index, claims
    chunks itself under the last slot, then calls finish; OpenMP (no callbacks, -fopenmp): a team
    of nt threads claims chunks (slot = thread number); serial otherwise, when nt <= 1, when
-   there is one chunk, or during a back-off.
-   Back-off: a parallel loop ends when its slowest participant does; beside other busy
-   processes a woken worker may wait a time slice for a core, and the caller waits for it at the
-   end of the loop (the OpenMP join, or finish). The caller measures that wait: after it found
-   the counter exhausted (t_m, its own chunks done), the loop ends at t_1; when t_1 - t_m exceeds
-   half of t_m - t_0 plus 30 us (a wait no balanced loop of dynamically claimed chunks shows)
-   the owner's loops run serially for AMPS__PAR_QUIET seconds, doubled while the next probe is
-   late again (at most AMPS__PAR_QUIET_MAX) and halved after a probe that is not. Serial and
-   parallel runs give the same bits, so this trades only time. */
-#ifndef AMPS__PAR_BACKOFF
-#define AMPS__PAR_BACKOFF 1 /* 0: no adaptive back-off (tests of the parallel schedule) */
+   there is one chunk, or when the mode choice below picks serial.
+   Mode choice: a parallel loop ends when its slowest participant does; beside other busy
+   processes a woken worker may wait a time slice for a core while the caller waits for it at
+   the end of the loop, and the loop is then slower than the serial one. So every owner times
+   its loops: per kernel (fn), an exponential average of seconds per item of [0, n) in each mode
+   (serial, parallel), over all of the loop including wake-up and join. A loop runs in the mode
+   with the smaller average; a few loops (pseudo-randomly chosen, so they are not tied to a
+   position in a sequence of loops; at most one in AMPS__PAR_EXPLORE, fewer the slower the other
+   mode is) run in the other mode, which keeps both averages current when the load changes. Serial and parallel runs give the same bits, so this trades
+   only time. */
+#ifndef AMPS__PAR_ADAPT
+#define AMPS__PAR_ADAPT 1 /* 0: every eligible loop runs in parallel (tests of the schedule) */
 #endif
-#ifndef AMPS__PAR_QUIET
-#define AMPS__PAR_QUIET 0.25
+#ifndef AMPS__PAR_EXPLORE
+#define AMPS__PAR_EXPLORE 16
 #endif
-#ifndef AMPS__PAR_QUIET_MAX
-#define AMPS__PAR_QUIET_MAX 4.0
-#endif
+#define AMPS__PAR_KERNELS 61 /* timing slots per owner (a prime: fn addresses hash into it) */
 
 #if defined(__GNUC__) || defined(__clang__)
 #define AMPS__HAVE_ATOMICS 1
@@ -1589,16 +1731,22 @@ static double amps__dload(const double *p) {
     return v;
 }
 static void amps__dstore(double *p, double v) { __atomic_store(p, &v, __ATOMIC_RELAXED); }
+#define AMPS__ZLOAD(p) __atomic_load_n((p), __ATOMIC_RELAXED)
+#define AMPS__ZSTORE(p, v) __atomic_store_n((p), (v), __ATOMIC_RELAXED)
 #elif defined(_MSC_VER)
 #include <intrin.h>
 #define AMPS__HAVE_ATOMICS 1
 #define AMPS__FETCH_ADD(p, v) _InterlockedExchangeAdd((volatile long *)(p), (v))
 static double amps__dload(const double *p) { return *(const volatile double *)p; }
 static void amps__dstore(double *p, double v) { *(volatile double *)p = v; }
+#define AMPS__ZLOAD(p) (*(volatile size_t *)(p))
+#define AMPS__ZSTORE(p, v) (*(volatile size_t *)(p) = (v))
 #else
 #define AMPS__HAVE_ATOMICS 0 /* no atomic counter: every loop runs serially */
 static double amps__dload(const double *p) { return *p; }
 static void amps__dstore(double *p, double v) { *p = v; }
+#define AMPS__ZLOAD(p) (*(p))
+#define AMPS__ZSTORE(p, v) (*(p) = (v))
 #endif
 
 #ifdef _OPENMP
@@ -1609,14 +1757,16 @@ static void amps__dstore(double *p, double v) { *p = v; }
 
 typedef void amps__chunk_fn(amps_int begin, amps_int end, int slot, void *arg);
 
-/* Back-off state of an object's loops (relaxed atomics: solves of one factor may run
-   concurrently). */
+/* Loop timing of one owner (relaxed atomics: the solves of one factor may run concurrently,
+   and a background job shares its engine's state). slot[k] holds kernel key[k] (the hashed fn
+   address; 0 = free) with avg[k][mode] seconds per item (0 = no sample yet). */
 typedef struct amps__parbo {
-    double until; /* loops before this time (amps_now) run serially */
-    double len;   /* the current back-off, seconds (0: none) */
+    size_t key[AMPS__PAR_KERNELS];
+    double avg[AMPS__PAR_KERNELS][2];
+    long tick; /* loops timed so far: the exploration's pseudo-random sequence */
 } amps__parbo;
 
-/* A back end captured from a context; bo points at the owner's back-off state (or NULL). */
+/* A back end captured from a context; bo points at the owner's loop timing (or NULL). */
 typedef struct amps__par {
     amps_enqueue_task_fn *enqueue;
     amps_finish_task_fn *finish;
@@ -1675,23 +1825,51 @@ static void amps__par_task(amps_int begin, amps_int end, int worker, void *task_
     amps__par_claim(AMPS__CAST(amps__job *, task_ctx), (int)begin);
 }
 
-/* The back-off rule of the layer's comment, after a parallel loop (t0 start, tm the caller's
-   chunks done, t1 end). */
-static void amps__par_note(amps__parbo *bo, double t0, double tm, double t1) {
-    double len;
-    if (!bo || !AMPS__PAR_BACKOFF) return;
-    len = amps__dload(&bo->len);
-    if (t1 - tm > 0.5 * (tm - t0) + 30e-6) {
-        len = len > 0 ? 2 * len : AMPS__PAR_QUIET;
-        if (len > AMPS__PAR_QUIET_MAX) len = AMPS__PAR_QUIET_MAX;
-        amps__dstore(&bo->until, t1 + len);
-        amps__dstore(&bo->len, len);
-    } else if (len > 0) amps__dstore(&bo->len, len > AMPS__PAR_QUIET ? len / 2 : 0);
+/* The timing slot of kernel fn in bo (an existing one, else a free one, else the home slot,
+   whose averages it then takes over). */
+static amps_int amps__par_slot(amps__parbo *bo, amps__chunk_fn *fn) {
+    size_t key = (size_t)fn | 1, home = ((size_t)fn >> 3) % AMPS__PAR_KERNELS, k, q;
+    for (q = 0; q < 4; q++) {
+        size_t have = AMPS__ZLOAD(&bo->key[(home + q) % AMPS__PAR_KERNELS]);
+        if (have == key) return (amps_int)((home + q) % AMPS__PAR_KERNELS);
+        if (have == 0) break;
+    }
+    k = (home + (q < 4 ? q : 0)) % AMPS__PAR_KERNELS;
+    AMPS__ZSTORE(&bo->key[k], key);
+    amps__dstore(&bo->avg[k][0], 0.0);
+    amps__dstore(&bo->avg[k][1], 0.0);
+    return (amps_int)k;
+}
+
+/* The mode of the next loop of slot k (1 parallel, 0 serial): the faster average, or a mode
+   without a sample yet; the other mode with probability p = 0.05 t_fast / (t_slow - t_fast)
+   within [1/1024, 1/16], so exploring costs about 5% of the loops' time however slow the other
+   mode is. */
+static int amps__par_pick(amps__parbo *bo, amps_int k) {
+    double ts = amps__dload(&bo->avg[k][0]), tp = amps__dload(&bo->avg[k][1]), p, u;
+    unsigned long h = (unsigned long)AMPS__FETCH_ADD(&bo->tick, 1L) * 2654435761UL;
+    int best = tp <= ts;
+    if (tp == 0.0) return 1;
+    if (ts == 0.0) return 0;
+    p = best ? (ts > tp ? 0.05 * tp / (ts - tp) : 1.0) : 0.05 * ts / (tp - ts);
+    p = p < 1.0 / 1024 ? 1.0 / 1024 : p > 1.0 / AMPS__PAR_EXPLORE ? 1.0 / AMPS__PAR_EXPLORE : p;
+    u = (double)((h >> 8) & 0xfffffUL) / 1048576.0;
+    return u < p ? !best : best;
+}
+
+/* avg <- avg + (sample - avg) / 8, sample = seconds per item of a loop in that mode. */
+static void amps__par_note(amps__parbo *bo, amps_int k, int mode, double t0, double t1, amps_int n) {
+    double e = (t1 - t0) / (double)n, a = amps__dload(&bo->avg[k][mode]);
+    if (e <= 0.0) e = 1e-12;
+    amps__dstore(&bo->avg[k][mode], a == 0.0 ? e : a + (e - a) / 8);
 }
 
 static void amps__par_for(const amps__par *par, int nt, amps_int n, amps_int chunk, amps__chunk_fn *fn, void *arg) {
     amps__job j;
-    double t0, tm = 0;
+    amps__parbo *bo = AMPS__PAR_ADAPT ? par->bo : NULL;
+    amps_int k = 0;
+    double t0 = 0;
+    int mode = 1;
     if (n <= 0) return;
     if (chunk < 1) chunk = 1;
     j.fn = fn;
@@ -1705,28 +1883,24 @@ static void amps__par_for(const amps__par *par, int nt, amps_int n, amps_int chu
         fn(0, n, 0, arg);
         return;
     }
-    t0 = amps_now();
-    if (par->bo && AMPS__PAR_BACKOFF && t0 < amps__dload(&par->bo->until)) {
-        fn(0, n, 0, arg);
-        return;
+    if (bo) {
+        k = amps__par_slot(bo, fn);
+        mode = amps__par_pick(bo, k);
+        t0 = amps_now();
     }
-    if (par->enqueue) {
+    if (!mode) fn(0, n, 0, arg);
+    else if (par->enqueue) {
         void *h = par->enqueue(amps__par_task, (amps_int)(nt - 1), 1, &j, par->user);
         amps__par_claim(&j, nt - 1);
-        tm = amps_now();
         if (h) par->finish(h, par->user); /* not queued (NULL): the caller claimed every chunk */
     }
 #ifdef _OPENMP
     else {
 #pragma omp parallel num_threads(nt)
-        {
-            int tid = omp_get_thread_num();
-            amps__par_claim(&j, tid);
-            if (tid == 0) tm = amps_now();
-        }
+        amps__par_claim(&j, omp_get_thread_num());
     }
 #endif
-    amps__par_note(par->bo, t0, tm, amps_now());
+    if (bo) amps__par_note(bo, k, mode, t0, amps_now(), n);
 }
 
 /* ==== [amps:sparse impl] sparse matrices ====================================================== */
@@ -3898,7 +4072,7 @@ typedef struct amps__fpriv {
     double parmin;                /* factorizations with less work run on one thread */
     double pargroup;              /* top groups with (entries of their columns) x (width) >= this run on all threads */
     double touch;                 /* AMPS_COUNT_TOUCH: L entries read by sparse/partial solves */
-    amps__parbo bo;               /* back-off of the factorization's and the solves' parallel loops */
+    amps__parbo bo;               /* loop timing of the factorization's and the solves' parallel loops */
 } amps__fpriv;
 
 /* Relative pivot threshold: pivot d of column c is accepted iff d > AMPS_PIVOT_TOL * A(c,c) (original
@@ -4432,6 +4606,72 @@ AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype 
     if (st == AMPS_OK) return F;
     amps_factor_free(ctx, F);
     return NULL;
+}
+
+/* 1 if A (stype part) has the pattern F was analyzed with (the test of amps_factorize). */
+static int amps__factor_same_pattern(const amps_factor *F, const amps_csc *A, amps_stype stype) {
+    const amps__fpriv *P = F ? AMPS__CAST(const amps__fpriv *, F->priv) : NULL;
+    return P && A && A->ncol == F->n && P->stype == stype && A->p[F->n] == P->nnzA && amps__pattern_hash(A) == P->hash;
+}
+
+/* Copies n entries of src into a new array (NULL on failure; n = 0 gives a 1-entry array). */
+static void *amps__dup(amps_ctx *ctx, const void *src, size_t n, size_t size) {
+    void *d = amps__malloc(ctx, n ? n : 1, size);
+    if (d && n) memcpy(d, src, n * size);
+    return d;
+}
+
+/* A factor with F's analysis (order, pattern of L, groups, subtrees, the scatter map of A) and
+   its own values and workspace for ctx's back end, for amps_factorize of a matrix with the
+   pattern F was analyzed with. Reads only the parts of F no factorization or solve writes. */
+static amps_factor *amps__factor_clone_symbolic(amps_ctx *ctx, const amps_factor *F) {
+    const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
+    amps_factor *G = AMPS__CAST(amps_factor *, amps__calloc(ctx, 1, sizeof(amps_factor)));
+    amps__fpriv *Q = AMPS__CAST(amps__fpriv *, amps__calloc(ctx, 1, sizeof(amps__fpriv)));
+    size_t n = (size_t)F->n, nl = (size_t)F->Lp[F->n], ng = (size_t)P->ng, ns = (size_t)P->nsub;
+    int nthr = amps__nthreads(ctx, 1024);
+    if (!G || !Q) {
+        amps__free(ctx, G);
+        amps__free(ctx, Q);
+        amps__err(ctx, AMPS_ERR_OOM, "amps_analyze: out of memory (a copy of the analysis)");
+        return NULL;
+    }
+    G->n = F->n;
+    G->height = F->height;
+    G->priv = Q;
+    G->perm = AMPS__CAST(amps_int *, amps__dup(ctx, F->perm, n, sizeof(amps_int)));
+    G->iperm = AMPS__CAST(amps_int *, amps__dup(ctx, F->iperm, n, sizeof(amps_int)));
+    G->parent = AMPS__CAST(amps_int *, amps__dup(ctx, F->parent, n, sizeof(amps_int)));
+    G->Lp = AMPS__CAST(amps_int *, amps__dup(ctx, F->Lp, n + 1, sizeof(amps_int)));
+    G->Li = AMPS__CAST(amps_int *, amps__dup(ctx, F->Li, nl, sizeof(amps_int)));
+    G->Lx = AMPS__CAST(double *, amps__malloc(ctx, nl ? nl : 1, sizeof(double)));
+    G->D = AMPS__CAST(double *, amps__malloc(ctx, n ? n : 1, sizeof(double)));
+    /* the sizes and parameters (the fields before touch; touch and bo are the solves') */
+    memcpy(Q, P, (size_t)((const char *)&P->touch - (const char *)P));
+    Q->nthr = nthr;
+    Q->gs = AMPS__CAST(amps_int *, amps__dup(ctx, P->gs, ng + 1, sizeof(amps_int)));
+    Q->cgrp = AMPS__CAST(amps_int *, amps__dup(ctx, P->cgrp, n, sizeof(amps_int)));
+    Q->Sp = AMPS__CAST(amps_int *, amps__dup(ctx, P->Sp, n + 1, sizeof(amps_int)));
+    Q->Ssrc = AMPS__CAST(amps_int *, amps__dup(ctx, P->Ssrc, (size_t)P->Sp[n], sizeof(amps_int)));
+    Q->Sdst = AMPS__CAST(amps_int *, amps__dup(ctx, P->Sdst, (size_t)P->Sp[n], sizeof(amps_int)));
+    Q->dsrc = AMPS__CAST(amps_int *, amps__dup(ctx, P->dsrc, n, sizeof(amps_int)));
+    Q->head = AMPS__CAST(amps_int *, amps__malloc(ctx, ng ? ng : 1, sizeof(amps_int)));
+    Q->next = AMPS__CAST(amps_int *, amps__malloc(ctx, ng ? ng : 1, sizeof(amps_int)));
+    Q->gpos = AMPS__CAST(amps_int *, amps__malloc(ctx, ng ? ng : 1, sizeof(amps_int)));
+    Q->gsub = AMPS__CAST(amps_int *, amps__dup(ctx, P->gsub, ng, sizeof(amps_int)));
+    Q->subp = AMPS__CAST(amps_int *, amps__dup(ctx, P->subp, ns + 1, sizeof(amps_int)));
+    Q->subg = AMPS__CAST(amps_int *, amps__dup(ctx, P->subg, ng - (size_t)P->ntop, sizeof(amps_int)));
+    Q->topg = AMPS__CAST(amps_int *, amps__dup(ctx, P->topg, (size_t)P->ntop, sizeof(amps_int)));
+    Q->fail = AMPS__CAST(amps_int *, amps__malloc(ctx, ns + 1, sizeof(amps_int)));
+    Q->iwork = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nthr * 2, (n ? n : 1) * sizeof(amps_int)));
+    if (!G->perm || !G->iperm || !G->parent || !G->Lp || !G->Li || !G->Lx || !G->D || !Q->gs || !Q->cgrp || !Q->Sp ||
+        !Q->Ssrc || !Q->Sdst || !Q->dsrc || !Q->head || !Q->next || !Q->gpos || !Q->gsub || !Q->subp || !Q->subg ||
+        !Q->topg || !Q->fail || !Q->iwork) {
+        amps_factor_free(ctx, G);
+        amps__err(ctx, AMPS_ERR_OOM, "amps_analyze: out of memory (a copy of the analysis)");
+        return NULL;
+    }
+    return G;
 }
 
 /* Queues finished group K for its next target group (the group of row S_K[gpos[K]]). In a subtree
@@ -5464,6 +5704,7 @@ struct amps_update {
         amps_int *Kp, *Ki;
         double *Kx;         /* K, both triangles, original numbering */
         double *inv_sqrt_d; /* n: D^{-1/2} */
+        int blk3;           /* K's pattern is made of 3x3 blocks (node blocks): amps__resid_blk */
     } base;
     struct {                          /* forces and ct = D^{-1/2} L^{-1} P^T f_ct */
         double *f;                    /* cap_N: f^ */
@@ -5548,6 +5789,8 @@ struct amps_update {
         double *ct;      /* n: forward solve of the residual */
         double *scratch; /* 2 * cap_N */
         double knorm;    /* ||K-bar||_inf (the base rows and sigma), the scale of the backward error */
+        double omega_d;  /* the mixed backward error of a direct solve with the base factor (amps__direct_omega) */
+        double cond;     /* kappa_1(K-bar) estimated at the creation of the base (amps_condest; 0: unknown) */
     } guard;
     struct {                   /* re-factorization */
         amps_update_opts opts; /* as created (for the engine of a new base) */
@@ -5558,6 +5801,12 @@ struct amps_update {
         double t_step_base, t_extra; /* step time after the last swap, extra time since */
         amps_int size_base;          /* |U| after the last swap */
         amps_int n_struct;           /* structural commits since the last swap (COUNT) */
+        amps_int *origin;            /* origin[j] of appended DOF j (-1: unknown), j < cap_origin */
+        amps_int cap_origin;
+        double fill_ref; /* nnz(L) / nnz(B) of the last fresh ordering (0: not known) */
+        double fold_flops; /* sum_j c_j^2 of the base factor (amps__commit_wants_fold; 0: not known) */
+        amps_int n_kept; /* re-factorizations since the last fresh ordering */
+        int fresh;       /* 1: the next start orders afresh (amps_update_refactor) */
     } refac;
     struct {                        /* watch set */
         amps_int n, n_closure, cap; /* size, |closure_L of its base indices|, capacity */
@@ -5605,6 +5854,7 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
     o->refine_tol = 2.220446049250313e-16;
     o->refactor_size = 384;
     o->refactor_every = 32;
+    o->refactor_reuse = 1;
 }
 
 /* ---- allocation of the capacity-dependent arrays ---- */
@@ -5748,6 +5998,8 @@ static void amps__bg_poll(amps_ctx *ctx, amps_update *U);
 static void amps__bg_log(amps_update *U, amps_int kpend, const amps__pdelta *pd, amps_int npd);
 static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t);
 static void amps__bg_after_commit(amps_ctx *ctx, amps_update *U, int structural, int may_swap);
+static int amps__commit_wants_fold(amps_update *U);
+static amps_status amps__commit_fold(amps_ctx *ctx, amps_update *U);
 
 AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     if (!U) return;
@@ -5761,6 +6013,7 @@ AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     amps__free(ctx, U->cjob.closure);
     amps_factor_free(ctx, U->refac.F_own);
     amps_csc_free(ctx, U->refac.K_own);
+    amps__free(ctx, U->refac.origin);
     amps__free(ctx, U->base.Kp);
     amps__free(ctx, U->base.Ki);
     amps__free(ctx, U->base.Kx);
@@ -5871,6 +6124,26 @@ oom:
     return AMPS_ERR_OOM;
 }
 
+/* 1 when the full symmetric pattern (Kp, Ki; rows ascending) is made of aligned 3x3 blocks:
+   columns 3B, 3B+1, 3B+2 list the same rows, in triples 3C, 3C+1, 3C+2 (n a multiple of 3). */
+static int amps__blk3(amps_int n, const amps_int *Kp, const amps_int *Ki) {
+    amps_int B, k, r, len;
+    if (n % 3 != 0) return 0;
+    for (B = 0; B < n / 3; B++) {
+        const amps_int *c0 = Ki + Kp[3 * B];
+        len = Kp[3 * B + 1] - Kp[3 * B];
+        if (len % 3 != 0) return 0;
+        for (r = 1; r < 3; r++)
+            if (Kp[3 * B + r + 1] - Kp[3 * B + r] != len) return 0;
+        for (k = 0; k < len; k += 3)
+            if (c0[k] % 3 != 0 || c0[k + 1] != c0[k] + 1 || c0[k + 2] != c0[k] + 2) return 0;
+        for (r = 1; r < 3; r++)
+            for (k = 0; k < len; k++)
+                if (Ki[Kp[3 * B + r] + k] != c0[k]) return 0;
+    }
+    return 1;
+}
+
 /* Options of a new engine: opts (NULL: the defaults) with the sizes and rates that are 0 or
    negative replaced by the defaults of amps_update_opts_default. */
 static amps_status amps__create_opts(amps_ctx *ctx, const amps_update_opts *opts, amps_update_opts *o) {
@@ -5939,6 +6212,42 @@ static amps_status amps__create_alloc(amps_ctx *ctx, amps_update *U, amps_int ca
     return AMPS_OK;
 }
 
+/* The mixed backward error omega_d = ||b - K-bar x||_2 / || |K-bar| |x| + |b| ||_2 that a direct
+   solve x = K-bar^{-1} b with the base factor (L, D, L^T, double residual) reaches on this matrix,
+   for b = K-bar x_p with x_p pseudo-random in [-1, 1): the accuracy a fresh factorization of the
+   base gives, the yardstick of amps__accuracy. One solve and two products (work.resid,
+   guard.scratch, guard.ct as workspace). */
+static double amps__direct_omega(amps_update *U) {
+    const amps_factor *F = U->F;
+    amps_int n = U->n, j, p, k;
+    double *xp = U->guard.scratch, *b = U->guard.scratch + U->cap_N, *x = U->work.resid, *ax = U->work.resid + U->cap_N;
+    double *ct = U->guard.ct, num = 0, den = 0;
+    for (j = 0; j < n; j++) {
+        unsigned long h = ((unsigned long)j * 2654435761UL + 12345UL) & 0xffffUL;
+        xp[j] = (double)h / 32768.0 - 1.0;
+        b[j] = 0.0;
+    }
+    for (j = 0; j < n; j++)
+        for (p = U->base.Kp[j]; p < U->base.Kp[j + 1]; p++) b[U->base.Ki[p]] += U->base.Kx[p] * xp[j];
+    for (k = 0; k < n; k++) ct[k] = b[F->perm[k]];
+    amps_lsolve(F, ct);
+    amps_dsolve(F, ct);
+    amps_ltsolve(F, ct);
+    for (k = 0; k < n; k++) x[F->perm[k]] = ct[k];
+    for (j = 0; j < n; j++) xp[j] = ax[j] = 0.0;
+    for (j = 0; j < n; j++)
+        for (p = U->base.Kp[j]; p < U->base.Kp[j + 1]; p++) {
+            double q = U->base.Kx[p] * x[j];
+            xp[U->base.Ki[p]] += q;
+            ax[U->base.Ki[p]] += fabs(q);
+        }
+    for (j = 0; j < n; j++) {
+        num += (b[j] - xp[j]) * (b[j] - xp[j]);
+        den += (ax[j] + fabs(b[j])) * (ax[j] + fabs(b[j]));
+    }
+    return num > 0 && den > 0 ? sqrt(num / den) : 0.0;
+}
+
 AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_stype stype, const amps_factor *F,
                                          const amps_update_opts *opts) {
     amps_update_opts o;
@@ -5990,12 +6299,29 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
         for (p = U->base.Kp[j]; p < U->base.Kp[j + 1]; p++)
             if (U->base.Ki[p] == j) s += U->base.Kx[p];
     U->sigma = n > 0 && s > 0 ? s / (double)n : 1.0;
+    U->base.blk3 = amps__blk3(n, U->base.Kp, U->base.Ki);
     U->guard.knorm = U->sigma;
     for (j = 0; j < n; j++) {
         double sa = 0;
         for (p = U->base.Kp[j]; p < U->base.Kp[j + 1]; p++) sa += fabs(U->base.Kx[p]);
         if (sa > U->guard.knorm) U->guard.knorm = sa;
     }
+    U->guard.omega_d = amps__direct_omega(U);
+    if (o.refine_tol > 0 && n > 0) { /* the forward refinement's yardstick: about 11 solves */
+        amps_csc Kb;
+        amps_ctx c1; /* serial, silent: this may run on the re-factorization's worker */
+        double *cw = AMPS__CAST(double *, amps__malloc(ctx, 3 * (size_t)n, sizeof(double)));
+        if (!cw) goto fail;
+        amps_ctx_init(&c1);
+        c1.nthreads = 1;
+        Kb.nrow = Kb.ncol = n;
+        Kb.p = U->base.Kp;
+        Kb.i = U->base.Ki;
+        Kb.x = U->base.Kx;
+        if (amps_condest(&c1, &Kb, AMPS_FULL, F, cw, &U->guard.cond) != AMPS_OK) U->guard.cond = 0;
+        amps__free(ctx, cw);
+    }
+    U->stats.base_cond = U->guard.cond;
     U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
     U->stats.dim = n;
     return U;
@@ -7504,6 +7830,7 @@ static amps_status amps__commit(amps_ctx *ctx, amps_update *U, int may_swap) {
        then committed on the new base, against its small augmentation */
     if (U->refac.job && may_swap && !U->cjob.state) amps__bg_poll(ctx, U);
     if (!U->pending.n_delta && !U->pending.n_con && !U->pending.n_dofs) return AMPS_OK;
+    if (may_swap && amps__commit_wants_fold(U) && amps__commit_fold(ctx, U) == AMPS_OK) return AMPS_OK;
     structural = U->pending.n_delta > 0 || U->pending.n_dofs > 0;
     t0 = amps_now();
     u_old = U->aug.size;
@@ -7721,22 +8048,22 @@ static void amps__update_ct(amps_update *U) {
 }
 
 /* Step 5: the forces w of the augmentation (and y = x_U, primal form) for right-hand side
-   r = H^T K-bar^{-1} f and prescribed values g on C (hom: g = 0). */
-static void amps__dense_step(amps_update *U, const double *r, int hom, double *yv, double *wv) {
+   r = H^T K-bar^{-1} f and prescribed values gv on C (U positions; NULL: g = 0). */
+static void amps__dense_step_g(amps_update *U, const double *r, const double *gv, double *yv, double *wv) {
     amps_int u = U->aug.size, a, k;
     size_t ld = (size_t)U->aug.cap;
     double *z = U->dense.z, *b = U->dense.b, *d = U->dense.tmp;
-#define AMPS__G(a) (hom ? 0.0 : U->aug.g[a])
+#define AMPS__G(a) (gv ? gv[a] : 0.0)
     if (U->form == AMPS_FORM_PRIMAL) {
         /* b = r - G d - g^, d = Delta[F', C] g; z = A^{-1} b; y = (z_F', g); w = (Delta_F' y, z_C) */
         for (a = 0; a < u; a++) b[a] = r[a] - ((U->aug.kind[a] & AMPS__UCON) ? AMPS__G(a) : 0.0);
-        if (!hom) {
+        if (gv) {
             for (a = 0; a < u; a++) {
                 double sum = 0;
                 if (!(U->aug.kind[a] & AMPS__UCON))
                     for (k = 0; k < U->delta.row_len[a]; k++) {
                         amps_int bb = U->delta.col[U->delta.row_start[a] + k];
-                        if (U->aug.kind[bb] & AMPS__UCON) sum += U->delta.val[U->delta.row_start[a] + k] * U->aug.g[bb];
+                        if (U->aug.kind[bb] & AMPS__UCON) sum += U->delta.val[U->delta.row_start[a] + k] * gv[bb];
                     }
                 d[a] = sum;
             }
@@ -7776,6 +8103,11 @@ static void amps__dense_step(amps_update *U, const double *r, int hom, double *y
         for (a = 0; a < u; a++) yv[a] = (U->aug.kind[a] & AMPS__UCON) ? AMPS__G(a) : 0.0;
     }
 #undef AMPS__G
+}
+
+/* amps__dense_step_g with the engine's prescribed values (hom: zero). */
+static void amps__dense_step(amps_update *U, const double *r, int hom, double *yv, double *wv) {
+    amps__dense_step_g(U, r, hom ? NULL : U->aug.g, yv, wv);
 }
 
 /* sv -= D^{-1/2} sum_a c_a W_a (permuted n-vector; appended DOFs have no W). */
@@ -7977,26 +8309,135 @@ static void amps__solve_core(amps_update *U, const double *ct, const double *fv,
 
 static void amps__kmul(const amps_update *U, const double *v, double *y);
 
-/* rho = f^ - K^ x on the free rows F (0 on the constrained rows C) and the normwise backward error
-   of x on the reduced system, eta = ||rho_F||_2 / (||K-bar||_inf ||x_F||_2 + ||f^_F||_2), in one
-   product with K^ (nnz(K^)). ||K-bar||_inf stands for ||K^||_inf: the changes (cuts, constraints)
-   remove couplings, and the unmodified rows dominate the norm. *rnorm receives ||rho_F||_2. */
-static double amps__backward_error(const amps_update *U, const double *x, double *rho, double *rnorm) {
-    amps_int N = U->N, j, a;
-    double num = 0, xn = 0, fn = 0;
-    amps__kmul(U, x, rho);
+/* Error-free transformations: a b = *p + *e and a + b = *s + *e exactly (TwoProduct by fma where
+   it is a hardware instruction, else by Dekker's split; TwoSum by Knuth). */
+static void amps__two_prod(double a, double b, double *p, double *e) {
+#ifdef FP_FAST_FMA
+    *p = a * b;
+    *e = fma(a, b, -*p);
+#else
+    static const double split = 134217729.0; /* 2^27 + 1 */
+    double t = split * a, ah = t - (t - a), al = a - ah, bh, bl;
+    t = split * b;
+    bh = t - (t - b);
+    bl = b - bh;
+    *p = a * b;
+    *e = ((ah * bh - *p) + ah * bl + al * bh) + al * bl;
+#endif
+}
+static void amps__two_sum(double a, double b, double *s, double *e) {
+    double z, t;
+    *s = a + b;
+    z = *s - a;
+    t = *s - z;
+    *e = (a - t) + (b - z);
+}
+
+/* hi + lo -= a v in double-double; *t += |a v|. */
+static void amps__dd_sub_prod(double a, double v, double *hi, double *lo, double *t) {
+    double p, e, s, e2;
+    amps__two_prod(-a, v, &p, &e);
+    amps__two_sum(*hi, p, &s, &e2);
+    *hi = s;
+    *lo += e + e2;
+    *t += fabs(p);
+}
+
+/* (f^ - K^ x)_j, row j of the residual, in double, and *ax = (|K^| |x|)_j; or (dd) accumulated in
+   double-double and rounded once: its rounding error is then eps |rho_j| + O(eps^2) (|K^| |x|)_j,
+   where a double sum leaves ~eps (|K^| |x|)_j, the size of the residual being corrected. */
+static double amps__resid_row(const amps_update *U, amps_int j, const double *x, int dd, double *ax) {
+    amps_int a = U->aug.pos[j], p, k, p0 = j < U->n ? U->base.Kp[j] : 0, p1 = j < U->n ? U->base.Kp[j + 1] : 0;
+    const amps_int *dc = a >= 0 ? U->delta.col + U->delta.row_start[a] : NULL;
+    const double *dv = a >= 0 ? U->delta.val + U->delta.row_start[a] : NULL;
+    amps_int nd = a >= 0 ? U->delta.row_len[a] : 0;
+    double hi = U->force.f[j], lo = 0, s = 0, t = 0;
+    if (!dd) {
+        if (j < U->n)
+            for (p = p0; p < p1; p++) {
+                double q = U->base.Kx[p] * x[U->base.Ki[p]];
+                s += q;
+                t += fabs(q);
+            }
+        else t = fabs(s = U->sigma * x[j]);
+        for (k = 0; k < nd; k++) {
+            double q = dv[k] * x[U->aug.idx[dc[k]]];
+            s += q;
+            t += fabs(q);
+        }
+        *ax = t;
+        return hi - s;
+    }
+    if (j < U->n)
+        for (p = p0; p < p1; p++) amps__dd_sub_prod(U->base.Kx[p], x[U->base.Ki[p]], &hi, &lo, &t);
+    else amps__dd_sub_prod(U->sigma, x[j], &hi, &lo, &t);
+    for (k = 0; k < nd; k++) amps__dd_sub_prod(dv[k], x[U->aug.idx[dc[k]]], &hi, &lo, &t);
+    *ax = t;
+    return hi + lo;
+}
+
+/* Rows 3B..3B+2 of the base part of K^ x (base.blk3): s[r] = (K x)_{3B+r}, t[r] = (|K| |x|)_{3B+r},
+   summed in the order of amps__resid_row's (bitwise the same s); one index per 3x3 block. */
+static void amps__resid_blk(const amps_update *U, amps_int B, const double *x, double s[3], double t[3]) {
+    const amps_int *ki = U->base.Ki + U->base.Kp[3 * B];
+    const double *a0 = U->base.Kx + U->base.Kp[3 * B], *a1 = U->base.Kx + U->base.Kp[3 * B + 1],
+                 *a2 = U->base.Kx + U->base.Kp[3 * B + 2];
+    amps_int k, len = U->base.Kp[3 * B + 1] - U->base.Kp[3 * B];
+    double s0 = 0, s1 = 0, s2 = 0, t0 = 0, t1 = 0, t2 = 0;
+    for (k = 0; k < len; k += 3) {
+        const double *xc = x + ki[k];
+        double x0 = xc[0], x1 = xc[1], x2 = xc[2], q;
+        q = a0[k] * x0, s0 += q, t0 += fabs(q);
+        q = a1[k] * x0, s1 += q, t1 += fabs(q);
+        q = a2[k] * x0, s2 += q, t2 += fabs(q);
+        q = a0[k + 1] * x1, s0 += q, t0 += fabs(q);
+        q = a1[k + 1] * x1, s1 += q, t1 += fabs(q);
+        q = a2[k + 1] * x1, s2 += q, t2 += fabs(q);
+        q = a0[k + 2] * x2, s0 += q, t0 += fabs(q);
+        q = a1[k + 2] * x2, s1 += q, t1 += fabs(q);
+        q = a2[k + 2] * x2, s2 += q, t2 += fabs(q);
+    }
+    s[0] = s0, s[1] = s1, s[2] = s2;
+    t[0] = t0, t[1] = t1, t[2] = t2;
+}
+
+/* rho = f^ - K^ x on the free rows F (0 on the constrained rows C) in one pass over K^ (nnz(K^);
+   in double-double when dd; by 3x3 blocks when base.blk3 and !dd), and two backward errors of x
+   on the reduced system: the normwise eta = ||rho_F||_2 / (||K-bar||_inf ||x_F||_2 + ||f^_F||_2)
+   (returned) and the mixed *omega = ||rho_F||_2 / || |K^| |x| + |f^| ||_2 (F rows) >= eta, which
+   does not take the largest row's norm for every row's (slivers: omega 20x eta). ||K-bar||_inf
+   stands for ||K^||_inf: the changes (cuts, constraints) remove couplings, and the unmodified rows
+   dominate the norm. *rnorm receives ||rho_F||_2. */
+static double amps__backward_error(const amps_update *U, const double *x, double *rho, double *rnorm, int dd,
+                                   double *omega) {
+    amps_int N = U->N, j, a, k, nb = !dd && U->base.blk3 ? U->n : 0;
+    double num = 0, xn = 0, fn = 0, den = 0, ax, sb[3], tb[3];
     for (j = 0; j < N; j++) {
         a = U->aug.pos[j];
+        if (j < nb && j % 3 == 0) amps__resid_blk(U, j / 3, x, sb, tb);
         if (a >= 0 && (U->aug.kind[a] & AMPS__UCON)) {
             rho[j] = 0.0;
             continue;
         }
-        rho[j] = U->force.f[j] - rho[j];
+        if (j < nb) {
+            double sj = sb[j % 3];
+            ax = tb[j % 3];
+            for (k = 0; a >= 0 && k < U->delta.row_len[a]; k++) {
+                double q = U->delta.val[U->delta.row_start[a] + k] *
+                           x[U->aug.idx[U->delta.col[U->delta.row_start[a] + k]]];
+                sj += q;
+                ax += fabs(q);
+            }
+            rho[j] = U->force.f[j] - sj;
+        } else rho[j] = amps__resid_row(U, j, x, dd, &ax);
+        ax += fabs(U->force.f[j]);
         num += rho[j] * rho[j];
         xn += x[j] * x[j];
         fn += U->force.f[j] * U->force.f[j];
+        den += ax * ax;
     }
     *rnorm = sqrt(num);
+    if (omega) *omega = num > 0 ? sqrt(num / den) : 0.0;
     return num > 0 ? sqrt(num) / (U->guard.knorm * sqrt(xn) + sqrt(fn)) : 0.0;
 }
 
@@ -8062,30 +8503,78 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    and their neighbours only; a second step changes nothing (3.1 eps), and with random pins and
    forces the rest reaches 370 eps (beam 5x5x256, stress suite).
    The fix: the residual of the explicit current system, one product with K^ (nnz(K^); measured
-   +5.7% instructions on a brick:14 cut step), its normwise backward error eta, and while
-   eta > refine_tol (default 1 eps) refinement steps through the augmented solve with the same
+   +5.7% instructions on a brick:14 cut step), its backward errors, and while the mixed one
+   omega > refine_tol (default 1 eps) refinement steps through the augmented solve with the same
    factors (the correction is driven by a residual of size eps ||H w||, so its own w is small):
    on 5x5x1024, 17 steps over the 25 cut solves bring eta from 3.1 to 0.1 eps; bricks and bunnies
-   meet 1 eps without a step. At most 3 steps; they stop when eta no longer halves. If eta is still
+   meet 1 eps without a step on free cuts (bunny20k: omega 0.44-0.53 eps over 200 solves), but not
+   always under opposing forces (brick:14, bench/refine_cost: 19 of 20 solves refined under the
+   1 eps trigger alone, 2.4x the instructions of the cut steps). The trigger is omega,
+   not the normwise eta: on a TetGen sliver mesh (stress suite) eta is 0.03-0.2 eps at every step
+   while omega is 0.5-3.8 eps and the residual up to 12x CHOLMOD's; ||K^||_inf ||x|| is the norm of
+   the stiffest row, 20x the typical row's. Refined on omega the residual stays within 3.2x. The
+   refinement residual is summed in double-double: a double sum of row j errs by ~eps (|K^||x|)_j,
+   the size of the residual it corrects, which caps a double-residual refinement at about omega ~ 1.
+   At most 3 steps; they stop when omega no longer halves. The trigger is relative to omega_d, the
+   mixed backward error of a direct solve with the base factor on K-bar (amps__direct_omega, at
+   the creation of each base): the target is a residual within 10x of a fresh direct solve's
+   (issue 18), and a solve within 4x of omega_d (a margin for the probe right-hand side) meets it
+   unrefined. Measured on the TetGen fissure cube in dynamics (bench/dynamics, 231 pins, 25
+   steps): omega_d 0.72 eps, the unrefined omega 0.8-4.1 eps; one refinement step brings it to
+   0.07 eps but leaves the residual against CHOLMOD's from-scratch system where it was (3.8e-14
+   refined, 4.1e-14 unrefined, CHOLMOD 2.0e-15: that gap is the rounding of the two right-hand
+   sides b = M w + dt (f - K u), not of the solve), at twice the step's cost. If eta is still
    above 64 refine_tol, the augmentation itself has gone bad and the caller re-factors. With the
    guard on, the relative residual ||rho|| / ||f^_F - K^_FC g|| must also reach guard.tol. Sets
    stats.relres (guard on), backward_error, guard_steps, refine_solves and guard_result (pass 1:
-   after a re-factorization); returns 1 when a re-factorization is wanted. */
+   after a re-factorization); returns 1 when a re-factorization is wanted.
+   Forward error. A backward error at a direct solve's level does not give its forward error:
+   on beam 5x5x256 (kappa 8.7e9, tests/test_stress.c fwd_*) the augmented solve reaches omega
+   0.7-1.4 eps (omega_d 0.5 eps, no step taken) and a residual 1.4-2.2x CHOLMOD's, yet its error
+   against the quad-precision reference is 9.7-10.5x CHOLMOD's (2.2-2.4e-8 against 2.3e-9): the
+   rounding of K-bar^{-1} H w lies along K's small eigenvectors, where a direct solve's does not.
+   One step with the double-double residual contracts the error by about kappa eps (2e-6 here)
+   and brings it to 0.01-0.2x CHOLMOD's (0.03x on beam 5x5x128). Unrefined, beam 5x5x32 (kappa
+   2.3e6) is at 1.1x, 5x5x64 (3.5e7) at 1.8-3.0x, the TetGen slivers (1.2e7) at 0.8-0.9x, and the
+   brick at nu 0.4999 (1.1e7) at 4.3-8.1x over 16 runs (it depends on when the background
+   re-factorization lands): too close to 10x. The benchmark's bricks and bunnies lie below
+   (brick:14 1.4e5, bunny20k 6.6e6, bunny50k 7.7e6) and keep their cost: the augmented solves of
+   a base with kappa eps > AMPS__FWD_KAPPA_EPS (kappa > 9.0e6, estimated at its creation by
+   amps_condest, about 11 solves) take one step. */
+#define AMPS__DIRECT_RATIO 4.0
+#ifndef AMPS__FWD_KAPPA_EPS /* (overridable for bench/refine_cost only) */
+#define AMPS__FWD_KAPPA_EPS 2e-9
+#endif
 static int amps__accuracy(amps_update *U, int pass) {
-    double *rho = U->work.resid, *dx = U->work.resid + U->cap_N, tol = U->refac.opts.refine_tol;
+    double *rho = U->work.resid, *dx = U->work.resid + U->cap_N, tol = U->refac.opts.refine_tol, om;
     double gtol = U->guard.tol, rn, den = gtol > 0 ? amps__rhs_norm(U, U->guard.scratch) : 0;
-    double eta = amps__backward_error(U, U->sol.x, rho, &rn), rel = den > 0 ? rn / den : rn;
-    amps_int it;
+    double eta = amps__backward_error(U, U->sol.x, rho, &rn, 0, &om), rel = den > 0 ? rn / den : rn;
+    double eta0, rel0;
+    amps_int it, k;
+    /* the forward trigger: an augmented solve on an ill-conditioned base (kappa eps above
+       AMPS__FWD_KAPPA_EPS) takes one step */
+    int fwd = tol > 0 && U->aug.size > 0 && U->guard.cond * 2.220446049250313e-16 > AMPS__FWD_KAPPA_EPS;
     for (it = 0; it < 3; it++) {
-        int want_g = gtol > 0 && rel > gtol, want_e = tol > 0 && eta > tol;
-        double eta0 = eta;
-        if (!want_g && !want_e) break;
+        int want_g = gtol > 0 && rel > gtol, want_e = tol > 0 && om > tol && om > AMPS__DIRECT_RATIO * U->guard.omega_d;
+        int want_f = fwd && it == 0;
+        double om0 = om;
+        if (!want_g && !want_e && !want_f) break;
+        if (it == 0) amps__backward_error(U, U->sol.x, rho, &rn, 1, NULL);
         amps__refine_full(U, rho, dx);
-        eta = amps__backward_error(U, U->sol.x, rho, &rn);
+        eta0 = eta;
+        rel0 = rel;
+        eta = amps__backward_error(U, U->sol.x, rho, &rn, 1, &om);
         rel = den > 0 ? rn / den : rn;
         U->stats.guard_steps++;
         U->stats.refine_solves++;
-        if (!want_g && !(eta <= 0.5 * eta0)) break; /* stagnates: the factors are not the limit */
+        if (!want_g && !want_e && om > om0 && om > AMPS__DIRECT_RATIO * U->guard.omega_d) {
+            /* a forward step that left the backward error worse than a direct solve's: undone */
+            for (k = 0; k < U->N; k++) U->sol.x[k] -= dx[k];
+            eta = eta0;
+            rel = rel0;
+            break;
+        }
+        if (!want_g && !(om <= 0.5 * om0)) break; /* stagnates: the factors are not the limit */
     }
     U->stats.backward_error = eta;
     if (gtol > 0) {
@@ -8334,7 +8823,7 @@ AMPS_API amps_status amps_update_residual(amps_ctx *ctx, amps_update *U, double 
     if (!U || !relres) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_residual: NULL argument");
     if (!U->sol.has_x || U->sol.x_stale || U->pending.n_delta || U->pending.n_con || U->pending.n_dofs)
         return amps__err(ctx, AMPS_ERR_STATE, "amps_update_residual: no current solution (call amps_update_solve)");
-    amps__backward_error(U, U->sol.x, U->work.resid, &rn);
+    amps__backward_error(U, U->sol.x, U->work.resid, &rn, 0, NULL);
     den = amps__rhs_norm(U, U->guard.scratch);
     *relres = den > 0 ? rn / den : rn;
     return AMPS_OK;
@@ -8372,6 +8861,11 @@ enum { AMPS__BG_RUNNING = 1, AMPS__BG_READY = 2, AMPS__BG_FAILED = 3 };
 #ifndef AMPS_TEST_BG_FAULT
 #define AMPS_TEST_BG_FAULT(phase) 0
 #endif
+/* Tests may define AMPS_TEST_BG_PARALLEL nonzero to run every loop of the background factorization
+   in parallel (no minimum size), so that its helper thread runs on small matrices. */
+#ifndef AMPS_TEST_BG_PARALLEL
+#define AMPS_TEST_BG_PARALLEL 0
+#endif
 
 typedef struct amps__bg {
     struct {                 /* the snapshot at the start (owned) and the parent's base (immutable until the swap) */
@@ -8390,6 +8884,11 @@ typedef struct amps__bg {
         void *alloc_user;
         amps__par par; /* the parent's back end, and its slots (nbuf) */
         int nbuf;
+        const amps_factor *F; /* the parent's base factor: its order and analysis (reuse) */
+        amps_int *org;        /* N - n: origin of appended DOF n + k, -1 unknown */
+        double fill_ref;      /* the parent's refac.fill_ref */
+        int keep;             /* 1: keep the parent's order (opts.refactor_reuse, not the 16th time) */
+        int threaded;         /* 1: the worker runs on its own thread */
     } snap;
     struct { /* the m' log: appended by the engine's thread, read by the worker (under mu) */
         amps__lentry *entries;
@@ -8409,6 +8908,23 @@ typedef struct amps__bg {
     pthread_mutex_t mu;
     pthread_t th;
     int has_thread, has_mu;
+#endif
+    struct { /* phases of the worker (seconds) and what the ordering kept */
+        double order, symbolic, numeric, catchup, fill, fill_ref;
+        int kept;
+    } ph;
+    struct {          /* the foreground (under mu): the factorization's helper waits while it is busy */
+        int busy;     /* a commit or solve of the parent is running */
+        double since; /* when it began */
+        double len;   /* its expected length: 4x the last step time (busy expires after it) */
+    } fg;
+#ifndef AMPS_NO_THREADS
+    struct { /* the helper thread of one parallel loop of the factorization */
+        pthread_t th;
+        amps_task_fn *task;
+        void *task_ctx;
+        amps_int n;
+    } help;
 #endif
 } amps__bg;
 
@@ -8447,6 +8963,7 @@ static void amps__bg_free(amps_ctx *ctx, amps__bg *b) {
     amps__free(ctx, b->snap.ci);
     amps__free(ctx, b->snap.cg);
     amps__free(ctx, b->snap.f);
+    amps__free(ctx, b->snap.org);
     amps__free(ctx, b->log.entries);
 #ifndef AMPS_NO_THREADS
     if (b->has_mu) pthread_mutex_destroy(&b->mu);
@@ -8455,11 +8972,44 @@ static void amps__bg_free(amps_ctx *ctx, amps__bg *b) {
 }
 
 /* Snapshot of the committed K^, constraints and forces of U: O(|Delta| + N). */
-static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U) {
+/* The constraints of the snapshot into snap.ci/cg: the committed ones, then (fold) the recorded
+   constraint changes applied in their order (a release drops an index, a constraint sets or
+   adds it). pos (N' entries, -1) is scratch. */
+static void amps__bg_snap_cons(const amps_update *U, amps__bg *b, int fold, amps_int *pos) {
+    amps_int a, k;
+    for (a = 0; a < U->aug.size; a++)
+        if (U->aug.kind[a] & AMPS__UCON) {
+            b->snap.ci[b->snap.nc] = U->aug.idx[a];
+            b->snap.cg[b->snap.nc] = U->aug.g[a];
+            b->snap.nc++;
+        }
+    if (!fold) return;
+    for (k = 0; k < b->snap.nc; k++) pos[b->snap.ci[k]] = k;
+    for (k = 0; k < U->pending.n_con; k++) {
+        const amps__pcon *c = U->pending.con + k;
+        amps_int q = pos[c->i];
+        if (c->release && q >= 0) { /* the last entry takes its place */
+            amps_int l = --b->snap.nc;
+            b->snap.ci[q] = b->snap.ci[l];
+            b->snap.cg[q] = b->snap.cg[l];
+            pos[b->snap.ci[q]] = q;
+            pos[c->i] = -1;
+        } else if (!c->release) {
+            if (q < 0) q = pos[c->i] = b->snap.nc++;
+            b->snap.ci[q] = c->i;
+            b->snap.cg[q] = c->v;
+        }
+    }
+}
+
+/* A snapshot of the committed system K^ (fold 0), or of K^ with the recorded changes applied
+   (fold 1: the matrix entries, the appended DOFs and the constraint changes since the last
+   commit; amps__commit_fold), for a re-factorization. */
+static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U, int fold) {
     amps__bg *b = AMPS__CAST(amps__bg *, amps__calloc(ctx, 1, sizeof(amps__bg)));
-    amps_int a, k, nt = 0, nc = 0, cap;
+    amps_int a, k, nt = 0, nc = 0, cap, N = U->N + (fold ? U->pending.n_dofs : 0), *pos = NULL;
     if (!b) return NULL;
-    b->snap.N = U->N;
+    b->snap.N = N;
     b->snap.n = U->n;
     b->snap.sigma = U->sigma;
     b->snap.nthr = U->nthr;
@@ -8470,21 +9020,32 @@ static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U) {
     b->snap.Kx = U->base.Kx;
     b->snap.opts = U->refac.opts;
     b->snap.alloc_user = ctx ? ctx->alloc_user : NULL;
+    b->snap.F = U->F;
+    b->snap.fill_ref = U->refac.fill_ref;
+    b->snap.keep = U->refac.opts.refactor_reuse && U->refac.fill_ref > 0 && U->refac.n_kept < 15 && !U->refac.fresh;
+    b->fg.len = 4 * U->refac.t_step_base > 0.002 ? 4 * U->refac.t_step_base : 0.002;
     for (a = 0; a < U->aug.size; a++)
         if (U->aug.kind[a] & AMPS__UCON) nc++;
-    cap = U->delta.used + (U->N - U->n) + nc + 1;
+    if (fold) nc += U->pending.n_con;
+    cap = U->delta.used + (N - U->n) + nc + 1 + (fold ? U->pending.n_delta : 0);
     b->snap.ti = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
     b->snap.tj = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)cap, sizeof(amps_int)));
     b->snap.tx = AMPS__CAST(double *, amps__malloc(ctx, (size_t)cap, sizeof(double)));
     b->snap.ci = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nc + 1, sizeof(amps_int)));
     b->snap.cg = AMPS__CAST(double *, amps__malloc(ctx, (size_t)nc + 1, sizeof(double)));
-    b->snap.f = AMPS__CAST(double *, amps__malloc(ctx, (size_t)U->N + 1, sizeof(double)));
+    b->snap.f = AMPS__CAST(double *, amps__malloc(ctx, (size_t)N + 1, sizeof(double)));
+    b->snap.org = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)(N - U->n) + 1, sizeof(amps_int)));
     b->log.cap = 4 * U->refac.opts.cap_pending; /* > 0: amps__create_opts */
     b->log.entries = AMPS__CAST(amps__lentry *, amps__malloc(ctx, (size_t)b->log.cap, sizeof(amps__lentry)));
-    if (!b->snap.ti || !b->snap.tj || !b->snap.tx || !b->snap.ci || !b->snap.cg || !b->snap.f || !b->log.entries) {
+    if (fold && (pos = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)N + 1, sizeof(amps_int)))))
+        for (k = 0; k < N; k++) pos[k] = -1;
+    if (!b->snap.ti || !b->snap.tj || !b->snap.tx || !b->snap.ci || !b->snap.cg || !b->snap.f || !b->snap.org ||
+        !b->log.entries || (fold && !pos)) {
+        amps__free(ctx, pos);
         amps__bg_free(ctx, b);
         return NULL;
     }
+    for (k = U->n; k < N; k++) b->snap.org[k - U->n] = k < U->refac.cap_origin ? U->refac.origin[k] : -1;
     for (a = 0; a < U->aug.size; a++) {
         amps_int i = U->aug.idx[a];
         for (k = 0; k < U->delta.row_len[a]; k++) {
@@ -8495,24 +9056,29 @@ static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U) {
             b->snap.tx[nt] = U->delta.val[U->delta.row_start[a] + k];
             nt++;
         }
-        if (U->aug.kind[a] & AMPS__UCON) { /* + sigma e_i e_i^T */
-            b->snap.ti[nt] = i;
-            b->snap.tj[nt] = i;
-            b->snap.tx[nt] = U->sigma;
-            nt++;
-            b->snap.ci[b->snap.nc] = i;
-            b->snap.cg[b->snap.nc] = U->aug.g[a];
-            b->snap.nc++;
-        }
     }
-    for (k = U->n; k < U->N; k++) {
+    for (k = 0; fold && k < U->pending.n_delta; k++) { /* K^[r, c] += v (and K^[c, r]) */
+        const amps__pdelta *d = U->pending.delta + k;
+        b->snap.ti[nt] = d->r < d->c ? d->r : d->c;
+        b->snap.tj[nt] = d->r < d->c ? d->c : d->r;
+        b->snap.tx[nt] = d->v;
+        nt++;
+    }
+    amps__bg_snap_cons(U, b, fold, pos);
+    amps__free(ctx, pos);
+    for (k = 0; k < b->snap.nc; k++) { /* + sigma e_i e_i^T */
+        b->snap.ti[nt] = b->snap.tj[nt] = b->snap.ci[k];
+        b->snap.tx[nt] = U->sigma;
+        nt++;
+    }
+    for (k = U->n; k < N; k++) {
         b->snap.ti[nt] = k;
         b->snap.tj[nt] = k;
         b->snap.tx[nt] = U->sigma;
         nt++;
     } /* K-bar */
     b->snap.nt = nt;
-    memcpy(b->snap.f, U->force.f, sizeof(double) * (size_t)U->N);
+    memcpy(b->snap.f, U->force.f, sizeof(double) * (size_t)N);
 #ifndef AMPS_NO_THREADS
     if (pthread_mutex_init(&b->mu, NULL) != 0) {
         amps__bg_free(ctx, b);
@@ -8634,17 +9200,146 @@ static amps_status amps__bg_assemble(amps_ctx *c2, amps__bg *b) {
     return AMPS_OK;
 }
 
+/* perm (order of the upper-triangle pattern B) := perm (postorder of its elimination tree): the
+   same fill, chains (supernodes) contiguous. O(nnz(B) log N). */
+static amps_status amps__order_postorder(amps_ctx *c2, const amps_csc *B, amps_int *perm) {
+    amps_int N = B->ncol, k, *Gp = NULL, *Gi = NULL;
+    amps_int *w = AMPS__CAST(amps_int *, amps__calloc(c2, 6 * (size_t)N + 1, sizeof(amps_int)));
+    amps_status s =
+            w ? amps__graph_sym(c2, "amps_update_refactor", N, B->p, B->i, (int)AMPS_UPPER, &Gp, &Gi) : AMPS_ERR_OOM;
+    if (s == AMPS_OK) {
+        amps_int *iord = w, *par = w + N, *pst = w + 2 * N, *wk = w + 3 * N;
+        for (k = 0; k < N; k++) iord[perm[k]] = k;
+        amps_etree(N, Gp, Gi, perm, iord, par, wk);
+        amps_postorder(N, par, pst, wk);
+        for (k = 0; k < N; k++) iord[k] = perm[pst[k]];
+        memcpy(perm, iord, sizeof(amps_int) * (size_t)N);
+    }
+    amps__free(c2, w);
+    amps__free(c2, Gp);
+    amps__free(c2, Gi);
+    return s;
+}
+
+/* The order of B = b->result.K (order N) kept from the parent's base order (n): each appended
+   DOF j follows its anchor, the base index its origin chain ends at (origin: snap.org, else its
+   neighbour i < j in B eliminated last); appended DOFs with consecutive indices and consecutive
+   anchors (a node's unknowns) all follow the run's last anchor, so node blocks stay together;
+   then postordered (amps__order_postorder). perm (N) is written. O(nnz(B) log N). */
+static amps_status amps__bg_order_kept(amps_ctx *c2, const amps__bg *b, amps_int *perm) {
+    const amps_csc *B = b->result.K;
+    const amps_int *po = b->snap.F->perm, *ip = b->snap.F->iperm;
+    amps_int n = b->snap.n, N = b->snap.N, j, p, k, q = 0, t = 0;
+    amps_int *anc = AMPS__CAST(amps_int *, amps__malloc(c2, (size_t)N + 1, sizeof(amps_int)));
+    amps_int *cnt = AMPS__CAST(amps_int *, amps__calloc(c2, (size_t)n + 1, sizeof(amps_int)));
+    amps_int *lst = AMPS__CAST(amps_int *, amps__malloc(c2, (size_t)(N - n) + 1, sizeof(amps_int)));
+    if (!anc || !cnt || !lst || n < 1) {
+        amps__free(c2, anc);
+        amps__free(c2, cnt);
+        amps__free(c2, lst);
+        return n < 1 ? AMPS_ERR_ARG : AMPS_ERR_OOM;
+    }
+    for (j = 0; j < n; j++) anc[j] = ip[j];
+    for (j = n; j < N; j++) {
+        amps_int o = b->snap.org[j - n], a = -1;
+        if (o >= 0 && o < j) a = anc[o];
+        else
+            for (p = B->p[j]; p < B->p[j + 1]; p++)
+                if (B->i[p] < j && anc[B->i[p]] > a) a = anc[B->i[p]];
+        anc[j] = a < 0 ? n - 1 : a;
+    }
+    if (N - 1 >= n) { /* runs, from the last: anc[j] + 1 == anc[j + 1] (as computed) */
+        amps_int nxt = anc[N - 1], fin = anc[N - 1];
+        for (j = N - 2; j >= n; j--) {
+            amps_int a = anc[j];
+            if (nxt == a + 1) anc[j] = fin;
+            else fin = a;
+            nxt = a;
+        }
+    }
+    for (j = n; j < N; j++) cnt[anc[j] + 1]++; /* counting sort by anchor, stable in j */
+    for (k = 0; k < n; k++) cnt[k + 1] += cnt[k];
+    for (j = n; j < N; j++) lst[cnt[anc[j]]++] = j;
+    for (k = 0; k < n; k++) {
+        perm[q++] = po[k];
+        while (t < N - n && anc[lst[t]] == k) perm[q++] = lst[t++];
+    }
+    amps__free(c2, anc);
+    amps__free(c2, cnt);
+    amps__free(c2, lst);
+    return amps__order_postorder(c2, B, perm);
+}
+
+/* The bound on the fill of a kept ordering: nnz(L) / nnz(B) at most this times the last fresh
+   ordering's (tests may lower it to force the fall-back). */
+#ifndef AMPS_REFACTOR_FILL_BOUND
+#define AMPS_REFACTOR_FILL_BOUND 1.2
+#endif
+
+/* Ordering and analysis of B into b->result.F: the parent's analysis when B has its pattern
+   (snap.keep), else the kept order (amps__bg_order_kept) unless its nnz(L) exceeds
+   AMPS_REFACTOR_FILL_BOUND times the last fresh ordering's fill per matrix entry, else a fresh
+   ordering (opts.refactor_order). */
+static amps_status amps__bg_analyze(amps_ctx *c2, amps__bg *b) {
+    const amps_factor *F0 = b->snap.F;
+    const amps_csc *K = b->result.K;
+    amps_int N = b->snap.N, *perm;
+    double t0 = amps_now(), nnzB = (double)K->p[N], bound = AMPS_REFACTOR_FILL_BOUND * b->snap.fill_ref * nnzB;
+    amps_order_opts go;
+    amps_status s = AMPS_OK;
+    b->ph.kept = b->snap.keep ? 1 : 0;
+    if (b->snap.keep && amps__factor_same_pattern(F0, K, AMPS_UPPER)) {
+        b->ph.kept = 2;
+        if (!(b->result.F = amps__factor_clone_symbolic(c2, F0))) return c2->status ? c2->status : AMPS_ERR_OOM;
+    } else {
+        if (!(perm = AMPS__CAST(amps_int *, amps__malloc(c2, (size_t)N + 1, sizeof(amps_int))))) return AMPS_ERR_OOM;
+        go.method = AMPS_ORDER_GIVEN;
+        go.perm = perm;
+        go.block = 1;
+        go.coords = NULL;
+        if (b->ph.kept && (s = amps__bg_order_kept(c2, b, perm)) == AMPS_OK) {
+            b->result.F = amps_analyze(c2, K, AMPS_UPPER, &go);
+            if (b->result.F && amps_factor_nnz(b->result.F) > bound) { /* too much fill: a fresh ordering */
+                amps_factor_free(c2, b->result.F);
+                b->result.F = NULL;
+                b->ph.kept = 0;
+            }
+        }
+        if (s == AMPS_OK && !b->ph.kept) {
+            double t1 = amps_now();
+            s = amps_order(c2, K, AMPS_UPPER, &b->snap.opts.refactor_order, perm);
+            b->ph.order = amps_now() - t1;
+            if (s == AMPS_OK) b->result.F = amps_analyze(c2, K, AMPS_UPPER, &go);
+        }
+        amps__free(c2, perm);
+        if (s != AMPS_OK) return s;
+        if (!b->result.F) return c2->status;
+    }
+    b->ph.symbolic = amps_now() - t0 - b->ph.order;
+    b->ph.fill_ref = nnzB > 0 ? amps_factor_nnz(b->result.F) / nnzB : 0;
+    b->ph.fill = b->snap.fill_ref > 0 ? b->ph.fill_ref / b->snap.fill_ref : 1;
+    return AMPS_OK;
+}
+
 /* Worker step 2: ordering, analysis and factorization of B, into b->result.F; stops early when
    cancelled. */
 static amps_status amps__bg_factor(amps_ctx *c2, amps__bg *b) {
     amps_status s;
+    double t;
     if (amps__bg_get(b, &b->cancel)) return AMPS_ERR_STATE;
     if (AMPS_TEST_BG_FAULT(1)) return amps__err(c2, AMPS_ERR_OOM, "injected failure in the analysis");
-    b->result.F = amps_analyze(c2, b->result.K, AMPS_UPPER, &b->snap.opts.refactor_order);
-    if (!b->result.F) return c2->status;
+    if ((s = amps__bg_analyze(c2, b)) != AMPS_OK) return s;
     if (amps__bg_get(b, &b->cancel)) return AMPS_ERR_STATE;
     if (AMPS_TEST_BG_FAULT(2)) return amps__err(c2, AMPS_ERR_NOT_SPD, "injected failure in the factorization");
-    if ((s = amps_factorize(c2, b->result.F, b->result.K)) != AMPS_OK) return s;
+    if (AMPS_TEST_BG_PARALLEL) {
+        amps__fpriv *P = AMPS__CAST(amps__fpriv *, b->result.F->priv);
+        P->parmin = 0;
+        P->pargroup = 0;
+    }
+    t = amps_now();
+    s = amps_factorize(c2, b->result.F, b->result.K);
+    b->ph.numeric = amps_now() - t;
+    if (s != AMPS_OK) return s;
     if (amps__bg_get(b, &b->cancel)) return AMPS_ERR_STATE;
     return AMPS_OK;
 }
@@ -8709,19 +9404,99 @@ static amps_status amps__bg_follow_log(amps_ctx *c2, amps__bg *b) {
     return AMPS_OK;
 }
 
+#ifndef AMPS_NO_THREADS
+/* 1 while a commit or solve of the parent runs (amps__bg_fg_mark), for at most fg.len. */
+static int amps__bg_fg_busy(amps__bg *b) {
+    int busy;
+    double now = amps_now();
+    amps__bg_lock(b);
+    busy = b->fg.busy && now - b->fg.since < b->fg.len;
+    amps__bg_unlock(b);
+    return busy;
+}
+
+/* The helper of one parallel loop: claims the loop's chunks (slot 0) while the foreground is not
+   busy and chunks are left; waits (0.1 ms sleeps) while it is. */
+static void *amps__bg_help_main(void *arg) {
+    amps__bg *b = AMPS__CAST(amps__bg *, arg);
+    amps__job *j = AMPS__CAST(amps__job *, b->help.task_ctx);
+    for (;;) {
+        long c;
+        while (AMPS__FETCH_ADD(&j->next, 0L) < j->nchunk && amps__bg_fg_busy(b)) {
+            struct timeval tv;
+            tv.tv_sec = 0;
+            tv.tv_usec = 100;
+            select(0, NULL, NULL, NULL, &tv);
+        }
+        if ((c = AMPS__FETCH_ADD(&j->next, 1L)) >= j->nchunk) break;
+        {
+            amps_int lo = (amps_int)c * j->chunk;
+            j->fn(lo, j->n - lo < j->chunk ? j->n : lo + j->chunk, 0, j->arg);
+        }
+    }
+    return NULL;
+}
+
+/* The worker's back end for its analysis and factorization (worker_count 1): the parallel layer's
+   loops get one helper thread, which runs only while the foreground is idle (amps__bg_help_main);
+   none (NULL: the worker claims every chunk) while it is busy. Other tasks run at once. */
+static void *amps__bg_enqueue(amps_task_fn *task, amps_int n, amps_int min_range, void *task_ctx, void *user) {
+    amps__bg *b = AMPS__CAST(amps__bg *, user);
+    (void)min_range;
+    if (task != amps__par_task) {
+        task(0, n, 0, task_ctx);
+        return NULL;
+    }
+    if (n < 1 || amps__bg_fg_busy(b)) return NULL;
+    b->help.task = task;
+    b->help.task_ctx = task_ctx;
+    b->help.n = n;
+    return pthread_create(&b->help.th, NULL, amps__bg_help_main, b) == 0 ? b : NULL;
+}
+
+static void amps__bg_finish(void *handle, void *user) {
+    (void)user;
+    pthread_join(AMPS__CAST(amps__bg *, handle)->help.th, NULL);
+}
+#endif
+
+/* Marks the parent's foreground busy (a commit began) or idle (a full solve ended, t its step time). */
+static void amps__bg_fg_mark(amps__bg *b, int busy, double t) {
+    amps__bg_lock(b);
+    b->fg.busy = busy;
+    b->fg.since = amps_now();
+    if (t > 0) b->fg.len = 4 * t > 0.002 ? 4 * t : 0.002;
+    amps__bg_unlock(b);
+}
+
 /* The worker: B = K^(t0) + sigma P_C assembled, ordered, analyzed and factored; the engine of
    the new base gets the forces, Delta = -sigma on C with the constraints, and catches up with
-   the log while it grows. */
+   the log while it grows. With refactor_threads 1 the analysis and factorization run on the
+   worker and, while the foreground is idle, a helper (amps__bg_enqueue); with more, on that many
+   OpenMP threads. Either way the factor's bits are the same. */
 static void amps__bg_work(amps__bg *b) {
     amps_ctx c2;
     amps_status s;
+    double t;
     amps_ctx_init(&c2);
     c2.alloc_user = b->snap.alloc_user;
     c2.nthreads = b->snap.opts.refactor_threads; /* > 0: amps__create_opts */
+#ifndef AMPS_NO_THREADS
+    if (b->snap.threaded && c2.nthreads == 1 && b->snap.nbuf > 1) {
+        c2.enqueue_task = amps__bg_enqueue;
+        c2.finish_task = amps__bg_finish;
+        c2.task_user = b;
+        c2.worker_count = 1;
+    }
+#endif
     b->t0 = amps_now();
-    if ((s = amps__bg_assemble(&c2, b)) == AMPS_OK && (s = amps__bg_factor(&c2, b)) == AMPS_OK &&
-        (s = amps__bg_engine(&c2, b)) == AMPS_OK && b->snap.opts.refactor != AMPS_REFACTOR_COUNT)
+    if ((s = amps__bg_assemble(&c2, b)) == AMPS_OK) s = amps__bg_factor(&c2, b);
+    c2.enqueue_task = NULL;
+    c2.finish_task = NULL;
+    t = amps_now();
+    if (s == AMPS_OK && (s = amps__bg_engine(&c2, b)) == AMPS_OK && b->snap.opts.refactor != AMPS_REFACTOR_COUNT)
         s = amps__bg_follow_log(&c2, b); /* COUNT: the swap replays the whole log (same bits) */
+    b->ph.catchup = amps_now() - t;
     amps__bg_lock(b);
     if (s == AMPS_OK && b->cancel) s = b->status ? b->status : AMPS_ERR_STATE;
     if (s != AMPS_OK) {
@@ -8874,6 +9649,16 @@ static void amps__bg_take(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg
     U->stats = old.stats;
     U->stats.nrefactor++;
     U->stats.t_refactor = b->t1 - b->t0;
+    U->stats.t_refactor_order = b->ph.order;
+    U->stats.t_refactor_symbolic = b->ph.symbolic;
+    U->stats.t_refactor_numeric = b->ph.numeric;
+    U->stats.t_refactor_catchup = b->ph.catchup;
+    U->stats.refactor_order_kept = b->ph.kept;
+    U->stats.refactor_fill = b->ph.fill;
+    if (!b->ph.kept) U->refac.fill_ref = b->ph.fill_ref;
+    U->refac.n_kept = b->ph.kept ? U->refac.n_kept + 1 : 0;
+    U->refac.fold_flops = 0;
+    old.refac.origin = NULL; /* U keeps the table */
     *V = old;
     amps_update_free(c2, V);
 }
@@ -8910,6 +9695,7 @@ static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
 /* At the start of a commit: swaps a ready re-factorization in (not while a watched-solve job
    runs), drops a failed one; the AUTO policy starts one. Never fails the caller. */
 static void amps__bg_poll(amps_ctx *ctx, amps_update *U) {
+    if (U->refac.job) amps__bg_fg_mark(U->refac.job, 1, 0);
     if (U->refac.job && U->refac.opts.refactor == AMPS_REFACTOR_COUNT) {
         /* deterministic: at the fixed point only, waiting for the worker */
         amps_int every = U->refac.opts.refactor_every;
@@ -8942,6 +9728,7 @@ static void amps__bg_poll(amps_ctx *ctx, amps_update *U) {
    factorization (measured, or estimated from the solve), a re-factorization starts. */
 static void amps__bg_policy(amps_ctx *ctx, amps_update *U, double t) {
 #ifndef AMPS_NO_THREADS
+    if (U->refac.job) amps__bg_fg_mark(U->refac.job, 0, t);
     if (U->refac.opts.refactor != AMPS_REFACTOR_AUTO || U->refac.job || U->aug.size <= U->refac.size_base + 8) {
         if (!U->refac.job && (U->refac.t_step_base == 0 || t < U->refac.t_step_base)) U->refac.t_step_base = t;
         return;
@@ -8979,7 +9766,8 @@ static void amps__bg_after_commit(amps_ctx *ctx, amps_update *U, int structural,
     if (!start) return;
     amps_ctx_init(&c2);
     c2.alloc_user = ctx ? ctx->alloc_user : NULL;
-    (void)amps_update_refactor_start(&c2, U);
+    if (amps_update_refactor_start(&c2, U) == AMPS_OK && U->refac.job)
+        amps__bg_fg_mark(U->refac.job, 1, 0); /* the rest of this call's step follows */
 }
 
 AMPS_API amps_status amps_update_refactor_start(amps_ctx *ctx, amps_update *U) {
@@ -8988,11 +9776,12 @@ AMPS_API amps_status amps_update_refactor_start(amps_ctx *ctx, amps_update *U) {
     if (U->refac.opts.refactor == AMPS_REFACTOR_OFF)
         return amps__err(ctx, AMPS_ERR_STATE, "amps_update_refactor_start: re-factorization is off (opts.refactor)");
     if (U->refac.job) return AMPS_WARN_NOOP;
-    b = amps__bg_snapshot(ctx, U);
+    b = amps__bg_snapshot(ctx, U, 0);
     if (!b) return ctx && ctx->status ? ctx->status : AMPS_ERR_OOM;
     U->refac.job = b;
     U->refac.t_extra = 0;
 #ifndef AMPS_NO_THREADS
+    b->snap.threaded = 1;
     if (pthread_create(&b->th, NULL, amps__bg_main, b) == 0) {
         /* the worker takes refactor_threads cores: the kernels leave them to it (OpenMP teams
            that wait on a descheduled thread are slower than fewer threads) */
@@ -9001,6 +9790,7 @@ AMPS_API amps_status amps_update_refactor_start(amps_ctx *ctx, amps_update *U) {
         b->has_thread = 1;
         return AMPS_OK;
     }
+    b->snap.threaded = 0;
 #endif
     amps__bg_work(b); /* no thread: synchronously */
     return AMPS_OK;
@@ -9037,13 +9827,138 @@ AMPS_API void amps_update_refactor_cancel(amps_ctx *ctx, amps_update *U) {
     if (U) amps__bg_discard(ctx, U);
 }
 
+/* A commit too large for the augmentation. With k = |S u C| before it and k' the indices it adds
+   (new rows of Delta, appended DOFs, new constraints), its dense work is about
+   2 (k + k')^2 k' (the LU's extension) + 2 (k + k') k' h (the rows of G; h: the elimination
+   tree's height, the length of a W column) flops, and a re-factorization's sum_j c_j^2 (c_j:
+   the nonzeros of L's column j). A fracture that tears a large part of a model away adds
+   thousands of indices in one commit: measured on a 4,431-equation two-region model (Gmsh),
+   5,112 tets torn in one step made the commit 25 s of dense work (k' = 3,765) against 0.2 s for
+   a factorization. Returns 1 when the dense work exceeds 4 re-factorizations (k' >= 64; policy
+   AUTO or COUNT; no two-phase or watched job in progress). O(recorded changes). */
+static int amps__commit_wants_fold(amps_update *U) {
+    amps_marker *mk = &U->work.mark_N;
+    amps_int k, kn = U->pending.n_dofs, u = U->aug.size;
+    double h = (double)(U->F->height > 0 ? U->F->height : 1), kk, dense;
+    if ((U->refac.opts.refactor != AMPS_REFACTOR_AUTO && U->refac.opts.refactor != AMPS_REFACTOR_COUNT) ||
+        U->cjob.state || U->watch.job_y)
+        return 0;
+    if (U->pending.n_delta + U->pending.n_con < 64) return 0;
+    amps_marker_next(mk);
+    for (k = 0; k < 2 * U->pending.n_delta + U->pending.n_con; k++) {
+        amps_int i = k < 2 * U->pending.n_delta ? (k & 1 ? U->pending.delta[k / 2].c : U->pending.delta[k / 2].r)
+                                                : U->pending.con[k - 2 * U->pending.n_delta].i;
+        if (i >= U->N || U->aug.pos[i] >= 0 || mk->mark[i] == mk->stamp) continue; /* appended: in n_dofs */
+        mk->mark[i] = mk->stamp;
+        kn++;
+    }
+    if (kn < 64) return 0;
+    if (U->refac.fold_flops <= 0) {
+        double s2 = 0;
+        for (k = 0; k < U->F->n; k++) {
+            double c = (double)(U->F->Lp[k + 1] - U->F->Lp[k]) + 1;
+            s2 += c * c;
+        }
+        U->refac.fold_flops = s2 > 1 ? s2 : 1;
+    }
+    kk = (double)u + (double)kn;
+    dense = 2.0 * kk * kk * (double)kn + 2.0 * kk * (double)kn * h;
+    return dense > 4.0 * U->refac.fold_flops;
+}
+
+/* Commits the recorded changes by a synchronous re-factorization of K^ with them applied
+   (amps__bg_snapshot, fold 1), the new base then taking the engine's place as after a swap (the
+   log is empty: there is nothing to catch up). A running re-factorization is cancelled first. On
+   failure (memory, a matrix that is not positive definite) the engine is as before with the
+   changes still recorded, and the caller commits them through the augmentation. */
+static amps_status amps__commit_fold(amps_ctx *ctx, amps_update *U) {
+    amps__bg *b;
+    amps_update *V;
+    amps_ctx c2;
+    amps_int kn = U->pending.n_dofs;
+    double t0 = amps_now();
+    amps_ctx_init(&c2);
+    c2.alloc_user = ctx ? ctx->alloc_user : NULL;
+    if (U->refac.job) amps_update_refactor_cancel(ctx, U);
+    if (!(b = amps__bg_snapshot(&c2, U, 1))) return c2.status ? c2.status : AMPS_ERR_OOM;
+    U->refac.job = b;
+    amps__bg_work(b); /* not threaded: this thread, the engine's kernels' back end unused */
+    if (b->state != AMPS__BG_READY) {
+        amps_status s = b->status ? b->status : AMPS_ERR_STATE;
+        amps__log(ctx, s, "amps_update_commit: committing by a re-factorization failed (%s)", b->msg);
+        amps__bg_end(&c2, U, 1);
+        return s;
+    }
+    V = b->result.U;
+    V->nthr = U->nbuf;
+    amps__bg_take(&c2, U, V, b);
+    amps__bg_free(&c2, b);
+    U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
+    U->stats.ncommit++;
+    U->stats.commit_folds++;
+    U->stats.t_swap = amps_now() - t0;
+    amps__log(ctx, AMPS_OK, "amps_update_commit: %ld new DOFs and a dense system of %ld committed by a re-factorization",
+              (long)kn, (long)U->aug.size);
+    return AMPS_OK;
+}
+
 AMPS_API amps_status amps_update_refactor(amps_ctx *ctx, amps_update *U) {
     amps_status s;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_refactor: NULL engine");
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
     if (U->refac.job) amps_update_refactor_cancel(ctx, U);
-    if ((s = amps_update_refactor_start(ctx, U)) != AMPS_OK) return s;
+    U->refac.fresh = 1;
+    s = amps_update_refactor_start(ctx, U);
+    U->refac.fresh = 0;
+    if (s != AMPS_OK) return s;
     return amps_update_refactor_wait(ctx, U);
+}
+
+AMPS_API amps_status amps_update_solve_rhs(amps_ctx *ctx, amps_update *U, const double *rhs, double *x) {
+    const amps_factor *F;
+    amps_int k, a;
+    amps_status s;
+    double *f, t0 = amps_now();
+    if (!U || !rhs || !x) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve_rhs: NULL argument");
+    if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
+    F = U->F;
+    f = U->work.resid + U->cap_N; /* rhs with zeros at C (x may alias rhs) */
+    for (k = 0; k < U->N; k++) f[k] = rhs[k];
+    for (a = 0; a < U->aug.size; a++)
+        if (U->aug.kind[a] & AMPS__UCON) f[U->aug.idx[a]] = 0.0;
+    for (k = 0; k < U->n; k++) U->guard.ct[k] = f[F->perm[k]];
+    amps_lsolve(F, U->guard.ct);
+    for (k = 0; k < U->n; k++) U->guard.ct[k] *= U->base.inv_sqrt_d[k];
+    amps__solve_core(U, U->guard.ct, f, 1, 0, x);
+    for (a = 0; a < U->aug.size; a++)
+        if (U->aug.kind[a] & AMPS__UCON) x[U->aug.idx[a]] = 0.0;
+    amps__bg_policy(ctx, U, amps_now() - t0);
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_update_set_origin(amps_ctx *ctx, amps_update *U, amps_int m, const amps_int *idx,
+                                            const amps_int *orig) {
+    amps_int k, top = 0, dim;
+    if (!U || m < 0 || (m > 0 && (!idx || !orig)))
+        return amps__err(ctx, AMPS_ERR_ARG, "amps_update_set_origin: %s", U ? "bad arguments" : "NULL engine");
+    dim = U->N + U->pending.n_dofs;
+    for (k = 0; k < m; k++) {
+        if (idx[k] < U->n || idx[k] >= dim || orig[k] < 0 || orig[k] >= idx[k])
+            return amps__err(
+                    ctx, AMPS_ERR_INDEX,
+                    "amps_update_set_origin: DOF %lld (origin %lld) is not an appended DOF with an earlier origin",
+                    (long long)idx[k], (long long)orig[k]);
+        if (idx[k] >= top) top = idx[k] + 1;
+    }
+    if (top > U->refac.cap_origin) {
+        amps_int cap = top > 2 * U->refac.cap_origin ? top : 2 * U->refac.cap_origin;
+        if (amps__realloc(ctx, (void **)&U->refac.origin, (size_t)cap, sizeof(amps_int)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_update_set_origin: out of memory");
+        for (k = U->refac.cap_origin; k < cap; k++) U->refac.origin[k] = -1;
+        U->refac.cap_origin = cap;
+    }
+    for (k = 0; k < m; k++) U->refac.origin[idx[k]] = orig[k];
+    return AMPS_OK;
 }
 
 /* ==== [amps:fem impl] mesh and P1 elasticity ================================================== */
@@ -9297,6 +10212,100 @@ AMPS_API double amps_tet_stress(const double X[12], double E, double nu, const d
     }
     if (principal) amps_sym3_eig(sigma, principal);
     return vol;
+}
+
+/* R of the polar decomposition of F (row-major) as amps_tet_rotation states it: one-sided
+   Jacobi on the columns of W = F V (rotations of pairs until every pair is orthogonal to
+   eps), s_i = |w_i| sorted descending, u1 = w1 / s1, u2 = w2 orthogonalized against u1 (any
+   unit vector orthogonal to u1 when that vanishes), U = [u1, u2, u1 x u2], and with
+   V' = [v1, v2, v1 x v2]: R = U V'^T (the det(U V^T) flip folded into the signs of u3, v3). */
+static void amps__polar(const double F[9], double R[9]) {
+    double W[9], V[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, n[3], u[9], v[9], scale = 0.0;
+    int sweep, p, q, i, k, ord[3] = {0, 1, 2};
+    for (i = 0; i < 9; i++) {
+        if (!amps__isfinite(F[i])) scale = -1.0;
+        else if (scale >= 0 && fabs(F[i]) > scale) scale = fabs(F[i]);
+    }
+    for (i = 0; i < 9; i++) R[i] = (i % 4 == 0) ? 1.0 : 0.0;
+    if (!(scale > 0)) return;
+    for (i = 0; i < 9; i++) W[i] = F[i] / scale;
+    for (sweep = 0; sweep < 30; sweep++) {
+        int rotated = 0;
+        for (p = 0; p < 2; p++)
+            for (q = p + 1; q < 3; q++) {
+                double al = 0, be = 0, ga = 0, zeta, t, c, sn;
+                for (i = 0; i < 3; i++) {
+                    al += W[3 * i + p] * W[3 * i + p];
+                    be += W[3 * i + q] * W[3 * i + q];
+                    ga += W[3 * i + p] * W[3 * i + q];
+                }
+                if (fabs(ga) <= 2.220446049250313e-16 * sqrt(al * be) || ga == 0.0) continue;
+                rotated = 1;
+                zeta = (be - al) / (2.0 * ga);
+                t = (zeta >= 0 ? 1.0 : -1.0) / (fabs(zeta) + sqrt(1.0 + zeta * zeta));
+                c = 1.0 / sqrt(1.0 + t * t);
+                sn = c * t;
+                for (i = 0; i < 3; i++) {
+                    double wp = W[3 * i + p], wq = W[3 * i + q], vp = V[3 * i + p], vq = V[3 * i + q];
+                    W[3 * i + p] = c * wp - sn * wq;
+                    W[3 * i + q] = sn * wp + c * wq;
+                    V[3 * i + p] = c * vp - sn * vq;
+                    V[3 * i + q] = sn * vp + c * vq;
+                }
+            }
+        if (!rotated) break;
+    }
+    for (k = 0; k < 3; k++) n[k] = sqrt(W[k] * W[k] + W[3 + k] * W[3 + k] + W[6 + k] * W[6 + k]);
+    for (p = 0; p < 2; p++) /* columns by descending norm */
+        for (q = 0; q < 2 - p; q++)
+            if (n[ord[q]] < n[ord[q + 1]]) {
+                k = ord[q];
+                ord[q] = ord[q + 1];
+                ord[q + 1] = k;
+            }
+    if (!(n[ord[0]] > 0)) return;
+    for (i = 0; i < 3; i++) { /* u[3 k + i], v[3 k + i]: component i of u_k+1, v_k+1 */
+        u[i] = W[3 * i + ord[0]] / n[ord[0]];
+        u[3 + i] = W[3 * i + ord[1]];
+        v[i] = V[3 * i + ord[0]];
+        v[3 + i] = V[3 * i + ord[1]];
+    }
+    {
+        double d = u[0] * u[3] + u[1] * u[4] + u[2] * u[5], l;
+        for (i = 0; i < 3; i++) u[3 + i] -= d * u[i];
+        l = sqrt(u[3] * u[3] + u[4] * u[4] + u[5] * u[5]);
+        if (!(l > 1e-150)) { /* rank 1: any unit vector orthogonal to u1 */
+            k = fabs(u[0]) <= fabs(u[1]) && fabs(u[0]) <= fabs(u[2]) ? 0 : fabs(u[1]) <= fabs(u[2]) ? 1 : 2;
+            for (i = 0; i < 3; i++) u[3 + i] = (i == k ? 1.0 : 0.0) - u[k] * u[i];
+            l = sqrt(u[3] * u[3] + u[4] * u[4] + u[5] * u[5]);
+        }
+        for (i = 0; i < 3; i++) u[3 + i] /= l;
+    }
+    u[6] = u[1] * u[5] - u[2] * u[4];
+    u[7] = u[2] * u[3] - u[0] * u[5];
+    u[8] = u[0] * u[4] - u[1] * u[3];
+    v[6] = v[1] * v[5] - v[2] * v[4];
+    v[7] = v[2] * v[3] - v[0] * v[5];
+    v[8] = v[0] * v[4] - v[1] * v[3];
+    for (i = 0; i < 3; i++)
+        for (k = 0; k < 3; k++) R[3 * i + k] = u[i] * v[k] + u[3 + i] * v[3 + k] + u[6 + i] * v[6 + k];
+}
+
+AMPS_API double amps_tet_rotation(const double X[12], const double x[12], double R[9]) {
+    double G[12], F[9];
+    int a, i, j;
+    if (amps_tet_gradients(X, G) == 0.0) {
+        for (i = 0; i < 9; i++) R[i] = (i % 4 == 0) ? 1.0 : 0.0;
+        return 0.0;
+    }
+    for (i = 0; i < 3; i++) /* F = sum_a (x_a - x_0) G_a^T: G_1..3 are the rows of D_m^-1 */
+        for (j = 0; j < 3; j++) {
+            double f = 0;
+            for (a = 1; a < 4; a++) f += (x[3 * a + i] - x[i]) * G[3 * a + j];
+            F[3 * i + j] = f;
+        }
+    amps__polar(F, R);
+    return F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) + F[2] * (F[3] * F[7] - F[4] * F[6]);
 }
 
 /* ---- mesh ---- */
@@ -10153,18 +11162,28 @@ AMPS_API amps_status amps_mesh_set_tet_region(amps_ctx *ctx, amps_mesh *m, amps_
     return AMPS_OK;
 }
 
-AMPS_API void amps_mesh_lumped_mass(const amps_mesh *m, double *mass) {
-    amps_int v, t;
-    int a;
-    if (!m || !mass) return;
-    for (v = 0; v < m->nnode; v++) mass[v] = 0.0;
-    for (t = 0; t < m->ntet; t++) {
-        double X[12], G[12], q;
-        if (m->removed[t]) continue;
-        amps_mesh_tet_coords(m, t, X);
-        q = 0.25 * m->rho[t] * fabs(amps_tet_gradients(X, G));
-        for (a = 0; a < 4; a++) mass[m->tet[4 * t + a]] += q;
+/* Lumped mass of node v, m_v = sum over the tets t that contain it of rho_t |V_t| / 4, summed in
+   incidence order; vol[t] = |V_t| (NULL: from the coordinates). The one definition of the mass. */
+static double amps__mesh_node_mass(const amps_mesh *m, const double *vol, amps_int v) {
+    double mv = 0.0, X[12], G[12];
+    amps_int k;
+    for (k = 0; k < m->inc_len[v]; k++) {
+        amps_int t = m->inc[m->inc_ptr[v] + k];
+        double V;
+        if (vol) V = vol[t];
+        else {
+            amps_mesh_tet_coords(m, t, X);
+            V = fabs(amps_tet_gradients(X, G));
+        }
+        mv += (m->rho ? m->rho[t] : 1.0) * V / 4;
     }
+    return mv;
+}
+
+AMPS_API void amps_mesh_lumped_mass(const amps_mesh *m, double *mass) {
+    amps_int v;
+    if (!m || !mass) return;
+    for (v = 0; v < m->nnode; v++) mass[v] = amps__mesh_node_mass(m, NULL, v);
 }
 
 /* ---- element removal and topological singularities ---- */
@@ -10648,6 +11667,7 @@ typedef struct amps__scene_nodes {
     double *pin_value;             /* target displacement of a pin */
     double *force;                 /* external force */
     double *disp;                  /* displacement of the last solve */
+    double *mass;                  /* lumped mass m_v (amps__mesh_node_mass), valid once factored */
     amps_int *dof;                 /* equation of each DOF, or -1 */
 } amps__scene_nodes;
 
@@ -10723,17 +11743,6 @@ typedef struct amps__scene_batch {
     amps__scene_op *ops;
     amps_int *moved;
 } amps__scene_batch;
-/* Lumped mass of node v: sum of rho |V| / 4 over the tets that contain it. */
-static double amps__scene_node_mass(const amps_mesh *m, amps_int v) {
-    double mv = 0.0, X[12], G[12];
-    amps_int k;
-    for (k = 0; k < m->inc_len[v]; k++) {
-        amps_int t = m->inc[m->inc_ptr[v] + k];
-        amps_mesh_tet_coords(m, t, X);
-        mv += (m->rho ? m->rho[t] : 1.0) * fabs(amps_tet_gradients(X, G)) / 4;
-    }
-    return mv;
-}
 
 /* Dynamics, gravity and fracture (amps_scene_dynamics, amps_scene_gravity, amps_scene_fracture). */
 typedef struct amps__scene_dyn {
@@ -10743,10 +11752,10 @@ typedef struct amps__scene_dyn {
     double g[3];            /* gravity: body force per unit mass */
     amps_int cap;           /* node capacity of the arrays below */
     double *vel;            /* 3 per node: velocity w */
-    double *mass, *ku;      /* scratch per node (mass) / per DOF (K u) */
+    double *ku;             /* per DOF: K u */
     amps_int *idx;          /* scratch: 3 per node */
     double *val;            /* scratch: 3 per node */
-    double *vol;            /* ntet: |V| of each tet (reference configuration), NULL until the first step */
+    double *vol;            /* ntet: |V| of each tet (reference configuration), NULL until factored */
     double *xe, *ye;        /* scratch per equation (ncap): u and A u */
     amps_int ncap;
     unsigned char *orphan;                        /* 1: the node lies in no tet and is held where it is */
@@ -10755,6 +11764,24 @@ typedef struct amps__scene_dyn {
     amps_int *freg_id;                            /* nfreg region ids */
     double *freg_sigma;                           /* their thresholds (<= 0: no fracture there) */
     amps_int nstep, nfractured, nfractured_total; /* steps taken; tets fractured by the last step, in all */
+    int corot;                                    /* corotational steps (amps_scene_corotational) */
+    int cr_rvalid;                                /* cr_R holds the rotations of the current u */
+    double corot_tol;                             /* PCG relative residual (<= 0: 1e-10) */
+    amps_int corot_maxit;                         /* PCG iteration cap (<= 0: 200) */
+    double *cr_G;                                 /* 12 per tet: reference gradients (NULL until the first step) */
+    double *cr_R;                                 /* 9 per tet: R_e */
+    double *cr_lm;                                /* 2 per tet: lambda |V|, mu |V| */
+    double *cr_ye;                                /* 12 per tet: element results of the last pass */
+    double *cr_gel, *cr_react;                    /* 3 per node: elastic force g, pin reactions of the last step */
+    double *cr_Rn;                                /* 9 per node: the node's rotation (the preconditioner's frame) */
+    amps_int cr_cap;                              /* node capacity of cr_gel, cr_react */
+    double *cr_vec;                               /* 6 per equation: b, x, r, z, p, q */
+    unsigned char *cr_con;                        /* 1 per equation: constrained in the engine */
+    amps_int cr_ncap;                             /* equation capacity of cr_vec, cr_con */
+    amps_scene_step_stats info;                   /* the last step (amps_scene_step_info) */
+    amps_int *rm_list, *rm_flag, *rm_rename, *rm_queue; /* removal and fracture workspace, grown on demand: */
+    unsigned char *rm_seen;                             /* tets, orphans flagged, node map, queue, marks */
+    size_t rm_list_cap, rm_flag_cap, rm_rename_cap, rm_queue_cap, rm_seen_cap;
 } amps__scene_dyn;
 
 struct amps_scene {
@@ -10812,6 +11839,7 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->node.pin_value);
     amps__free(ctx, S->node.force);
     amps__free(ctx, S->node.disp);
+    amps__free(ctx, S->node.mass);
     amps__free(ctx, S->node.dof);
     amps__free(ctx, S->cut.moved);
     amps__free(ctx, S->cut.local_dof);
@@ -10832,7 +11860,6 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->batch.ops);
     amps__free(ctx, S->batch.moved);
     amps__free(ctx, S->dyn.vel);
-    amps__free(ctx, S->dyn.mass);
     amps__free(ctx, S->dyn.ku);
     amps__free(ctx, S->dyn.idx);
     amps__free(ctx, S->dyn.val);
@@ -10842,6 +11869,20 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->dyn.ye);
     amps__free(ctx, S->dyn.freg_id);
     amps__free(ctx, S->dyn.freg_sigma);
+    amps__free(ctx, S->dyn.cr_G);
+    amps__free(ctx, S->dyn.cr_R);
+    amps__free(ctx, S->dyn.cr_lm);
+    amps__free(ctx, S->dyn.cr_ye);
+    amps__free(ctx, S->dyn.cr_gel);
+    amps__free(ctx, S->dyn.cr_react);
+    amps__free(ctx, S->dyn.cr_Rn);
+    amps__free(ctx, S->dyn.cr_vec);
+    amps__free(ctx, S->dyn.cr_con);
+    amps__free(ctx, S->dyn.rm_list);
+    amps__free(ctx, S->dyn.rm_flag);
+    amps__free(ctx, S->dyn.rm_rename);
+    amps__free(ctx, S->dyn.rm_queue);
+    amps__free(ctx, S->dyn.rm_seen);
     amps__free(ctx, S);
 }
 
@@ -10854,6 +11895,7 @@ static amps_status amps__scene_grow(amps_ctx *ctx, amps_scene *S, amps_int cap) 
         amps__realloc(ctx, (void **)&S->node.pin_value, 3 * c, sizeof(double)) ||
         amps__realloc(ctx, (void **)&S->node.force, 3 * c, sizeof(double)) ||
         amps__realloc(ctx, (void **)&S->node.disp, 3 * c, sizeof(double)) ||
+        amps__realloc(ctx, (void **)&S->node.mass, c, sizeof(double)) ||
         amps__realloc(ctx, (void **)&S->node.dof, 3 * c, sizeof(amps_int)) ||
         amps_marker_grow(ctx, &S->mech.node_seen, cap))
         return AMPS_ERR_OOM;
@@ -10861,6 +11903,7 @@ static amps_status amps__scene_grow(amps_ctx *ctx, amps_scene *S, amps_int cap) 
         int d;
         S->node.fixed[v] = 0;
         S->node.pinned[v] = 0;
+        S->node.mass[v] = 0;
         for (d = 0; d < 3; d++) {
             S->node.pin_value[3 * v + d] = 0;
             S->node.force[3 * v + d] = 0;
@@ -10937,6 +11980,31 @@ AMPS_API amps_status amps_scene_fix_where(amps_ctx *ctx, amps_scene *S, int axis
     return AMPS_OK;
 }
 
+/* The tet volumes (dyn.vol, once: the reference configuration does not move) and the lumped
+   mass of every node (node.mass). */
+static amps_status amps__scene_masses(amps_ctx *ctx, amps_scene *S) {
+    const amps_mesh *m = S->m;
+    amps_int t, v;
+    if (!S->dyn.vol) {
+        S->dyn.vol = AMPS__CAST(double *, amps__malloc(ctx, (size_t)m->ntet + 1, sizeof(double)));
+        if (!S->dyn.vol) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene: out of memory");
+        for (t = 0; t < m->ntet; t++) {
+            double X[12], G[12];
+            amps_mesh_tet_coords(m, t, X);
+            S->dyn.vol[t] = fabs(amps_tet_gradients(X, G));
+        }
+    }
+    for (v = 0; v < m->nnode; v++) S->node.mass[v] = amps__mesh_node_mass(m, S->dyn.vol, v);
+    return AMPS_OK;
+}
+
+/* node.mass[v] after a change of the tets of v (cut, removal, density); before the first
+   factorization nothing (amps__scene_masses computes them all). */
+static void amps__scene_mass_node(amps_scene *S, amps_int v) {
+    if (S->dyn.vol && v >= 0 && v < S->node.cap)
+        S->node.mass[v] = v < S->m->nnode ? amps__mesh_node_mass(S->m, S->dyn.vol, v) : 0.0;
+}
+
 /* K (upper triangle over node.dof) becomes cK K + cM M, M the lumped mass: the system of
    amps__scene_tet_matrix summed. */
 static void amps__scene_mass_diag(amps_scene *S, amps_csc *K) {
@@ -10946,7 +12014,7 @@ static void amps__scene_mass_diag(amps_scene *S, amps_csc *K) {
     for (v = 0; v < S->m->nnode; v++)
         for (d = 0; d < 3; d++)
             if ((j = S->node.dof[3 * v + d]) >= 0 && K->p[j + 1] > K->p[j] && K->i[K->p[j + 1] - 1] == j)
-                K->x[K->p[j + 1] - 1] += S->dyn.cM * amps__scene_node_mass(S->m, v);
+                K->x[K->p[j + 1] - 1] += S->dyn.cM * S->node.mass[v];
 }
 
 /* K = the stiffness matrix of the free DOFs (node.dof numbered), its factor F (ordered with the
@@ -10956,6 +12024,7 @@ static amps_status amps__scene_factor(amps_ctx *ctx, amps_scene *S, amps_int n) 
     double *coords;
     amps_order_opts ord;
     amps_update_opts uo = S->opts.update;
+    if (amps__scene_masses(ctx, S) != AMPS_OK) return AMPS_ERR_OOM;
     S->K = amps_mesh_assemble(ctx, S->m, S->node.dof, n);
     if (!S->K) return AMPS_ERR_OOM;
     if (S->dyn.on) amps__scene_mass_diag(S, S->K);
@@ -11478,6 +12547,7 @@ static amps_status amps__scene_cut_update(amps_ctx *ctx, amps_scene *S, amps_int
     if (!S->node.fixed[v] && S->node.dof[3 * v] >= 0) {
         if ((s = amps_update_add_dofs(ctx, S->U, 3, &first)) != AMPS_OK) goto undo_engine;
         for (k = 0; k < 3; k++) S->node.dof[3 * vc + k] = first + k;
+        (void)amps_update_set_origin(ctx, S->U, 3, S->node.dof + 3 * vc, S->node.dof + 3 * v); /* ordering hint */
     }
     nl = amps__cut_local_dofs(S, v, vc, nmoved);
     amps__cut_local_K(S, v, vc, nmoved, nl);
@@ -11544,13 +12614,37 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
 
 static void amps__scene_gather(amps_scene *S, amps_int nv, const amps_int *nodes);
 
-AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S) {
+/* The preamble of the static solves (fn names the caller in messages): S is static, prepared
+   (amps_scene_prepare on the first call) and its open batch committed; with watch, the engine's
+   watch set follows a stale scene watch set (the equations of the watched nodes; allocates 3 nv
+   indices for the call). */
+static amps_status amps__scene_ready(amps_ctx *ctx, amps_scene *S, const char *fn, int watch) {
     amps_status s;
-    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve: NULL scene");
-    if (S->dyn.on)
-        return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_solve: the scene is dynamic (use amps_scene_step)");
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL scene", fn);
+    if (S->dyn.on) return amps__err(ctx, AMPS_ERR_STATE, "%s: the scene is dynamic (use amps_scene_step)", fn);
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
+    if (watch && S->watch.stale) {
+        amps_int k, d, m = 0,
+                       *idx = AMPS__CAST(amps_int *, amps__malloc(ctx, 3 * (size_t)(S->watch.n > 0 ? S->watch.n : 1),
+                                                                  sizeof(amps_int)));
+        if (!idx) return amps__err(ctx, AMPS_ERR_OOM, "%s: out of memory", fn);
+        for (k = 0; k < S->watch.n; k++)
+            for (d = 0; d < 3; d++) {
+                amps_int e = S->node.dof[3 * S->watch.nodes[k] + d];
+                if (e >= 0) idx[m++] = e;
+            }
+        s = amps_update_watch(ctx, S->U, m, idx);
+        amps__free(ctx, idx);
+        if (s != AMPS_OK) return s;
+        S->watch.stale = 0;
+    }
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S) {
+    amps_status s;
+    if ((s = amps__scene_ready(ctx, S, "amps_scene_solve", 0)) != AMPS_OK) return s;
     if ((s = amps_update_solve(ctx, S->U, NULL)) < 0) return s;
     amps__scene_gather(S, 0, NULL);
     return s; /* AMPS_WARN_INACCURATE: solved all the same */
@@ -11592,27 +12686,7 @@ static void amps__scene_gather(amps_scene *S, amps_int nv, const amps_int *nodes
 
 AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
-    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_watched: NULL scene");
-    if (S->dyn.on)
-        return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_solve_watched: the scene is dynamic (use amps_scene_step)");
-    if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
-    if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
-    if (S->watch.stale) {
-        /* the engine watches the equations of the watched nodes */
-        amps_int k, d, m = 0,
-                       *idx = AMPS__CAST(amps_int *, amps__malloc(ctx, 3 * (size_t)(S->watch.n > 0 ? S->watch.n : 1),
-                                                                  sizeof(amps_int)));
-        if (!idx) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_solve_watched: out of memory");
-        for (k = 0; k < S->watch.n; k++)
-            for (d = 0; d < 3; d++) {
-                amps_int e = S->node.dof[3 * S->watch.nodes[k] + d];
-                if (e >= 0) idx[m++] = e;
-            }
-        s = amps_update_watch(ctx, S->U, m, idx);
-        amps__free(ctx, idx);
-        if (s != AMPS_OK) return s;
-        S->watch.stale = 0;
-    }
+    if ((s = amps__scene_ready(ctx, S, "amps_scene_solve_watched", 1)) != AMPS_OK) return s;
     if ((s = amps_update_solve_watched(ctx, S->U, NULL)) < 0) return s;
     amps__scene_gather(S, S->watch.n, S->watch.nodes);
     return s;
@@ -11621,6 +12695,9 @@ AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S) {
 AMPS_API amps_status amps_scene_solve_reactions(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_reactions: NULL scene");
+    if (S->dyn.corot)
+        return amps__err(ctx, AMPS_ERR_STATE,
+                         "amps_scene_solve_reactions: corotational: the reactions come with each step");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
     if (S->dyn.on && (s = amps__scene_dyn_load(ctx, S)) != AMPS_OK) return s;
@@ -11650,19 +12727,237 @@ AMPS_API amps_status amps_scene_reaction(amps_ctx *ctx, const amps_scene *S, amp
         return amps__err(ctx, AMPS_ERR_INDEX, "amps_scene_reaction: node %ld out of range", (long)v);
     for (k = 0; k < 3; k++)
         r[k] = (S->U && S->node.pinned[v]) ? amps_update_reaction(S->U, S->node.dof[3 * v + k]) : 0.0;
+    if (S->dyn.corot) {
+        for (k = 0; k < 3; k++) r[k] = S->node.pinned[v] && v < S->dyn.cr_cap ? S->dyn.cr_react[3 * v + k] : 0.0;
+        return AMPS_OK;
+    }
     if (S->dyn.on)
         for (k = 0; k < 3; k++) r[k] /= S->dyn.dt; /* (A w+ - b)_P / dt */
     return AMPS_OK;
 }
 
+AMPS_API void amps_haptic_init(amps_haptic *h) {
+    if (h) memset(h, 0, sizeof(*h));
+}
+
+AMPS_API void amps_haptic_free(amps_ctx *ctx, amps_haptic *h) {
+    if (!h) return;
+    amps__free(ctx, h->node);
+    amps__free(ctx, h->eq);
+    amps__free(ctx, h->g0);
+    amps__free(ctx, h->r0);
+    amps__free(ctx, h->H);
+    amps_haptic_init(h);
+}
+
+/* H[:, j] = d react_P / d g_j for the engine's committed dense system (m pinned indices idx,
+   -1: none), column major with leading dimension m: per column the dense step with r = 0 and
+   g = e_j on C, then the reactions (Delta y)_P - w_P (amps__small_reactions). Primal form: the
+   columns in blocks that share each pass over the LU factor (b_j = -e_j - G Delta[:, j],
+   z_j = A^{-1} b_j, y_j = (z_j on F', e_j on C), w_j = z_j on C), the blocks in work.resid. */
+static void amps__pin_schur(amps_update *U, amps_int m, const amps_int *idx, double *H) {
+    amps_int u = U->aug.size, a, b, i, j, k, q, rr, j0, nbmax;
+    size_t ld = (size_t)U->aug.cap, su = (size_t)u;
+    for (k = 0; k < m * m; k++) H[k] = 0.0;
+    if (U->form == AMPS_FORM_PRIMAL && u > 0) {
+        double *Z = U->work.resid, *T;
+        nbmax = U->cap_N / u < 16 ? U->cap_N / u : 16; /* 2 u nb <= 2 cap_N */
+        T = Z + su * (size_t)nbmax;
+        for (j0 = 0; j0 < m; j0 += nbmax) {
+            amps_int nb = m - j0 < nbmax ? m - j0 : nbmax, pj[16];
+            for (k = 0; k < nb; k++) {
+                amps_int p = idx[j0 + k] >= 0 ? U->aug.pos[idx[j0 + k]] : -1;
+                pj[k] = p >= 0 && (U->aug.kind[p] & AMPS__UCON) ? p : -1;
+                for (a = 0; a < u; a++) Z[(size_t)k * su + (size_t)a] = 0.0;
+                if (pj[k] >= 0) Z[(size_t)k * su + (size_t)pj[k]] = -1.0;
+            }
+            for (a = 0; a < u; a++) /* b -= G[:, a] Delta[a, p_j] over the free rows a */
+                if (!(U->aug.kind[a] & AMPS__UCON))
+                    for (i = 0; i < U->delta.row_len[a]; i++) {
+                        amps_int c = U->delta.col[U->delta.row_start[a] + i];
+                        double dv = U->delta.val[U->delta.row_start[a] + i];
+                        if (!(U->aug.kind[c] & AMPS__UCON) || dv == 0.0) continue;
+                        for (k = 0; k < nb; k++)
+                            if (pj[k] == c) {
+                                const double *ga = U->lu.G + (size_t)a * ld;
+                                double *zk = Z + (size_t)k * su;
+                                for (b = 0; b < u; b++) zk[b] -= ga[b] * dv;
+                            }
+                    }
+            for (k = 0; k < nb; k++) /* t = P b */
+                for (rr = 0; rr < u; rr++)
+                    T[(size_t)k * su + (size_t)rr] = Z[(size_t)k * su + (size_t)U->lu.row_perm[rr]];
+            for (q = 0; q < u; q++) { /* L */
+                const double *l = U->lu.LU + (size_t)q * ld;
+                for (k = 0; k < nb; k++) {
+                    double *t = T + (size_t)k * su, x = t[q];
+                    if (x != 0.0)
+                        for (rr = q + 1; rr < u; rr++) t[rr] -= l[rr] * x;
+                }
+            }
+            for (q = u - 1; q >= 0; q--) { /* U */
+                const double *col = U->lu.LU + (size_t)q * ld;
+                for (k = 0; k < nb; k++) {
+                    double *t = T + (size_t)k * su, x = t[q] / col[q];
+                    t[q] = x;
+                    if (x != 0.0)
+                        for (rr = 0; rr < q; rr++) t[rr] -= col[rr] * x;
+                }
+            }
+            for (k = 0; k < nb; k++) {
+                double *zk = Z + (size_t)k * su;
+                if (pj[k] < 0) continue;
+                for (q = 0; q < u; q++) zk[U->lu.col_order[q]] = T[(size_t)k * su + (size_t)q];
+                for (i = 0; i < m; i++) {
+                    amps_int pi = idx[i] >= 0 ? U->aug.pos[idx[i]] : -1;
+                    double sum = 0;
+                    if (pi < 0 || !(U->aug.kind[pi] & AMPS__UCON)) continue;
+                    for (a = 0; a < U->delta.row_len[pi]; a++) {
+                        amps_int c = U->delta.col[U->delta.row_start[pi] + a];
+                        double yc = (U->aug.kind[c] & AMPS__UCON) ? (c == pj[k] ? 1.0 : 0.0) : zk[c];
+                        sum += U->delta.val[U->delta.row_start[pi] + a] * yc;
+                    }
+                    H[(size_t)(j0 + k) * (size_t)m + (size_t)i] = sum - zk[pi];
+                }
+            }
+        }
+        return;
+    }
+    {
+        double *r = U->dense.r_corr, *gv = U->dense.rho, *yv = U->dense.y_corr, *wv = U->dense.w_corr;
+        for (a = 0; a < u; a++) r[a] = gv[a] = 0.0;
+        for (j = 0; j < m; j++) {
+            amps_int pj = idx[j] >= 0 ? U->aug.pos[idx[j]] : -1;
+            if (pj < 0 || !(U->aug.kind[pj] & AMPS__UCON)) continue;
+            gv[pj] = 1.0;
+            amps__dense_step_g(U, r, gv, yv, wv);
+            gv[pj] = 0.0;
+            if (U->form == AMPS_FORM_DUAL)
+                for (a = 0; a < u; a++) {
+                    double sum = 0;
+                    if (U->aug.kind[a] & AMPS__UCON) continue;
+                    for (b = 0; b < u; b++) sum -= U->lu.G[(size_t)b * ld + (size_t)a] * wv[b];
+                    yv[a] = sum;
+                }
+            for (i = 0; i < m; i++) {
+                amps_int pi = idx[i] >= 0 ? U->aug.pos[idx[i]] : -1;
+                double sum = 0;
+                if (pi < 0 || !(U->aug.kind[pi] & AMPS__UCON)) continue;
+                for (k = 0; k < U->delta.row_len[pi]; k++)
+                    sum += U->delta.val[U->delta.row_start[pi] + k] * yv[U->delta.col[U->delta.row_start[pi] + k]];
+                H[(size_t)j * (size_t)m + (size_t)i] = sum - wv[pi];
+            }
+        }
+    }
+}
+
+AMPS_API amps_status amps_scene_haptic_build(amps_ctx *ctx, amps_scene *S, amps_haptic *h) {
+    amps_int nn, v, n = 0, k, m, *idx;
+    amps_status s;
+    double sc;
+    if (!S || !h) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_haptic_build: NULL argument");
+    if (S->dyn.corot)
+        return amps__err(ctx, AMPS_ERR_STATE,
+                         "amps_scene_haptic_build: corotational: the reactions come with each step");
+    if (S->batch.committing)
+        return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_haptic_build: a two-phase commit is in progress");
+    if ((s = amps_scene_solve_reactions(ctx, S)) < 0) return s;
+    nn = S->m->nnode;
+    for (v = 0; v < nn; v++) n += S->node.pinned[v] != 0;
+    if (n > h->cap) {
+        size_t c = (size_t)n;
+        amps_int *nd = AMPS__CAST(amps_int *, amps__malloc(ctx, c, sizeof(amps_int)));
+        amps_int *eq = AMPS__CAST(amps_int *, amps__malloc(ctx, 3 * c, sizeof(amps_int)));
+        double *g0 = AMPS__CAST(double *, amps__malloc(ctx, 3 * c, sizeof(double)));
+        double *r0 = AMPS__CAST(double *, amps__malloc(ctx, 3 * c, sizeof(double)));
+        double *H = AMPS__CAST(double *, amps__malloc(ctx, 9 * c * c, sizeof(double)));
+        if (!nd || !eq || !g0 || !r0 || !H) {
+            amps__free(ctx, nd);
+            amps__free(ctx, eq);
+            amps__free(ctx, g0);
+            amps__free(ctx, r0);
+            amps__free(ctx, H);
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_haptic_build: out of memory for %ld pins", (long)n);
+        }
+        {
+            long serial = h->serial;
+            amps_haptic_free(ctx, h);
+            h->serial = serial;
+        }
+        h->node = nd;
+        h->eq = eq;
+        h->g0 = g0;
+        h->r0 = r0;
+        h->H = H;
+        h->cap = n;
+    }
+    m = 3 * n;
+    idx = h->eq;
+    for (n = 0, v = 0; v < nn; v++) {
+        int d;
+        if (!S->node.pinned[v]) continue;
+        h->node[n] = v;
+        amps_scene_reaction(ctx, S, v, h->r0 + 3 * n);
+        for (d = 0; d < 3; d++) {
+            int orphan = S->dyn.orphan && v < S->dyn.cap && S->dyn.orphan[v];
+            h->g0[3 * n + d] = S->node.pin_value[3 * v + d];
+            idx[3 * n + d] = orphan ? -1 : S->node.dof[3 * v + d]; /* orphans: held, not by the pin */
+        }
+        n++;
+    }
+    h->n = n;
+    h->serial++;
+    if (n == 0) return amps__err(ctx, AMPS_WARN_NOOP, "amps_scene_haptic_build: no pinned node");
+    amps__pin_schur(S->U, m, idx, h->H);
+    sc = S->dyn.on ? 1.0 / (S->dyn.dt * S->dyn.dt) : 1.0;
+    if (sc != 1.0)
+        for (k = 0; k < m * m; k++) h->H[k] *= sc;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_haptic_eval(const amps_haptic *h, const double *g, double *r) {
+    amps_int m, i, j;
+    if (!h || !r || (h->n > 0 && (!h->r0 || !h->H))) return AMPS_ERR_ARG;
+    m = 3 * h->n;
+    for (i = 0; i < m; i++) r[i] = h->r0[i];
+    if (!g) return AMPS_OK;
+    for (j = 0; j < m; j++) {
+        double dg = g[j] - h->g0[j];
+        const double *hj = h->H + (size_t)j * (size_t)m;
+        if (dg != 0.0)
+            for (i = 0; i < m; i++) r[i] += hj[i] * dg;
+    }
+    return AMPS_OK;
+}
+
+AMPS_API amps_int amps_haptic_find(const amps_haptic *h, amps_int v) {
+    amps_int lo = 0, hi;
+    if (!h || !h->node) return -1;
+    hi = h->n - 1;
+    while (lo <= hi) {
+        amps_int mid = lo + (hi - lo) / 2;
+        if (h->node[mid] == v) return mid;
+        if (h->node[mid] < v) lo = mid + 1;
+        else hi = mid - 1;
+    }
+    return -1;
+}
+
 AMPS_API amps_status amps_scene_residual(amps_ctx *ctx, amps_scene *S, double *relres) {
     if (!S || !S->U) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_residual: nothing solved yet");
+    if (S->dyn.corot && relres) { /* the last corotational step's PCG */
+        *relres = S->dyn.info.relres;
+        return AMPS_OK;
+    }
     return amps_update_residual(ctx, S->U, relres);
 }
 
+static amps_status amps__scene_corot_stress(amps_ctx *ctx, const amps_scene *S, double *sigma, double *von_mises,
+                                            double *principal);
 AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, double *sigma, double *von_mises,
                                        double *principal) {
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_stress: NULL scene");
+    if (S->dyn.corot) return amps__scene_corot_stress(ctx, S, sigma, von_mises, principal);
     return amps_mesh_stress(ctx, S->m, S->node.disp, sigma, von_mises, principal);
 }
 
@@ -12204,6 +13499,8 @@ static void amps__scene_batch_undo(amps_scene *S) {
             S->node.fixed[op->vc] = 0;
             S->node.pinned[op->vc] = 0;
             (void)amps_mesh_uncut(&c2, S->m, op->v, op->vc, B->moved + op->moved_at, op->nmoved);
+            amps__scene_mass_node(S, op->v);
+            amps__scene_mass_node(S, op->vc);
         }
     }
     B->open = 0;
@@ -12435,7 +13732,7 @@ done:
 
 /* Gravity load of DOF d of node v: m_v g_d (0 without gravity). */
 static double amps__scene_body_force(const amps_scene *S, amps_int v, int d) {
-    return S->dyn.g[d] == 0.0 ? 0.0 : S->dyn.g[d] * amps__scene_node_mass(S->m, v);
+    return S->dyn.g[d] == 0.0 ? 0.0 : S->dyn.g[d] * S->node.mass[v];
 }
 
 /* Room for nnode nodes in the dynamics arrays (new velocities zero, not orphans). */
@@ -12444,7 +13741,6 @@ static amps_status amps__scene_dyn_room(amps_ctx *ctx, amps_scene *S, amps_int n
     size_t c = (size_t)cap;
     if (nnode <= S->dyn.cap) return AMPS_OK;
     if (amps__realloc(ctx, (void **)&S->dyn.vel, 3 * c, sizeof(double)) ||
-        amps__realloc(ctx, (void **)&S->dyn.mass, c, sizeof(double)) ||
         amps__realloc(ctx, (void **)&S->dyn.ku, 3 * c, sizeof(double)) ||
         amps__realloc(ctx, (void **)&S->dyn.idx, 3 * c, sizeof(amps_int)) ||
         amps__realloc(ctx, (void **)&S->dyn.val, 3 * c, sizeof(double)) ||
@@ -12458,11 +13754,13 @@ static amps_status amps__scene_dyn_room(amps_ctx *ctx, amps_scene *S, amps_int n
     return AMPS_OK;
 }
 
-/* Engine forces of node v: its force plus its gravity load (statics; dynamics loads each step). */
+/* The mass of node v (its tets changed) and its engine forces: its force plus its gravity load
+   (statics; dynamics loads each step). */
 static amps_status amps__scene_refresh_force(amps_ctx *ctx, amps_scene *S, amps_int v) {
     amps_int idx[3], m = 0;
     double val[3];
     int d;
+    amps__scene_mass_node(S, v);
     if (!S->prepared || S->dyn.on) return AMPS_OK;
     for (d = 0; d < 3; d++)
         if (S->node.dof[3 * v + d] >= 0) {
@@ -12472,10 +13770,12 @@ static amps_status amps__scene_refresh_force(amps_ctx *ctx, amps_scene *S, amps_
     return amps_update_set_force(ctx, S->U, m, idx, val);
 }
 
-/* After the cut of v into v and vc: vc moves with v's velocity; the gravity loads of both follow
-   their masses. */
+/* After the cut of v into v and vc: vc moves with v's velocity; the masses of both and their
+   gravity loads follow their tets. */
 static void amps__scene_dyn_cut(amps_ctx *ctx, amps_scene *S, amps_int v, amps_int vc) {
     int d;
+    amps__scene_mass_node(S, v);
+    amps__scene_mass_node(S, vc);
     if (vc < 0 || vc >= S->dyn.cap) return;
     for (d = 0; d < 3; d++) S->dyn.vel[3 * vc + d] = S->dyn.vel[3 * v + d];
     S->dyn.orphan[vc] = 0;
@@ -12485,36 +13785,23 @@ static void amps__scene_dyn_cut(amps_ctx *ctx, amps_scene *S, amps_int v, amps_i
     }
 }
 
-/* Lumped masses of the nodes (dyn.mass) from the cached tet volumes, and K u on every DOF
-   (dyn.ku) as (A u - cM M u) / cK with one product by the engine's committed matrix A. */
+/* K u on every DOF (dyn.ku) as (A u - cM M u) / cK with one product by the engine's committed
+   matrix A. */
 static amps_status amps__scene_dyn_ku(amps_ctx *ctx, amps_scene *S) {
     const amps_mesh *m = S->m;
-    amps_int nn = m->nnode, v, t, e, N;
-    int a, d;
+    amps_int nn = m->nnode, v, e, N;
+    int d;
     if (S->U->pending.n_delta || S->U->pending.n_dofs) {
         amps_status s = amps_update_commit(ctx, S->U);
         if (s != AMPS_OK) return s;
     }
     N = amps_update_dim(S->U);
-    if (!S->dyn.vol) {
-        S->dyn.vol = AMPS__CAST(double *, amps__malloc(ctx, (size_t)m->ntet + 1, sizeof(double)));
-        if (!S->dyn.vol) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory");
-        for (t = 0; t < m->ntet; t++) {
-            double X[12], G[12];
-            amps_mesh_tet_coords(m, t, X);
-            S->dyn.vol[t] = fabs(amps_tet_gradients(X, G));
-        }
-    }
     if (N > S->dyn.ncap) {
         if (amps__realloc(ctx, (void **)&S->dyn.xe, (size_t)N, sizeof(double)) ||
             amps__realloc(ctx, (void **)&S->dyn.ye, (size_t)N, sizeof(double)))
             return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory");
         S->dyn.ncap = N;
     }
-    for (v = 0; v < nn; v++) S->dyn.mass[v] = 0.0;
-    for (t = 0; t < m->ntet; t++)
-        if (!(m->removed && m->removed[t]))
-            for (a = 0; a < 4; a++) S->dyn.mass[m->tet[4 * t + a]] += (m->rho ? m->rho[t] : 1.0) * S->dyn.vol[t] / 4;
     for (e = 0; e < N; e++) S->dyn.xe[e] = 0.0;
     for (v = 0; v < 3 * nn; v++)
         if ((e = S->node.dof[v]) >= 0) S->dyn.xe[e] = S->node.disp[v];
@@ -12523,14 +13810,14 @@ static amps_status amps__scene_dyn_ku(amps_ctx *ctx, amps_scene *S) {
         for (d = 0; d < 3; d++) {
             e = S->node.dof[3 * v + d];
             S->dyn.ku[3 * v + d] =
-                    e >= 0 ? (S->dyn.ye[e] - S->dyn.cM * S->dyn.mass[v] * S->node.disp[3 * v + d]) / S->dyn.cK : 0.0;
+                    e >= 0 ? (S->dyn.ye[e] - S->dyn.cM * S->node.mass[v] * S->node.disp[3 * v + d]) / S->dyn.cK : 0.0;
         }
     return AMPS_OK;
 }
 
 /* The right-hand side and pins of the next step (paper 003 Eq. 27): b = M w + dt (f + M g - K u)
    on every equation, w_P = (g_P - u_P) / dt at the pins (orphans stay at w = 0). Cost: one
-   product with the engine's matrix and O(ntet) for the masses (amps__scene_dyn_ku). */
+   product with the engine's matrix (amps__scene_dyn_ku). */
 static amps_status amps__scene_dyn_load(amps_ctx *ctx, amps_scene *S) {
     amps_int nn = S->m->nnode, v, n = 0;
     double dt = S->dyn.dt, *u = S->node.disp, *ku, *mass;
@@ -12538,7 +13825,7 @@ static amps_status amps__scene_dyn_load(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if ((s = amps__scene_dyn_room(ctx, S, nn)) != AMPS_OK || (s = amps__scene_dyn_ku(ctx, S)) != AMPS_OK) return s;
     ku = S->dyn.ku;
-    mass = S->dyn.mass;
+    mass = S->node.mass;
     for (v = 0; v < nn; v++)
         for (d = 0; d < 3; d++)
             if (S->node.dof[3 * v + d] >= 0) {
@@ -12679,6 +13966,16 @@ AMPS_API amps_status amps_scene_dynamics(amps_ctx *ctx, amps_scene *S, double dt
     return amps_scene_prepare(ctx, S);
 }
 
+/* Makes *p (workspace of the removal, *cap entries) hold n entries of size bytes: grows by half
+   on demand and keeps its contents. */
+static amps_status amps__scene_rm_ws(amps_ctx *ctx, void **p, size_t *cap, size_t n, size_t size) {
+    size_t c = n + n / 2 + 16;
+    if (*p && n <= *cap) return AMPS_OK;
+    if (amps__realloc(ctx, p, c, size)) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_remove: out of memory");
+    *cap = c;
+    return AMPS_OK;
+}
+
 /* The tets of a removal: statics requires every node-connected piece around them to keep a fixed
    or pinned node (AMPS_ERR_SINGULAR_UPDATE naming the first loose piece). Cost: the tets of the
    pieces explored (a piece stops at its first held node). */
@@ -12686,10 +13983,12 @@ static amps_status amps__scene_removal_held(amps_ctx *ctx, amps_scene *S, const 
     const amps_mesh *m = S->m;
     amps_int nn = m->nnode, k, q, head, tail, *queue;
     unsigned char *seen;
-    amps_status s = AMPS_OK;
-    seen = AMPS__CAST(unsigned char *, amps__calloc(ctx, (size_t)nn + 1, 1));
-    queue = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nn + 1, sizeof(amps_int)));
-    if (!seen || !queue) s = amps__err(ctx, AMPS_ERR_OOM, "amps_scene_remove: out of memory");
+    amps_status s = amps__scene_rm_ws(ctx, (void **)&S->dyn.rm_seen, &S->dyn.rm_seen_cap, (size_t)nn + 1, 1);
+    if (!s) s = amps__scene_rm_ws(ctx, (void **)&S->dyn.rm_queue, &S->dyn.rm_queue_cap, (size_t)nn + 1, sizeof(amps_int));
+    if (s) return s;
+    seen = S->dyn.rm_seen;
+    queue = S->dyn.rm_queue;
+    memset(seen, 0, (size_t)nn + 1);
     for (k = 0; !s && k < 4 * r->ntet; k++) {
         amps_int seed = m->tet[4 * r->tets[k / 4] + k % 4], ntet = 0;
         int held = 0;
@@ -12716,8 +14015,6 @@ static amps_status amps__scene_removal_held(amps_ctx *ctx, amps_scene *S, const 
                           "the removal was undone",
                           (long)(ntet / 4 > 0 ? ntet / 4 : 1), (long)seed);
     }
-    amps__free(ctx, seen);
-    amps__free(ctx, queue);
     return s;
 }
 
@@ -12806,9 +14103,13 @@ static amps_status amps__scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, 
     if (!s) s = amps__scene_dyn_room(ctx, S, S->m->nnode);
     if (!s) {
         amps__scene_removal_copies(S, out);
-        flagged = AMPS__CAST(amps_int *, amps__malloc(ctx, 4 * (size_t)out->ntet + 1, sizeof(amps_int)));
-        rename = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)S->m->nnode + 1, sizeof(amps_int)));
-        if (!flagged || !rename) s = amps__err(ctx, AMPS_ERR_OOM, "amps_scene_remove: out of memory");
+        s = amps__scene_rm_ws(ctx, (void **)&S->dyn.rm_flag, &S->dyn.rm_flag_cap, 4 * (size_t)out->ntet + 1,
+                              sizeof(amps_int));
+        if (!s)
+            s = amps__scene_rm_ws(ctx, (void **)&S->dyn.rm_rename, &S->dyn.rm_rename_cap, (size_t)S->m->nnode + 1,
+                                  sizeof(amps_int));
+        flagged = S->dyn.rm_flag;
+        rename = S->dyn.rm_rename;
     }
     for (k = 0; !s && !S->prepared && k < 4 * out->ntet; k++) /* before the factorization: topology only */
         if (S->m->inc_len[S->m->tet[4 * out->tets[k / 4] + k % 4]] == 0)
@@ -12826,12 +14127,14 @@ static amps_status amps__scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, 
         for (k = 3 * nn0; k < 3 * S->m->nnode && k < 3 * S->node.cap; k++) S->node.dof[k] = -1;
         amps_ctx_init(&c2);
         (void)amps_mesh_unremove(&c2, S->m, out);
+        /* the gravity loads of the restored masses: a discard keeps the engine's forces */
+        for (k = 0; S->prepared && k < 4 * out->ntet; k++)
+            (void)amps__scene_refresh_force(&c2, S, S->m->tet[4 * out->tets[k / 4] + k % 4]);
+        for (k = 0; S->prepared && k < out->nsep; k++) (void)amps__scene_refresh_force(&c2, S, out->sep_node[k]);
     } else { /* rendering data: the separations' copies, then the faces around the removed tets */
         for (k = 0; k < out->nsep; k++) amps__scene_cut_recorded(ctx, S, out->sep_node[k], out->sep_copy[k]);
         amps__scene_faces_changed(ctx, S, out->tets, out->ntet);
     }
-    amps__free(ctx, flagged);
-    amps__free(ctx, rename);
     return s;
 }
 
@@ -12842,17 +14145,30 @@ AMPS_API amps_status amps_scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n,
     return amps__scene_remove(ctx, S, n, tets, policy, report ? report : &r);
 }
 
+static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S);
+static void amps__cr_pass(amps_scene *S, int mode, const double *v, double *y);
+static void amps__cr_sigma(const amps_scene *S, amps_int t, const double *G, const double *Rt, double sigma[6]);
+
 /* Tets whose largest principal stress magnitude exceeds sigma_max are removed (default policy). */
 static amps_status amps__scene_fracture_step(amps_ctx *ctx, amps_scene *S) {
     const amps_mesh *m = S->m;
     amps_int t, n = 0, *list;
     amps_mesh_removal r;
     amps_status s = AMPS_OK;
+    int any = S->dyn.sigma_max > 0;
     S->dyn.nfractured = 0;
-    list = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m->ntet, sizeof(amps_int)));
-    if (!list) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory");
+    for (t = 0; t < S->dyn.nfreg && !any; t++) any = S->dyn.freg_sigma[t] > 0;
+    if (!any) return AMPS_OK; /* no threshold anywhere: no stress pass */
+    if ((s = amps__scene_rm_ws(ctx, (void **)&S->dyn.rm_list, &S->dyn.rm_list_cap, (size_t)m->ntet,
+                               sizeof(amps_int))) != AMPS_OK)
+        return s;
+    list = S->dyn.rm_list;
+    if (S->dyn.corot && S->dyn.cr_G) { /* the rotations of the new state (kept for the next step) */
+        amps__cr_pass(S, 2, NULL, NULL);
+        S->dyn.cr_rvalid = 1;
+    }
     for (t = 0; t < m->ntet; t++) {
-        double X[12], u[12], sg[6], pr[3], mx, smax = S->dyn.sigma_max;
+        double X[12], u[12], sg[6], pr[3], mx, fr, smax = S->dyn.sigma_max;
         amps_int k;
         int a;
         if (m->removed && m->removed[t]) continue;
@@ -12861,15 +14177,22 @@ static amps_status amps__scene_fracture_step(amps_ctx *ctx, amps_scene *S) {
         if (smax <= 0) continue;
         amps_mesh_tet_coords(m, t, X);
         for (a = 0; a < 12; a++) u[a] = S->node.disp[3 * m->tet[4 * t + a / 3] + a % 3];
-        amps_tet_stress(X, m->E[t], m->nu[t], u, sg, NULL, pr);
-        mx = fabs(pr[0]) > fabs(pr[2]) ? fabs(pr[0]) : fabs(pr[2]);
-        if (mx > smax) list[n++] = t;
+        if (S->dyn.corot && S->dyn.cr_G) amps__cr_sigma(S, t, S->dyn.cr_G + 12 * t, S->dyn.cr_R + 9 * t, sg);
+        else amps_tet_stress(X, m->E[t], m->nu[t], u, sg, NULL, NULL);
+        /* max |sigma_i| lies in [|sigma|_F / sqrt 3, |sigma|_F]: the eigenvalues only in between */
+        fr = sg[0] * sg[0] + sg[1] * sg[1] + sg[2] * sg[2] + 2 * (sg[3] * sg[3] + sg[4] * sg[4] + sg[5] * sg[5]);
+        if (!(fr > smax * smax)) continue;
+        if (!(fr > 3 * smax * smax)) {
+            amps_sym3_eig(sg, pr);
+            mx = fabs(pr[0]) > fabs(pr[2]) ? fabs(pr[0]) : fabs(pr[2]);
+            if (!(mx > smax)) continue;
+        }
+        list[n++] = t;
     }
     if (n > 0 && (s = amps__scene_remove(ctx, S, n, list, AMPS_SINGULAR_REMOVE, &r)) == AMPS_OK) {
         S->dyn.nfractured = r.ntet;
         S->dyn.nfractured_total += r.ntet;
     }
-    amps__free(ctx, list);
     return s;
 }
 
@@ -12883,6 +14206,11 @@ AMPS_API amps_status amps_scene_step(amps_ctx *ctx, amps_scene *S, amps_int nste
     for (k = 0; k < nsteps; k++) {
         const double *x;
         int d;
+        if (S->dyn.corot) {
+            if ((s = amps__scene_corot_step(ctx, S)) < 0) return s;
+            if (s > 0) w = s;
+            goto stepped;
+        }
         if ((s = amps__scene_dyn_load(ctx, S)) != AMPS_OK) return s;
         if ((s = amps_update_solve(ctx, S->U, NULL)) < 0) return s;
         if (s > 0) w = s;
@@ -12894,6 +14222,10 @@ AMPS_API amps_status amps_scene_step(amps_ctx *ctx, amps_scene *S, amps_int nste
                 S->dyn.vel[3 * v + d] = wv;
                 S->node.disp[3 * v + d] += S->dyn.dt * wv;
             }
+        S->dyn.info.corotational = 0;
+        S->dyn.info.iterations = 0;
+        S->dyn.info.relres = -1;
+    stepped:
         S->dyn.nstep++;
         S->dyn.nfractured = 0;
         if ((S->dyn.sigma_max > 0 || S->dyn.nfreg > 0) && (s = amps__scene_fracture_step(ctx, S)) != AMPS_OK) return s;
@@ -12971,6 +14303,7 @@ static amps_status amps__scene_retet(amps_ctx *ctx, amps_scene *S, amps_int n, c
             m->nu[tets[k]] = old[3 * k + 1];
             if (rho > 0) m->rho[tets[k]] = old[3 * k + 2];
         }
+    for (k = 0; k < 4 * n && s && rho > 0; k++) amps__scene_mass_node(S, m->tet[4 * tets[k / 4] + k % 4]);
     amps__free(ctx, old);
     return s;
 }
@@ -13018,6 +14351,397 @@ static amps_status amps__scene_set_material_all(amps_ctx *ctx, amps_scene *S, do
     s = amps__scene_retet(ctx, S, n, list, E, nu, 0.0, "amps_scene_set_material");
     amps__free(ctx, list);
     return s;
+}
+
+/* ---- corotational dynamics ---- */
+
+/* Tests may define AMPS_TEST_COROT_IDENTITY (an int expression) to make every R_e = I. */
+#ifndef AMPS_TEST_COROT_IDENTITY
+#define AMPS_TEST_COROT_IDENTITY 0
+#endif
+
+/* A pass of the corotational step: mode 0 rotations R_e, Lame constants and elastic forces
+   g_e = R K0 (R^T x - X) per tet into cr_ye, then per node g and the lumped mass; mode 1
+   y = A_R v (equations); mode 2 the rotations only. */
+typedef struct amps__crjob {
+    const amps_scene *S;
+    const double *v;
+    double *y;
+    int mode;
+} amps__crjob;
+
+/* F = I + sum_a u_a G_a^T of tet t from the displacements u (3 per node). */
+static void amps__cr_deform(const amps_scene *S, amps_int t, const double *G, double F[9]) {
+    const amps_int *tv = S->m->tet + 4 * t;
+    int a, i, j;
+    for (i = 0; i < 9; i++) F[i] = (i % 4 == 0) ? 1.0 : 0.0;
+    for (a = 0; a < 4; a++) {
+        const double *u = S->node.disp + 3 * tv[a];
+        for (i = 0; i < 3; i++)
+            for (j = 0; j < 3; j++) F[3 * i + j] += u[i] * G[3 * a + j];
+    }
+}
+
+/* Per tet t in [b, e): H (the displacement gradient in the rotated frame: R^T F - I in mode 0,
+   sum_a (R^T v_a) G_a^T in mode 1), sigma = lambda V tr(H) I + mu V (H + H^T) and
+   ye_a = R sigma G_a. */
+static void amps__cr_tets(amps_int b, amps_int e, int slot, void *arg) {
+    const amps__crjob *j = AMPS__CAST(const amps__crjob *, arg);
+    const amps_scene *S = j->S;
+    const amps_mesh *m = S->m;
+    amps_int t;
+    (void)slot;
+    for (t = b; t < e; t++) {
+        const double *G = S->dyn.cr_G + 12 * t;
+        double *R = S->dyn.cr_R + 9 * t, *lm = S->dyn.cr_lm + 2 * t, *ye = S->dyn.cr_ye + 12 * t;
+        double H[9], F[9], sg[9], tr;
+        int a, i, k;
+        if (m->removed && m->removed[t]) continue;
+        if (j->mode != 1) {
+            amps__cr_deform(S, t, G, F);
+            if (!S->dyn.cr_rvalid) {
+                if (AMPS_TEST_COROT_IDENTITY)
+                    for (i = 0; i < 9; i++) R[i] = (i % 4 == 0) ? 1.0 : 0.0;
+                else amps__polar(F, R);
+            }
+            if (j->mode == 2) continue;
+            amps__lame(m->E[t], m->nu[t], lm, lm + 1);
+            lm[0] *= S->dyn.vol[t];
+            lm[1] *= S->dyn.vol[t];
+            for (i = 0; i < 3; i++)
+                for (k = 0; k < 3; k++)
+                    H[3 * i + k] = R[i] * F[k] + R[3 + i] * F[3 + k] + R[6 + i] * F[6 + k] - (i == k ? 1.0 : 0.0);
+        } else {
+            const amps_int *tv = m->tet + 4 * t;
+            for (i = 0; i < 9; i++) H[i] = 0.0;
+            for (a = 0; a < 4; a++) {
+                double w[3], l[3];
+                for (i = 0; i < 3; i++) {
+                    amps_int q = S->node.dof[3 * tv[a] + i];
+                    w[i] = q >= 0 ? j->v[q] : 0.0;
+                }
+                for (i = 0; i < 3; i++) l[i] = R[i] * w[0] + R[3 + i] * w[1] + R[6 + i] * w[2];
+                for (i = 0; i < 3; i++)
+                    for (k = 0; k < 3; k++) H[3 * i + k] += l[i] * G[3 * a + k];
+            }
+        }
+        tr = lm[0] * (H[0] + H[4] + H[8]);
+        for (i = 0; i < 3; i++)
+            for (k = 0; k < 3; k++) sg[3 * i + k] = lm[1] * (H[3 * i + k] + H[3 * k + i]) + (i == k ? tr : 0.0);
+        for (a = 0; a < 4; a++) {
+            double f[3];
+            for (i = 0; i < 3; i++)
+                f[i] = sg[3 * i] * G[3 * a] + sg[3 * i + 1] * G[3 * a + 1] + sg[3 * i + 2] * G[3 * a + 2];
+            for (i = 0; i < 3; i++) ye[3 * a + i] = R[3 * i] * f[0] + R[3 * i + 1] * f[1] + R[3 * i + 2] * f[2];
+        }
+    }
+}
+
+/* Per node v in [b, e): the sum of the element results of its tets (in incidence order); mode 0
+   stores it as g_v with the node rotation Rn_v, mode 1 as y = cM m_v v + cK (K_R v)_v. */
+static void amps__cr_nodes(amps_int b, amps_int e, int slot, void *arg) {
+    const amps__crjob *j = AMPS__CAST(const amps__crjob *, arg);
+    const amps_scene *S = j->S;
+    const amps_mesh *m = S->m;
+    amps_int v, k;
+    (void)slot;
+    for (v = b; v < e; v++) {
+        double sum[3] = {0, 0, 0}, Rs[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+        int a, d;
+        if (j->mode == 1 && S->node.dof[3 * v] < 0) continue;
+        for (k = 0; k < m->inc_len[v]; k++) {
+            amps_int t = m->inc[m->inc_ptr[v] + k];
+            const double *ye = S->dyn.cr_ye + 12 * t;
+            for (a = 0; a < 3 && m->tet[4 * t + a] != v; a++) {}
+            for (d = 0; d < 3; d++) sum[d] += ye[3 * a + d];
+            if (j->mode == 0)
+                for (d = 0; d < 9; d++) Rs[d] += S->dyn.vol[t] * S->dyn.cr_R[9 * t + d];
+        }
+        if (j->mode == 0) {
+            amps__polar(Rs, S->dyn.cr_Rn + 9 * v); /* the rotation nearest to the volume-weighted mean */
+            for (d = 0; d < 3; d++) S->dyn.cr_gel[3 * v + d] = sum[d];
+        } else
+            for (d = 0; d < 3; d++) {
+                amps_int q = S->node.dof[3 * v + d];
+                if (q >= 0) j->y[q] = S->dyn.cM * S->node.mass[v] * j->v[q] + S->dyn.cK * sum[d];
+            }
+    }
+}
+
+/* One pass (see amps__crjob) over every tet and node; parallel on the engine's threads. */
+static void amps__cr_pass(amps_scene *S, int mode, const double *v, double *y) {
+    amps__crjob j;
+    int nt = S->U->nthr;
+    j.S = S;
+    j.v = v;
+    j.y = y;
+    j.mode = mode;
+    amps__par_for(&S->U->par, S->m->ntet > 2048 ? nt : 1, S->m->ntet, 256, amps__cr_tets, &j);
+    if (mode != 2) amps__par_for(&S->U->par, S->m->nnode > 2048 ? nt : 1, S->m->nnode, 256, amps__cr_nodes, &j);
+    if (mode == 1) S->dyn.info.products++;
+}
+
+/* The corotational workspace: per tet (gradients and volumes at the first call), per node and
+   per equation (N). */
+static amps_status amps__cr_room(amps_ctx *ctx, amps_scene *S, amps_int N) {
+    amps__scene_dyn *D = &S->dyn;
+    const amps_mesh *m = S->m;
+    size_t nt = (size_t)m->ntet;
+    amps_int t;
+    if (!D->cr_G) {
+        if (amps__realloc(ctx, (void **)&D->cr_R, 9 * nt, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->cr_lm, 2 * nt, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->cr_ye, 12 * nt, sizeof(double)) ||
+            (!D->vol && amps__realloc(ctx, (void **)&D->vol, nt + 1, sizeof(double))) ||
+            amps__realloc(ctx, (void **)&D->cr_G, 12 * nt, sizeof(double))) {
+            amps__free(ctx, D->cr_G);
+            D->cr_G = NULL;
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory (corotational)");
+        }
+        for (t = 0; t < m->ntet; t++) {
+            double X[12];
+            amps_mesh_tet_coords(m, t, X);
+            D->vol[t] = fabs(amps_tet_gradients(X, D->cr_G + 12 * t));
+        }
+    }
+    if (m->nnode > D->cr_cap) {
+        size_t c = (size_t)(m->node_cap > m->nnode ? m->node_cap : m->nnode);
+        if (amps__realloc(ctx, (void **)&D->cr_gel, 3 * c, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->cr_react, 3 * c, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->cr_Rn, 9 * c, sizeof(double)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory (corotational)");
+        D->cr_cap = (amps_int)c;
+    }
+    if (N > D->cr_ncap) {
+        size_t c = (size_t)N + (size_t)N / 2 + 16;
+        if (amps__realloc(ctx, (void **)&D->cr_vec, 6 * c, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->cr_con, c, 1))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory (corotational)");
+        D->cr_ncap = (amps_int)c;
+    }
+    return AMPS_OK;
+}
+
+/* sum over the free equations of x_e y_e (in equation order). */
+static double amps__cr_dot(const amps_scene *S, amps_int N, const double *x, const double *y) {
+    double s = 0;
+    amps_int e;
+    for (e = 0; e < N; e++)
+        if (!S->dyn.cr_con[e]) s += x[e] * y[e];
+    return s;
+}
+
+/* The right-hand side b = M w + dt (f + M g_grav - g) (mode 0 pass first) and the start x: w on
+   the free equations, (g_P - u_P) / dt at the pins, 0 at the orphans. */
+static void amps__cr_rhs(amps_scene *S, amps_int N, double *b, double *x) {
+    const amps__scene_dyn *D = &S->dyn;
+    amps_int v, e;
+    int d;
+    for (e = 0; e < N; e++) b[e] = x[e] = 0.0;
+    for (v = 0; v < S->m->nnode; v++)
+        for (d = 0; d < 3; d++) {
+            amps_int k = 3 * v + d;
+            if ((e = S->node.dof[k]) < 0) continue;
+            b[e] = S->node.mass[v] * D->vel[k] + D->dt * (S->node.force[k] + S->node.mass[v] * D->g[d] - D->cr_gel[k]);
+            x[e] = D->orphan[v]        ? 0.0
+                   : S->node.pinned[v] ? (S->node.pin_value[k] - S->node.disp[k]) / D->dt
+                                       : D->vel[k];
+        }
+}
+
+/* y = Rn^T x (transpose) or Rn x per node, on the equations of the nodes (y may be x). */
+static void amps__cr_rotate(const amps_scene *S, const double *x, double *y, int transpose) {
+    amps_int v;
+    for (v = 0; v < S->m->nnode; v++) {
+        const amps_int *e = S->node.dof + 3 * v;
+        const double *R = S->dyn.cr_Rn + 9 * v;
+        double a[3];
+        int i;
+        if (e[0] < 0) continue;
+        for (i = 0; i < 3; i++) a[i] = x[e[i]];
+        for (i = 0; i < 3; i++)
+            y[e[i]] = transpose ? R[i] * a[0] + R[3 + i] * a[1] + R[6 + i] * a[2]
+                                : R[3 * i] * a[0] + R[3 * i + 1] * a[1] + R[3 * i + 2] * a[2];
+    }
+}
+
+/* PCG on the reduced A_R w_F = (b - A_R w_C)_F from x (x_C: the prescribed values), in place,
+   preconditioned by Rn A^-1 Rn^T (A: the engine's linear matrix, Rn the node rotations: exact for
+   a rigid rotation of the whole model); *bn receives ||(b - A_R w_C)_F||, *relres the final
+   relative residual, q (the fifth vector of cr_vec) A_R x. Returns the iterations, or a negative
+   status. */
+static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const double *b, double *x, double *bn,
+                             double *relres) {
+    amps__scene_dyn *D = &S->dyn;
+    double *r = D->cr_vec + 2 * (size_t)D->cr_ncap, *z = r + D->cr_ncap, *p = z + D->cr_ncap, *q = p + D->cr_ncap;
+    double tol = D->corot_tol > 0 ? D->corot_tol : 1e-10, rz = 0, rn, alpha, beta;
+    amps_int maxit = D->corot_maxit > 0 ? D->corot_maxit : 200, it = 0, e;
+    int restart;
+    amps_status s;
+    for (e = 0; e < N; e++) p[e] = D->cr_con[e] ? x[e] : 0.0;
+    amps__cr_pass(S, 1, p, q);
+    for (e = 0; e < N; e++) r[e] = D->cr_con[e] ? 0.0 : b[e] - q[e];
+    *bn = sqrt(amps__cr_dot(S, N, r, r));
+    if (*bn == 0) {
+        for (e = 0; e < N; e++)
+            if (!D->cr_con[e]) x[e] = 0.0;
+        amps__cr_pass(S, 1, x, q);
+        *relres = 0;
+        return 0;
+    }
+    for (restart = 0; restart < 3; restart++) {
+        /* r = b - A_R x on the free equations (the true residual) */
+        amps__cr_pass(S, 1, x, q);
+        for (e = 0; e < N; e++) r[e] = D->cr_con[e] ? 0.0 : b[e] - q[e];
+        rn = sqrt(amps__cr_dot(S, N, r, r));
+        *relres = rn / *bn;
+        if (*relres <= tol || it >= maxit) break;
+        for (; it < maxit && rn > tol * *bn; it++) {
+            double rz1;
+            amps__cr_rotate(S, r, z, 1);
+            if ((s = amps_update_solve_rhs(ctx, S->U, z, z)) != AMPS_OK) return s;
+            amps__cr_rotate(S, z, z, 0);
+            rz1 = amps__cr_dot(S, N, r, z);
+            beta = rz != 0 ? rz1 / rz : 0.0;
+            for (e = 0; e < N; e++) p[e] = D->cr_con[e] ? 0.0 : z[e] + beta * p[e];
+            rz = rz1;
+            amps__cr_pass(S, 1, p, q);
+            alpha = amps__cr_dot(S, N, p, q);
+            if (!(alpha > 0)) break; /* not positive definite on this direction (rounding): stop */
+            alpha = rz / alpha;
+            for (e = 0; e < N; e++)
+                if (!D->cr_con[e]) {
+                    x[e] += alpha * p[e];
+                    r[e] -= alpha * q[e];
+                }
+            rn = sqrt(amps__cr_dot(S, N, r, r));
+        }
+        rz = 0; /* a restart begins with the steepest descent direction */
+    }
+    return it;
+}
+
+/* One corotational step (see amps_scene_corotational): rotations and elastic forces, b, PCG,
+   reactions, the new state. Returns AMPS_WARN_INACCURATE when the PCG stopped above tol. */
+static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
+    amps__scene_dyn *D = &S->dyn;
+    amps_int N, e, v, a, it;
+    double *b, *x, *q, bn, relres, t0 = amps_now(), tol = D->corot_tol > 0 ? D->corot_tol : 1e-10;
+    amps_status s;
+    int d;
+    if ((s = amps__scene_dyn_room(ctx, S, S->m->nnode)) != AMPS_OK || (s = amps_update_commit(ctx, S->U)) != AMPS_OK)
+        return s;
+    N = amps_update_dim(S->U);
+    if ((s = amps__cr_room(ctx, S, N)) != AMPS_OK) return s;
+    b = D->cr_vec;
+    x = b + D->cr_ncap;
+    q = b + 5 * (size_t)D->cr_ncap;
+    for (e = 0; e < N; e++) D->cr_con[e] = 0;
+    for (a = 0; a < S->U->aug.size; a++)
+        if (S->U->aug.kind[a] & AMPS__UCON) D->cr_con[S->U->aug.idx[a]] = 1;
+    D->info.products = 0;
+    amps__cr_pass(S, 0, NULL, NULL);
+    amps__cr_rhs(S, N, b, x);
+    D->info.t_rotation = amps_now() - t0;
+    t0 = amps_now();
+    it = amps__cr_pcg(ctx, S, N, b, x, &bn, &relres);
+    if (it < 0) return (amps_status)it;
+    /* reactions (A_R w+ - b)_P / dt, q = A_R w+ from the PCG */
+    for (v = 0; v < S->m->nnode; v++)
+        for (d = 0; d < 3; d++) {
+            amps_int k = 3 * v + d;
+            e = S->node.dof[k];
+            D->cr_react[k] = (e >= 0 && S->node.pinned[v] && !D->orphan[v]) ? (q[e] - b[e]) / D->dt : 0.0;
+            D->vel[k] = e >= 0 ? x[e] : 0.0;
+            S->node.disp[k] += D->dt * D->vel[k];
+        }
+    D->cr_rvalid = 0;
+    D->info.corotational = 1;
+    D->info.iterations = it;
+    D->info.iterations_total += it;
+    D->info.relres = relres;
+    D->info.t_solve = amps_now() - t0;
+    if (relres > tol)
+        return amps__err(ctx, AMPS_WARN_INACCURATE,
+                         "amps_scene_step: corotational PCG stopped at relative residual %.3g after %ld iterations "
+                         "(tolerance %.3g)",
+                         relres, (long)it, tol);
+    return AMPS_OK;
+}
+
+/* sigma (6, Voigt) of tet t from eps = sym(R^T F - I) with R = cr_R (cr_rvalid) or the polar
+   rotation of F. */
+static void amps__cr_sigma(const amps_scene *S, amps_int t, const double *G, const double *Rt, double sigma[6]) {
+    double F[9], R[9], H[9], lam, mu, tr;
+    int i, k;
+    amps__cr_deform(S, t, G, F);
+    if (Rt) memcpy(R, Rt, sizeof(R));
+    else amps__polar(F, R);
+    for (i = 0; i < 3; i++)
+        for (k = 0; k < 3; k++)
+            H[3 * i + k] = R[i] * F[k] + R[3 + i] * F[3 + k] + R[6 + i] * F[6 + k] - (i == k ? 1.0 : 0.0);
+    amps__lame(S->m->E[t], S->m->nu[t], &lam, &mu);
+    tr = H[0] + H[4] + H[8];
+    for (i = 0; i < 3; i++) sigma[i] = lam * tr + 2.0 * mu * H[4 * i];
+    sigma[3] = mu * (H[1] + H[3]);
+    sigma[4] = mu * (H[5] + H[7]);
+    sigma[5] = mu * (H[2] + H[6]);
+}
+
+/* amps_scene_stress of the corotational mode: sigma of eps = sym(R^T F - I) per live tet (the
+   rotations of the current state), von Mises and principal stresses as amps_mesh_stress. */
+static amps_status amps__scene_corot_stress(amps_ctx *ctx, const amps_scene *S, double *sigma, double *von_mises,
+                                            double *principal) {
+    const amps_mesh *m = S->m;
+    amps_int t;
+    (void)ctx;
+    for (t = 0; t < m->ntet; t++) {
+        double X[12], G[12], sg[6] = {0, 0, 0, 0, 0, 0}, pr[3] = {0, 0, 0};
+        int k;
+        if (!(m->removed && m->removed[t])) {
+            amps_mesh_tet_coords(m, t, X);
+            amps_tet_gradients(X, G);
+            amps__cr_sigma(S, t, G, S->dyn.cr_rvalid && S->dyn.cr_R ? S->dyn.cr_R + 9 * t : NULL, sg);
+            if (principal) amps_sym3_eig(sg, pr);
+        }
+        if (sigma)
+            for (k = 0; k < 6; k++) sigma[6 * t + k] = sg[k];
+        if (principal)
+            for (k = 0; k < 3; k++) principal[3 * t + k] = pr[k];
+        if (von_mises) {
+            double d01 = sg[0] - sg[1], d12 = sg[1] - sg[2], d20 = sg[2] - sg[0];
+            von_mises[t] = sqrt(0.5 * (d01 * d01 + d12 * d12 + d20 * d20) +
+                                3.0 * (sg[3] * sg[3] + sg[4] * sg[4] + sg[5] * sg[5]));
+        }
+    }
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_corotational(amps_ctx *ctx, amps_scene *S, int on) {
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_corotational: NULL scene");
+    if (!S->dyn.on)
+        return amps__err(ctx, AMPS_ERR_STATE,
+                         "amps_scene_corotational: the scene is static (call amps_scene_dynamics first)");
+    if (S->dyn.nstep > 0)
+        return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_corotational: only before the first step (%ld taken)",
+                         (long)S->dyn.nstep);
+    S->dyn.corot = on != 0;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_corotational_tol(amps_ctx *ctx, amps_scene *S, double tol, amps_int maxit) {
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_corotational_tol: NULL scene");
+    if (!amps__isfinite(tol) || !(tol > 0) || !(tol < 1) || maxit < 0)
+        return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_corotational_tol: need 0 < tol < 1 and maxit >= 0");
+    S->dyn.corot_tol = tol;
+    S->dyn.corot_maxit = maxit;
+    return AMPS_OK;
+}
+
+AMPS_API amps_status amps_scene_step_info(const amps_scene *S, amps_scene_step_stats *st) {
+    if (!S || !st) return AMPS_ERR_ARG;
+    *st = S->dyn.info;
+    return AMPS_OK;
 }
 #endif /* AMPS_NO_FEM */
 

@@ -457,8 +457,20 @@ static inline void bench_spmv(const amps_csc *A, const double *x, double *y) {
     }
 }
 
+/* b = f - K g and nb = ||b_F|| from f, g, con and Kf (t: n doubles of scratch). */
+static inline void bench_sys_rhs(bench_sys *S, double *t) {
+    int i;
+    bench_spmv(S->Kf, S->g, t);
+    S->nb = 0;
+    for (i = 0; i < S->n; i++) {
+        S->b[i] = S->f[i] - t[i];
+        if (!S->con[i]) S->nb += S->b[i] * S->b[i];
+    }
+    S->nb = sqrt(S->nb);
+}
+
 static inline void bench_sys_build(amps_ctx *ctx, const bench_scen *sc, const amps_mesh *M, bench_sys *S) {
-    int v, d, i, nn = (int)M->nnode;
+    int v, d, nn = (int)M->nnode;
     unsigned char *fixed = (unsigned char *)bench_alloc((size_t)nn);
     double *t;
     memset(S, 0, sizeof(*S));
@@ -484,13 +496,7 @@ static inline void bench_sys_build(amps_ctx *ctx, const bench_scen *sc, const am
                 S->g[e] = sc->pinval[3 * v + d];
             }
         }
-    bench_spmv(S->Kf, S->g, t);
-    S->nb = 0;
-    for (i = 0; i < S->n; i++) {
-        S->b[i] = S->f[i] - t[i];
-        if (!S->con[i]) S->nb += S->b[i] * S->b[i];
-    }
-    S->nb = sqrt(S->nb);
+    bench_sys_rhs(S, t);
     free(t);
     free(fixed);
 }

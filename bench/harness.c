@@ -41,11 +41,11 @@
 #define AMPS_IMPLEMENTATION
 #include "../amps.h"
 #include "bench.h"
-#include <cholmod.h>
+#include "bench_solve.h"
 #include <umfpack.h>
 
-#define NTOL 4
-static const double tols[NTOL] = {1e-4, 1e-6, 1e-8, 1e-10};
+#define NTOL BENCH_NTOL
+#define tols bench_tols
 
 static FILE *csv;
 static int cur_step;
@@ -66,57 +66,6 @@ static int envi(const char *name, int def) {
 
 /* ======================= CHOLMOD on the explicit reduced system ======================= */
 
-/* reduced upper matrix K_FF and b_F; fmap[i] = position of equation i in F or -1 */
-static cholmod_sparse *reduced(const bench_sys *S, int *fmap, cholmod_dense **B, cholmod_common *c) {
-    int i, j, p, nf = 0, nz = 0;
-    cholmod_sparse *A;
-    for (i = 0; i < S->n; i++) fmap[i] = S->con[i] ? -1 : nf++;
-    for (j = 0; j < S->n; j++)
-        if (fmap[j] >= 0)
-            for (p = S->K->p[j]; p < S->K->p[j + 1]; p++) nz += fmap[S->K->i[p]] >= 0;
-    A = cholmod_allocate_sparse((size_t)nf, (size_t)nf, (size_t)nz, 1, 1, 1, CHOLMOD_REAL, c);
-    *B = cholmod_zeros((size_t)nf, 1, CHOLMOD_REAL, c);
-    nz = 0;
-    for (j = 0; j < S->n; j++) {
-        if (fmap[j] < 0) continue;
-        ((int *)A->p)[fmap[j]] = nz;
-        for (p = S->K->p[j]; p < S->K->p[j + 1]; p++)
-            if (fmap[S->K->i[p]] >= 0) {
-                ((int *)A->i)[nz] = fmap[S->K->i[p]];
-                ((double *)A->x)[nz++] = S->K->x[p];
-            }
-        ((double *)(*B)->x)[fmap[j]] = S->b[j];
-    }
-    ((int *)A->p)[nf] = nz;
-    return A;
-}
-
-static void expand(const bench_sys *S, const int *fmap, const double *xf, double *x) {
-    int i;
-    for (i = 0; i < S->n; i++) x[i] = fmap[i] >= 0 ? xf[fmap[i]] : S->g[i];
-}
-
-#ifdef __SIZEOF_FLOAT128__
-__extension__ typedef __float128 quad;
-#else
-typedef long double quad;
-#endif
-
-/* r = b - A x summed in quad precision (A: the upper triangle, stype 1), rounded to double. */
-static void quad_residual(const cholmod_sparse *A, const double *b, const quad *x, quad *acc, double *r) {
-    const int *Ap = (const int *)A->p, *Ai = (const int *)A->i;
-    const double *Ax = (const double *)A->x;
-    int n = (int)A->ncol, j, p;
-    for (j = 0; j < n; j++) acc[j] = b[j];
-    for (j = 0; j < n; j++)
-        for (p = Ap[j]; p < Ap[j + 1]; p++) {
-            int i = Ai[p];
-            acc[i] -= (quad)Ax[p] * x[j];
-            if (i != j) acc[j] -= (quad)Ax[p] * x[i];
-        }
-    for (j = 0; j < n; j++) r[j] = (double)acc[j];
-}
-
 /* CHOLMOD refactor + solve (timed), a second solve (timed), then xref by refinement steps whose
    residual is summed in quad precision (x kept in quad too; until a correction is below 1e-3 eps
    ||x||, at most 20 steps): exact to working precision for cond < 1 / eps, so the errors of
@@ -125,13 +74,13 @@ static void quad_residual(const cholmod_sparse *A, const double *b, const quad *
 static void reference(const bench_sys *S, double *xref, double *work, int simpl) {
     cholmod_common c;
     cholmod_sparse *A;
-    cholmod_dense *B, *X, *X2, *R;
+    cholmod_dense *B, *X, *X2;
     cholmod_factor *L;
-    int *fmap = (int *)bench_alloc(sizeof(int) * (size_t)S->n), it;
+    int *fmap = (int *)bench_alloc(sizeof(int) * (size_t)S->n);
     double t0, t_ref, t_sol, *x0 = (double *)bench_alloc(sizeof(double) * (size_t)S->n);
     cholmod_start(&c);
     c.supernodal = CHOLMOD_SUPERNODAL;
-    A = reduced(S, fmap, &B, &c);
+    A = bench_reduced(S, fmap, &B, &c);
     t0 = amps_now();
     L = cholmod_analyze(A, &c);
     cholmod_factorize(A, L, &c);
@@ -141,31 +90,9 @@ static void reference(const bench_sys *S, double *xref, double *work, int simpl)
     X2 = cholmod_solve(CHOLMOD_A, L, B, &c);
     t_sol = amps_now() - t0;
     if (!X || !X2 || c.status != CHOLMOD_OK) bench_die("cholmod", "reference factorization failed");
-    expand(S, fmap, (double *)X->x, x0);
-    {
-        size_t k, nr = X2->nrow;
-        quad *xq = (quad *)bench_alloc(sizeof(quad) * (nr + 1)), *acc = (quad *)bench_alloc(sizeof(quad) * (nr + 1));
-        for (k = 0; k < nr; k++) xq[k] = ((double *)X2->x)[k];
-        R = cholmod_copy_dense(B, &c);
-        for (it = 0; it < 20; it++) { /* xq += A^{-1} (B - A xq) */
-            cholmod_dense *D;
-            double dn = 0, xn = 0;
-            quad_residual(A, (const double *)B->x, xq, acc, (double *)R->x);
-            D = cholmod_solve(CHOLMOD_A, L, R, &c);
-            for (k = 0; k < nr; k++) {
-                xq[k] += ((double *)D->x)[k];
-                dn += ((double *)D->x)[k] * ((double *)D->x)[k];
-                xn += (double)xq[k] * (double)xq[k];
-            }
-            cholmod_free_dense(&D, &c);
-            if (dn <= 1e-6 * 4.93e-32 * xn) break;
-        }
-        for (k = 0; k < nr; k++) ((double *)X2->x)[k] = (double)xq[k];
-        cholmod_free_dense(&R, &c);
-        free(xq);
-        free(acc);
-    }
-    expand(S, fmap, (double *)X2->x, xref);
+    bench_expand(S, fmap, (double *)X->x, x0);
+    bench_refine(A, L, B, X2, 20, &c);
+    bench_expand(S, fmap, (double *)X2->x, xref);
     put("chol_refactor", 0, t_ref, 0, bench_sys_relres(S, x0, work), bench_sys_relerr(S, x0, xref), 1, S->n, 0, NULL);
     put("chol_solve", 0, t_sol, 0, bench_sys_relres(S, x0, work), bench_sys_relerr(S, x0, xref), 1, S->n, 0, NULL);
     cholmod_free_dense(&X, &c);
@@ -179,7 +106,7 @@ static void reference(const bench_sys *S, double *xref, double *work, int simpl)
         cholmod_factorize(A, L, &c);
         X = cholmod_solve(CHOLMOD_A, L, B, &c);
         t_ref = amps_now() - t0;
-        expand(S, fmap, (double *)X->x, x0);
+        bench_expand(S, fmap, (double *)X->x, x0);
         put("chol_refactor_simpl", 0, t_ref, 0, bench_sys_relres(S, x0, work), bench_sys_relerr(S, x0, xref), 1, S->n,
             0, NULL);
         cholmod_free_dense(&X, &c);
@@ -356,85 +283,6 @@ static double updown_step(updown *u, const amps_mesh *M, const amps_int *ndof, c
     memcpy(x, X->x, sizeof(double) * (size_t)u->N);
     cholmod_free_dense(&X, &u->c);
     return amps_now() - t0;
-}
-
-/* ================================ CG (ours) ================================
-   K_FF x_F = b_F on the full numbering with x_C = g held: r = (f - K x)_F, products with p
-   zero on C and the result zeroed on C. Jacobi: z = r ./ diag(K). Stops at ||r|| <= tol ||b_F||
-   (recursive residual) or maxit. Records for each tolerance the time, iterations and iterate. */
-typedef struct snaps {
-    double t[NTOL], *x[NTOL];
-    int it[NTOL], conv[NTOL];
-} snaps;
-
-static void cg_run(const bench_sys *S, const double *x0, int jacobi, int maxit, snaps *sn) {
-    int n = S->n, i, it = 0, ti = 0;
-    double *x = (double *)bench_alloc(sizeof(double) * (size_t)n),
-           *r = (double *)bench_alloc(sizeof(double) * (size_t)n);
-    double *z = (double *)bench_alloc(sizeof(double) * (size_t)n),
-           *p = (double *)bench_alloc(sizeof(double) * (size_t)n);
-    double *q = (double *)bench_alloc(sizeof(double) * (size_t)n),
-           *dinv = (double *)bench_alloc(sizeof(double) * (size_t)n);
-    double rz, rr, t0 = amps_now(), tpause = 0;
-    for (i = 0; i < n; i++) {
-        amps_int k;
-        dinv[i] = 1;
-        if (jacobi)
-            for (k = S->Kf->p[i]; k < S->Kf->p[i + 1]; k++)
-                if (S->Kf->i[k] == i) dinv[i] = 1 / S->Kf->x[k];
-        x[i] = S->con[i] ? S->g[i] : x0[i];
-    }
-    bench_spmv(S->Kf, x, q);
-    rz = rr = 0;
-    for (i = 0; i < n; i++) {
-        r[i] = S->con[i] ? 0 : S->f[i] - q[i];
-        z[i] = p[i] = dinv[i] * r[i];
-        rz += r[i] * z[i];
-        rr += r[i] * r[i];
-    }
-    for (;;) {
-        double pq = 0, alpha, rz1 = 0, beta;
-        while (ti < NTOL && sqrt(rr) <= tols[ti] * S->nb) { /* snapshot, not timed */
-            double t1 = amps_now();
-            sn->t[ti] = t1 - t0 - tpause;
-            sn->it[ti] = it;
-            sn->conv[ti] = 1;
-            memcpy(sn->x[ti], x, sizeof(double) * (size_t)n);
-            ti++;
-            tpause += amps_now() - t1;
-        }
-        if (ti == NTOL || it >= maxit) break;
-        bench_spmv(S->Kf, p, q);
-        for (i = 0; i < n; i++) {
-            if (S->con[i]) q[i] = 0;
-            pq += p[i] * q[i];
-        }
-        alpha = rz / pq;
-        rr = 0;
-        for (i = 0; i < n; i++) {
-            x[i] += alpha * p[i];
-            r[i] -= alpha * q[i];
-            z[i] = dinv[i] * r[i];
-            rz1 += r[i] * z[i];
-            rr += r[i] * r[i];
-        }
-        beta = rz1 / rz;
-        rz = rz1;
-        for (i = 0; i < n; i++) p[i] = z[i] + beta * p[i];
-        it++;
-    }
-    for (; ti < NTOL; ti++) {
-        sn->t[ti] = amps_now() - t0 - tpause;
-        sn->it[ti] = it;
-        sn->conv[ti] = 0;
-        memcpy(sn->x[ti], x, sizeof(double) * (size_t)n);
-    }
-    free(x);
-    free(r);
-    free(z);
-    free(p);
-    free(q);
-    free(dinv);
 }
 
 /* ================= [Interactive cutting]: augmented system + GMRES =================
@@ -635,7 +483,7 @@ static void hess_solve(const double *H, int mr, const double *g, int j, double *
 
 /* Runs the method for one step to the tightest tolerance; snapshots of the full solution. */
 static void gm_run(gmres *G, const bench_sys *S, const int *Lset, int m, const double *x0, int prec, int maxit,
-                   int restart, snaps *sn) {
+                   int restart, bench_snaps *sn) {
     int n = S->n, k, p, i, j, it = 0, ti = 0, mr = restart < m ? restart : m;
     double t0 = amps_now(), tpause = 0, nrhs, beta;
     double *rhs = (double *)bench_alloc(sizeof(double) * (size_t)m),
@@ -856,7 +704,7 @@ int main(int argc, char **argv) {
     int *Lset;
     unsigned char *inL, *udcon;
     double *uprev, *xprev, *x, *xref, *work, *xud, t_amps_setup[MAXCONF];
-    snaps sn;
+    bench_snaps sn;
     FILE *meta;
     if (argc < 6) {
         fprintf(stderr, "usage: harness <beam:h|brick:R|file> <cut|deform> <steps> <every> <out.csv>\n");
@@ -1023,7 +871,7 @@ int main(int argc, char **argv) {
                 0, NULL);
             bench_sys_from_disp(&Sy, uprev, xprev);
             for (prec = 0; prec < 2 * iter; prec++) {
-                cg_run(&Sy, xprev, prec, cg_maxit, &sn);
+                bench_cg_run(&Sy, xprev, prec, cg_maxit, &sn);
                 for (ti = 0; ti < NTOL; ti++)
                     put(prec ? "cg_jacobi" : "cg_none", tols[ti], sn.t[ti], sn.it[ti],
                         bench_sys_relres(&Sy, sn.x[ti], work), bench_sys_relerr(&Sy, sn.x[ti], xref), sn.conv[ti], Sy.n,

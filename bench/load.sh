@@ -9,8 +9,8 @@
 # Configurations: 1 (one thread), omp2 (two OpenMP threads, today's default on 2 cores), jobs2
 # (two workers of examples/jobs.h through ctx->enqueue_task/finish_task). Cases: the cut and
 # deformation sequences of bench/harness on bunny20k and bunny50k (amps.h alone, bench/load run),
-# 12 steps each, and a bunny incision (bunny9k, 20 cuts) through tools/amps_replay (1 and omp2 only: the replay
-# has no job-system option). The configurations of a case alternate within each load, so drift of
+# 12 steps each, and a bunny incision (bunny9k, 20 cuts) through tools/amps_replay (its
+# --jobs option for jobs2). The configurations of a case alternate within each load, so drift of
 # the machine hits them alike; the whole process set is pinned to cpus 0-1 (taskset).
 # Output: $out/load.csv (case,load,conf,step,time), $out/load_summary.txt (medians, ratios).
 set -u
@@ -26,7 +26,7 @@ mkdir -p "$out" build/bench
 CC=${CC:-cc}
 FLAGS="-std=c99 -O2 -fopenmp -I. -I/usr/include/suitesparse -Wall -Wextra -pedantic -Werror"
 $CC $FLAGS -o build/bench/load bench/load.c -lpthread -lm || exit 1
-$CC $FLAGS -o build/bench/amps_replay tools/amps_replay.c -lm || exit 1
+$CC $FLAGS -o build/bench/amps_replay tools/amps_replay.c -lpthread -lm || exit 1
 TS="taskset -c 0,1"
 command -v taskset > /dev/null || TS=""
 csv=$out/load.csv
@@ -82,16 +82,17 @@ if [ -n "${only_summary:-}" ]; then summary; exit 0; fi
 echo "case,load,conf,step,time" > "$csv"
 # replay <load> <conf>: one row per solve after the first (its step time, from the step lines)
 replay() {
-  local t=1
-  [ "$2" = omp2 ] && t=2
-  (cd build/bench && $TS ./amps_replay --threads $t "$scn" 2> /dev/null) | # dump/write lines write here
+  local t="--threads 1"
+  [ "$2" = omp2 ] && t="--threads 2"
+  [ "$2" = jobs2 ] && t="--threads 1 --jobs 2"
+  (cd build/bench && $TS ./amps_replay $t "$scn" 2> /dev/null) | # dump/write lines write here
     awk -v l="$1" -v c="$2" '/^step / && $2 > 1 { for (k = 1; k < NF; k++) if ($(k+1) == "ms") print "incision," l "," c "," $2 "," $k / 1000 }' >> "$csv"
 }
 # case by case (the incision first), each under every load: a run cut short still has every
 # load of the cases it finished
 for load in $loads; do
   start_load $load
-  for conf in 1 omp2 1 omp2; do replay $load $conf; done
+  for conf in 1 omp2 jobs2 1 omp2 jobs2; do replay $load $conf; done
   stop_load
 done
 for r in $runs; do

@@ -24,7 +24,8 @@ build() {
 }
 build factor -lcholmod
 build harness -lcholmod -lumfpack
-for b in haptic watch refactor; do build $b; done
+for b in haptic watch refactor refine_cost; do build $b; done
+build corot -lcholmod
 build frameloop -lpthread
 bash bench/make_liver.sh >/dev/null || exit 1
 build order_metis -DAMPS_USE_METIS -lcholmod -lmetis
@@ -89,8 +90,9 @@ for m in $rmesh; do
   run build/bench/refactor "$m" $rsteps on $out/refactor.csv
   run build/bench/refactor "$m" $rsteps off $out/refactor.csv 60
   for r in $rreps; do run build/bench/refactor "$m" $rsteps on $out/refactor.csv 0 $r; done
+  run build/bench/refactor "$m" $rsteps paced $out/refactor.csv
 done
-# the frame loop: strokes, a grasper, two-phase commits, a 1 kHz haptic thread (bench/frameloop.c)
+# the frame loop: strokes, a grasper, one commit a frame, a 1 kHz haptic thread on the published haptic model (bench/frameloop.c)
 rm -f $out/frameloop.csv $out/frameloop_frames.csv
 if [ "$mode" = quick ]; then fmesh="bench/data/liver.1.node"; fframes=30
 else fmesh="bench/data/liver.1.node bench/data/bunny50k.1.node"; fframes=200; fi
@@ -108,6 +110,18 @@ if command -v gnuplot >/dev/null; then
       unset multiplot" 2>/dev/null || echo "gnuplot failed for $m"
   done
 fi
+# corotational dynamics: amps.h against CHOLMOD re-factorization and Jacobi-PCG (bench/corot.c)
+rm -f $out/corot.csv
+if [ "$mode" = quick ]; then cruns="beam:20:10"
+else cruns="beam:100:25 bunny:30:10 brain:300:50"; fi
+for r in $cruns; do
+  IFS=: read -r c st ev <<< "$r"
+  if [ "$c" = brain ] && [ ! -f bench/data/brain.1.node ]; then echo "corot: no bench/data/brain.1.node (bench/make_fissure.sh)"; continue; fi
+  run build/bench/corot "$c" "$st" "$ev" $out/corot.csv
+done
+# implicit dynamics, removal and fracture (bench/dynamics.c; full: about 5 minutes on 2 idle cores)
+if [ "$mode" = quick ]; then PRE="" bash bench/dynamics.sh quick $out || exit 1
+else PRE=out/ bash bench/dynamics.sh full $out || exit 1; fi
 # under load: spinning processes and a 1 kHz loop beside 1 thread, 2 OpenMP threads and the
 # example job system (bench/load.sh; full: about 15 minutes, quick: about 1)
 bash bench/load.sh $mode $out || exit 1

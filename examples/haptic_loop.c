@@ -4,13 +4,18 @@
    Model: a soft 1 x 1 x 2 brick (amps_mesh_brick), or the given mesh, held at its bottom face
    (z near its minimum). The "tool": the 4 nodes nearest the centre of the top face, pinned and
    moved along a smooth path (press down and slide sideways).
-     haptic thread, 1 kHz: move the tool pins, amps_scene_solve_reactions (reactions from the small
-       dense system alone, no triangular solve), read the tool force;
-     visual thread, 60 Hz: the displacements of the surface nodes with the engine's two-phase
-       watched solve, one line per 15th frame (frame, max surface displacement, tool force), and
-       a VTU file every 30th frame if -o outdir is given (surface displacements; interior zero);
-       its amps calls hand their parallel work to a host job system (examples/jobs.h, -w workers,
-       default 2; 0: none) through ctx->enqueue_task / finish_task.
+     haptic thread, 1 kHz: reads the device (the tool path), evaluates the latest published
+       haptic model there (amps_haptic_eval: r = r0 + H (g - g0), a 12 x 12 product), sums the
+       tool force and hands the position to the visual thread. It never calls the scene;
+     visual thread, 60 Hz, the only thread that calls the scene: pins the tool at the latest
+       device position, the displacements of the surface nodes (amps_update_solve_watched), one
+       line per 15th frame (frame, max surface displacement, tool force), a VTU file every 30th
+       frame if -o outdir is given (surface displacements; interior zero); then the haptic model
+       of the new state (amps_scene_haptic_build) into the back buffer, published by a pointer
+       swap. Its amps calls hand their parallel work to a host job system (examples/jobs.h, -w
+       workers, default 2; 0: none) through ctx->enqueue_task / finish_task.
+   The threads share one mutex, held for the swap and the stop flag (visual thread) or one
+   evaluation and a copy of the position (haptic thread): microseconds.
    At the end: the achieved rates, the haptic period (median, 99th percentile, worst) and the
    missed haptic deadlines.
    Build: make examples (or cc -std=c99 -O2 -I. examples/haptic_loop.c -lpthread -lm). */
@@ -33,12 +38,15 @@
 #define VISUAL_NS (1000000000L / 60)
 
 typedef struct shared {
-    pthread_mutex_t lock; /* guards every call on the scene and its engine */
-    amps_scene *S;
+    pthread_mutex_t lock; /* held only for the model's swap, one evaluation, a copy of 3 doubles */
+    amps_scene *S;        /* called by the visual thread only (after the setup) */
     amps_int tool[NTOOL];
-    double amp;      /* tool path amplitude */
-    double force[3]; /* latest tool force (haptic thread writes, under lock) */
-    int stop;        /* 1: both loops end (read and written under lock) */
+    double amp;           /* tool path amplitude */
+    amps_haptic model[2]; /* the haptic thread reads *front, the visual thread builds the other */
+    amps_haptic *front;
+    double device[3]; /* latest tool position (haptic thread writes, under lock) */
+    double force[3];  /* latest tool force (haptic thread writes, under lock) */
+    int stop;         /* 1: both loops end (read and written under lock) */
     /* surface watch set: watched equation k is component wdim[k] of node wnode[k] */
     amps_int nw, *widx, *wnode;
     int *wdim;
@@ -86,20 +94,18 @@ static void tool_path(double amp, double t, double u[3]) {
     u[2] = -0.5 * amp * (1.0 - cos(2.0 * pi * t));
 }
 
-/* 1 kHz: each period (absolute deadlines, so the rate does not drift) moves the tool and reads
-   its force. A deadline is missed when a step ends after the start of the next period; the
-   loop then skips the periods it missed. */
+/* 1 kHz: each period (absolute deadlines, so the rate does not drift) reads the tool position
+   and evaluates its force. A deadline is missed when a step ends after the start of the next
+   period; the loop then skips the periods it missed. */
 static void *haptic_thread(void *arg) {
     shared *sh = (shared *)arg;
-    amps_ctx ctx;
     struct timespec next;
-    double t0, prev = -1;
-    int k;
-    amps_ctx_init(&ctx);
+    double t0, prev = -1, g[3 * NTOOL], r[3 * NTOOL];
+    amps_int k;
     clock_gettime(CLOCK_MONOTONIC, &next);
     t0 = ts_s(&next);
     while (!stopped(sh)) {
-        double u[3], f[3] = {0, 0, 0}, r[3], wake, done;
+        double u[3], f[3] = {0, 0, 0}, wake, done;
         add_ns(&next, HAPTIC_NS);
         clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, NULL);
         wake = now_s();
@@ -108,18 +114,16 @@ static void *haptic_thread(void *arg) {
         prev = wake;
         tool_path(sh->amp, ts_s(&next) - t0, u);
         pthread_mutex_lock(&sh->lock);
-        for (k = 0; k < NTOOL; k++) amps_scene_pin(&ctx, sh->S, sh->tool[k], u);
-        if (amps_scene_solve_reactions(&ctx, sh->S) != AMPS_OK) {
-            fprintf(stderr, "haptic: %s\n", ctx.msg);
-            sh->stop = 1;
-        } /* lock held */
-        for (k = 0; k < NTOOL; k++) {
-            amps_scene_reaction(&ctx, sh->S, sh->tool[k], r);
-            f[0] += r[0];
-            f[1] += r[1];
-            f[2] += r[2];
-        }
+        /* every pinned node is a tool node: g = u at each (the model's nodes, ascending) */
+        for (k = 0; k < sh->front->n && k < NTOOL; k++) memcpy(g + 3 * k, u, sizeof(u));
+        if (sh->front->n <= NTOOL && amps_haptic_eval(sh->front, g, r) == AMPS_OK)
+            for (k = 0; k < sh->front->n; k++) {
+                f[0] += r[3 * k];
+                f[1] += r[3 * k + 1];
+                f[2] += r[3 * k + 2];
+            }
         memcpy(sh->force, f, sizeof(f));
+        memcpy(sh->device, u, sizeof(u));
         pthread_mutex_unlock(&sh->lock);
         /* f would go to the haptic device here */
         done = now_s();
@@ -134,48 +138,45 @@ static void *haptic_thread(void *arg) {
     return NULL;
 }
 
-/* 60 Hz: surface displacements with the two-phase watched solve. Why two phases: the backward
-   solve over closure_L(surface) costs about as much as a full solve (the surface reaches most
-   separators), i.e. milliseconds on a large model; under the lock it would stall the haptic
-   thread for that long and miss many 1 ms deadlines. begin (under the lock) does only the small
-   dense work and copies the right-hand side into y; run (no lock) reads only y and the factor,
-   which the engine never changes; end (under the lock) releases the job. */
+/* 60 Hz: the tool pinned where the device is, the surface displacements (the backward solve
+   over closure_L(surface) costs about as much as a full solve: milliseconds on a large model,
+   which the haptic thread never waits for), the haptic model of the new state published. */
 static void *visual_thread(void *arg) {
     shared *sh = (shared *)arg;
     amps_ctx ctx;
     amps_update *U = amps_scene_engine(sh->S);
-    amps_update_job job;
     struct timespec next;
     const amps_mesh *m = amps_scene_mesh(sh->S);
-    amps_int ylen = amps_update_dim(U); /* the base order is at most the dimension (no cuts here) */
-    double *y = (double *)malloc(sizeof(double) * (size_t)ylen);
     double *xw = (double *)malloc(sizeof(double) * (size_t)(sh->nw > 0 ? sh->nw : 1));
     double *disp = sh->outdir ? (double *)calloc(3 * (size_t)m->nnode, sizeof(double)) : NULL;
     amps_ctx_init(&ctx);
     if (sh->pool) jobs_attach(sh->pool, &ctx); /* the solves' parallel work goes to the pool */
-    if (!y || !xw || (sh->outdir && !disp)) {
+    if (!xw || (sh->outdir && !disp)) {
         fprintf(stderr, "visual: out of memory\n");
         stop_all(sh);
     }
     clock_gettime(CLOCK_MONOTONIC, &next);
     while (!stopped(sh)) {
         amps_status s;
-        double f[3], umax = 0;
+        double f[3], u[3], umax = 0;
         amps_int k;
+        amps_haptic *back = sh->front == &sh->model[0] ? &sh->model[1] : &sh->model[0];
         add_ns(&next, VISUAL_NS);
         clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, NULL);
         pthread_mutex_lock(&sh->lock);
-        s = amps_update_watched_begin(&ctx, U, &job, y, ylen, xw);
+        memcpy(u, sh->device, sizeof(u));
+        memcpy(f, sh->force, sizeof(f));
         pthread_mutex_unlock(&sh->lock);
-        if (s != AMPS_OK) {
+        for (k = 0, s = AMPS_OK; k < NTOOL && s == AMPS_OK; k++) s = amps_scene_pin(&ctx, sh->S, sh->tool[k], u);
+        if (s == AMPS_OK) s = amps_update_solve_watched(&ctx, U, xw);
+        if (s >= 0) s = amps_scene_haptic_build(&ctx, sh->S, back);
+        if (s < 0) {
             fprintf(stderr, "visual: %s\n", ctx.msg);
             stop_all(sh);
             break;
         }
-        amps_update_watched_run(&job); /* the expensive part, lock-free */
         pthread_mutex_lock(&sh->lock);
-        amps_update_watched_end(U, &job);
-        memcpy(f, sh->force, sizeof(f));
+        sh->front = back; /* published */
         pthread_mutex_unlock(&sh->lock);
         /* "render" the frame: the largest surface displacement (a node's 3 equations are consecutive) */
         for (k = 0; k + 2 < sh->nw; k += 3) {
@@ -196,7 +197,6 @@ static void *visual_thread(void *arg) {
         }
         sh->frames++;
     }
-    free(y);
     free(xw);
     free(disp);
     return NULL;
@@ -318,9 +318,6 @@ int main(int argc, char **argv) {
         best[k] = dist;
         sh.tool[k] = v;
     }
-    /* the scene numbers the equations of the nodes as amps_mesh_number_dofs with the fixed nodes
-       (checked against the first solve below) */
-    amps_mesh_number_dofs(m, fixed, dof);
     sh.S = amps_scene_create(&ctx, m, NULL); /* the scene owns m from here */
     if (!sh.S) {
         fprintf(stderr, "%s\n", ctx.msg);
@@ -334,20 +331,21 @@ int main(int argc, char **argv) {
         amps_scene_pin(&ctx, sh.S, sh.tool[k], u0);
     }
     t0 = now_s();
-    if (amps_scene_solve(&ctx, sh.S) != AMPS_OK) {
+    amps_haptic_init(&sh.model[0]);
+    amps_haptic_init(&sh.model[1]);
+    sh.front = &sh.model[0];
+    if (amps_scene_solve(&ctx, sh.S) != AMPS_OK || amps_scene_haptic_build(&ctx, sh.S, sh.front) != AMPS_OK) {
         fprintf(stderr, "%s\n", ctx.msg);
         return 1;
     }
     printf("model: %ld nodes, %ld equations, factored and solved in %.3f s; tool: %d nodes; %.1f s run\n", (long)nn,
            (long)amps_scene_ndof(sh.S), now_s() - t0, NTOOL, seconds);
-    {
-        const double *x = amps_update_solution(amps_scene_engine(sh.S)), *u = amps_scene_displacements(sh.S);
-        for (k = 0; k < 3 * (int)nn; k++)
-            if (dof[k] >= 0 && x[dof[k]] != u[k]) {
-                fprintf(stderr, "unexpected equation numbering\n");
-                return 1;
-            }
-    }
+    /* the scene's node-to-equation map (the engine's indices of each node's DOFs, -1: fixed) */
+    for (v = 0; v < nn; v++)
+        if (amps_scene_node_dofs(&ctx, sh.S, v, dof + 3 * v) != AMPS_OK) {
+            fprintf(stderr, "%s\n", ctx.msg);
+            return 1;
+        }
     /* the watch set: every equation of the free surface nodes */
     for (v = 0; v < nn; v++)
         if (surf[v])
@@ -397,6 +395,8 @@ int main(int argc, char **argv) {
     jobs_destroy(sh.pool);
     free(sh.period);
     pthread_mutex_destroy(&sh.lock);
+    amps_haptic_free(&ctx, &sh.model[0]);
+    amps_haptic_free(&ctx, &sh.model[1]);
     amps_scene_free(&ctx, sh.S);
     free(fixed);
     free(surf);

@@ -52,6 +52,17 @@ static inline double t_reldiff(int n, const double *x, const double *y) {
     }
     return t > 0 ? sqrt(s / t) : sqrt(s);
 }
+/* ||x - y|| / max(||y||, floor) over n entries. */
+static inline double t_relerr_floor(int n, const double *x, const double *y, double floor) {
+    double s = 0, t = 0;
+    int i;
+    for (i = 0; i < n; i++) {
+        s += (x[i] - y[i]) * (x[i] - y[i]);
+        t += y[i] * y[i];
+    }
+    t = sqrt(t);
+    return sqrt(s) / (t > floor ? t : floor);
+}
 #ifndef AMPS_NO_FEM
 /* K (upper triangle) of mesh m with the nodes below z = 0.5 fixed; *fixed (1 per node), *dof
    (3 per node, -1 for fixed) and *n (equations) receive the numbering. */

@@ -10,123 +10,7 @@
 #include "scene_ref.h"
 #include <string.h>
 
-/* What the test knows independently of the scene: the shadow of scene_ref.h (fixed file
-   nodes, pins, forces) and the gravity and time integration. */
-typedef struct tstate {
-    shadow sh;
-    double g[3];
-    int dyn;
-    double dt, alpha, beta;
-} tstate;
-
-/* The reference of one solve of the current mesh m: statics K u = f + M g (pins u = g), or one
-   step from (u, w): A w+ = M w + dt (f + M g - K u) (pins w = (g - u)/dt), u+ = u + dt w+.
-   uo, wo (3 per node) receive the result (statics: wo untouched, may be NULL), react (may be
-   NULL) the pin reactions. Orphans (nodes in no tet) keep u, w = 0. Returns 0 on success. */
-static int ref_step(amps_ctx *ctx, const amps_mesh *m, const tstate *w, const double *u, const double *vel, double *uo,
-                    double *wo, double *react) {
-    int nn = m->nnode, v, d, n, nf = 0, k, j, p, nz = 0, ok, *map, *ti, *tj;
-    unsigned char *fixed = (unsigned char *)calloc(nn + 1, 1);
-    amps_int *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * nn);
-    double *mass = (double *)malloc(sizeof(double) * (nn + 1)), *b, *ue, *gv, *rhs, *x, *tx, *ax;
-    double cM = w->dyn ? 1 + w->alpha * w->dt : 0, cK = w->dyn ? w->beta * w->dt + w->dt * w->dt : 1;
-    amps_csc *K, *R;
-    for (v = 0; v < nn; v++) fixed[v] = w->sh.fixed0[m->origin[v]];
-    n = (int)amps_mesh_number_dofs(m, fixed, dof);
-    K = amps_mesh_assemble(ctx, m, dof, n);
-    amps_mesh_lumped_mass(m, mass);
-    b = (double *)calloc(n + 1, sizeof(double));
-    ue = (double *)calloc(n + 1, sizeof(double));
-    gv = (double *)calloc(n + 1, sizeof(double));
-    ax = (double *)calloc(n + 1, sizeof(double));
-    map = (int *)calloc(n + 1, sizeof(int));
-    for (v = 0; v < nn; v++)
-        for (d = 0; d < 3; d++) {
-            int e = dof[3 * v + d];
-            if (e < 0) continue;
-            ue[e] = u[3 * v + d];
-            b[e] = w->sh.force[3 * v + d] + mass[v] * w->g[d];
-            if (w->sh.pinned[v]) {
-                map[e] = -1;
-                gv[e] = w->dyn ? (w->sh.pinval[3 * v + d] - u[3 * v + d]) / w->dt : w->sh.pinval[3 * v + d];
-            }
-        }
-    if (w->dyn) { /* b = M w + dt (f + M g - K u) */
-        amps_csc_symv(K, AMPS_UPPER, ue, ax);
-        for (v = 0; v < nn; v++)
-            for (d = 0; d < 3; d++) {
-                int e = dof[3 * v + d];
-                if (e >= 0) b[e] = mass[v] * vel[3 * v + d] + w->dt * (b[e] - ax[e]);
-            }
-    }
-    for (p = 0; p < K->p[n]; p++) K->x[p] *= cK; /* A = cK K + cM M */
-    for (v = 0; v < nn; v++)
-        for (d = 0; d < 3; d++) {
-            int e = dof[3 * v + d];
-            if (e >= 0) K->x[K->p[e + 1] - 1] += cM * mass[v];
-        }
-    for (k = 0; k < n; k++) map[k] = map[k] < 0 ? -1 : nf++;
-    rhs = (double *)calloc(nf + 1, sizeof(double));
-    x = (double *)calloc(nf + 1, sizeof(double));
-    ti = (int *)calloc(K->p[n] + 1, sizeof(int));
-    tj = (int *)calloc(K->p[n] + 1, sizeof(int));
-    tx = (double *)calloc(K->p[n] + 1, sizeof(double));
-    amps_csc_symv(K, AMPS_UPPER, gv, ax); /* the prescribed values move to the right-hand side */
-    for (k = 0; k < n; k++)
-        if (map[k] >= 0) rhs[map[k]] = b[k] - ax[k];
-    for (j = 0; j < n; j++) /* the free block */
-        for (p = K->p[j]; p < K->p[j + 1]; p++)
-            if (map[K->i[p]] >= 0 && map[j] >= 0) {
-                ti[nz] = map[K->i[p]];
-                tj[nz] = map[j];
-                tx[nz++] = K->x[p];
-            }
-    R = amps_csc_from_triplets(ctx, nf, nz, ti, tj, tx, AMPS_UPPER);
-    ok = R && ref_solve_refined(nf, R->p, R->i, R->x, rhs, x, 2, NULL) == 0;
-    for (k = 0; k < n; k++) ue[k] = map[k] < 0 ? gv[k] : x[map[k]]; /* the solution on every equation */
-    amps_csc_symv(K, AMPS_UPPER, ue, ax);                           /* A x - b */
-    for (j = 0; j < n; j++) ax[j] -= b[j];
-    for (v = 0; v < nn; v++)
-        for (d = 0; d < 3; d++) {
-            int e = dof[3 * v + d];
-            double s = e >= 0 ? ue[e] : 0.0;
-            if (w->dyn) {
-                wo[3 * v + d] = s;
-                uo[3 * v + d] = u[3 * v + d] + w->dt * s;
-            } else {
-                uo[3 * v + d] = e >= 0 ? s : (fixed[v] ? 0.0 : u[3 * v + d]);
-            }
-            if (react) react[3 * v + d] = (e >= 0 && w->sh.pinned[v]) ? ax[e] / (w->dyn ? w->dt : 1.0) : 0.0;
-        }
-    amps_csc_free(ctx, R);
-    amps_csc_free(ctx, K);
-    free(fixed);
-    free(dof);
-    free(mass);
-    free(b);
-    free(ue);
-    free(gv);
-    free(ax);
-    free(map);
-    free(rhs);
-    free(x);
-    free(ti);
-    free(tj);
-    free(tx);
-    return ok ? 0 : 1;
-}
-
-/* ||x - y|| / max(||y||, floor) over n entries. */
-static double relerr(int n, const double *x, const double *y, double floor) {
-    double s = 0, t = 0;
-    int i;
-    for (i = 0; i < n; i++) {
-        s += (x[i] - y[i]) * (x[i] - y[i]);
-        t += y[i] * y[i];
-    }
-    t = sqrt(t);
-    return sqrt(s) / (t > floor ? t : floor);
-}
+#include "step_ref.h"
 
 static double worst_err = 0;
 
@@ -148,10 +32,10 @@ static void check_step(amps_ctx *ctx, amps_scene *S, tstate *w, const char *what
     s = amps_scene_step(ctx, S, 1);
     CHECK(s == AMPS_OK, "%s step %d: step: %s", what, step, ctx->msg);
     for (v = 0; v < nn; v++) amps_scene_reaction(ctx, S, v, rs + 3 * v);
-    eu = relerr(3 * nn, amps_scene_displacements(S), ur, 1e-300);
-    ew = relerr(3 * nn, amps_scene_velocities(S), wr, 1e-12);
-    er = relerr(3 * nn, rs, rr, 1e-12 + t_norm(3 * nn, rr) + 1e-9 * t_norm(3 * nn, wr));
-    erh = relerr(3 * nn, rh, rr, 1e-12 + t_norm(3 * nn, rr) + 1e-9 * t_norm(3 * nn, wr));
+    eu = t_relerr_floor(3 * nn, amps_scene_displacements(S), ur, 1e-300);
+    ew = t_relerr_floor(3 * nn, amps_scene_velocities(S), wr, 1e-12);
+    er = t_relerr_floor(3 * nn, rs, rr, 1e-12 + t_norm(3 * nn, rr) + 1e-9 * t_norm(3 * nn, wr));
+    erh = t_relerr_floor(3 * nn, rh, rr, 1e-12 + t_norm(3 * nn, rr) + 1e-9 * t_norm(3 * nn, wr));
     CHECK(eu < 1e-10 && ew < 1e-10, "%s step %d: error u %.2e w %.2e", what, step, eu, ew);
     CHECK(er < 1e-9 && erh < 1e-9, "%s step %d: reactions error %.2e (haptic %.2e)", what, step, er, erh);
     if (ew > worst_err) worst_err = ew;
@@ -193,7 +77,7 @@ static void check_solve(amps_ctx *ctx, amps_scene *S, tstate *w, const char *wha
     memcpy(u0, amps_scene_displacements(S), sizeof(double) * 3 * nn);
     CHECK(ref_step(ctx, m, w, u0, NULL, ur, NULL, NULL) == 0, "%s solve %d: reference failed", what, step);
     CHECK(amps_scene_solve(ctx, S) == AMPS_OK, "%s solve %d: %s", what, step, ctx->msg);
-    eu = relerr(3 * nn, amps_scene_displacements(S), ur, 1e-300);
+    eu = t_relerr_floor(3 * nn, amps_scene_displacements(S), ur, 1e-300);
     CHECK(eu < 1e-10, "%s solve %d: error u %.2e", what, step, eu);
     if (eu > worst_err) worst_err = eu;
     free(u0);
@@ -270,16 +154,9 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
                     }
             }
         } else if (kind == 5) { /* pin (also of copies) near the current displacement */
-            double g[3];
-            int d;
             v = free_node(mm, &w);
             if (v < 0) continue;
-            for (d = 0; d < 3; d++) g[d] = amps_scene_displacements(S)[3 * v + d] + 0.01 * (t_unif() - 0.5);
-            if (amps_scene_pin(&ctx, S, v, g) == AMPS_OK) {
-                w.sh.pinned[v] = 1;
-                memcpy(w.sh.pinval + 3 * v, g, sizeof(g));
-                npin++;
-            }
+            npin += t_pin_near(&ctx, S, &w.sh, v);
         } else if (kind == 6) { /* release */
             for (v = 0; v < mm->nnode && !w.sh.pinned[v]; v++) {}
             if (v < mm->nnode && amps_scene_release(&ctx, S, v) == AMPS_OK) w.sh.pinned[v] = 0;
@@ -459,7 +336,7 @@ static void test_physics(void) {
         ur = (double *)calloc(3 * nn, sizeof(double));
         memcpy(us, amps_scene_displacements(S), sizeof(double) * 3 * nn);
         ref_step(&ctx, amps_scene_mesh(S), &w, ur, NULL, ur, NULL, NULL);
-        err = relerr(3 * nn, us, ur, 1e-300);
+        err = t_relerr_floor(3 * nn, us, ur, 1e-300);
         CHECK(err < 1e-10, "static gravity sag against CHOLMOD: %.2e", err);
         amps_scene_free(&ctx, S);
         shadow_free(&w.sh);
@@ -469,7 +346,7 @@ static void test_physics(void) {
         CHECK(amps_scene_dynamics(&ctx, S, 0.3 / sqrt(lam), 2 * sqrt(lam), 0) == AMPS_OK, "damped dynamics: %s",
               ctx.msg);
         CHECK(amps_scene_step(&ctx, S, 300) == AMPS_OK, "300 steps: %s", ctx.msg);
-        err = relerr(3 * nn, amps_scene_displacements(S), us, 1e-300);
+        err = t_relerr_floor(3 * nn, amps_scene_displacements(S), us, 1e-300);
         CHECK(err < 1e-6, "gravity sag after 300 damped steps off the static one by %.2e", err);
         printf("  gravity sag: dynamic after 300 steps against static %.2e\n", err);
         free(us);
@@ -480,8 +357,9 @@ static void test_physics(void) {
     (void)v;
 }
 
-/* Statics: a removal that frees a piece is refused with the scene unchanged; a removal of a
-   held part equals CHOLMOD; runtime materials equal CHOLMOD; dynamics: the same removal is legal. */
+/* Statics (with gravity): a removal that frees a piece is refused with the scene unchanged, its
+   gravity loads included; a removal of a held part equals CHOLMOD; runtime materials equal
+   CHOLMOD; dynamics: the same removal is legal. */
 static void test_removal(void) {
     amps_ctx ctx;
     amps_scene *S;
@@ -493,6 +371,8 @@ static void test_removal(void) {
     amps_status s;
     amps_ctx_init(&ctx);
     S = make_scene(&ctx, amps_mesh_beam(&ctx, 6), 0.5, &w);
+    w.g[1] = -0.002;
+    CHECK(amps_scene_gravity(&ctx, S, w.g) == AMPS_OK, "gravity: %s", ctx.msg);
     m = amps_scene_mesh(S);
     nn = (int)m->nnode;
     v = 5 * 5 * 5 + 7;
@@ -513,7 +393,7 @@ static void test_removal(void) {
     CHECK(strstr(ctx.msg, "held by nothing") != NULL, "message: %s", ctx.msg);
     CHECK(m->nremoved == 0 && amps_mesh_degree(m, 5 * 5 * 3 + 12) > 0, "refused removal changed the mesh");
     CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "solve after refusal: %s", ctx.msg);
-    err = relerr(3 * nn, amps_scene_displacements(S), u0, 1e-300);
+    err = t_relerr_floor(3 * nn, amps_scene_displacements(S), u0, 1e-300);
     CHECK(err < 1e-12, "refused removal changed the solution by %.2e", err);
     /* a held removal (half the layer), then a runtime material: both against CHOLMOD */
     CHECK(amps_scene_remove(&ctx, S, n / 2, layer, AMPS_SINGULAR_REMOVE, NULL) == AMPS_OK, "removal: %s", ctx.msg);
@@ -523,7 +403,7 @@ static void test_removal(void) {
     CHECK(amps_scene_set_tet_material(&ctx, S, 3, 5.0, 0.2) == AMPS_OK, "runtime material: %s", ctx.msg);
     CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "solve after removal: %s", ctx.msg);
     ref_step(&ctx, m, &w, u0, NULL, ur, NULL, NULL);
-    err = relerr(3 * nn, amps_scene_displacements(S), ur, 1e-300);
+    err = t_relerr_floor(3 * nn, amps_scene_displacements(S), ur, 1e-300);
     CHECK(err < 1e-10, "statics removal + runtime material against CHOLMOD: %.2e", err);
     amps_scene_free(&ctx, S);
     shadow_free(&w.sh);
@@ -658,6 +538,12 @@ int main(void) {
     random_sequence("brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 2, 1);
     random_sequence("beam 5x5x6 seed 3", amps_mesh_beam(&ctx, 6), 0.5, 3.0, 150, 3, 1);
     random_sequence("statics beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 120, 4, 0);
+    /* Statics on the coarse brick: seed 5 there disagreed with CHOLMOD by 1e-3 at a well-conditioned
+       system (cond 8e2): a refused removal kept its gravity loads, fixed. Seeds 5, 7 and 8 also
+       reach removals that leave a piece on a hinge (reduced K exactly singular, cond 1e16, where
+       no solution can be judged) which the statics removal refuses or not depending on rounding
+       (the engine's pivot test; OpenMP); seed 6 does not. */
+    random_sequence("statics brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 6, 0);
     random_sequence("statics brick R=3", amps_mesh_brick(&ctx, 3), 0.25, 1.0, 120, 5, 0);
     return amps_t_end("test_dynamics");
 }

@@ -4,7 +4,7 @@
    with random delays, refusing to queue) and on OpenMP teams of 2 and 3 gives the bits of the
    serial run; each kernel is checked to have gone through the host's enqueue. */
 #define AMPS_IMPLEMENTATION
-#define AMPS__PAR_BACKOFF 0 /* every loop parallel, also after late workers */
+#define AMPS__PAR_ADAPT 0 /* every eligible loop parallel, whatever the timing says */
 #include "amps.h"
 #include "amps_test.h"
 #include "fe_util.h"

@@ -49,6 +49,9 @@ removetwice|mesh beam 4\nfix z lt 0.5\ndynamics 0.1 0 0\nremove 3\nremove 3\n|5|
 removerange|mesh beam 4\nremove 100000\n|2|out of range
 fracturebad|mesh beam 4\nfracture x\n|2|usage
 stepnan|mesh beam 4\ndynamics nan 0 0\n|2|bad number
+corotstatic|mesh beam 4\nfix z lt 0.5\ncorotational on\n|3|needs dynamics
+corotlate|mesh beam 4\nfix z lt 0.5\ndynamics 0.1 0 0\nstep\ncorotational on\n|5|only before the first step
+corotbad|mesh beam 4\nfix z lt 0.5\ndynamics 0.1 0 0\ncorotational yes\n|4|usage
 CASES
 # the dynamic examples dump displacements and velocities
 head -1 "$tmp/cantilever_drop_state.csv" 2>/dev/null | grep -q '^node,ux,uy,uz,vx,vy,vz$' && ok || bad "dynamic dump header"

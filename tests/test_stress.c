@@ -8,7 +8,8 @@
    usage: test_stress [--long]      (or AMPS_STRESS=long; `make stress` runs the long mode)
    AMPS_STRESS_ONLY=<text> runs only the cases whose name contains text (no adversarial cases).
    AMPS_STRESS_VARIANT=xs_from_dense|norefine|guard|norefactor changes the engine options of the cases, and
-   AMPS_STRESS_TABLE=<file> appends the summary table to file as CSV (bench/accuracy.sh).
+   AMPS_STRESS_TABLE=<file> appends the summary table to file as CSV (bench/accuracy.sh), and
+   AMPS_STRESS_SINGULAR_TOL=<tol> sets the pivot test opts.singular_tol (default 1e-15).
    Short mode (part of `make test`) takes well under a minute; long mode: beams up to 5x5x4096,
    10,000-step runs on a brick and on the bunny (bench/data/bunny20k.1.node or $AMPS_BUNNY, skipped
    when absent). Residual vs step is written to build/stress/<case>.csv (and a PNG when gnuplot
@@ -69,6 +70,7 @@ static double min_pivot_ratio(const amps_update *U) {
 typedef struct stats {
     char name[48];
     int neq, steps, checks, cuts, noop, singular, false_singular, pins, releases, fails;
+    int warn;                            /* solves that returned AMPS_WARN_INACCURATE (guard) */
     double cond0, cond_end;              /* condition estimates, first and last check */
     double res, err, res_chol, err_chol; /* worst over the checks */
     double be, be_chol;                  /* worst normwise backward errors */
@@ -111,19 +113,27 @@ static double bbox_len(const amps_mesh *m, double lo[3], double hi[3]) {
 /* AMPS_STRESS_VARIANT: the engine options of the run_case scenes (bench/accuracy.sh compares
    them): default, xs_from_dense (x_S from the small system, Eq. 3.20), norefine (no local refinement
    step), guard (guard_tol = 1e-12), norefactor (no background re-factorization), noacc
-   (refine_tol = 0: no default refinement; the residual contract is then not checked). */
+   (refine_tol = 0: no default refinement; the residual contract is then not checked).
+   AMPS_STRESS_SINGULAR_TOL=<tol> sets opts.singular_tol (the dense pivot test) in every variant. */
 static const char *variant = "default";
+#define GUARD_TOL 1e-12
 static int contract_on(void) { return strcmp(variant, "noacc") != 0; }
+/* The guard variant's tolerance on the relative residual, 0 in the others. A solve that returns
+   AMPS_WARN_INACCURATE is right when the tolerance is out of reach: CHOLMOD's plain solve of the
+   explicit system does not meet it either (its relative residual res_chol > GUARD_TOL). */
+static double guard_tol(void) { return strcmp(variant, "guard") ? 0.0 : GUARD_TOL; }
 static void variant_opts(amps_update_opts *o) {
+    if (getenv("AMPS_STRESS_SINGULAR_TOL")) o->singular_tol = atof(getenv("AMPS_STRESS_SINGULAR_TOL"));
     if (!strcmp(variant, "noacc")) o->refine_tol = 0;
     else if (!strcmp(variant, "xs_from_dense")) o->xs_from_dense = 1;
     else if (!strcmp(variant, "norefine")) o->refine = 0;
-    else if (!strcmp(variant, "guard")) o->guard_tol = 1e-12;
+    else if (!strcmp(variant, "guard")) o->guard_tol = GUARD_TOL;
     else if (!strcmp(variant, "norefactor")) o->refactor = AMPS_REFACTOR_OFF;
 }
 
-/* Compares the scene's last solve with the reference; updates st, prints, writes csv. */
-static void check_step(amps_ctx *ctx, amps_scene *S, const shadow *w, stats *st, int step, FILE *csv, int want_cond) {
+/* Compares the scene's last solve with the reference; updates st, prints, writes csv. Returns
+   CHOLMOD's relative residual (before refinement). */
+static double check_step(amps_ctx *ctx, amps_scene *S, const shadow *w, stats *st, int step, FILE *csv, int want_cond) {
     const amps_mesh *m = amps_scene_mesh(S);
     double *u = (double *)malloc(sizeof(double) * 3 * m->nnode), err, reng = -1, bres, berr, cond, rfac;
     scene_ref_info inf;
@@ -145,10 +155,7 @@ static void check_step(amps_ctx *ctx, amps_scene *S, const shadow *w, stats *st,
     CHECK(err <= berr,
           "%s step %d: error %.3e > bound %.3e (cond %.2e, CHOLMOD %.3e, CHOLMOD residual %.2e, smallest pivot ratio %.2e)",
           st->name, step, err, berr, cond, inf.err_chol, inf.res_chol, min_pivot_ratio(amps_scene_engine(S)));
-    /* Open gap: on the sliver mesh the refinement with a double residual stagnates at 11-12x
-       CHOLMOD's residual (normwise backward error below 1 eps); it is held to 20x until the
-       residual is accumulated in extended precision. */
-    rfac = strstr(st->name, "slivers") ? 2 * BOUND_RES_FACTOR : BOUND_RES_FACTOR;
+    rfac = BOUND_RES_FACTOR;
     CHECK(!contract_on() || inf.res_disp <= rfac * inf.res_chol + BOUND_RES_FLOOR,
           "%s step %d: residual %.3e > %g x CHOLMOD's %.3e + %.1e", st->name, step, inf.res_disp, rfac, inf.res_chol,
           BOUND_RES_FLOOR);
@@ -173,6 +180,7 @@ static void check_step(amps_ctx *ctx, amps_scene *S, const shadow *w, stats *st,
         fprintf(csv, "%d,%d,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e\n", step, inf.n, inf.res_disp, reng, err, inf.res_chol,
                 inf.err_chol, inf.be_disp, inf.be_chol);
     free(u);
+    return inf.res_chol;
 }
 
 static void plot_csv(const char *name) {
@@ -290,8 +298,16 @@ static stats *run_case(const char *name, amps_mesh *m0, int axis, double frac, d
                 memcpy(w.force + 3 * v, f, sizeof(f));
                 cnt++;
             }
-        CHECK(amps_scene_solve(&ctx, S) >= 0, "%s: first solve: %s", name, ctx.msg); /* a guard's warning gives x too */
-        check_step(&ctx, S, &w, st, 0, csv, 1);
+        amps_status s = amps_scene_solve(&ctx, S); /* a guard's warning gives x too */
+        double rc;
+        CHECK(s == AMPS_OK || (s == AMPS_WARN_INACCURATE && guard_tol() > 0), "%s: first solve: %s", name, ctx.msg);
+        rc = check_step(&ctx, S, &w, st, 0, csv, 1);
+        if (s == AMPS_WARN_INACCURATE) {
+            st->warn++;
+            CHECK(rc > guard_tol(), "%s: first solve: inaccurate, but CHOLMOD's relative residual %.2e meets %g", name,
+                  rc, guard_tol());
+            if (!(rc > guard_tol())) st->fails++;
+        }
     }
     for (step = 1; step <= c->steps; step++) {
         const amps_mesh *m = amps_scene_mesh(S);
@@ -359,14 +375,22 @@ static stats *run_case(const char *name, amps_mesh *m0, int axis, double frac, d
             memcpy(w.force + 3 * v, f, sizeof(f));
         }
         s = amps_scene_solve(&ctx, S);
-        CHECK(s == AMPS_OK || s == AMPS_WARN_INACCURATE, "%s step %d: solve: %s", name, step, ctx.msg);
+        CHECK(s == AMPS_OK || (s == AMPS_WARN_INACCURATE && guard_tol() > 0), "%s step %d: solve: %s", name, step,
+              ctx.msg);
         if (s < 0) break;
         {
             double pr = min_pivot_ratio(amps_scene_engine(S));
             if (pr < st->piv_min) st->piv_min = pr;
         }
-        if (step % c->check_every == 0 || step == c->steps) check_step(&ctx, S, &w, st, step, csv, step == c->steps);
-        else if (csv) {
+        if (step % c->check_every == 0 || step == c->steps || s == AMPS_WARN_INACCURATE) {
+            double rc = check_step(&ctx, S, &w, st, step, csv, step == c->steps);
+            if (s == AMPS_WARN_INACCURATE) {
+                st->warn++;
+                CHECK(rc > guard_tol(), "%s step %d: inaccurate, but CHOLMOD's relative residual %.2e meets %g", name,
+                      step, rc, guard_tol());
+                if (!(rc > guard_tol())) st->fails++;
+            }
+        } else if (csv) {
             double reng = -1;
             amps_scene_residual(&ctx, S, &reng);
             fprintf(csv, "%d,,,%.3e,,,,,\n", step, reng);
@@ -916,15 +940,18 @@ typedef long double quad;
 #endif
 
 /* x = A^{-1} b to working precision (at most 40 steps; stops when a correction is below
-   1e-3 eps ||x||). Returns the steps taken, -1 on failure. */
-static int quad_reference(amps_ctx *ctx, const amps_csc *A, const double *b, double *x) {
+   1e-3 eps ||x||); *cond (unless NULL) receives amps_condest of A (-1 on failure). Returns the
+   steps taken, -1 on failure. */
+static int quad_reference(amps_ctx *ctx, const amps_csc *A, const double *b, double *x, double *cond) {
     amps_int n = A->ncol, j, p;
     amps_factor *F = amps_analyze(ctx, A, AMPS_UPPER, NULL);
     quad *xq = (quad *)calloc(n + 1, sizeof(quad)), *rq = (quad *)malloc(sizeof(quad) * (n + 1));
     double *r = (double *)malloc(sizeof(double) * (n + 1)), *d = (double *)malloc(sizeof(double) * (n + 1));
     double *w = (double *)malloc(sizeof(double) * (n + 1));
     int it = -1, k;
+    if (cond) *cond = -1;
     if (F && amps_factorize(ctx, F, A) == AMPS_OK) {
+        if (cond && amps_condest(ctx, A, AMPS_UPPER, F, NULL, cond) != AMPS_OK) *cond = -1;
         memcpy(r, b, sizeof(double) * n);
         for (it = 0; it < 40; it++) {
             double dn = 0, xn = 0;
@@ -958,40 +985,49 @@ static int quad_reference(amps_ctx *ctx, const amps_csc *A, const double *b, dou
     return it;
 }
 
-/* The forward error of the scene's displacements and of CHOLMOD's plain solve against the quad
-   reference of the current mesh (nodes with coordinate axis below 1e-9 fixed, forces f: 3 per
-   node); *err_chol receives CHOLMOD's, *neq the order of the system, *steps the reference's
-   refinement steps. Returns the scene's, -1 on failure. */
-static double quad_errors(amps_ctx *ctx, amps_scene *S, const double *f, double *err_chol, int *neq, int *steps) {
+/* The explicit system of the current mesh (nodes with z below 1e-9 fixed, forces f: 3 per node):
+   returns K (upper), *b the load and *xa the scene's displacements on its DOFs, *n its order. */
+static amps_csc *fwd_system(amps_ctx *ctx, amps_scene *S, const double *f, amps_int *n, double **b, double **xa) {
     const amps_mesh *m = amps_scene_mesh(S);
-    amps_int nn = m->nnode, v, n, *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * nn);
+    amps_int nn = m->nnode, v, *dof = (amps_int *)malloc(sizeof(amps_int) * 3 * nn);
     unsigned char *fixed = (unsigned char *)calloc(nn, 1);
     amps_csc *K;
-    double *b, *xq, *xc, *xa, e = -1;
     int d;
     for (v = 0; v < nn; v++) fixed[v] = m->xyz[3 * v + 2] < 1e-9;
-    n = amps_mesh_number_dofs(m, fixed, dof);
-    *neq = (int)n;
-    K = amps_mesh_assemble(ctx, m, dof, n);
-    b = (double *)calloc(n + 1, sizeof(double));
-    xq = (double *)calloc(n + 1, sizeof(double));
-    xc = (double *)calloc(n + 1, sizeof(double));
-    xa = (double *)calloc(n + 1, sizeof(double));
+    *n = amps_mesh_number_dofs(m, fixed, dof);
+    K = amps_mesh_assemble(ctx, m, dof, *n);
+    *b = (double *)calloc(*n + 1, sizeof(double));
+    *xa = (double *)calloc(*n + 1, sizeof(double));
     for (v = 0; v < nn; v++)
         for (d = 0; d < 3; d++)
             if (dof[3 * v + d] >= 0) {
-                b[dof[3 * v + d]] = f[3 * v + d];
-                xa[dof[3 * v + d]] = amps_scene_displacements(S)[3 * v + d];
+                (*b)[dof[3 * v + d]] = f[3 * v + d];
+                (*xa)[dof[3 * v + d]] = amps_scene_displacements(S)[3 * v + d];
             }
+    free(dof);
+    free(fixed);
+    return K;
+}
+
+/* The forward error of the scene's displacements and of CHOLMOD's plain solve against the quad
+   reference of the current mesh (see fwd_system); *err_chol receives CHOLMOD's, *neq the order of
+   the system, *steps the reference's refinement steps, *cond (unless NULL) the condition estimate.
+   Returns the scene's, -1 on failure. */
+static double quad_errors(amps_ctx *ctx, amps_scene *S, const double *f, double *err_chol, int *neq, int *steps,
+                          double *cond) {
+    amps_int n;
+    double *b, *xa, *xq, *xc, e = -1;
+    amps_csc *K = fwd_system(ctx, S, f, &n, &b, &xa);
+    *neq = (int)n;
+    xq = (double *)calloc(n + 1, sizeof(double));
+    xc = (double *)calloc(n + 1, sizeof(double));
     *err_chol = -1;
-    if (K && (*steps = quad_reference(ctx, K, b, xq)) >= 0 &&
+    if (K && (*steps = quad_reference(ctx, K, b, xq, cond)) >= 0 &&
         ref_solve_refined((int)n, K->p, K->i, K->x, b, xc, 0, NULL) == 0) {
         *err_chol = t_reldiff((int)n, xc, xq);
         e = t_reldiff((int)n, xa, xq);
     }
     amps_csc_free(ctx, K);
-    free(dof);
-    free(fixed);
     free(b);
     free(xq);
     free(xc);
@@ -999,13 +1035,78 @@ static double quad_errors(amps_ctx *ctx, amps_scene *S, const double *f, double 
     return e;
 }
 
+/* Normwise backward error ||b - K x|| / (||K||_1 ||x|| + ||b||) of x on upper K, given its
+   relative residual rr = ||b - K x|| / ||b||. */
+static double fwd_backward_error(const amps_csc *K, const double *b, const double *x, double rr) {
+    amps_int n = K->ncol, j, p;
+    double *cs = (double *)calloc(n + 1, sizeof(double)), k1 = 0, bn = t_norm((int)n, b);
+    for (j = 0; j < n; j++)
+        for (p = K->p[j]; p < K->p[j + 1]; p++) {
+            cs[j] += fabs(K->x[p]);
+            if (K->i[p] != j) cs[K->i[p]] += fabs(K->x[p]);
+        }
+    for (j = 0; j < n; j++)
+        if (cs[j] > k1) k1 = cs[j];
+    free(cs);
+    return rr * bn / (k1 * t_norm((int)n, x) + bn);
+}
+
+/* Relative residuals ||b - K x|| / ||b|| on the explicit system (see fwd_system): the scene's is
+   returned, CHOLMOD's plain solve's in *res_chol (-1 on failure); be, be_chol (may be NULL):
+   the normwise backward errors. */
+static double fwd_residuals(amps_ctx *ctx, amps_scene *S, const double *f, double *res_chol, double *be,
+                            double *be_chol) {
+    amps_int n;
+    double *b, *xa, *xc, r = -1;
+    amps_csc *K = fwd_system(ctx, S, f, &n, &b, &xa);
+    xc = (double *)calloc(n + 1, sizeof(double));
+    *res_chol = -1;
+    if (K && ref_solve_refined((int)n, K->p, K->i, K->x, b, xc, 0, NULL) == 0) {
+        *res_chol = ref_resid((int)n, K->p, K->i, K->x, xc, b);
+        r = ref_resid((int)n, K->p, K->i, K->x, xa, b);
+        if (be) *be = fwd_backward_error(K, b, xa, r);
+        if (be_chol) *be_chol = fwd_backward_error(K, b, xc, *res_chol);
+    }
+    amps_csc_free(ctx, K);
+    free(b);
+    free(xc);
+    free(xa);
+    return r;
+}
+
+/* A solve of forward_error_case that returned s: AMPS_OK, or AMPS_WARN_INACCURATE (guard variant)
+   where CHOLMOD's plain solve misses the guard's tolerance too and the scene's relative residual
+   is within BOUND_RES_FACTOR of CHOLMOD's (+ BOUND_RES_FLOOR). Returns 1 if right. */
+static int fwd_solve_ok(amps_ctx *ctx, amps_scene *S, const double *f, amps_status s, const char *name, int k,
+                        stats *st) {
+    double r, rc;
+    if (s != AMPS_WARN_INACCURATE || guard_tol() <= 0) {
+        CHECK(s == AMPS_OK, "%s cut %d: solve: %s", name, k, ctx->msg);
+        return s == AMPS_OK;
+    }
+    st->warn++;
+    r = fwd_residuals(ctx, S, f, &rc, NULL, NULL);
+    CHECK(rc >= 0, "%s cut %d: CHOLMOD failed", name, k);
+    CHECK(rc > guard_tol(), "%s cut %d: inaccurate, but CHOLMOD's relative residual %.2e meets %g", name, k, rc,
+          guard_tol());
+    CHECK(r <= BOUND_RES_FACTOR * rc + BOUND_RES_FLOOR, "%s cut %d: residual %.3e > %g x CHOLMOD's %.3e + %.1e", name,
+          k, r, BOUND_RES_FACTOR, rc, BOUND_RES_FLOOR);
+    if (r > st->res) st->res = r;
+    if (rc > st->res_chol) st->res_chol = rc;
+    return rc > guard_tol() && r <= BOUND_RES_FACTOR * rc + BOUND_RES_FLOOR;
+}
+
 /* Mesh m (taken over; material E = 1000, nu) fixed at z = 0 with a load across its top (the
    free end), factored uncut, then ncuts cuts through random nodes of its top layers by random
-   planes, each solved through the updates (default options). At every check_every-th cut and
-   the last: the forward error against the quad reference at most BOUND_FWD_FACTOR times
-   CHOLMOD's (check: 0 reports only). */
+   planes (a plane that leaves one side of its node empty is drawn again), each solved through
+   the updates (the variant's options; singular_tol >= 0 sets opts.singular_tol). At every check_every-th cut
+   and the last: the forward error against the quad reference at most BOUND_FWD_FACTOR times
+   CHOLMOD's and the relative residual within the contract (BOUND_RES_FACTOR) of CHOLMOD's plain
+   solve (check: 0 reports only). Every solve returns AMPS_OK, or under the guard variant
+   AMPS_WARN_INACCURATE where the tolerance is out of CHOLMOD's reach too (fwd_solve_ok). */
 #define BOUND_FWD_FACTOR 10.0
-static void forward_error_case(const char *name, amps_mesh *m0, double nu, int ncuts, int check_every, int check) {
+static void forward_error_case(const char *name, amps_mesh *m0, double nu, int ncuts, int check_every, int check,
+                               double singular_tol) {
     amps_ctx ctx;
     amps_scene_opts so;
     amps_scene *S;
@@ -1025,6 +1126,7 @@ static void forward_error_case(const char *name, amps_mesh *m0, double nu, int n
     bbox_len(m0, lo, hi);
     amps_mesh_set_material(&ctx, m0, 1000.0, nu);
     amps_scene_opts_default(&so);
+    if (singular_tol >= 0) so.update.singular_tol = singular_tol;
     variant_opts(&so.update);
     S = amps_scene_create(&ctx, m0, &so);
     CHECK(S != NULL, "%s: create: %s", name, ctx.msg);
@@ -1036,29 +1138,60 @@ static void forward_error_case(const char *name, amps_mesh *m0, double nu, int n
             f[3 * v + 1] = 1.0;
             amps_scene_force(&ctx, S, v, f + 3 * v);
         }
-    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "%s: first solve: %s", name, ctx.msg);
+    if (!fwd_solve_ok(&ctx, S, f, amps_scene_solve(&ctx, S), name, 0, st)) st->fails++;
     t_seed(900);
     for (k = 1; k <= ncuts; k++) {
         const amps_mesh *m = amps_scene_mesh(S);
         double p[3], nrm[3];
         amps_int vc;
-        amps_status s;
-        int d;
-        do v = t_int((int)m->nnode);
-        while (m->xyz[3 * v + 2] < hi[2] - 3.0 - 1e-9);
-        for (d = 0; d < 3; d++) {
-            p[d] = m->xyz[3 * v + d];
-            nrm[d] = t_unif() - 0.5;
+        amps_status s = AMPS_WARN_NOOP;
+        int d, draw;
+        for (draw = 0; draw < 20 && s == AMPS_WARN_NOOP; draw++) { /* a plane that leaves a side empty: again */
+            do v = t_int((int)m->nnode);
+            while (m->xyz[3 * v + 2] < hi[2] - 3.0 - 1e-9);
+            for (d = 0; d < 3; d++) {
+                p[d] = m->xyz[3 * v + d];
+                nrm[d] = t_unif() - 0.5;
+            }
+            s = amps_scene_cut(&ctx, S, v, p, nrm, &vc);
         }
-        s = amps_scene_cut(&ctx, S, v, p, nrm, &vc);
         CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP || s == AMPS_ERR_SINGULAR_UPDATE, "%s: cut: %s", name, ctx.msg);
-        if (s == AMPS_OK) cuts++;
-        CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "%s cut %d: solve: %s", name, k, ctx.msg);
+        if (s == AMPS_OK) {
+            double pr = min_pivot_ratio(amps_scene_engine(S));
+            cuts++;
+            if (pr < st->piv_min) st->piv_min = pr;
+            if (pr < 1e-15) /* the default pivot test would have refused it */
+                printf("    %-22s cut %3d  node %ld committed with the smallest pivot ratio %.2e\n", name, k, (long)v,
+                       pr);
+        } else {
+            if (s == AMPS_WARN_NOOP) st->noop++;
+            else st->singular++;
+            printf("    %-22s cut %3d  node %ld (z %g): %s\n", name, k, (long)v, m->xyz[3 * v + 2], ctx.msg);
+        }
+        if (!fwd_solve_ok(&ctx, S, f, amps_scene_solve(&ctx, S), name, k, st)) st->fails++;
         if (k % check_every == 0 || k == ncuts) {
-            double ec, e = quad_errors(&ctx, S, f, &ec, &st->neq, &steps);
+            double cond = -1, ec,
+                   e = quad_errors(&ctx, S, f, &ec, &st->neq, &steps, st->checks == 0 || k == ncuts ? &cond : NULL),
+                   be = -1, bec = -1, rc, r;
+            int bad_res;
             CHECK(e >= 0, "%s cut %d: reference failed", name, k);
             if (e < 0) break;
-            printf("    %-22s cut %3d  error %.2e (CHOLMOD %.2e)  reference: %d steps\n", name, k, e, ec, steps);
+            r = fwd_residuals(&ctx, S, f, &rc, &be, &bec);
+            bad_res = check && contract_on() && !(r <= BOUND_RES_FACTOR * rc + BOUND_RES_FLOOR);
+            if (cond > 0) {
+                if (st->checks == 0) st->cond0 = cond;
+                st->cond_end = cond;
+            }
+            printf("    %-22s cut %3d  error %.2e (CHOLMOD %.2e)  residual %.2e (CHOLMOD %.2e)  reference: %d steps"
+                   "  cond %.1e\n",
+                   name, k, e, ec, r, rc, steps, cond);
+            CHECK(!bad_res, "%s cut %d: residual %.3e > %g x CHOLMOD's %.3e + %.1e", name, k, r, BOUND_RES_FACTOR, rc,
+                  BOUND_RES_FLOOR);
+            if (bad_res) st->fails++;
+            if (r > st->res) st->res = r;
+            if (rc > st->res_chol) st->res_chol = rc;
+            if (be > st->be) st->be = be;
+            if (bec > st->be_chol) st->be_chol = bec;
             if (check)
                 CHECK(e <= BOUND_FWD_FACTOR * ec + 1e-15, "%s cut %d: error %.3e > %g x CHOLMOD's %.3e", name, k, e,
                       BOUND_FWD_FACTOR, ec);
@@ -1084,11 +1217,21 @@ static void forward_errors(void) {
     amps_ctx ctx;
     amps_ctx_init(&ctx);
     printf("forward error against a quad-precision reference\n");
-    forward_error_case("fwd_beam_5x5x256", amps_mesh_beam(&ctx, 256), 0.3, 25, 25, 1);
-    forward_error_case("fwd_brick_nu_0.4999", amps_mesh_brick(&ctx, long_mode ? 8 : 5), 0.4999, 25, 5, 1);
+    forward_error_case("fwd_beam_5x5x64", amps_mesh_beam(&ctx, 64), 0.3, 25, 5, 1, -1);
+    forward_error_case("fwd_beam_5x5x256", amps_mesh_beam(&ctx, 256), 0.3, 25, 25, 1, -1);
+    forward_error_case("fwd_brick_nu_0.4999", amps_mesh_brick(&ctx, long_mode ? 8 : 5), 0.4999, 25, 5, 1, -1);
+    {
+        amps_mesh *m = tetgen_slivers(&ctx, 600, 9); /* held at its 4 corners with z = 0 */
+        if (m) forward_error_case("fwd_tetgen_slivers", m, 0.3, 25, 25, 1, -1);
+    }
     if (!long_mode) return;
-    forward_error_case("fwd_beam_5x5x1024", amps_mesh_beam(&ctx, 1024), 0.3, 25, 5, 1);
-    forward_error_case("fwd_beam_5x5x4096", amps_mesh_beam(&ctx, 4096), 0.3, 25, 25, 0);
+    forward_error_case("fwd_beam_5x5x1024", amps_mesh_beam(&ctx, 1024), 0.3, 25, 5, 1, -1);
+    /* Beam 5x5x4096 (cond 5.7e14): with the default singular_tol = 1e-15 the dense pivot test refuses
+       23 of these 25 cuts, which the scene's topological test passed, although they are not singular:
+       with singular_tol = 0 every cut commits (smallest pivot ratio 5.6e-19), CHOLMOD factors the cut
+       system, the quad refinement converges, and the backward error is 0.1 eps, the error 5.1e-7
+       against CHOLMOD's 2.2e-3 (bench/RESULTS.md 6b). So the case runs with singular_tol = 0. */
+    forward_error_case("fwd_beam_5x5x4096", amps_mesh_beam(&ctx, 4096), 0.3, 25, 25, 1, 0.0);
 }
 
 static void adversarial(void) {
@@ -1130,9 +1273,9 @@ int main(int argc, char **argv) {
         if (tf) {
             for (k = 0; k < ntable; k++) {
                 stats *s = table + k;
-                fprintf(tf, "%s,%s,%d,%d,%d,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%d\n", variant, s->name, s->neq,
+                fprintf(tf, "%s,%s,%d,%d,%d,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%d,%d\n", variant, s->name, s->neq,
                         s->steps, s->cuts, s->cond0, s->res, s->res_chol, s->be / EPS, s->be_chol / EPS, s->err,
-                        s->err_chol, s->piv_min, s->fails);
+                        s->err_chol, s->piv_min, s->fails, s->warn);
             }
             fclose(tf);
         }

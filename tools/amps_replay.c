@@ -1,8 +1,10 @@
 /* amps_replay: runs a scenario (mesh, material, fixed nodes, forces, pins, cuts, solves) with
    amps.h and prints one line per solve and a summary.
 
-   usage: amps_replay [-q] [--residual] [--threads N] [--order auto|amd|nd|metis|natural]
+   usage: amps_replay [-q] [--residual] [--threads N] [--jobs N] [--order auto|amd|nd|metis|natural]
                       [--dual] [--xs-from-dense] [--surface FILE] scenario
+   --jobs N runs amps.h's parallel loops on N worker threads of examples/jobs.h (the host task
+   system of amps_ctx: enqueue_task/finish_task; the calling thread helps) instead of OpenMP.
    --surface FILE writes the deformed boundary triangles (cut faces included) at the end, one
    block of 4 lines "x y z |u|" per triangle, for gnuplot's "with polygons".
 
@@ -43,6 +45,9 @@
      step [<n>]               n time steps (default 1); dynamics only (solve is an error there)
      remove <tet> [<tet> ...] element removal with the default singularity avoidance
      fracture <sigma_max> | off  automatic removal after each step
+     corotational on|off      corotational elasticity (large rotations; amps_scene_corotational):
+                              after dynamics, before the first step; each step line then reports
+                              the PCG iterations and its relative residual
    In dynamics dump writes node,ux,uy,uz,vx,vy,vz. */
 #define AMPS_IMPLEMENTATION
 #include "amps.h"
@@ -51,6 +56,10 @@
 #include <string.h>
 #include <ctype.h>
 #include <math.h>
+#ifndef AMPS_REPLAY_NO_MAIN
+#define JOBS_IMPLEMENTATION
+#include "../examples/jobs.h"
+#endif
 
 #define MAXTOK 64
 
@@ -540,6 +549,12 @@ static int cmd_step(replay *R, int nt, char **t) {
         nf = amps_scene_fractured(R->S, NULL);
         if (!R->last_cmd[0]) snprintf(R->last_cmd, sizeof(R->last_cmd), "step");
         if (nf > 0) snprintf(R->last_cmd, sizeof(R->last_cmd), "step (tore %ld)", (long)nf);
+        {
+            amps_scene_step_stats st;
+            size_t l = strlen(R->last_cmd);
+            if (amps_scene_step_info(R->S, &st) == AMPS_OK && st.corotational && l + 1 < sizeof(R->last_cmd))
+                snprintf(R->last_cmd + l, sizeof(R->last_cmd) - l, " pcg %ld", (long)st.iterations);
+        }
         if (nf > 0) { /* the tear changed the system after the solve: no residual for this step */
             int on = R->residual_on, rc;
             R->residual_on = 0;
@@ -577,6 +592,14 @@ static int cmd_remove(replay *R, int nt, char **t) {
     return 0;
 }
 
+/* corotational on|off: dynamics only, before the first step. */
+static int cmd_corotational(replay *R, int nt, char **t) {
+    if (nt != 2 || (strcmp(t[1], "on") && strcmp(t[1], "off"))) return fail(R, "%s", "usage: corotational on|off");
+    if (!R->dynamic) return fail(R, "%s", "corotational needs dynamics (give dynamics first)");
+    if (R->solved) return fail(R, "%s", "corotational is allowed only before the first step");
+    return amps_scene_corotational(&R->ctx, R->S, !strcmp(t[1], "on")) ? lib_fail(R, "corotational") : 0;
+}
+
 /* The dynamics commands; -1 if t[0] is none of them. */
 static int run_dynamics_line(replay *R, int nt, char **t) {
     const char *c = t[0];
@@ -584,6 +607,7 @@ static int run_dynamics_line(replay *R, int nt, char **t) {
     if (!strcmp(c, "gravity") || !strcmp(c, "dynamics") || !strcmp(c, "fracture")) return cmd_dynamics(R, nt, t);
     if (!strcmp(c, "step")) return cmd_step(R, nt, t);
     if (!strcmp(c, "remove")) return cmd_remove(R, nt, t);
+    if (!strcmp(c, "corotational")) return cmd_corotational(R, nt, t);
     return -1;
 }
 
@@ -646,6 +670,8 @@ int main(int argc, char **argv) {
     size_t len = 0, cap = 0;
     int a, rc = 0;
     const char *path = NULL, *surface = NULL;
+    jobs_pool *pool = NULL;
+    int njobs = 0;
     replay_init(&R);
     for (a = 1; a < argc; a++) {
         if (!strcmp(argv[a], "-q")) R.quiet = 1;
@@ -653,6 +679,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[a], "--dual")) R.opts.update.formulation = AMPS_FORM_DUAL;
         else if (!strcmp(argv[a], "--xs-from-dense")) R.opts.update.xs_from_dense = 1;
         else if (!strcmp(argv[a], "--threads") && a + 1 < argc) R.ctx.nthreads = atoi(argv[++a]);
+        else if (!strcmp(argv[a], "--jobs") && a + 1 < argc) njobs = atoi(argv[++a]);
         else if (!strcmp(argv[a], "--surface") && a + 1 < argc) surface = argv[++a];
         else if (!strcmp(argv[a], "--order") && a + 1 < argc) {
             const char *o = argv[++a];
@@ -672,7 +699,7 @@ int main(int argc, char **argv) {
     }
     if (!path) {
         fprintf(stderr,
-                "usage: amps_replay [-q] [--residual] [--threads N] [--order auto|amd|nd|metis|natural] [--dual] [--xs-from-dense] [--surface FILE] scenario\n");
+                "usage: amps_replay [-q] [--residual] [--threads N] [--jobs N] [--order auto|amd|nd|metis|natural] [--dual] [--xs-from-dense] [--surface FILE] scenario\n");
         return 2;
     }
 #ifdef _OPENMP
@@ -714,6 +741,14 @@ int main(int argc, char **argv) {
         return 1;
     }
     fclose(f);
+    if (njobs > 0) {
+        if (!(pool = jobs_create(njobs))) {
+            free(text);
+            fprintf(stderr, "amps_replay: cannot start %d worker threads\n", njobs);
+            return 1;
+        }
+        jobs_attach(pool, &R.ctx);
+    }
     rc = replay_run_buffer(&R, text, len);
     free(text);
     if (rc == 0) {
@@ -730,6 +765,7 @@ int main(int argc, char **argv) {
         if (surface && R.S) rc = write_surface(&R, surface);
     }
     replay_free(&R);
+    if (pool) jobs_destroy(pool);
     return rc;
 }
 #endif

@@ -6,7 +6,7 @@ set -u
 pkgs="build-essential libsuitesparse-dev"
 cmds=""
 case "${1:-}" in
-  bench) pkgs="$pkgs libmetis-dev libopenblas0-pthread"; cmds="tetgen:tetgen gnuplot:gnuplot-nox node:nodejs npm:npm" ;;
+  bench) pkgs="$pkgs libmetis-dev libopenblas0-pthread"; cmds="tetgen:tetgen gmsh:gmsh gnuplot:gnuplot-nox node:nodejs npm:npm" ;;
   demo) pkgs="build-essential"; cmds="gnuplot:gnuplot-nox" ;;
 esac
 missing=""
