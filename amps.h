@@ -485,7 +485,7 @@ typedef struct amps_update_opts {
                                refinement steps with the same factors (each
                                a forward and a backward solve, the residual in double-double; at
                                most 3, stopping when omega no longer halves); on a base whose
-                               condition estimate exceeds 9.0e6 (stats.base_cond) every augmented
+                               condition estimate exceeds 9.0e6 (stats.base_cond) every full
                                solve takes one step, for its forward error; when the normwise
                                eta = ||r_F|| / (||K^||_inf ||x_F|| + ||f^_F||) <= omega is still
                                above 64 refine_tol after them a synchronous
@@ -8538,9 +8538,12 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    2.3e6) is at 1.1x, 5x5x64 (3.5e7) at 1.8-3.0x, the TetGen slivers (1.2e7) at 0.8-0.9x, and the
    brick at nu 0.4999 (1.1e7) at 4.3-8.1x over 16 runs (it depends on when the background
    re-factorization lands): too close to 10x. The benchmark's bricks and bunnies lie below
-   (brick:14 1.4e5, bunny20k 6.6e6, bunny50k 7.7e6) and keep their cost: the augmented solves of
-   a base with kappa eps > AMPS__FWD_KAPPA_EPS (kappa > 9.0e6, estimated at its creation by
-   amps_condest, about 11 solves) take one step. */
+   (brick:14 1.4e5, bunny20k 6.6e6, bunny50k 7.7e6) and keep their cost: the solves of a base
+   with kappa eps > AMPS__FWD_KAPPA_EPS (kappa > 9.0e6, estimated at its creation by amps_condest,
+   about 11 solves) take one step. A fresh base (no augmentation) takes it too: our direct solve
+   is as backward stable as CHOLMOD's, but at this kappa two such solves' forward errors differ by
+   their orderings' rounding, up to 10.6-11.8x on beams 5x5x256 and 5x5x64 (re-factored after every
+   cut, tests/test_stress.c with AMPS_STRESS_COUNT=1). */
 #define AMPS__DIRECT_RATIO 4.0
 #ifndef AMPS__FWD_KAPPA_EPS /* (overridable for bench/refine_cost only) */
 #define AMPS__FWD_KAPPA_EPS 2e-9
@@ -8551,9 +8554,9 @@ static int amps__accuracy(amps_update *U, int pass) {
     double eta = amps__backward_error(U, U->sol.x, rho, &rn, 0, &om), rel = den > 0 ? rn / den : rn;
     double eta0, rel0;
     amps_int it, k;
-    /* the forward trigger: an augmented solve on an ill-conditioned base (kappa eps above
+    /* the forward trigger: a solve on an ill-conditioned base (kappa eps above
        AMPS__FWD_KAPPA_EPS) takes one step */
-    int fwd = tol > 0 && U->aug.size > 0 && U->guard.cond * 2.220446049250313e-16 > AMPS__FWD_KAPPA_EPS;
+    int fwd = tol > 0 && U->guard.cond * 2.220446049250313e-16 > AMPS__FWD_KAPPA_EPS;
     for (it = 0; it < 3; it++) {
         int want_g = gtol > 0 && rel > gtol, want_e = tol > 0 && om > tol && om > AMPS__DIRECT_RATIO * U->guard.omega_d;
         int want_f = fwd && it == 0;

@@ -9,7 +9,8 @@
    AMPS_STRESS_ONLY=<text> runs only the cases whose name contains text (no adversarial cases).
    AMPS_STRESS_VARIANT=xs_from_dense|norefine|guard|norefactor changes the engine options of the cases, and
    AMPS_STRESS_TABLE=<file> appends the summary table to file as CSV (bench/accuracy.sh), and
-   AMPS_STRESS_SINGULAR_TOL=<tol> sets the pivot test opts.singular_tol (default 1e-15).
+   AMPS_STRESS_SINGULAR_TOL=<tol> sets the pivot test opts.singular_tol (default 1e-15), and
+   AMPS_STRESS_COUNT=<n> re-factors deterministically after every n commits (AMPS_REFACTOR_COUNT).
    Short mode (part of `make test`) takes well under a minute; long mode: beams up to 5x5x4096,
    10,000-step runs on a brick and on the bunny (bench/data/bunny20k.1.node or $AMPS_BUNNY, skipped
    when absent). Residual vs step is written to build/stress/<case>.csv (and a PNG when gnuplot
@@ -116,6 +117,9 @@ static double bbox_len(const amps_mesh *m, double lo[3], double hi[3]) {
    (refine_tol = 0: no default refinement; the residual contract is then not checked).
    AMPS_STRESS_SINGULAR_TOL=<tol> sets opts.singular_tol (the dense pivot test) in every variant. */
 static const char *variant = "default";
+/* > 0: the forward_error_case being run re-factors deterministically after every that many
+   commits (AMPS_REFACTOR_COUNT), whatever the variant; AMPS_STRESS_COUNT=<n> does so for all. */
+static int fwd_refactor_every = 0;
 #define GUARD_TOL 1e-12
 static int contract_on(void) { return strcmp(variant, "noacc") != 0; }
 /* The guard variant's tolerance on the relative residual, 0 in the others. A solve that returns
@@ -124,6 +128,10 @@ static int contract_on(void) { return strcmp(variant, "noacc") != 0; }
 static double guard_tol(void) { return strcmp(variant, "guard") ? 0.0 : GUARD_TOL; }
 static void variant_opts(amps_update_opts *o) {
     if (getenv("AMPS_STRESS_SINGULAR_TOL")) o->singular_tol = atof(getenv("AMPS_STRESS_SINGULAR_TOL"));
+    if (getenv("AMPS_STRESS_COUNT") || fwd_refactor_every > 0) { /* re-factored every that many commits */
+        o->refactor = AMPS_REFACTOR_COUNT;
+        o->refactor_every = fwd_refactor_every > 0 ? fwd_refactor_every : atoi(getenv("AMPS_STRESS_COUNT"));
+    }
     if (!strcmp(variant, "noacc")) o->refine_tol = 0;
     else if (!strcmp(variant, "xs_from_dense")) o->xs_from_dense = 1;
     else if (!strcmp(variant, "norefine")) o->refine = 0;
@@ -1219,6 +1227,10 @@ static void forward_errors(void) {
     printf("forward error against a quad-precision reference\n");
     forward_error_case("fwd_beam_5x5x64", amps_mesh_beam(&ctx, 64), 0.3, 25, 5, 1, -1);
     forward_error_case("fwd_beam_5x5x256", amps_mesh_beam(&ctx, 256), 0.3, 25, 25, 1, -1);
+    /* every solve on a fresh base (no augmentation): the forward step is needed there too */
+    fwd_refactor_every = 1;
+    forward_error_case("fwd_beam_5x5x64_fresh", amps_mesh_beam(&ctx, 64), 0.3, 25, 5, 1, -1);
+    fwd_refactor_every = 0;
     forward_error_case("fwd_brick_nu_0.4999", amps_mesh_brick(&ctx, long_mode ? 8 : 5), 0.4999, 25, 5, 1, -1);
     {
         amps_mesh *m = tetgen_slivers(&ctx, 600, 9); /* held at its 4 corners with z = 0 */
