@@ -1218,9 +1218,10 @@ AMPS_API const double *amps_scene_velocities(const amps_scene *S);
    edges; report may be NULL), then updates A on the rows of the affected nodes: minus the element
    matrices of the removed tets, separated nodes as new equations (like cut copies, with their
    origin's u and w). Orphans (nodes left in no tet) are held: statics at their displacement,
-   dynamics at w = 0. In statics a removal that leaves a node-connected piece with no fixed or
-   pinned node, or a piece the engine finds singular (a hinge), is AMPS_ERR_SINGULAR_UPDATE with
-   the piece named, and the scene is as it was (amps_mesh_unremove); in dynamics a free piece is
+   dynamics at w = 0. In statics a removal that leaves a node-connected piece whose fixed and
+   pinned nodes are none or all on one line (it could turn about that line), or a piece the
+   engine finds singular (a hinge inside it under AMPS_SINGULAR_IGNORE), is
+   AMPS_ERR_SINGULAR_UPDATE with the piece named, and the scene is as it was (amps_mesh_unremove); in dynamics a free piece is
    legal. Errors of amps_mesh_remove (index, removed twice) change nothing. Allocates. */
 AMPS_API amps_status amps_scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, const amps_int *tets,
                                        amps_singular_policy policy, amps_mesh_removal *report);
@@ -13979,9 +13980,13 @@ static amps_status amps__scene_rm_ws(amps_ctx *ctx, void **p, size_t *cap, size_
     return AMPS_OK;
 }
 
-/* The tets of a removal: statics requires every node-connected piece around them to keep a fixed
-   or pinned node (AMPS_ERR_SINGULAR_UPDATE naming the first loose piece). Cost: the tets of the
-   pieces explored (a piece stops at its first held node). */
+/* The tets of a removal: statics requires every node-connected piece around them to be held by
+   fixed or pinned nodes not all on one line (AMPS_ERR_SINGULAR_UPDATE naming the first loose
+   piece). A piece held at points of one line turns about it at zero energy, whatever its inside;
+   with singularity avoidance (REMOVE, SEPARATE) a node-connected piece is face-connected, so rigid,
+   and the test is exact. Cost: the tets of the pieces explored (a piece stops at its third
+   constrained node off the line of the first two, or where it meets a piece found held: seen 1;
+   seen 2: the piece being explored). */
 static amps_status amps__scene_removal_held(amps_ctx *ctx, amps_scene *S, const amps_mesh_removal *r) {
     const amps_mesh *m = S->m;
     amps_int nn = m->nnode, k, q, head, tail, *queue;
@@ -13993,30 +13998,49 @@ static amps_status amps__scene_removal_held(amps_ctx *ctx, amps_scene *S, const 
     queue = S->dyn.rm_queue;
     memset(seen, 0, (size_t)nn + 1);
     for (k = 0; !s && k < 4 * r->ntet; k++) {
-        amps_int seed = m->tet[4 * r->tets[k / 4] + k % 4], ntet = 0;
-        int held = 0;
+        amps_int seed = m->tet[4 * r->tets[k / 4] + k % 4], ntet = 0, ncon = 0, con = -1, i;
+        amps__line L;
+        int joined = 0;
         if (seen[seed] || m->inc_len[seed] == 0) continue;
-        seen[seed] = 1;
+        seen[seed] = 2;
+        L.state = 0;
+        L.tol = 1e-9 * S->mech.scale;
         head = tail = 0;
         queue[tail++] = seed;
-        while (head < tail && !held) {
+        while (head < tail && L.state != 3 && !joined) {
             amps_int v = queue[head++], j;
-            held = S->node.fixed[v] || (S->node.pinned[v] && !S->dyn.orphan[v]);
+            if (S->node.fixed[v] || (S->node.pinned[v] && !S->dyn.orphan[v])) {
+                amps__line_add(&L, m->xyz + 3 * v);
+                ncon++;
+                con = v;
+            }
             ntet += m->inc_len[v];
             for (j = 0; j < m->inc_len[v]; j++)
                 for (q = 0; q < 4; q++) {
                     amps_int w = m->tet[4 * m->inc[m->inc_ptr[v] + j] + q];
-                    if (!seen[w]) {
-                        seen[w] = 1;
+                    if (seen[w] == 1) joined = 1;
+                    else if (!seen[w]) {
+                        seen[w] = 2;
                         queue[tail++] = w;
                     }
                 }
         }
-        if (!held)
+        if (L.state == 3 || joined) {
+            for (i = 0; i < tail; i++) seen[queue[i]] = 1;
+            continue;
+        }
+        if (ncon == 0)
             s = amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
                           "amps_scene_remove: the removal leaves a piece of %ld tets (node %ld) held by nothing; "
                           "the removal was undone",
                           (long)(ntet / 4 > 0 ? ntet / 4 : 1), (long)seed);
+        else
+            s = amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
+                          "amps_scene_remove: the removal leaves a piece of %ld tets (node %ld) held only at %ld "
+                          "constrained node%s on one line (node %ld): it could turn about that line; the removal "
+                          "was undone",
+                          (long)(ntet / 4 > 0 ? ntet / 4 : 1), (long)seed, (long)ncon, ncon == 1 ? "" : "s",
+                          (long)con);
     }
     return s;
 }
