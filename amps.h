@@ -51,6 +51,7 @@
                           amps_mesh_write_*); the *_mem readers stay. Error messages never use
                           stdio (a private formatter, the same in every build).
      AMPS_NO_THREADS      leave out amps' own background threads (pthreads); OpenMP is separate
+     AMPS_NO_SIMD         plain C where SSE2 intrinsics would be used (the residual check)
      OpenMP kernels are used when compiled with -fopenmp (_OPENMP defined), else none.
 
    ERRORS AND OWNERSHIP
@@ -1365,6 +1366,10 @@ AMPS_API amps_status amps_pvd_write(amps_ctx *ctx, const char *path, amps_int n,
 #endif
 #ifdef _OPENMP
 #include <omp.h>
+#endif
+#if !defined(AMPS_NO_SIMD) && (defined(__SSE2__) || defined(_M_X64) || (defined(_M_IX86_FP) && _M_IX86_FP >= 2))
+#include <emmintrin.h> /* the residual check's 3x3-block product (amps__resid_blk) */
+#define AMPS__SSE2 1
 #endif
 #ifndef AMPS_NO_THREADS
 #include <pthread.h>
@@ -8377,15 +8382,49 @@ static double amps__resid_row(const amps_update *U, amps_int j, const double *x,
     return hi + lo;
 }
 
+#ifdef AMPS__SSE2
+/* *S += a[0..5] .* (X0, X1, X2) and *T += |a[0..5] .* (X0, X1, X2)|, lane by lane. */
+static void amps__blk_row(const double *a, __m128d X0, __m128d X1, __m128d X2, __m128d *S, __m128d *T) {
+    const __m128d nosign = _mm_castsi128_pd(_mm_set_epi32(0x7fffffff, -1, 0x7fffffff, -1));
+    __m128d q0 = _mm_mul_pd(_mm_loadu_pd(a), X0), q1 = _mm_mul_pd(_mm_loadu_pd(a + 2), X1),
+            q2 = _mm_mul_pd(_mm_loadu_pd(a + 4), X2);
+    *S = _mm_add_pd(_mm_add_pd(_mm_add_pd(*S, q0), q1), q2);
+    *T = _mm_add_pd(_mm_add_pd(_mm_add_pd(*T, _mm_and_pd(q0, nosign)), _mm_and_pd(q1, nosign)), _mm_and_pd(q2, nosign));
+}
+#endif
+
 /* Rows 3B..3B+2 of the base part of K^ x (base.blk3): s[r] = (K x)_{3B+r}, t[r] = (|K| |x|)_{3B+r},
-   summed in the order of amps__resid_row's (bitwise the same s); one index per 3x3 block. */
+   one column index per 3x3 block. The order of the sums is fixed by the pattern alone (with
+   SSE2: two lanes, entries 2i and 2i+1 of the row, added at the end, then a last odd block), so
+   a result does not depend on threads or schedule; it differs from amps__resid_row's by rounding,
+   which only the check (its trigger and stats) sees. */
 static void amps__resid_blk(const amps_update *U, amps_int B, const double *x, double s[3], double t[3]) {
     const amps_int *ki = U->base.Ki + U->base.Kp[3 * B];
     const double *a0 = U->base.Kx + U->base.Kp[3 * B], *a1 = U->base.Kx + U->base.Kp[3 * B + 1],
                  *a2 = U->base.Kx + U->base.Kp[3 * B + 2];
-    amps_int k, len = U->base.Kp[3 * B + 1] - U->base.Kp[3 * B];
+    amps_int k = 0, len = U->base.Kp[3 * B + 1] - U->base.Kp[3 * B];
     double s0 = 0, s1 = 0, s2 = 0, t0 = 0, t1 = 0, t2 = 0;
-    for (k = 0; k < len; k += 3) {
+#ifdef AMPS__SSE2
+    {
+        __m128d S0 = _mm_setzero_pd(), S1 = S0, S2 = S0, T0 = S0, T1 = S0, T2 = S0, X0, X1, X2;
+        double l0[2], l1[2], l2[2];
+        /* two blocks (6 entries of each row) at a time: X0 X1 X2 = x of columns c, c+1 | c+2, d |
+           d+1, d+2, where c and d are the blocks' first columns */
+        for (; k + 6 <= len; k += 6) {
+            const double *xc = x + ki[k], *xd = x + ki[k + 3];
+            X0 = _mm_loadu_pd(xc);
+            X1 = _mm_loadh_pd(_mm_load_sd(xc + 2), xd);
+            X2 = _mm_loadu_pd(xd + 1);
+            amps__blk_row(a0 + k, X0, X1, X2, &S0, &T0);
+            amps__blk_row(a1 + k, X0, X1, X2, &S1, &T1);
+            amps__blk_row(a2 + k, X0, X1, X2, &S2, &T2);
+        }
+        _mm_storeu_pd(l0, S0), s0 = l0[0] + l0[1], _mm_storeu_pd(l0, T0), t0 = l0[0] + l0[1];
+        _mm_storeu_pd(l1, S1), s1 = l1[0] + l1[1], _mm_storeu_pd(l1, T1), t1 = l1[0] + l1[1];
+        _mm_storeu_pd(l2, S2), s2 = l2[0] + l2[1], _mm_storeu_pd(l2, T2), t2 = l2[0] + l2[1];
+    }
+#endif
+    for (; k < len; k += 3) {
         const double *xc = x + ki[k];
         double x0 = xc[0], x1 = xc[1], x2 = xc[2], q;
         q = a0[k] * x0, s0 += q, t0 += fabs(q);
@@ -8402,6 +8441,40 @@ static void amps__resid_blk(const amps_update *U, amps_int B, const double *x, d
     t[0] = t0, t[1] = t1, t[2] = t2;
 }
 
+/* Constrained rows of amps__backward_error (rho_j = 0). */
+static int amps__resid_con(const amps_update *U, amps_int j) {
+    amps_int a = U->aug.pos[j];
+    return a >= 0 && (U->aug.kind[a] & AMPS__UCON);
+}
+
+/* Adds rho_j^2, x_j^2, f^_j^2 and ((|K^| |x|)_j + |f^_j|)^2 (ax: (|K^| |x|)_j) to sums[0..3]. */
+static void amps__resid_sums(const amps_update *U, amps_int j, const double *x, double rj, double ax, double sums[4]) {
+    double f = U->force.f[j];
+    ax += fabs(f);
+    sums[0] += rj * rj;
+    sums[1] += x[j] * x[j];
+    sums[2] += f * f;
+    sums[3] += ax * ax;
+}
+
+/* Row j < n of amps__backward_error from the base part kx = (K x)_j, tx = (|K| |x|)_j: adds the
+   delta row's part, sets rho_j and adds to sums (free rows; rho_j = 0 on a constrained one). */
+static void amps__resid_base_row(const amps_update *U, amps_int j, const double *x, double kx, double tx, double *rho,
+                                 double sums[4]) {
+    amps_int a = U->aug.pos[j], k;
+    if (amps__resid_con(U, j)) {
+        rho[j] = 0.0;
+        return;
+    }
+    for (k = 0; a >= 0 && k < U->delta.row_len[a]; k++) {
+        double q = U->delta.val[U->delta.row_start[a] + k] * x[U->aug.idx[U->delta.col[U->delta.row_start[a] + k]]];
+        kx += q;
+        tx += fabs(q);
+    }
+    rho[j] = U->force.f[j] - kx;
+    amps__resid_sums(U, j, x, rho[j], tx, sums);
+}
+
 /* rho = f^ - K^ x on the free rows F (0 on the constrained rows C) in one pass over K^ (nnz(K^);
    in double-double when dd; by 3x3 blocks when base.blk3 and !dd), and two backward errors of x
    on the reduced system: the normwise eta = ||rho_F||_2 / (||K-bar||_inf ||x_F||_2 + ||f^_F||_2)
@@ -8411,32 +8484,22 @@ static void amps__resid_blk(const amps_update *U, amps_int B, const double *x, d
    dominate the norm. *rnorm receives ||rho_F||_2. */
 static double amps__backward_error(const amps_update *U, const double *x, double *rho, double *rnorm, int dd,
                                    double *omega) {
-    amps_int N = U->N, j, a, k, nb = !dd && U->base.blk3 ? U->n : 0;
-    double num = 0, xn = 0, fn = 0, den = 0, ax, sb[3], tb[3];
-    for (j = 0; j < N; j++) {
-        a = U->aug.pos[j];
-        if (j < nb && j % 3 == 0) amps__resid_blk(U, j / 3, x, sb, tb);
-        if (a >= 0 && (U->aug.kind[a] & AMPS__UCON)) {
+    double num, xn, fn, den;
+    amps_int N = U->N, j, r, nb = !dd && U->base.blk3 ? U->n : 0;
+    double sums[4] = {0, 0, 0, 0}, ax, sb[3], tb[3]; /* ||rho_F||^2, ||x_F||^2, ||f^_F||^2, den^2 */
+    for (j = 0; j < nb; j += 3) { /* base rows by 3x3 blocks, then the delta rows' changes */
+        amps__resid_blk(U, j / 3, x, sb, tb);
+        for (r = 0; r < 3; r++) amps__resid_base_row(U, j + r, x, sb[r], tb[r], rho, sums);
+    }
+    for (; j < N; j++) { /* row by row: appended rows, no blocks, or double-double */
+        if (amps__resid_con(U, j)) {
             rho[j] = 0.0;
             continue;
         }
-        if (j < nb) {
-            double sj = sb[j % 3];
-            ax = tb[j % 3];
-            for (k = 0; a >= 0 && k < U->delta.row_len[a]; k++) {
-                double q = U->delta.val[U->delta.row_start[a] + k] *
-                           x[U->aug.idx[U->delta.col[U->delta.row_start[a] + k]]];
-                sj += q;
-                ax += fabs(q);
-            }
-            rho[j] = U->force.f[j] - sj;
-        } else rho[j] = amps__resid_row(U, j, x, dd, &ax);
-        ax += fabs(U->force.f[j]);
-        num += rho[j] * rho[j];
-        xn += x[j] * x[j];
-        fn += U->force.f[j] * U->force.f[j];
-        den += ax * ax;
+        rho[j] = amps__resid_row(U, j, x, dd, &ax);
+        amps__resid_sums(U, j, x, rho[j], ax, sums);
     }
+    num = sums[0], xn = sums[1], fn = sums[2], den = sums[3];
     *rnorm = sqrt(num);
     if (omega) *omega = num > 0 ? sqrt(num / den) : 0.0;
     return num > 0 ? sqrt(num) / (U->guard.knorm * sqrt(xn) + sqrt(fn)) : 0.0;
