@@ -5,7 +5,7 @@
      every: the sampled steps are 1, every k-th and the last; the reference solution, CHOLMOD
             refactorization, PCG and GMRES run at sampled steps only; amps.h and CHOLMOD
             update/downdate (stateful) run at every step.
-   environment: BENCH_AMPS (amps configurations, default "p2,p1,d2,d1": primal/dual, threads),
+   environment: BENCH_AMPS (amps configurations, default "p2,p1,d2,d1,p1o": primal/dual, threads),
      BENCH_CG_MAXIT (default 2000), BENCH_GM_MAXIT (default 600), BENCH_GM_RESTART (default 150),
      BENCH_SIMPL_MAXN (CHOLMOD simplicial refactor at the first and last sampled steps when the
      system has at most this many equations; default 60000), BENCH_ITER=0 (no CG / GMRES),
@@ -21,7 +21,9 @@
    matrix used by CG, GMRES and the reference is not counted):
    amps_<p|d><threads>  amps_scene_cut / amps_scene_pin + amps_scene_solve, primal or dual
                         formulation (opts.update.formulation), ctx.nthreads = 1 or 2; a trailing
-                        o (amps_p1o) turns the default refinement off (opts.update.refine_tol = 0).
+                        o (amps_p1o) turns the default refinement off (opts.update.refine_tol = 0:
+                        the default before it, beside it in the tables). BENCH_AMPS lists the
+                        configurations (default p2,p1,d2,d1,p1o).
    chol_refactor        CHOLMOD analyze + factorize (supernodal LL', OpenBLAS) + solve on the
                         explicitly assembled reduced system; chol_solve: a second plain solve.
    chol_refactor_simpl  the same with CHOLMOD's simplicial LDL'.
@@ -683,7 +685,7 @@ static void gm_run(gmres *G, const bench_sys *S, const int *Lset, int m, const d
 }
 
 /* =================================== driver =================================== */
-#define MAXCONF 4
+#define MAXCONF 5
 int main(int argc, char **argv) {
     amps_ctx ctx, cctx[MAXCONF];
     const char *spec, *out;
@@ -718,7 +720,7 @@ int main(int argc, char **argv) {
     if (every < 1) every = 1;
     amps_ctx_init(&ctx);
     { /* amps configurations */
-        const char *l = getenv("BENCH_AMPS") ? getenv("BENCH_AMPS") : "p2,p1,d2,d1";
+        const char *l = getenv("BENCH_AMPS") ? getenv("BENCH_AMPS") : "p2,p1,d2,d1,p1o";
         while (*l && nconf < MAXCONF) {
             int len = 0;
             while (l[len] && l[len] != ',' && len < 7) len++;

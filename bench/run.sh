@@ -7,6 +7,9 @@
 #                         bench/out/*.csv, the plots bench/out/*.png and bench/RESULTS.md
 #                         (bench/summarize.sh)
 #   bench/run.sh quick    representative subset (under 3 minutes), all of it in build/bench/quick/
+#   bench/run.sh solvers  the full run's solver comparison only (factor, harness, guard, accuracy:
+#                         RESULTS.md sections 1-6b, about 25 minutes); its summary goes to
+#                         bench/out/RESULTS_solvers.md, to be merged into RESULTS.md by hand
 set -u
 cd "$(dirname "$0")/.."
 mode=${1:-full}
@@ -31,7 +34,9 @@ bash bench/make_liver.sh >/dev/null || exit 1
 build order_metis -DAMPS_USE_METIS -lcholmod -lmetis
 log=$out/log_$mode.txt
 : > "$log"
-rm -f $out/factor.csv $out/h_*.csv $out/*.png $out/summary.csv
+if [ "$mode" = solvers ]; then # only what sections 1-6b are made of
+  rm -f $out/factor.csv $out/h_*.csv $out/rate_*.png $out/tradeoff_*.png $out/scaling.png $out/steps.png $out/summary.csv
+else rm -f $out/factor.csv $out/h_*.csv $out/*.png $out/summary.csv; fi
 run() { echo "+ $*" | tee -a "$log"; "$@" 2>&1 | tee -a "$log"; }
 # the METIS build of amps.h (AMPS_USE_METIS): its ordering against CHOLMOD's METIS
 run build/bench/order_metis 12
@@ -63,12 +68,27 @@ for r in $runs; do
   BENCH_CG_MAXIT=$cgmax BENCH_TMAX=$tmax \
     run build/bench/harness "$mesh" "$kind" "$steps" "$every" "$out/h_${kind}_${name}.csv"
 done
-if [ "$mode" = full ]; then
+# machine.txt: where and how this run was made
+machine() {
+  cpu=$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//')
+  echo "machine: $(uname -m), $(nproc) cores, $cpu, $(free -g | awk '/Mem:/{print $2}') GiB"
+  echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
+  echo "blas: $(readlink -f /usr/lib/x86_64-linux-gnu/libblas.so.3 2>/dev/null)"
+  echo "compiler: $($CC --version | head -1), flags: $FLAGS"
+  echo "mode: $mode"
+}
+if [ "$mode" != quick ]; then
   # the accuracy guard (opt-in) on the worst-conditioned beam, amps.h only
   BENCH_GUARD=1e-12 BENCH_AMPS=p2 BENCH_ITER=0 BENCH_TMAX=60 \
     run build/bench/harness beam:1024 cut 50 25 $out/h_cut_beam_1024_guard.csv
   # the stress suite's cases under the engine variants (Eq. 3.20, refinement, guard)
   run bash bench/accuracy.sh $out/accuracy.csv
+fi
+if [ "$mode" = solvers ]; then
+  machine > $out/machine.txt
+  bash bench/summarize.sh "$out" out/ > $out/RESULTS_solvers.md || exit 1
+  echo "done: $out/ (log $log), $out/RESULTS_solvers.md"
+  exit 0
 fi
 # haptic step and watch sets (bench/haptic.c, bench/watch.c)
 rm -f $out/haptic.csv $out/watch.csv
@@ -125,14 +145,7 @@ else PRE=out/ bash bench/dynamics.sh full $out || exit 1; fi
 # under load: spinning processes and a 1 kHz loop beside 1 thread, 2 OpenMP threads and the
 # example job system (bench/load.sh; full: about 15 minutes, quick: about 1)
 bash bench/load.sh $mode $out || exit 1
-{
-  cpu=$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//')
-  echo "machine: $(uname -m), $(nproc) cores, $cpu, $(free -g | awk '/Mem:/{print $2}') GiB"
-  echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
-  echo "blas: $(readlink -f /usr/lib/x86_64-linux-gnu/libblas.so.3 2>/dev/null)"
-  echo "compiler: $($CC --version | head -1), flags: $FLAGS"
-  echo "mode: $mode"
-} > $out/machine.txt
+machine > $out/machine.txt
 if [ "$mode" = quick ]; then res=$out/RESULTS.md; pre=""; else res=bench/RESULTS.md; pre=out/; fi
 bash bench/summarize.sh "$out" "$pre" > $res.tmp && mv $res.tmp $res || exit 1
 echo "done: $out/ (log $log), $res"

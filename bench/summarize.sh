@@ -96,11 +96,14 @@ All methods follow the same step sequence (`bench/bench.h`). **cut**: an advanci
 cut through the middle of the model, one node per step, opposing forces pulling the cut faces
 apart. **deform**: one more node pinned with a nonzero displacement per step. Residuals are
 ||K^ x - f^|| / ||f^|| of the reduced system (fixed and pinned DOFs eliminated), errors
-||x - x_ref|| / ||x_ref|| against CHOLMOD on the explicit matrix improved by three refinement
-steps (residual in double), both 2-norms over the free DOFs.
+||x - x_ref|| / ||x_ref|| against CHOLMOD on the explicit matrix improved by refinement steps
+with the residual summed in quad precision (`__float128`, so x_ref is exact to working
+precision), both 2-norms over the free DOFs.
 
 - `amps_p2`, `amps_p1`, `amps_d2`, `amps_d1`: amps.h (`amps_scene_cut` / `amps_scene_pin` +
-  `amps_scene_solve`), primal (p) or dual (d) formulation, 2 or 1 threads (`ctx.nthreads`).
+  `amps_scene_solve`), primal (p) or dual (d) formulation, 2 or 1 threads (`ctx.nthreads`),
+  default options. `amps_p1o`: p1 with the default refinement off (`refine_tol = 0`), the
+  default before the accuracy work: the step it saves and the accuracy it loses.
 - `chol_refactor`: CHOLMOD analyze + supernodal factorize (OpenBLAS) + solve of the explicitly
   assembled reduced system (a new analysis each step: the dimension changes). `chol_solve`: a
   plain solve with that factor, the floor every exact method pays. `chol_refactor_simpl`: the
@@ -148,17 +151,17 @@ echo "## 3. Direct methods per run"
 echo
 echo "Median step time (ms); ratios are CHOLMOD / amps_p2. Worst residual and error over the sampled steps."
 echo
-echo "| run | steps (k) | n0 | nnz(L) | final dim / \|S u C\| | amps p2 / p1 / d2 / d1 | CHOLMOD updown | refactor | solve | refactor / amps | updown / amps | amps / solve | worst residual amps / updown / refactor | worst error amps / updown / refactor |"
+echo "| run | steps (k) | n0 | nnz(L) | final dim / \|S u C\| | amps p2 / p1 / d2 / d1 / p1o | CHOLMOD updown | refactor | solve | refactor / amps | updown / amps | amps / solve | worst residual amps / p1o / updown / refactor | worst error amps / p1o / updown / refactor |"
 echo "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
 for e in cut deform; do for r in $(runs_of $e); do
   a=$(get "$r" amps_p2 0 7); u=$(get "$r" chol_updown 0 7); c=$(get "$r" chol_refactor 0 7); s=$(get "$r" chol_solve 0 7)
-  printf "| %s | %s (%s) | %s | %.2fM | %s / %s | %s / %s / %s / %s | %s | %s | %s | %s | %s | %s | %s / %s / %s | %s / %s / %s |\n" \
+  printf "| %s | %s (%s) | %s | %.2fM | %s / %s | %s / %s / %s / %s / %s | %s | %s | %s | %s | %s | %s | %s / %s / %s / %s | %s / %s / %s / %s |\n" \
     "$r" "$(get "$r" amps_p2 0 6)" "$(get "$r" amps_p2 0 27)" "$(get "$r" amps_p2 0 24)" "$(awk -v x="$(get "$r" amps_p2 0 25)" 'BEGIN{print x/1e6}')" \
     "$(get "$r" amps_p2 0 15)" "$(get "$r" amps_p2 0 16)" \
-    "$(ms "$a")" "$(ms "$(get "$r" amps_p1 0 7)")" "$(ms "$(get "$r" amps_d2 0 7)")" "$(ms "$(get "$r" amps_d1 0 7)")" \
+    "$(ms "$a")" "$(ms "$(get "$r" amps_p1 0 7)")" "$(ms "$(get "$r" amps_d2 0 7)")" "$(ms "$(get "$r" amps_d1 0 7)")" "$(ms "$(get "$r" amps_p1o 0 7)")" \
     "$(ms "$u")" "$(ms "$c")" "$(ms "$s")" "$(ratio "$c" "$a")" "$(ratio "$u" "$a")" "$(awk -v a="$a" -v s="$s" 'BEGIN{ if (s > 0) printf "%.2f", a / s; else printf "-" }')" \
-    "$(sci "$(get "$r" amps_p2 0 10)")" "$(sci "$(get "$r" chol_updown 0 10)")" "$(sci "$(get "$r" chol_refactor 0 10)")" \
-    "$(sci "$(get "$r" amps_p2 0 12)")" "$(sci "$(get "$r" chol_updown 0 12)")" "$(sci "$(get "$r" chol_refactor 0 12)")"
+    "$(sci "$(get "$r" amps_p2 0 10)")" "$(sci "$(get "$r" amps_p1o 0 10)")" "$(sci "$(get "$r" chol_updown 0 10)")" "$(sci "$(get "$r" chol_refactor 0 10)")" \
+    "$(sci "$(get "$r" amps_p2 0 12)")" "$(sci "$(get "$r" amps_p1o 0 12)")" "$(sci "$(get "$r" chol_updown 0 12)")" "$(sci "$(get "$r" chol_refactor 0 12)")"
 done; done
 echo
 
@@ -188,7 +191,7 @@ if command -v gnuplot >/dev/null 2>&1; then
         awk -F, -v m="${m%%:*}" -v t="${m#*:}" 'NR > 1 && $2 == m && $3 + 0 == t + 0 && $4 > 0 { print $1, 1 / $4 }' "h_$r.csv" > "$tmp/rate_${r}_${m%%:*}.dat"
       done
       # time against error: medians per method and tolerance
-      for m in cg_none cg_jacobi gmres_none gmres_D gmres_tri amps_p2 amps_d2 amps_p1 chol_updown chol_refactor; do
+      for m in cg_none cg_jacobi gmres_none gmres_D gmres_tri amps_p2 amps_d2 amps_p1 amps_p1o chol_updown chol_refactor; do
         awk -F, -v r="$r" -v m=$m '$1 == r && $4 == m && $11 > 0 { print $11, $7 }' summary.csv > "$tmp/te_${r}_$m.dat"
       done
     done
@@ -225,7 +228,7 @@ if command -v gnuplot >/dev/null 2>&1; then
         echo "set title '$r'"
         a=()
         for m in cg_none cg_jacobi gmres_none gmres_D gmres_tri; do a+=("$tmp/te_${r}_$m.dat|w lp t '$m'"); done
-        for m in amps_p2 amps_d2 amps_p1 chol_updown chol_refactor; do a+=("$tmp/te_${r}_$m.dat|w p pt 7 ps 1.5 t '$m'"); done
+        for m in amps_p2 amps_d2 amps_p1 amps_p1o chol_updown chol_refactor; do a+=("$tmp/te_${r}_$m.dat|w p pt 7 ps 1.5 t '$m'"); done
         pl "${a[@]}"
       done
       echo "unset multiplot; unset logscale"
@@ -287,6 +290,9 @@ awk -F, '
       if (best < 1e300) { q = best / a; if (!ni++ || q < imin) { imin = q; ir0 = r } if (q > imax) { imax = q; ir1 = r } }
       if (E[r, "amps_p2"] > emax) { emax = E[r, "amps_p2"]; er = r }
       if (R[r, "amps_p2"] > 10 * R[r, "chol_refactor"]) resw = resw " " r
+      if (R[r, "amps_p1o"] > 10 * R[r, "chol_refactor"]) resw0 = resw0 " " r
+      if (E[r, "amps_p2"] > 10 * E[r, "chol_refactor"]) errw = errw " " r
+      if (E[r, "amps_p1o"] > 10 * E[r, "chol_refactor"]) errw0 = errw0 " " r
     }
     printf "- CHOLMOD refactorization (analyze + factor + solve) takes %.2g (%s) to %.3g (%s) times the amps.h step (p2).\n", cmin, cr0, cmax, cr1
     printf "- CHOLMOD update/downdate (`cholmod_updown` / `cholmod_rowdel` on a simplicial LDL^T, then a solve) takes %.2g (%s) to %.3g (%s) times the amps.h step", umin, ur0, umax, ur1
@@ -298,16 +304,17 @@ awk -F, '
     printf ".\n"
     printf "- Median errors of the iterative methods at tolerance 1e-8: %.0e to %.0e (per run and method); worst amps.h error per run: see below.\n", iemin, iemax
     printf "- Worst amps.h error against the reference: %.1e (%s); [AMPS] Table 3 reports 7e-11 (beam) and 3e-14 (brick).", emax, er
-    if (resw != "") printf " Runs whose worst amps.h residual exceeds 10x CHOLMOD refactor'"'"'s:%s.", resw
+    printf " Runs whose worst amps.h (p2, default) residual exceeds 10x CHOLMOD refactor'"'"'s: %s; error: %s.", resw == "" ? "none" : resw, errw == "" ? "none" : errw
+    printf " With the default refinement off (p1o), residual:%s; error:%s.", resw0 == "" ? " none" : resw0, errw0 == "" ? " none" : errw0
     printf "\n"
   }' summary.csv
 echo
 echo "Per-mesh worst errors next to [AMPS] Table 3 (beam 7e-11, brick 3e-14):"
 echo
-echo "| run | amps p2 | amps d2 | CHOLMOD updown | CHOLMOD refactor (unrefined) |"
-echo "|---|---|---|---|---|"
+echo "| run | amps p2 | amps d2 | amps p1o (refinement off) | CHOLMOD updown | CHOLMOD refactor (unrefined) |"
+echo "|---|---|---|---|---|---|"
 for r in $(runs_of cut) $(runs_of deform); do
-  echo "| $r | $(sci "$(get "$r" amps_p2 0 12)") | $(sci "$(get "$r" amps_d2 0 12)") | $(sci "$(get "$r" chol_updown 0 12)") | $(sci "$(get "$r" chol_refactor 0 12)") |"
+  echo "| $r | $(sci "$(get "$r" amps_p2 0 12)") | $(sci "$(get "$r" amps_d2 0 12)") | $(sci "$(get "$r" amps_p1o 0 12)") | $(sci "$(get "$r" chol_updown 0 12)") | $(sci "$(get "$r" chol_refactor 0 12)") |"
 done
 echo
 if [ -f accuracy.csv ]; then
