@@ -8486,12 +8486,14 @@ static double amps__backward_error(const amps_update *U, const double *x, double
                                    double *omega) {
     double num, xn, fn, den;
     amps_int N = U->N, j, r, nb = !dd && U->base.blk3 ? U->n : 0;
-    double sums[4] = {0, 0, 0, 0}, ax, sb[3], tb[3]; /* ||rho_F||^2, ||x_F||^2, ||f^_F||^2, den^2 */
-    for (j = 0; j < nb; j += 3) { /* base rows by 3x3 blocks, then the delta rows' changes */
+    /* sums: ||rho_F||^2, ||x_F||^2, ||f^_F||^2, den^2; base rows by 3x3 blocks (their delta rows'
+       changes added row by row), then the rest row by row: appended rows, no blocks, or dd */
+    double sums[4] = {0, 0, 0, 0}, ax, sb[3], tb[3];
+    for (j = 0; j < nb; j += 3) {
         amps__resid_blk(U, j / 3, x, sb, tb);
         for (r = 0; r < 3; r++) amps__resid_base_row(U, j + r, x, sb[r], tb[r], rho, sums);
     }
-    for (; j < N; j++) { /* row by row: appended rows, no blocks, or double-double */
+    for (; j < N; j++) {
         if (amps__resid_con(U, j)) {
             rho[j] = 0.0;
             continue;
