@@ -8,7 +8,7 @@
 #                         (bench/summarize.sh)
 #   bench/run.sh quick    representative subset (under 3 minutes), all of it in build/bench/quick/
 #   bench/run.sh solvers  the full run's solver comparison only (factor, harness, guard, accuracy:
-#                         RESULTS.md sections 1-6b, about 25 minutes); its summary goes to
+#                         RESULTS.md sections 1-6b, about 35 minutes); its summary goes to
 #                         bench/out/RESULTS_solvers.md, to be merged into RESULTS.md by hand
 set -u
 cd "$(dirname "$0")/.."
