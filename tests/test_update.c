@@ -957,6 +957,32 @@ static void residual_paths(model *m) {
    within 10x of CHOLMOD's (model_check), the backward error reported is the one reached (at most
    64 refine_tol: refinement stops when it stagnates), and with refine_tol = 0 nothing is
    measured or refined. */
+/* A well-conditioned brick cut 40 times with the default options: solves whose Step 6 cancels
+   little (stats.cancel_ratio <= 4) skip the product with K^, and every step still meets the
+   residual contract against CHOLMOD (cut_sequence checks each one). */
+static void test_check_skipped(void) {
+    model m;
+    amps_update_opts o;
+    fe_mesh mesh = fe_brick(4);
+    amps_update_stats st;
+    amps_update_opts_default(&o);
+    o.grow = 1;
+    o.refactor = AMPS_REFACTOR_OFF;
+    fe_model(&m, &mesh, 2, &o);
+    cut_sequence(&m, &mesh, 40, 23, 1e-7);
+    amps_update_get_stats(m.U, &st);
+    CHECK(st.checks_skipped > 0 && st.checks_skipped <= st.nsolve, "brick: %d of %d solves skipped the check",
+          (int)st.checks_skipped, (int)st.nsolve);
+    CHECK(st.cancel_ratio >= 0, "brick: cancellation ratio %.3e after a full solve", st.cancel_ratio);
+    CHECK(st.backward_error == -1 || st.cancel_ratio > 4, "brick: backward error %.3e with ratio %.3e",
+          st.backward_error, st.cancel_ratio);
+    printf("  brick R=4, 40 cuts: %d of %d solves skipped the check (last ratio %.2f)\n", (int)st.checks_skipped,
+           (int)st.nsolve, st.cancel_ratio);
+    report("brick R=4 cuts, default (check skipped where mu <= 4)", &m);
+    model_free(&m);
+    fe_free(&mesh);
+}
+
 static void test_default_accuracy(void) {
     int off;
     for (off = 0; off <= 1; off++) {
@@ -1495,6 +1521,7 @@ int main(void) {
     test_fe_sequences();
     test_guard();
     test_default_accuracy();
+    test_check_skipped();
     test_refactor();
     test_refactor_kept();
     test_commit_fold();
