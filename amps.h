@@ -7736,8 +7736,8 @@ static amps_status amps__delta_relocate(amps_ctx *ctx, amps_update *U, amps_int 
 }
 
 /* Applies the recorded changes to Delta and the kinds (journaled) and marks the dense columns
-   they change in lu.changed: the touched rows, the new positions, and where a kind changes the
-   column and those of its Delta-neighbours. */
+   they change in lu.changed: the touched rows outside C, the new positions, and where a kind
+   changes the column and those of its Delta-neighbours. */
 static void amps__apply_pending(amps_update *U, amps_int u_old) {
     amps_marker *cm = &U->lu.changed;
     amps_int k, a;
@@ -7746,6 +7746,9 @@ static void amps__apply_pending(amps_update *U, amps_int u_old) {
         amps_int ra = U->aug.pos[U->pending.delta[k].r], rb = U->aug.pos[U->pending.delta[k].c];
         amps__delta_add(U, ra, rb, U->pending.delta[k].v);
         if (ra != rb) amps__delta_add(U, rb, ra, U->pending.delta[k].v);
+        /* A(:, a) holds Delta(a, b) only for a and b both outside C (amps__acol); where a kind
+           changes below, its column and its Delta-neighbours are marked there */
+        if ((U->aug.kind[ra] | U->aug.kind[rb]) & AMPS__UCON) continue;
         cm->mark[ra] = cm->stamp;
         cm->mark[rb] = cm->stamp;
     }
