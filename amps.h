@@ -5140,7 +5140,28 @@ AMPS__KERNEL void amps__fwd_block(int KC, const amps_factor *F, amps_int c, amps
         s[k] = F->Lx + F->Lp[c + k] + (ke - c - k); /* L(S, c+k) */
         xk[k] = x[c + k];
     }
-    for (p = 0; p < ns; p++) {
+    p = 0;
+#ifdef AMPS__SSE2
+    { /* two rows at a time, each with the operations of the scalar loop below */
+        __m128d xv[8];
+        AMPS__UNROLL
+        for (k = 0; k < KC; k++) xv[k] = _mm_set1_pd(xk[k]);
+        for (; p + 2 <= ns; p += 2) {
+            __m128d a = _mm_mul_pd(_mm_loadu_pd(s[0] + p), xv[0]);
+            AMPS__UNROLL
+            for (k = 1; k < (KC < 4 ? KC : 4); k++) a = _mm_add_pd(a, _mm_mul_pd(_mm_loadu_pd(s[k] + p), xv[k]));
+            if (KC > 4) {
+                __m128d b = _mm_mul_pd(_mm_loadu_pd(s[4] + p), xv[4]);
+                AMPS__UNROLL
+                for (k = 5; k < KC; k++) b = _mm_add_pd(b, _mm_mul_pd(_mm_loadu_pd(s[k] + p), xv[k]));
+                a = _mm_add_pd(a, b);
+            }
+            x[S[p]] -= _mm_cvtsd_f64(a);
+            x[S[p + 1]] -= _mm_cvtsd_f64(_mm_unpackhi_pd(a, a));
+        }
+    }
+#endif
+    for (; p < ns; p++) {
         double a = s[0][p] * xk[0];
         AMPS__UNROLL
         for (k = 1; k < (KC < 4 ? KC : 4); k++) a += s[k][p] * xk[k];
@@ -5189,7 +5210,16 @@ static void amps__fwd(const amps_factor *F, amps_int c0, amps_int ke, double *x)
     for (c = c0; c < ke; c++) { /* the group's triangle */
         const double *Lc = Lx + Lp[c];
         double xc = x[c];
-        for (o = 0; o < ke - c; o++) x[c + 1 + o] -= Lc[o] * xc;
+        o = 0;
+#ifdef AMPS__SSE2
+        {
+            __m128d xv = _mm_set1_pd(xc);
+            for (; o + 2 <= ke - c; o += 2)
+                _mm_storeu_pd(x + c + 1 + o,
+                              _mm_sub_pd(_mm_loadu_pd(x + c + 1 + o), _mm_mul_pd(_mm_loadu_pd(Lc + o), xv)));
+        }
+#endif
+        for (; o < ke - c; o++) x[c + 1 + o] -= Lc[o] * xc;
     }
     for (c = c0; c <= ke; c += w) {
         switch (w = amps__block_width(ke + 1 - c)) {
