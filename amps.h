@@ -6701,32 +6701,35 @@ AMPS__KERNEL void amps__wblock_body(int W, const double *const *sl, amps_int b, 
         amps_int k;
         for (k = 0; k < i; k++) {
             double l = sl[k][i - b]; /* L(o+i, o+k) */
+            AMPS__UNROLL
             for (j = 0; j < W; j++) Xo[(size_t)i * ld + j] -= l * Xo[(size_t)k * ld + j];
         }
     }
     for (i = 0; i < b; i++) memcpy(a[i], Xo + (size_t)i * ld, sizeof(double) * (size_t)W);
+#define AMPS__WROW(q) (q < ng ? Xo + (size_t)(b + q) * ld : X + (size_t)lmap[S[q - ng]] * ld)
     if (b == 4) {
         const double *s0 = sl[0], *s1 = sl[1], *s2 = sl[2], *s3 = sl[3];
         for (q = 0; q < ng + ns; q++) {
-            double l0 = s0[q], l1 = s1[q], l2 = s2[q], l3 = s3[q];
-            double *xr = q < ng ? Xo + (size_t)(4 + q) * ld : X + (size_t)lmap[S[q - ng]] * ld;
+            double l0 = s0[q], l1 = s1[q], l2 = s2[q], l3 = s3[q], *xr = AMPS__WROW(q);
+            AMPS__UNROLL
             for (j = 0; j < W; j++) xr[j] -= (l0 * a[0][j] + l1 * a[1][j]) + (l2 * a[2][j] + l3 * a[3][j]);
         }
     } else if (b == 2) {
         const double *s0 = sl[0], *s1 = sl[1];
         for (q = 0; q < ng + ns; q++) {
-            double l0 = s0[q], l1 = s1[q];
-            double *xr = q < ng ? Xo + (size_t)(2 + q) * ld : X + (size_t)lmap[S[q - ng]] * ld;
+            double l0 = s0[q], l1 = s1[q], *xr = AMPS__WROW(q);
+            AMPS__UNROLL
             for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j] + l1 * a[1][j];
         }
     } else {
         const double *s0 = sl[0];
         for (q = 0; q < ng + ns; q++) {
-            double l0 = s0[q];
-            double *xr = q < ng ? Xo + (size_t)(1 + q) * ld : X + (size_t)lmap[S[q - ng]] * ld;
+            double l0 = s0[q], *xr = AMPS__WROW(q);
+            AMPS__UNROLL
             for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j];
         }
     }
+#undef AMPS__WROW
 }
 #define AMPS__WBLOCK(W)                                                                                           \
     static void amps__wblock##W(const double *const *sl, amps_int b, amps_int ng, const amps_int *S, amps_int ns, \
@@ -6889,16 +6892,20 @@ static void amps__wcols(amps_update *U, amps_int *list, amps_int nb) {
 }
 
 /* acc(0:W) = sum over the common suffix of the root path (wi, wv, len) and the union mapped by
-   lmap of wv[t] X(lmap[wi[t]], 0:W): the union is closed under parents, so the suffix starts
-   below the last node (from the root down) inside it. Summed upwards, as the path is stored. */
+   lmap of wv[t] X(lmap[wi[t]], 0:W): the union is closed under parents, so the path's nodes in
+   it are a suffix (found by bisection). Summed upwards, as the path is stored. */
 AMPS__KERNEL void amps__gscan_body(int W, const amps_int *wi, const double *wv, amps_int len, const amps_int *lmap,
                                    const double *X, double *acc) {
     double a[AMPS__VB]; /* fully unrolled: the accumulators live in registers */
-    amps_int t;
+    amps_int t = 0, hi = len;
     int j;
     AMPS__UNROLL
     for (j = 0; j < W; j++) a[j] = 0;
-    for (t = len; t > 0 && lmap[wi[t - 1]] >= 0; t--) {}
+    while (t < hi) { /* the suffix's start: the path's members of the union are a suffix */
+        amps_int mid = t + (hi - t) / 2;
+        if (lmap[wi[mid]] >= 0) hi = mid;
+        else t = mid + 1;
+    }
     for (; t < len; t++) {
         const double *xr = X + (size_t)lmap[wi[t]] * W;
         double v = wv[t];
