@@ -5176,19 +5176,35 @@ AMPS__KERNEL void amps__fwd_block(int KC, const amps_factor *F, amps_int c, amps
 }
 
 /* Backward kernel of a block of KC (1-4 or 8) columns c..c+KC-1 of a group ending at ke:
-   x(c+k) -= L(S, c+k)^T x(S), each dot product summed in ascending order of S. */
+   x(c+k) -= L(S, c+k)^T x(S), each dot product summed in ascending order of S (with SSE2: as two
+   partial sums over the even and the odd positions of S, added at the end, then the last odd
+   position; the order depends on the pattern alone). */
 AMPS__KERNEL void amps__bwd_block(int KC, const amps_factor *F, amps_int c, amps_int ke, const amps_int *S, amps_int ns,
                                   double *x) {
     const double *s[8];
     double t[8];
-    amps_int p;
+    amps_int p = 0;
     int k;
     AMPS__UNROLL
     for (k = 0; k < KC; k++) {
         s[k] = F->Lx + F->Lp[c + k] + (ke - c - k);
         t[k] = 0;
     }
-    for (p = 0; p < ns; p++) {
+#ifdef AMPS__SSE2
+    if (ns >= 2) {
+        __m128d tv[8];
+        AMPS__UNROLL
+        for (k = 0; k < KC; k++) tv[k] = _mm_setzero_pd();
+        for (; p + 2 <= ns; p += 2) {
+            __m128d xs = _mm_loadh_pd(_mm_load_sd(x + S[p]), x + S[p + 1]);
+            AMPS__UNROLL
+            for (k = 0; k < KC; k++) tv[k] = _mm_add_pd(tv[k], _mm_mul_pd(_mm_loadu_pd(s[k] + p), xs));
+        }
+        AMPS__UNROLL
+        for (k = 0; k < KC; k++) t[k] = _mm_cvtsd_f64(tv[k]) + _mm_cvtsd_f64(_mm_unpackhi_pd(tv[k], tv[k]));
+    }
+#endif
+    for (; p < ns; p++) {
         double xs = x[S[p]];
         AMPS__UNROLL
         for (k = 0; k < KC; k++) t[k] += s[k][p] * xs;
