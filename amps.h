@@ -5265,7 +5265,8 @@ static void amps__bwd_rows(const amps_factor *F, amps_int c0, amps_int cl, amps_
     }
 }
 
-/* x(c0:ke) := L(c0:ke, c0:ke)^{-T} x(c0:ke), the triangle of a group. */
+/* x(c0:ke) := L(c0:ke, c0:ke)^{-T} x(c0:ke), the triangle of a group (each dot product summed as in
+   amps__bwd_block). */
 static void amps__bwd_tri(const amps_factor *F, amps_int c0, amps_int ke, double *x) {
     const amps_int *Lp = F->Lp;
     const double *Lx = F->Lx;
@@ -5273,7 +5274,16 @@ static void amps__bwd_tri(const amps_factor *F, amps_int c0, amps_int ke, double
     for (c = ke - 1; c >= c0; c--) {
         const double *Lc = Lx + Lp[c];
         double t = 0;
-        for (o = 0; o < ke - c; o++) t += Lc[o] * x[c + 1 + o];
+        o = 0;
+#ifdef AMPS__SSE2
+        if (ke - c >= 2) { /* the partial sums of even and odd o, as in amps__bwd_block */
+            __m128d tv = _mm_setzero_pd();
+            for (; o + 2 <= ke - c; o += 2)
+                tv = _mm_add_pd(tv, _mm_mul_pd(_mm_loadu_pd(Lc + o), _mm_loadu_pd(x + c + 1 + o)));
+            t = _mm_cvtsd_f64(tv) + _mm_cvtsd_f64(_mm_unpackhi_pd(tv, tv));
+        }
+#endif
+        for (; o < ke - c; o++) t += Lc[o] * x[c + 1 + o];
         x[c] -= t;
     }
 }
