@@ -5146,7 +5146,28 @@ AMPS__KERNEL void amps__fwd_block(int KC, const amps_factor *F, amps_int c, amps
         s[k] = F->Lx + F->Lp[c + k] + (ke - c - k); /* L(S, c+k) */
         xk[k] = x[c + k];
     }
-    for (p = 0; p < ns; p++) {
+    p = 0;
+#ifdef AMPS__SSE2
+    { /* two rows at a time, each with the operations of the scalar loop below */
+        __m128d xv[8];
+        AMPS__UNROLL
+        for (k = 0; k < KC; k++) xv[k] = _mm_set1_pd(xk[k]);
+        for (; p + 2 <= ns; p += 2) {
+            __m128d a = _mm_mul_pd(_mm_loadu_pd(s[0] + p), xv[0]);
+            AMPS__UNROLL
+            for (k = 1; k < (KC < 4 ? KC : 4); k++) a = _mm_add_pd(a, _mm_mul_pd(_mm_loadu_pd(s[k] + p), xv[k]));
+            if (KC > 4) {
+                __m128d b = _mm_mul_pd(_mm_loadu_pd(s[4] + p), xv[4]);
+                AMPS__UNROLL
+                for (k = 5; k < KC; k++) b = _mm_add_pd(b, _mm_mul_pd(_mm_loadu_pd(s[k] + p), xv[k]));
+                a = _mm_add_pd(a, b);
+            }
+            x[S[p]] -= _mm_cvtsd_f64(a);
+            x[S[p + 1]] -= _mm_cvtsd_f64(_mm_unpackhi_pd(a, a));
+        }
+    }
+#endif
+    for (; p < ns; p++) {
         double a = s[0][p] * xk[0];
         AMPS__UNROLL
         for (k = 1; k < (KC < 4 ? KC : 4); k++) a += s[k][p] * xk[k];
@@ -5161,19 +5182,35 @@ AMPS__KERNEL void amps__fwd_block(int KC, const amps_factor *F, amps_int c, amps
 }
 
 /* Backward kernel of a block of KC (1-4 or 8) columns c..c+KC-1 of a group ending at ke:
-   x(c+k) -= L(S, c+k)^T x(S), each dot product summed in ascending order of S. */
+   x(c+k) -= L(S, c+k)^T x(S), each dot product summed in ascending order of S (with SSE2: as two
+   partial sums over the even and the odd positions of S, added at the end, then the last odd
+   position; the order depends on the pattern alone). */
 AMPS__KERNEL void amps__bwd_block(int KC, const amps_factor *F, amps_int c, amps_int ke, const amps_int *S, amps_int ns,
                                   double *x) {
     const double *s[8];
     double t[8];
-    amps_int p;
+    amps_int p = 0;
     int k;
     AMPS__UNROLL
     for (k = 0; k < KC; k++) {
         s[k] = F->Lx + F->Lp[c + k] + (ke - c - k);
         t[k] = 0;
     }
-    for (p = 0; p < ns; p++) {
+#ifdef AMPS__SSE2
+    if (ns >= 2) {
+        __m128d tv[8];
+        AMPS__UNROLL
+        for (k = 0; k < KC; k++) tv[k] = _mm_setzero_pd();
+        for (; p + 2 <= ns; p += 2) {
+            __m128d xs = _mm_loadh_pd(_mm_load_sd(x + S[p]), x + S[p + 1]);
+            AMPS__UNROLL
+            for (k = 0; k < KC; k++) tv[k] = _mm_add_pd(tv[k], _mm_mul_pd(_mm_loadu_pd(s[k] + p), xs));
+        }
+        AMPS__UNROLL
+        for (k = 0; k < KC; k++) t[k] = _mm_cvtsd_f64(tv[k]) + _mm_cvtsd_f64(_mm_unpackhi_pd(tv[k], tv[k]));
+    }
+#endif
+    for (; p < ns; p++) {
         double xs = x[S[p]];
         AMPS__UNROLL
         for (k = 0; k < KC; k++) t[k] += s[k][p] * xs;
@@ -5195,7 +5232,16 @@ static void amps__fwd(const amps_factor *F, amps_int c0, amps_int ke, double *x)
     for (c = c0; c < ke; c++) { /* the group's triangle */
         const double *Lc = Lx + Lp[c];
         double xc = x[c];
-        for (o = 0; o < ke - c; o++) x[c + 1 + o] -= Lc[o] * xc;
+        o = 0;
+#ifdef AMPS__SSE2
+        {
+            __m128d xv = _mm_set1_pd(xc);
+            for (; o + 2 <= ke - c; o += 2)
+                _mm_storeu_pd(x + c + 1 + o,
+                              _mm_sub_pd(_mm_loadu_pd(x + c + 1 + o), _mm_mul_pd(_mm_loadu_pd(Lc + o), xv)));
+        }
+#endif
+        for (; o < ke - c; o++) x[c + 1 + o] -= Lc[o] * xc;
     }
     for (c = c0; c <= ke; c += w) {
         switch (w = amps__block_width(ke + 1 - c)) {
@@ -5225,7 +5271,8 @@ static void amps__bwd_rows(const amps_factor *F, amps_int c0, amps_int cl, amps_
     }
 }
 
-/* x(c0:ke) := L(c0:ke, c0:ke)^{-T} x(c0:ke), the triangle of a group. */
+/* x(c0:ke) := L(c0:ke, c0:ke)^{-T} x(c0:ke), the triangle of a group (each dot product summed as in
+   amps__bwd_block). */
 static void amps__bwd_tri(const amps_factor *F, amps_int c0, amps_int ke, double *x) {
     const amps_int *Lp = F->Lp;
     const double *Lx = F->Lx;
@@ -5233,7 +5280,16 @@ static void amps__bwd_tri(const amps_factor *F, amps_int c0, amps_int ke, double
     for (c = ke - 1; c >= c0; c--) {
         const double *Lc = Lx + Lp[c];
         double t = 0;
-        for (o = 0; o < ke - c; o++) t += Lc[o] * x[c + 1 + o];
+        o = 0;
+#ifdef AMPS__SSE2
+        if (ke - c >= 2) { /* the partial sums of even and odd o, as in amps__bwd_block */
+            __m128d tv = _mm_setzero_pd();
+            for (; o + 2 <= ke - c; o += 2)
+                tv = _mm_add_pd(tv, _mm_mul_pd(_mm_loadu_pd(Lc + o), _mm_loadu_pd(x + c + 1 + o)));
+            t = _mm_cvtsd_f64(tv) + _mm_cvtsd_f64(_mm_unpackhi_pd(tv, tv));
+        }
+#endif
+        for (; o < ke - c; o++) t += Lc[o] * x[c + 1 + o];
         x[c] -= t;
     }
 }
@@ -5782,6 +5838,7 @@ struct amps_update {
         double *chunk;
         amps_int chunk_rows;         /* Step 1 chunks: nthr * chunk_rows * AMPS__VB */
         amps_int *row_map, *closure; /* Step 1: nthr * n each (row_map -1 between uses) */
+        unsigned char *lanes;        /* Step 1: nthr * 2n, lane bounds of the union's rows */
         amps_int *idx;               /* n + cap_N */
         double *resid;               /* 2 * cap_N residual vectors */
         amps_marker mark_n, mark_N;  /* over base nodes (n) and indices (cap_N) */
@@ -5816,10 +5873,10 @@ struct amps_update {
         amps_int n_struct;           /* structural commits since the last swap (COUNT) */
         amps_int *origin;            /* origin[j] of appended DOF j (-1: unknown), j < cap_origin */
         amps_int cap_origin;
-        double fill_ref; /* nnz(L) / nnz(B) of the last fresh ordering (0: not known) */
+        double fill_ref;   /* nnz(L) / nnz(B) of the last fresh ordering (0: not known) */
         double fold_flops; /* sum_j c_j^2 of the base factor (amps__commit_wants_fold; 0: not known) */
-        amps_int n_kept; /* re-factorizations since the last fresh ordering */
-        int fresh;       /* 1: the next start orders afresh (amps_update_refactor) */
+        amps_int n_kept;   /* re-factorizations since the last fresh ordering */
+        int fresh;         /* 1: the next start orders afresh (amps_update_refactor) */
     } refac;
     struct {                        /* watch set */
         amps_int n, n_closure, cap; /* size, |closure_L of its base indices|, capacity */
@@ -5840,9 +5897,10 @@ struct amps_update {
         amps_int *list, cap_list;    /* the new base positions (Step 1) */
         double *chunk;               /* the run phase's Step 1-2 workspace (as work.*) */
         amps_int *row_map, *closure; /* row_map -1 between uses */
-        amps_int ws_n;               /* base order the workspace is sized for (0: none) */
-        size_t vused_old;            /* memo.used before it */
-        double t_wcols, t_gram;      /* the run phase's step times */
+        unsigned char *lanes;
+        amps_int ws_n;          /* base order the workspace is sized for (0: none) */
+        size_t vused_old;       /* memo.used before it */
+        double t_wcols, t_gram; /* the run phase's step times */
     } cjob;
 };
 
@@ -6024,6 +6082,7 @@ AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     amps__free(ctx, U->cjob.chunk);
     amps__free(ctx, U->cjob.row_map);
     amps__free(ctx, U->cjob.closure);
+    amps__free(ctx, U->cjob.lanes);
     amps_factor_free(ctx, U->refac.F_own);
     amps_csc_free(ctx, U->refac.K_own);
     amps__free(ctx, U->refac.origin);
@@ -6078,6 +6137,7 @@ AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     amps__free(ctx, U->work.chunk);
     amps__free(ctx, U->work.row_map);
     amps__free(ctx, U->work.closure);
+    amps__free(ctx, U->work.lanes);
     amps__free(ctx, U->work.idx);
     amps__free(ctx, U->work.resid);
     amps_marker_free(ctx, &U->work.mark_n);
@@ -6197,6 +6257,7 @@ static amps_status amps__create_alloc(amps_ctx *ctx, amps_update *U, amps_int ca
     U->work.chunk = AMPS__CAST(double *, amps__malloc(ctx, nt * (size_t)U->work.chunk_rows * AMPS__VB, sizeof(double)));
     U->work.row_map = AMPS__CAST(amps_int *, amps__malloc(ctx, nt * (size_t)n, sizeof(amps_int)));
     U->work.closure = AMPS__CAST(amps_int *, amps__malloc(ctx, nt * (size_t)n, sizeof(amps_int)));
+    U->work.lanes = AMPS__CAST(unsigned char *, amps__malloc(ctx, nt * 2 * (size_t)n + 1, 1));
     U->pending.delta =
             AMPS__CAST(amps__pdelta *, amps__malloc(ctx, (size_t)U->pending.cap_delta, sizeof(amps__pdelta)));
     U->pending.con = AMPS__CAST(amps__pcon *, amps__malloc(ctx, (size_t)U->pending.cap_con, sizeof(amps__pcon)));
@@ -6210,8 +6271,9 @@ static amps_status amps__create_alloc(amps_ctx *ctx, amps_update *U, amps_int ca
     U->guard.ct = AMPS__CAST(double *, amps__malloc(ctx, (size_t)n, sizeof(double)));
     if (!U->force.f || !U->sol.x || !U->aug.pos || !U->work.idx || !U->force.ct || !U->force.f_ct ||
         !U->base.inv_sqrt_d || !U->force.changed || !U->work.vec || !U->work.vec2 || !U->work.chunk ||
-        !U->work.row_map || !U->work.closure || !U->pending.delta || !U->pending.con || !U->memo.val || !U->memo.idx ||
-        !U->delta.col || !U->delta.val || !U->journal.kinds || !U->work.resid || !U->guard.scratch || !U->guard.ct)
+        !U->work.row_map || !U->work.closure || !U->work.lanes || !U->pending.delta || !U->pending.con ||
+        !U->memo.val || !U->memo.idx || !U->delta.col || !U->delta.val || !U->journal.kinds || !U->work.resid ||
+        !U->guard.scratch || !U->guard.ct)
         return AMPS_ERR_OOM;
     if (amps_marker_init(ctx, &U->work.mark_n, n > 0 ? n : 1) ||
         amps_marker_init(ctx, &U->work.mark_N, capN > 0 ? capN : 1))
@@ -6657,51 +6719,79 @@ static amps_int amps__path_len(const amps_factor *F, amps_int p) {
 static amps_int amps__width(amps_int m) { return m <= 4 ? 4 : (m <= 8 ? 8 : (m <= 12 ? 12 : AMPS__VB)); }
 
 /* X := L^{-1} X restricted to the ascending node list clo[0..nc-1] (closed under the elimination
-   tree's parents), X row-major with W columns, row t for node clo[t], lmap: node -> row. The union
-   enters a column group c0..ke at some c and then holds c..ke (a chain) in consecutive rows. The
-   group goes by blocks of b = 4 (2, 1) columns o..o+b-1: the small triangle inside the block, then
-   X(r, :) -= sum_i L(r, o+i) X(o+i, :) for the rows r after the block, first those of the group
-   (consecutive) then its shared rows S, so each row of X is loaded and stored once per block.
-   The block's rows are copied to a local array (no aliasing: the row loop vectorizes). */
+   tree's parents), X row-major with row stride ld, row t for node clo[t], lmap: node -> row. The
+   union enters a column group c0..ke at some c and then holds c..ke (a chain) in consecutive rows.
+   The group goes by blocks of b = 4 (2, 1) columns o..o+b-1: the small triangle inside the block,
+   then X(r, 0:W) -= sum_i L(r, o+i) X(o+i, 0:W) for the rows r after the block, first those of the
+   group (consecutive) then its shared rows S, so each row of X is loaded and stored once per block.
+   Xo and X point at the block's first row and at row 0, both at the block's first lane. The
+   block's rows are copied to a local array (no aliasing: the row loop vectorizes). */
 AMPS__KERNEL void amps__wblock_body(int W, const double *const *sl, amps_int b, amps_int ng, const amps_int *S,
-                                    amps_int ns, const amps_int *lmap, double *Xo, double *X) {
+                                    amps_int ns, const amps_int *lmap, size_t ld, double *Xo, double *X) {
     double a[4][AMPS__VB];
     amps_int i, q, j;
     for (i = 1; i < b; i++) { /* triangle: row o+i from o..o+i-1 */
         amps_int k;
         for (k = 0; k < i; k++) {
             double l = sl[k][i - b]; /* L(o+i, o+k) */
-            for (j = 0; j < W; j++) Xo[(size_t)i * W + j] -= l * Xo[(size_t)k * W + j];
+            AMPS__UNROLL
+            for (j = 0; j < W; j++) Xo[(size_t)i * ld + j] -= l * Xo[(size_t)k * ld + j];
         }
     }
-    for (i = 0; i < b; i++) memcpy(a[i], Xo + (size_t)i * W, sizeof(double) * (size_t)W);
+    for (i = 0; i < b; i++) memcpy(a[i], Xo + (size_t)i * ld, sizeof(double) * (size_t)W);
+#define AMPS__WROW(q) (q < ng ? Xo + (size_t)(b + q) * ld : X + (size_t)lmap[S[q - ng]] * ld)
     if (b == 4) {
         const double *s0 = sl[0], *s1 = sl[1], *s2 = sl[2], *s3 = sl[3];
         for (q = 0; q < ng + ns; q++) {
-            double l0 = s0[q], l1 = s1[q], l2 = s2[q], l3 = s3[q];
-            double *xr = q < ng ? Xo + (size_t)(4 + q) * W : X + (size_t)lmap[S[q - ng]] * W;
+            double l0 = s0[q], l1 = s1[q], l2 = s2[q], l3 = s3[q], *xr = AMPS__WROW(q);
+            AMPS__UNROLL
             for (j = 0; j < W; j++) xr[j] -= (l0 * a[0][j] + l1 * a[1][j]) + (l2 * a[2][j] + l3 * a[3][j]);
         }
     } else if (b == 2) {
         const double *s0 = sl[0], *s1 = sl[1];
         for (q = 0; q < ng + ns; q++) {
-            double l0 = s0[q], l1 = s1[q];
-            double *xr = q < ng ? Xo + (size_t)(2 + q) * W : X + (size_t)lmap[S[q - ng]] * W;
+            double l0 = s0[q], l1 = s1[q], *xr = AMPS__WROW(q);
+            AMPS__UNROLL
             for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j] + l1 * a[1][j];
         }
     } else {
         const double *s0 = sl[0];
         for (q = 0; q < ng + ns; q++) {
-            double l0 = s0[q];
-            double *xr = q < ng ? Xo + (size_t)(1 + q) * W : X + (size_t)lmap[S[q - ng]] * W;
+            double l0 = s0[q], *xr = AMPS__WROW(q);
+            AMPS__UNROLL
             for (j = 0; j < W; j++) xr[j] -= l0 * a[0][j];
         }
     }
+#undef AMPS__WROW
 }
-typedef void (*amps__wblock_fn)(const double *const *, amps_int, amps_int, const amps_int *, amps_int, const amps_int *,
-                                double *, double *);
-AMPS__KERNEL void amps__wsolve_body(int W, amps__wblock_fn block, const amps_factor *F, const amps_int *clo,
-                                    amps_int nc, const amps_int *lmap, double *X) {
+#define AMPS__WBLOCK(W)                                                                                           \
+    static void amps__wblock##W(const double *const *sl, amps_int b, amps_int ng, const amps_int *S, amps_int ns, \
+                                const amps_int *lmap, size_t ld, double *Xo, double *X) {                         \
+        amps__wblock_body(W, sl, b, ng, S, ns, lmap, ld, Xo, X);                                                  \
+    }
+AMPS__WBLOCK(4)
+AMPS__WBLOCK(8)
+AMPS__WBLOCK(12)
+AMPS__WBLOCK(16)
+#undef AMPS__WBLOCK
+
+/* amps__wblock_body on the lanes [lo, lo + W) of X (row stride mw), W = 4, 8, 12 or 16. */
+static void amps__wblock(amps_int W, const double *const *sl, amps_int b, amps_int ng, const amps_int *S, amps_int ns,
+                         const amps_int *lmap, amps_int mw, amps_int lo, double *Xo, double *X) {
+    size_t ld = (size_t)mw;
+    if (W == 4) amps__wblock4(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
+    else if (W == 8) amps__wblock8(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
+    else if (W == 12) amps__wblock12(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
+    else amps__wblock16(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
+}
+
+/* X := L^{-1} X on the union clo[0..nc-1] (see amps__wblock_body), X with mw lanes. lanes[2t] and
+   lanes[2t+1] bound the lanes of row t that can be nonzero (those of the columns whose path holds
+   clo[t]; every other lane of the row stays zero): a block updates only the lanes of its top
+   column, which holds those of the block's other columns, in the narrowest kernel covering them.
+   Each lane sees the same operations as at full width. */
+static void amps__wsolve(const amps_factor *F, const amps_int *clo, amps_int nc, const amps_int *lmap,
+                         const unsigned char *lanes, amps_int mw, double *X) {
     const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
     const amps_int *Lp = F->Lp;
     amps_int t, c, ke, o, b, i;
@@ -6715,33 +6805,38 @@ AMPS__KERNEL void amps__wsolve_body(int W, amps__wblock_fn block, const amps_fac
         ns = Lp[ke + 1] - Lp[ke];
         for (o = c; o <= ke; o += b) {
             const double *sl[4];
+            amps_int top, lo, w;
             b = ke + 1 - o >= 4 ? 4 : (ke + 1 - o >= 2 ? 2 : 1);
             /* column o+i: rows o+i+1..ke, then S; sl[i] starts at row o+b */
             for (i = 0; i < b; i++) sl[i] = F->Lx + Lp[o + i] + (b - 1 - i);
-            block(sl, b, ke + 1 - o - b, S, ns, lmap, X + (size_t)(t + o - c) * W, X);
+            top = t + o - c + b - 1;
+            lo = lanes[2 * top];
+            w = amps__width(lanes[2 * top + 1] - lo + 1);
+            if (lo > mw - w) lo = mw - w;
+            amps__wblock(w, sl, b, ke + 1 - o - b, S, ns, lmap, mw, lo, X + (size_t)(t + o - c) * (size_t)mw, X);
         }
     }
 }
-#define AMPS__WSOLVE(W)                                                                                           \
-    static void amps__wblock##W(const double *const *sl, amps_int b, amps_int ng, const amps_int *S, amps_int ns, \
-                                const amps_int *lmap, double *Xo, double *X) {                                    \
-        amps__wblock_body(W, sl, b, ng, S, ns, lmap, Xo, X);                                                      \
-    }                                                                                                             \
-    static void amps__wsolve##W(const amps_factor *F, const amps_int *clo, amps_int nc, const amps_int *lmap,     \
-                                double *X) {                                                                      \
-        amps__wsolve_body(W, amps__wblock##W, F, clo, nc, lmap, X);                                               \
-    }
-AMPS__WSOLVE(4)
-AMPS__WSOLVE(8)
-AMPS__WSOLVE(12)
-AMPS__WSOLVE(16)
-#undef AMPS__WSOLVE
 
 typedef struct amps__wcjob {
     amps_update *U;
     const amps_int *list;
     amps_int nb, csize;
 } amps__wcjob;
+
+/* The columns of chunk ch of amps__wcols in their lanes (ord[lane] = index in the chunk): ascending
+   by the factor position of their index, so that in a postordered elimination tree the columns
+   whose paths hold a node are consecutive lanes. Returns the chunk's size. */
+static amps_int amps__wc_lanes(const amps_update *U, const amps_int *list, amps_int j0, amps_int m, amps_int *ord) {
+    const amps_factor *F = U->F;
+    amps_int j, i;
+    for (j = 0; j < m; j++) {
+        amps_int p = F->iperm[U->aug.idx[list[j0 + j]]];
+        for (i = j; i > 0 && F->iperm[U->aug.idx[list[j0 + ord[i - 1]]]] > p; i--) ord[i] = ord[i - 1];
+        ord[i] = j;
+    }
+    return m;
+}
 
 /* Chunks [b, e) of amps__wcols. */
 static void amps__wc_chunks(amps_int b, amps_int e, int th, void *arg) {
@@ -6753,7 +6848,8 @@ static void amps__wc_chunks(amps_int b, amps_int e, int th, void *arg) {
     for (ch = b; ch < e; ch++) {
         double *X = U->work.chunk + (size_t)th * (size_t)U->work.chunk_rows * AMPS__VB;
         amps_int *lmap = U->work.row_map + (size_t)th * (size_t)U->n,
-                 *clo = U->work.closure + (size_t)th * (size_t)U->n;
+                 *clo = U->work.closure + (size_t)th * (size_t)U->n, ord[AMPS__VB];
+        unsigned char *lanes = U->work.lanes + (size_t)th * 2 * (size_t)U->n;
         amps_int j0 = ch * csize, m = nb - j0 < csize ? nb - j0 : csize, nc = 0, j, t, k, mw;
         /* union of the root paths, ascending */
         for (j = 0; j < m; j++)
@@ -6762,18 +6858,31 @@ static void amps__wc_chunks(amps_int b, amps_int e, int th, void *arg) {
                 clo[nc++] = k;
             }
         qsort(clo, (size_t)nc, sizeof(amps_int), amps__int_cmp);
-        for (t = 0; t < nc; t++) lmap[clo[t]] = t;
-        mw = amps__width(m);
+        for (t = 0; t < nc; t++) {
+            lmap[clo[t]] = t;
+            lanes[2 * t] = (unsigned char)(AMPS__VB - 1);
+            lanes[2 * t + 1] = 0;
+        }
+        mw = amps__width(amps__wc_lanes(U, list, j0, m, ord));
         memset(X, 0, sizeof(double) * (size_t)nc * (size_t)mw);
-        for (j = 0; j < m; j++) X[(size_t)lmap[F->iperm[U->aug.idx[list[j0 + j]]]] * (size_t)mw + (size_t)j] = 1.0;
-        /* X := L^{-1} X on the union, with a fixed row width mw >= m (zero padding) */
-        if (m <= 4) amps__wsolve4(F, clo, nc, lmap, X);
-        else if (m <= 8) amps__wsolve8(F, clo, nc, lmap, X);
-        else if (m <= 12) amps__wsolve12(F, clo, nc, lmap, X);
-        else amps__wsolve16(F, clo, nc, lmap, X);
+        for (j = 0; j < m; j++) { /* lane j: its unit entry, its bounds up the tree (parents come later) */
+            t = lmap[F->iperm[U->aug.idx[list[j0 + ord[j]]]]];
+            X[(size_t)t * (size_t)mw + (size_t)j] = 1.0;
+            if (lanes[2 * t] > j) lanes[2 * t] = (unsigned char)j;
+            if (lanes[2 * t + 1] < j) lanes[2 * t + 1] = (unsigned char)j;
+        }
+        for (t = 0; t < nc; t++) {
+            amps_int p = F->parent[clo[t]], tp;
+            if (p == -1) continue;
+            tp = lmap[p];
+            if (lanes[2 * tp] > lanes[2 * t]) lanes[2 * tp] = lanes[2 * t];
+            if (lanes[2 * tp + 1] < lanes[2 * t + 1]) lanes[2 * tp + 1] = lanes[2 * t + 1];
+        }
+        /* X := L^{-1} X on the union, each block on the lanes its columns can reach */
+        amps__wsolve(F, clo, nc, lmap, lanes, mw, X);
         /* gather each column along its own path, scaled by D^{-1/2} */
         for (j = 0; j < m; j++) {
-            amps_int aa = list[j0 + j], len = 0;
+            amps_int aa = list[j0 + ord[j]], len = 0;
             double *wv = U->memo.val + U->memo.off[aa];
             amps_int *wi = U->memo.idx + U->memo.off[aa];
             for (k = F->iperm[U->aug.idx[aa]]; k != -1; k = F->parent[k]) {
@@ -6791,23 +6900,22 @@ static void amps__wc_chunks(amps_int b, amps_int e, int th, void *arg) {
    one chunk per participant at a time; a chunk is one forward solve over the union of its paths
    (ascending = topological), X(t, j) row-major over the chunk, so each column of L on the
    union is read once per chunk. The rows of L(:, k) lie on the path of k, so no solve leaves
-   the union. Workspace per slot: work.chunk (chunk_rows * AMPS__VB), work.row_map (n, -1
-   outside use), work.closure (n). */
-static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
+   the union; a block of L's columns updates only the lanes its columns reach (amps__wsolve).
+   Workspace per slot: work.chunk (chunk_rows * AMPS__VB), work.row_map (n, -1 outside use),
+   work.closure (n), work.lanes (2n). */
+static void amps__wcols(amps_update *U, amps_int *list, amps_int nb) {
     const amps_factor *F = U->F;
-    amps_int nchunk, csize;
+    amps_int nchunk, csize, k, p, *pmap = U->work.row_map; /* slot 0's row map, -1 between uses */
     amps__wcjob wj;
     if (nb <= 0) return;
-    { /* 4 chunks (of at least 4 columns) only when the work (entries of L on one path, times nb)
-         is worth a parallel loop */
-        double work = 0;
-        amps_int k;
-        for (k = F->iperm[U->aug.idx[list[0]]]; k != -1; k = F->parent[k]) work += (double)(F->Lp[k + 1] - F->Lp[k]);
-        work *= (double)nb;
-        csize = work > 2e6 ? (nb + 3) / 4 : nb;
-        if (csize < 4) csize = 4;
-    }
-    if (csize > AMPS__VB) csize = AMPS__VB;
+    /* the columns by ascending factor position: a chunk's paths share most of their length */
+    for (k = 0; k < nb; k++) pmap[F->iperm[U->aug.idx[list[k]]]] = list[k];
+    for (p = 0, k = 0; p < F->n && k < nb; p++)
+        if (pmap[p] >= 0) {
+            list[k++] = pmap[p];
+            pmap[p] = -1;
+        }
+    csize = AMPS__VB;
     nchunk = (nb + csize - 1) / csize;
     wj.U = U;
     wj.list = list;
@@ -6817,16 +6925,20 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
 }
 
 /* acc(0:W) = sum over the common suffix of the root path (wi, wv, len) and the union mapped by
-   lmap of wv[t] X(lmap[wi[t]], 0:W): the union is closed under parents, so the suffix starts
-   below the last node (from the root down) inside it. Summed upwards, as the path is stored. */
+   lmap of wv[t] X(lmap[wi[t]], 0:W): the union is closed under parents, so the path's nodes in
+   it are a suffix (found by bisection). Summed upwards, as the path is stored. */
 AMPS__KERNEL void amps__gscan_body(int W, const amps_int *wi, const double *wv, amps_int len, const amps_int *lmap,
                                    const double *X, double *acc) {
     double a[AMPS__VB]; /* fully unrolled: the accumulators live in registers */
-    amps_int t;
+    amps_int t = 0, hi = len;
     int j;
     AMPS__UNROLL
     for (j = 0; j < W; j++) a[j] = 0;
-    for (t = len; t > 0 && lmap[wi[t - 1]] >= 0; t--) {}
+    while (t < hi) { /* the suffix's start: the path's members of the union are a suffix */
+        amps_int mid = t + (hi - t) / 2;
+        if (lmap[wi[mid]] >= 0) hi = mid;
+        else t = mid + 1;
+    }
     for (; t < len; t++) {
         const double *xr = X + (size_t)lmap[wi[t]] * W;
         double v = wv[t];
@@ -7694,8 +7806,8 @@ static amps_status amps__delta_relocate(amps_ctx *ctx, amps_update *U, amps_int 
 }
 
 /* Applies the recorded changes to Delta and the kinds (journaled) and marks the dense columns
-   they change in lu.changed: the touched rows, the new positions, and where a kind changes the
-   column and those of its Delta-neighbours. */
+   they change in lu.changed: the touched rows outside C, the new positions, and where a kind
+   changes the column and those of its Delta-neighbours. */
 static void amps__apply_pending(amps_update *U, amps_int u_old) {
     amps_marker *cm = &U->lu.changed;
     amps_int k, a;
@@ -7704,6 +7816,9 @@ static void amps__apply_pending(amps_update *U, amps_int u_old) {
         amps_int ra = U->aug.pos[U->pending.delta[k].r], rb = U->aug.pos[U->pending.delta[k].c];
         amps__delta_add(U, ra, rb, U->pending.delta[k].v);
         if (ra != rb) amps__delta_add(U, rb, ra, U->pending.delta[k].v);
+        /* A(:, a) holds Delta(a, b) only for a and b both outside C (amps__acol); where a kind
+           changes below, its column and its Delta-neighbours are marked there */
+        if ((U->aug.kind[ra] | U->aug.kind[rb]) & AMPS__UCON) continue;
         cm->mark[ra] = cm->stamp;
         cm->mark[rb] = cm->stamp;
     }
@@ -7864,19 +7979,21 @@ AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U) { return 
 
 /* ---- the two-phase commit ---- */
 
-/* The run phase's workspace (as work.chunk, row_map, closure) for base order n. */
+/* The run phase's workspace (as work.chunk, row_map, closure, lanes) for base order n. */
 static amps_status amps__cjob_workspace(amps_ctx *ctx, amps_update *U) {
     size_t nb = (size_t)U->nbuf, n = (size_t)U->n, k;
     if (U->cjob.ws_n == U->n && U->cjob.J) return AMPS_OK;
     amps__free(ctx, U->cjob.chunk);
     amps__free(ctx, U->cjob.row_map);
     amps__free(ctx, U->cjob.closure);
+    amps__free(ctx, U->cjob.lanes);
     U->cjob.ws_n = 0;
     U->cjob.chunk = AMPS__CAST(double *, amps__malloc(ctx, nb * (size_t)U->work.chunk_rows * AMPS__VB, sizeof(double)));
     U->cjob.row_map = AMPS__CAST(amps_int *, amps__malloc(ctx, nb * n, sizeof(amps_int)));
     U->cjob.closure = AMPS__CAST(amps_int *, amps__malloc(ctx, nb * n, sizeof(amps_int)));
+    U->cjob.lanes = AMPS__CAST(unsigned char *, amps__malloc(ctx, nb * 2 * n + 1, 1));
     if (!U->cjob.J) U->cjob.J = AMPS__CAST(amps_update *, amps__malloc(ctx, 1, sizeof(amps_update)));
-    if (!U->cjob.chunk || !U->cjob.row_map || !U->cjob.closure || !U->cjob.J)
+    if (!U->cjob.chunk || !U->cjob.row_map || !U->cjob.closure || !U->cjob.lanes || !U->cjob.J)
         return amps__err(ctx, AMPS_ERR_OOM, "amps_update_commit_begin: out of memory");
     for (k = 0; k < nb * n; k++) U->cjob.row_map[k] = -1;
     U->cjob.ws_n = U->n;
@@ -7959,6 +8076,7 @@ AMPS_API amps_status amps_update_commit_begin(amps_ctx *ctx, amps_update *U) {
     U->cjob.J->work.chunk = U->cjob.chunk;
     U->cjob.J->work.row_map = U->cjob.row_map;
     U->cjob.J->work.closure = U->cjob.closure;
+    U->cjob.J->work.lanes = U->cjob.lanes;
     for (a = u_old; a < U->aug.size; a++) U->aug.pos[U->aug.idx[a]] = -1;
     U->aug.size = u_old;
     U->cjob.u_old = u_old;
@@ -10048,8 +10166,9 @@ static amps_status amps__commit_fold(amps_ctx *ctx, amps_update *U) {
     U->stats.ncommit++;
     U->stats.commit_folds++;
     U->stats.t_swap = amps_now() - t0;
-    amps__log(ctx, AMPS_OK, "amps_update_commit: %ld new DOFs and a dense system of %ld committed by a re-factorization",
-              (long)kn, (long)U->aug.size);
+    amps__log(ctx, AMPS_OK,
+              "amps_update_commit: %ld new DOFs and a dense system of %ld committed by a re-factorization", (long)kn,
+              (long)U->aug.size);
     return AMPS_OK;
 }
 
@@ -14139,7 +14258,8 @@ static amps_status amps__scene_removal_held(amps_ctx *ctx, amps_scene *S, const 
     amps_int nn = m->nnode, k, q, head, tail, *queue;
     unsigned char *seen;
     amps_status s = amps__scene_rm_ws(ctx, (void **)&S->dyn.rm_seen, &S->dyn.rm_seen_cap, (size_t)nn + 1, 1);
-    if (!s) s = amps__scene_rm_ws(ctx, (void **)&S->dyn.rm_queue, &S->dyn.rm_queue_cap, (size_t)nn + 1, sizeof(amps_int));
+    if (!s)
+        s = amps__scene_rm_ws(ctx, (void **)&S->dyn.rm_queue, &S->dyn.rm_queue_cap, (size_t)nn + 1, sizeof(amps_int));
     if (s) return s;
     seen = S->dyn.rm_seen;
     queue = S->dyn.rm_queue;
@@ -14186,8 +14306,7 @@ static amps_status amps__scene_removal_held(amps_ctx *ctx, amps_scene *S, const 
                           "amps_scene_remove: the removal leaves a piece of %ld tets (node %ld) held only at %ld "
                           "constrained node%s on one line (node %ld): it could turn about that line; the removal "
                           "was undone",
-                          (long)(ntet / 4 > 0 ? ntet / 4 : 1), (long)seed, (long)ncon, ncon == 1 ? "" : "s",
-                          (long)con);
+                          (long)(ntet / 4 > 0 ? ntet / 4 : 1), (long)seed, (long)ncon, ncon == 1 ? "" : "s", (long)con);
     }
     return s;
 }
