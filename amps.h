@@ -638,7 +638,8 @@ AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m
 /* Commits, then computes x on the watched indices only: xw[k] = x[idx[k]] (xw may be NULL; the
    values also land in amps_update_solution, whose other entries are then stale). The backward
    solve reads L only on closure_L(watched) and, for the local refinement, on the closure of
-   S u C and its neighbours. Updates the reactions too. Allocates nothing. Neither the default
+   the unconstrained rows of S u C and their neighbours (none while S u C holds only
+   constrained rows, such as pins: no refinement then). Updates the reactions too. Allocates nothing. Neither the default
    refinement (opts.refine_tol) nor the guard: a product with K^ would cost more than this
    solve, so x is the augmented solve's with the local refinement (opts.refine), whose backward
    error on a badly conditioned K^ can exceed a fresh direct solve's (measured up to 0.02 eps
@@ -6670,7 +6671,30 @@ AMPS__KERNEL void amps__wblock_body(int W, const double *const *sl, amps_int b, 
     for (i = 0; i < b; i++) memcpy(a[i], Xo + (size_t)i * W, sizeof(double) * (size_t)W);
     if (b == 4) {
         const double *s0 = sl[0], *s1 = sl[1], *s2 = sl[2], *s3 = sl[3];
-        for (q = 0; q < ng + ns; q++) {
+        q = 0;
+#ifdef AMPS__SSE2
+        /* two rows at a time, two lanes: each load of the block's rows serves both rows; the
+           sums of the scalar loop below, so the same bits */
+        for (; q + 1 < ng + ns; q += 2) {
+            const __m128d l0 = _mm_set1_pd(s0[q]), l1 = _mm_set1_pd(s1[q]), l2 = _mm_set1_pd(s2[q]),
+                          l3 = _mm_set1_pd(s3[q]), m0 = _mm_set1_pd(s0[q + 1]), m1 = _mm_set1_pd(s1[q + 1]),
+                          m2 = _mm_set1_pd(s2[q + 1]), m3 = _mm_set1_pd(s3[q + 1]);
+            double *xr = q < ng ? Xo + (size_t)(4 + q) * W : X + (size_t)lmap[S[q - ng]] * W;
+            double *xs = q + 1 < ng ? Xo + (size_t)(5 + q) * W : X + (size_t)lmap[S[q + 1 - ng]] * W;
+            AMPS__UNROLL
+            for (j = 0; j < W; j += 2) {
+                __m128d a0 = _mm_loadu_pd(a[0] + j), a1 = _mm_loadu_pd(a[1] + j), a2 = _mm_loadu_pd(a[2] + j),
+                        a3 = _mm_loadu_pd(a[3] + j);
+                __m128d er = _mm_add_pd(_mm_add_pd(_mm_mul_pd(l0, a0), _mm_mul_pd(l1, a1)),
+                                        _mm_add_pd(_mm_mul_pd(l2, a2), _mm_mul_pd(l3, a3)));
+                __m128d es = _mm_add_pd(_mm_add_pd(_mm_mul_pd(m0, a0), _mm_mul_pd(m1, a1)),
+                                        _mm_add_pd(_mm_mul_pd(m2, a2), _mm_mul_pd(m3, a3)));
+                _mm_storeu_pd(xr + j, _mm_sub_pd(_mm_loadu_pd(xr + j), er));
+                _mm_storeu_pd(xs + j, _mm_sub_pd(_mm_loadu_pd(xs + j), es));
+            }
+        }
+#endif
+        for (; q < ng + ns; q++) {
             double l0 = s0[q], l1 = s1[q], l2 = s2[q], l3 = s3[q];
             double *xr = q < ng ? Xo + (size_t)(4 + q) * W : X + (size_t)lmap[S[q - ng]] * W;
             for (j = 0; j < W; j++) xr[j] -= (l0 * a[0][j] + l1 * a[1][j]) + (l2 * a[2][j] + l3 * a[3][j]);
@@ -6791,14 +6815,16 @@ static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
     amps_int nchunk, csize;
     amps__wcjob wj;
     if (nb <= 0) return;
-    { /* 4 chunks (of at least 4 columns) only when the work (entries of L on one path, times nb)
-         is worth a parallel loop */
+    { /* 4 chunks only when the work (entries of L on one path, times nb) is worth a parallel
+         loop; a chunk's size a multiple of 4, the kernels' widths (zero padding in the last
+         chunk only). Wider chunks of sorted columns were measured worse: their unions grow
+         faster than the kernel's width saves. */
         double work = 0;
         amps_int k;
         for (k = F->iperm[U->aug.idx[list[0]]]; k != -1; k = F->parent[k]) work += (double)(F->Lp[k + 1] - F->Lp[k]);
         work *= (double)nb;
         csize = work > 2e6 ? (nb + 3) / 4 : nb;
-        if (csize < 4) csize = 4;
+        csize = (csize + 3) / 4 * 4;
     }
     if (csize > AMPS__VB) csize = AMPS__VB;
     nchunk = (nb + csize - 1) / csize;
@@ -7620,16 +7646,28 @@ static amps_status amps__need_memo(amps_ctx *ctx, amps_update *U, size_t vneed) 
     return AMPS_OK;
 }
 
-/* Step 1: W columns of the new base positions u_old.., in batches over the union of their paths. */
-static void amps__step1(amps_update *U, amps_int u_old) {
-    amps_int a, nb = 0, *list = U->work.idx;
+/* Step 1's list: the memo offsets of the new base positions u_old.. (in position order), and
+   these positions into list in the factor's order of their indices, so that a batch of
+   amps__wcols holds paths that share most of their nodes (a subtree of the elimination tree is
+   a range of that order). Returns their number. */
+static amps_int amps__step1_list(amps_update *U, amps_int u_old, amps_int *list) {
+    const amps_factor *F = U->F;
+    amps_int a, k, nb = 0;
     for (a = u_old; a < U->aug.size; a++)
         if (U->aug.idx[a] < U->n) {
             U->memo.off[a] = U->memo.used; /* memo.len was set with the position */
             U->memo.used += (size_t)U->memo.len[a];
-            list[nb++] = a;
+            list[nb++] = F->iperm[U->aug.idx[a]];
         }
-    amps__wcols(U, list, nb);
+    qsort(list, (size_t)nb, sizeof(amps_int), amps__int_cmp);
+    for (k = 0; k < nb; k++) list[k] = U->aug.pos[F->perm[list[k]]];
+    return nb;
+}
+
+/* Step 1: W columns of the new base positions u_old.., in batches over the union of their paths. */
+static void amps__step1(amps_update *U, amps_int u_old) {
+    amps_int nb = amps__step1_list(U, u_old, U->work.idx);
+    amps__wcols(U, U->work.idx, nb);
 }
 
 /* Delta: relocates every row the changes touch to the end of the pool with room for its
@@ -7937,12 +7975,7 @@ AMPS_API amps_status amps_update_commit_begin(amps_ctx *ctx, amps_update *U) {
         return AMPS_ERR_OOM;
     }
     if (U->aug.size - u_old > U->cjob.cap_list) U->cjob.cap_list = U->aug.size - u_old;
-    for (a = u_old; a < U->aug.size; a++) /* Step 1's memo offsets (amps__step1) */
-        if (U->aug.idx[a] < U->n) {
-            U->memo.off[a] = U->memo.used;
-            U->memo.used += (size_t)U->memo.len[a];
-            U->cjob.list[nl++] = a;
-        }
+    nl = amps__step1_list(U, u_old, U->cjob.list);
     if ((s = amps__cjob_take(ctx, U)) != AMPS_OK) {
         amps__rollback(U, u_old, vused_old, U->delta.used);
         return amps__err(ctx, s, "amps_update_commit_begin: out of memory");
@@ -8141,10 +8174,10 @@ static double amps__krow(const amps_update *U, amps_int i, const double *v) {
     return s;
 }
 
-/* Refinement: x~ = K-bar^{-1}(f - H w) on U and its neighbours by a partial backward solve of
-   sv (a copy), rho = (f - K^ x~) on the free rows of U, and the correction problem K^ d = H rho
-   (d_C = 0) gives dense.w_corr; afterwards the full solve uses w + w_corr - rho. x~ is gathered
-   into x. */
+/* Refinement: x~ = K-bar^{-1}(f - H w) on the free base rows of U and their neighbours (what
+   rho reads) by a partial backward solve of sv (a copy), rho = (f - K^ x~) on the free rows of U
+   (0 on the constrained ones, whose x~ is g), and the correction problem K^ d = H rho (d_C = 0)
+   gives dense.w_corr; afterwards the full solve uses w + w_corr - rho. x~ is gathered into x. */
 static void amps__refine(amps_update *U, const double *sv, const double *wv, const double *fv, int hom, double *x) {
     const amps_factor *F = U->F;
     amps_int u = U->aug.size, n = U->n, a, k, p, nreq = 0, *req = U->work.idx, *clo = U->work.idx + n, ncl;
@@ -8153,7 +8186,7 @@ static void amps__refine(amps_update *U, const double *sv, const double *wv, con
     amps_marker_next(&U->work.mark_n);
     for (a = 0; a < u; a++) {
         amps_int i = U->aug.idx[a];
-        if (i >= n) continue;
+        if (i >= n || (U->aug.kind[a] & AMPS__UCON)) continue;
         for (p = U->base.Kp[i]; p < U->base.Kp[i + 1]; p++) {
             amps_int q = F->iperm[U->base.Ki[p]];
             if (U->work.mark_n.mark[q] != U->work.mark_n.stamp) {
@@ -8269,7 +8302,8 @@ static void amps__solve_core(amps_update *U, const double *ct, const double *fv,
     /* Step 6: x = K-bar^{-1} (f - H w), permuted: L^{-T} D^{-1/2} (ct - sum_a w_a W_a) */
     for (k = 0; k < n; k++) sv[k] = ct[k] * U->base.inv_sqrt_d[k];
     amps__scatter_w(U, wv, sv);
-    if (u > 0) {
+    for (a = 0; a < u && (U->aug.kind[a] & AMPS__UCON); a++) {}
+    if (a < u) { /* a free row in U (rho is 0 on constrained rows: no correction) */
         int it;
         for (it = 0; it < U->refine; it++) {
             amps__refine(U, sv, wv, fv, hom, x);
