@@ -644,7 +644,8 @@ AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m
 /* Commits, then computes x on the watched indices only: xw[k] = x[idx[k]] (xw may be NULL; the
    values also land in amps_update_solution, whose other entries are then stale). The backward
    solve reads L only on closure_L(watched) and, for the local refinement, on the closure of
-   S u C and its neighbours. Updates the reactions too. Allocates nothing. Neither the default
+   the unconstrained rows of S u C and their neighbours (none while S u C holds only
+   constrained rows, such as pins: no refinement then). Updates the reactions too. Allocates nothing. Neither the default
    refinement (opts.refine_tol) nor the guard: a product with K^ would cost more than this
    solve, so x is the augmented solve's with the local refinement (opts.refine), whose backward
    error on a badly conditioned K^ can exceed a fresh direct solve's (measured up to 0.02 eps
@@ -7739,16 +7740,23 @@ static amps_status amps__need_memo(amps_ctx *ctx, amps_update *U, size_t vneed) 
     return AMPS_OK;
 }
 
-/* Step 1: W columns of the new base positions u_old.., in batches over the union of their paths. */
-static void amps__step1(amps_update *U, amps_int u_old) {
-    amps_int a, nb = 0, *list = U->work.idx;
+/* Step 1's list: the memo offsets of the new base positions u_old.. and these positions into
+   list (amps__wcols puts them in the factor's order). Returns their number. */
+static amps_int amps__step1_list(amps_update *U, amps_int u_old, amps_int *list) {
+    amps_int a, nb = 0;
     for (a = u_old; a < U->aug.size; a++)
         if (U->aug.idx[a] < U->n) {
             U->memo.off[a] = U->memo.used; /* memo.len was set with the position */
             U->memo.used += (size_t)U->memo.len[a];
             list[nb++] = a;
         }
-    amps__wcols(U, list, nb);
+    return nb;
+}
+
+/* Step 1: W columns of the new base positions u_old.., in batches over the union of their paths. */
+static void amps__step1(amps_update *U, amps_int u_old) {
+    amps_int nb = amps__step1_list(U, u_old, U->work.idx);
+    amps__wcols(U, U->work.idx, nb);
 }
 
 /* Delta: relocates every row the changes touch to the end of the pool with room for its
@@ -8061,12 +8069,7 @@ AMPS_API amps_status amps_update_commit_begin(amps_ctx *ctx, amps_update *U) {
         return AMPS_ERR_OOM;
     }
     if (U->aug.size - u_old > U->cjob.cap_list) U->cjob.cap_list = U->aug.size - u_old;
-    for (a = u_old; a < U->aug.size; a++) /* Step 1's memo offsets (amps__step1) */
-        if (U->aug.idx[a] < U->n) {
-            U->memo.off[a] = U->memo.used;
-            U->memo.used += (size_t)U->memo.len[a];
-            U->cjob.list[nl++] = a;
-        }
+    nl = amps__step1_list(U, u_old, U->cjob.list);
     if ((s = amps__cjob_take(ctx, U)) != AMPS_OK) {
         amps__rollback(U, u_old, vused_old, U->delta.used);
         return amps__err(ctx, s, "amps_update_commit_begin: out of memory");
@@ -8274,10 +8277,10 @@ static double amps__krow(const amps_update *U, amps_int i, const double *v) {
     return s;
 }
 
-/* Refinement: x~ = K-bar^{-1}(f - H w) on U and its neighbours by a partial backward solve of
-   sv (a copy), rho = (f - K^ x~) on the free rows of U, and the correction problem K^ d = H rho
-   (d_C = 0) gives dense.w_corr; afterwards the full solve uses w + w_corr - rho. x~ is gathered
-   into x. */
+/* Refinement: x~ = K-bar^{-1}(f - H w) on the free base rows of U and their neighbours (what
+   rho reads) by a partial backward solve of sv (a copy), rho = (f - K^ x~) on the free rows of U
+   (0 on the constrained ones, whose x~ is g), and the correction problem K^ d = H rho (d_C = 0)
+   gives dense.w_corr; afterwards the full solve uses w + w_corr - rho. x~ is gathered into x. */
 static void amps__refine(amps_update *U, const double *sv, const double *wv, const double *fv, int hom, double *x) {
     const amps_factor *F = U->F;
     amps_int u = U->aug.size, n = U->n, a, k, p, nreq = 0, *req = U->work.idx, *clo = U->work.idx + n, ncl;
@@ -8286,7 +8289,7 @@ static void amps__refine(amps_update *U, const double *sv, const double *wv, con
     amps_marker_next(&U->work.mark_n);
     for (a = 0; a < u; a++) {
         amps_int i = U->aug.idx[a];
-        if (i >= n) continue;
+        if (i >= n || (U->aug.kind[a] & AMPS__UCON)) continue;
         for (p = U->base.Kp[i]; p < U->base.Kp[i + 1]; p++) {
             amps_int q = F->iperm[U->base.Ki[p]];
             if (U->work.mark_n.mark[q] != U->work.mark_n.stamp) {
@@ -8421,7 +8424,8 @@ static void amps__solve_core(amps_update *U, const double *ct, const double *fv,
     if (mt)
         for (k = 0; k < n; k++) mt[k] = 0.0;
     amps__scatter_w(U, wv, sv, mt);
-    if (u > 0) {
+    for (a = 0; a < u && (U->aug.kind[a] & AMPS__UCON); a++) {}
+    if (a < u) { /* a free row in U (rho is 0 on constrained rows: no correction) */
         int it;
         for (it = 0; it < U->refine; it++) {
             amps__refine(U, sv, wv, fv, hom, x);
