@@ -8635,6 +8635,9 @@ static void amps__resid_base_row(const amps_update *U, amps_int j, const double 
 
 /* The node blocks [b0, b1) of amps__backward_error's base rows: rho_j and ax_j of their rows.
    Each row has one writer, so the chunks may run on any participants. */
+#ifndef AMPS__BE_PARMIN
+#define AMPS__BE_PARMIN 6144 /* rows below which the check runs on one participant */
+#endif
 typedef struct amps__bejob {
     const amps_update *U;
     const double *x;
@@ -8671,7 +8674,7 @@ static double amps__backward_error(const amps_update *U, const double *x, double
     if (nb > 0) {
         amps__bejob bj;
         bj.U = U, bj.x = x, bj.rho = rho, bj.ax = axj;
-        amps__par_for(&U->par, nb > 6144 ? U->nthr : 1, nb / 3, 64, amps__be_blocks, &bj);
+        amps__par_for(&U->par, nb > AMPS__BE_PARMIN ? U->nthr : 1, nb / 3, 64, amps__be_blocks, &bj);
         for (j = 0; j < nb; j++)
             if (!amps__resid_con(U, j)) amps__resid_sums(U, j, x, rho[j], axj[j], sums);
     }

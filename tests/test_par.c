@@ -1,10 +1,11 @@
 /* The parallel layer: every parallel kernel (numeric factorization with the parallel top groups,
-   solves: tree-parallel backward, closure, multi-RHS; the update engine's Steps 1-4 and its dense
-   factorization) run on the test job system (tests/jobs_test.h: inline, 4 workers, 4 workers
+   solves: tree-parallel backward, closure, multi-RHS; the update engine's Steps 1-4, its dense
+   factorization and the residual check) run on the test job system (tests/jobs_test.h: inline, 4 workers, 4 workers
    with random delays, refusing to queue) and on OpenMP teams of 2 and 3 gives the bits of the
    serial run; each kernel is checked to have gone through the host's enqueue. */
 #define AMPS_IMPLEMENTATION
 #define AMPS__PAR_ADAPT 0 /* every eligible loop parallel, whatever the timing says */
+#define AMPS__BE_PARMIN 0 /* the residual check's blocks on the layer at any size */
 #include "amps.h"
 #include "amps_test.h"
 #include "fe_util.h"
@@ -57,7 +58,7 @@ static void check_layer(void) {
 }
 
 typedef struct result {
-    double *Lx, *D, *x, *X, *y, *xu, *xu2;
+    double *Lx, *D, *x, *X, *y, *xu, *xu2, *rho, be[2]; /* rho, be: the residual check */
     size_t nnz; /* entries of L */
 } result;
 
@@ -69,6 +70,7 @@ static void result_free(result *r) {
     free(r->y);
     free(r->xu);
     free(r->xu2);
+    free(r->rho);
 }
 
 static double *dup(const double *p, size_t n) {
@@ -169,6 +171,13 @@ static void run_all(int v, const amps_csc *K, const int *perm, result *r, int *n
         r->xu2 = (double *)malloc(sizeof(double) * n);
         s = amps_update_solve(&ctx, U, r->xu2);
         CHECK(s == AMPS_OK, "%s: update solve 2: %d %s", vname[v], (int)s, ctx.msg);
+        { /* the residual check (amps__backward_error's 3x3 blocks on the layer) */
+            double rn;
+            before = t_nenq;
+            r->be[0] = amps__backward_error(U, U->sol.x, U->work.resid, &rn, 0, &r->be[1]);
+            r->rho = dup(U->work.resid, (size_t)n);
+            nenq[5] = t_nenq - before;
+        }
         amps_update_free(&ctx, U);
         free(ci);
         free(ri);
@@ -205,11 +214,11 @@ int main(void) {
         amps_factor_free(&ctx, F);
     }
     {
-        int nenq[5];
+        int nenq[6];
         run_all(0, K, perm, &r0, nenq);
     }
     for (v = 1; v < 7; v++) {
-        int nenq[5] = {0, 0, 0, 0, 0};
+        int nenq[6] = {0, 0, 0, 0, 0, 0};
         run_all(v, K, perm, &r, nenq);
         CHECK(r.nnz == r0.nnz && same(r.Lx, r0.Lx, r0.nnz) && same(r.D, r0.D, (size_t)n), "%s: factor differs",
               vname[v]);
@@ -217,9 +226,10 @@ int main(void) {
         CHECK(same(r.X, r0.X, (size_t)n * 11), "%s: multi-RHS solve differs", vname[v]);
         CHECK(same(r.y, r0.y, (size_t)n), "%s: closure solve differs", vname[v]);
         CHECK(same(r.xu, r0.xu, (size_t)n) && same(r.xu2, r0.xu2, (size_t)n), "%s: update solves differ", vname[v]);
+        CHECK(same(r.rho, r0.rho, (size_t)n) && same(r.be, r0.be, 2), "%s: residual check differs", vname[v]);
         if (v >= 1 && v <= 3) {
             int k;
-            for (k = 0; k < 5; k++)
+            for (k = 0; k < 6; k++)
                 CHECK(nenq[k] > 0, "%s: kernel %d did not reach the host (%d enqueues)", vname[v], k, nenq[k]);
         }
         result_free(&r);
