@@ -8409,7 +8409,8 @@ static double amps__cancel_ratio(const amps_update *U, const double *sv, const d
 static void amps__solve_core(amps_update *U, const double *ct, const double *fv, int hom, int watched, double *x) {
     const amps_factor *F = U->F;
     amps_int u = U->aug.size, n = U->n, a, k;
-    double t0, t1, *r = hom ? U->dense.r_corr : U->dense.rhs, *yv = U->dense.y, *wv = U->dense.w, *sv = U->work.vec, *mt;
+    double t0, t1, *r = hom ? U->dense.r_corr : U->dense.rhs, *yv = U->dense.y, *wv = U->dense.w, *sv = U->work.vec,
+                   *mt;
     amps__step4(U, ct, fv, !hom, r);
     t0 = amps_now();
     /* Step 5 */

@@ -59,7 +59,7 @@ static void check_layer(void) {
 
 typedef struct result {
     double *Lx, *D, *x, *X, *y, *xu, *xu2, *rho, be[2]; /* rho, be: the residual check */
-    size_t nnz; /* entries of L */
+    size_t nnz;                                         /* entries of L */
 } result;
 
 static void result_free(result *r) {

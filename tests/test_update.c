@@ -1493,8 +1493,7 @@ static void test_commit_fold(void) {
             } else {
                 m.con[i0] = 1;
                 m.g[i0] = v;
-                CHECK(amps_update_constrain(&m.ctx, m.U, 1, &i0, &v) == AMPS_OK, "%s: constrain: %s", what,
-                      m.ctx.msg);
+                CHECK(amps_update_constrain(&m.ctx, m.U, 1, &i0, &v) == AMPS_OK, "%s: constrain: %s", what, m.ctx.msg);
             }
         }
         model_check(&m, 1e-9, what);
@@ -1502,8 +1501,8 @@ static void test_commit_fold(void) {
         CHECK(st.commit_folds == (pol[p] == AMPS_REFACTOR_AUTO || pol[p] == AMPS_REFACTOR_COUNT),
               "%s: %d commits by re-factorization", what, (int)st.commit_folds);
         if (st.commit_folds)
-            CHECK(st.nsys == st.ncon, "%s: dense system %d after the re-factorization (%d constrained)",
-                  what, (int)st.nsys, (int)st.ncon);
+            CHECK(st.nsys == st.ncon, "%s: dense system %d after the re-factorization (%d constrained)", what,
+                  (int)st.nsys, (int)st.ncon);
         random_sequence(&m, 30, 31 + (unsigned long long)p, 1e-9, what); /* small commits on the new base */
         amps_update_get_stats(m.U, &st);
         CHECK(st.commit_folds <= 1, "%s: small commits folded (%d)", what, (int)st.commit_folds);
