@@ -1375,7 +1375,7 @@ AMPS_API amps_status amps_pvd_write(amps_ctx *ctx, const char *path, amps_int n,
 #include <omp.h>
 #endif
 #if !defined(AMPS_NO_SIMD) && (defined(__SSE2__) || defined(_M_X64) || (defined(_M_IX86_FP) && _M_IX86_FP >= 2))
-#include <emmintrin.h> /* the residual check's 3x3-block product (amps__resid_blk) */
+#include <emmintrin.h> /* two-row kernels: the factorization updates, the solves, the residual check */
 #define AMPS__SSE2 1
 #endif
 #ifndef AMPS_NO_THREADS
@@ -4124,7 +4124,36 @@ AMPS__KERNEL void amps__kern_body(int KC, int TC, int gather, amps_int m, const 
         AMPS__UNROLL
         for (t = 0; t < TC; t++) w[k][t] = W[4 * k + t];
     }
-    for (p = 0; p < m; p++) {
+    p = 0;
+#ifdef AMPS__SSE2
+    /* two rows at a time: the same products and sums per entry as the loop below */
+    for (; p + 1 < m; p += 2) {
+        __m128d l[4];
+        amps_int r0 = gather ? rel[Si[p]] : p, r1 = gather ? rel[Si[p + 1]] : p + 1;
+        AMPS__UNROLL
+        for (k = 0; k < KC; k++) l[k] = _mm_loadu_pd(sk[k] + p);
+        if (r1 == r0 + 1) {
+            AMPS__UNROLL
+            for (t = 0; t < TC; t++) {
+                __m128d a = _mm_mul_pd(l[0], _mm_set1_pd(w[0][t]));
+                AMPS__UNROLL
+                for (k = 1; k < KC; k++) a = _mm_add_pd(a, _mm_mul_pd(l[k], _mm_set1_pd(w[k][t])));
+                _mm_storeu_pd(dt[t] + r0, _mm_sub_pd(_mm_loadu_pd(dt[t] + r0), a));
+            }
+        } else {
+            AMPS__UNROLL
+            for (t = 0; t < TC; t++) {
+                __m128d a = _mm_mul_pd(l[0], _mm_set1_pd(w[0][t])), v;
+                AMPS__UNROLL
+                for (k = 1; k < KC; k++) a = _mm_add_pd(a, _mm_mul_pd(l[k], _mm_set1_pd(w[k][t])));
+                v = _mm_sub_pd(_mm_loadh_pd(_mm_load_sd(dt[t] + r0), dt[t] + r1), a);
+                _mm_storel_pd(dt[t] + r0, v);
+                _mm_storeh_pd(dt[t] + r1, v);
+            }
+        }
+    }
+#endif
+    for (; p < m; p++) {
         amps_int r = gather ? rel[Si[p]] : p;
         double l[4];
         AMPS__UNROLL
