@@ -1375,7 +1375,7 @@ AMPS_API amps_status amps_pvd_write(amps_ctx *ctx, const char *path, amps_int n,
 #include <omp.h>
 #endif
 #if !defined(AMPS_NO_SIMD) && (defined(__SSE2__) || defined(_M_X64) || (defined(_M_IX86_FP) && _M_IX86_FP >= 2))
-#include <emmintrin.h> /* the residual check's 3x3-block product (amps__resid_blk) */
+#include <emmintrin.h> /* two-row kernels: the factorization updates, the solves, the residual check */
 #define AMPS__SSE2 1
 #endif
 #ifndef AMPS_NO_THREADS
@@ -4107,6 +4107,29 @@ typedef struct amps__fpriv {
 #define AMPS__KERNEL static inline
 #define AMPS__UNROLL
 #endif
+#ifdef AMPS__SSE2
+/* Rows p, p+1 of amps__kern_body into target rows r0 < r1 (same operations per entry as its scalar loop). */
+AMPS__KERNEL void amps__kern_pair(int KC, int TC, const double *const *sk, amps_int p, amps_int r0, amps_int r1,
+                                  double (*w)[4], double *const *dt) {
+    __m128d l[4];
+    int k, t;
+    AMPS__UNROLL
+    for (k = 0; k < KC; k++) l[k] = _mm_loadu_pd(sk[k] + p);
+    AMPS__UNROLL
+    for (t = 0; t < TC; t++) {
+        __m128d a = _mm_mul_pd(l[0], _mm_set1_pd(w[0][t])), v;
+        AMPS__UNROLL
+        for (k = 1; k < KC; k++) a = _mm_add_pd(a, _mm_mul_pd(l[k], _mm_set1_pd(w[k][t])));
+        if (r1 == r0 + 1) {
+            _mm_storeu_pd(dt[t] + r0, _mm_sub_pd(_mm_loadu_pd(dt[t] + r0), a));
+        } else {
+            v = _mm_sub_pd(_mm_loadh_pd(_mm_load_sd(dt[t] + r0), dt[t] + r1), a);
+            _mm_storel_pd(dt[t] + r0, v);
+            _mm_storeh_pd(dt[t] + r1, v);
+        }
+    }
+}
+#endif
 /* Update kernel of a column block: for p in [0,m), with r = rel[Si[p]] (gather) or p (dense),
    d_t[r] -= sum_k s_k[p] * W[4k+t] for t < TC, the sum over k < KC in ascending order. */
 AMPS__KERNEL void amps__kern_body(int KC, int TC, int gather, amps_int m, const amps_int *Si, const amps_int *rel,
@@ -4124,7 +4147,41 @@ AMPS__KERNEL void amps__kern_body(int KC, int TC, int gather, amps_int m, const 
         AMPS__UNROLL
         for (t = 0; t < TC; t++) w[k][t] = W[4 * k + t];
     }
-    for (p = 0; p < m; p++) {
+    p = 0;
+#ifdef AMPS__SSE2
+    /* four, then two rows at a time: the same products and sums per entry as the loop below */
+    for (; p + 3 < m; p += 4) {
+        amps_int r0 = gather ? rel[Si[p]] : p, r3 = gather ? rel[Si[p + 3]] : p + 3;
+        if (r3 == r0 + 3) { /* rel is increasing along Si: the four target rows are contiguous */
+            __m128d l[4], h[4];
+            AMPS__UNROLL
+            for (k = 0; k < KC; k++) {
+                l[k] = _mm_loadu_pd(sk[k] + p);
+                h[k] = _mm_loadu_pd(sk[k] + p + 2);
+            }
+            AMPS__UNROLL
+            for (t = 0; t < TC; t++) {
+                __m128d wk = _mm_set1_pd(w[0][t]), a = _mm_mul_pd(l[0], wk), c = _mm_mul_pd(h[0], wk);
+                AMPS__UNROLL
+                for (k = 1; k < KC; k++) {
+                    wk = _mm_set1_pd(w[k][t]);
+                    a = _mm_add_pd(a, _mm_mul_pd(l[k], wk));
+                    c = _mm_add_pd(c, _mm_mul_pd(h[k], wk));
+                }
+                _mm_storeu_pd(dt[t] + r0, _mm_sub_pd(_mm_loadu_pd(dt[t] + r0), a));
+                _mm_storeu_pd(dt[t] + r0 + 2, _mm_sub_pd(_mm_loadu_pd(dt[t] + r0 + 2), c));
+            }
+        } else {
+            amps__kern_pair(KC, TC, sk, p, r0, rel[Si[p + 1]], w, dt);
+            amps__kern_pair(KC, TC, sk, p + 2, rel[Si[p + 2]], r3, w, dt);
+        }
+    }
+    if (p + 1 < m) {
+        amps__kern_pair(KC, TC, sk, p, gather ? rel[Si[p]] : p, gather ? rel[Si[p + 1]] : p + 1, w, dt);
+        p += 2;
+    }
+#endif
+    for (; p < m; p++) {
         amps_int r = gather ? rel[Si[p]] : p;
         double l[4];
         AMPS__UNROLL
@@ -4835,9 +4892,19 @@ static amps_int amps__panel_factor(amps_factor *F, const amps__fpriv *P, const d
             const double *Ls = Lc + (c2 - c);
             amps_int len2 = Lp[c2 + 1] - Lp[c2];
             D[c2] -= v * lv;
-            for (o = 0; o < len2; o++) L2[o] -= Ls[o] * lv;
+            o = 0;
+#ifdef AMPS__SSE2
+            for (; o + 1 < len2; o += 2)
+                _mm_storeu_pd(L2 + o,
+                              _mm_sub_pd(_mm_loadu_pd(L2 + o), _mm_mul_pd(_mm_loadu_pd(Ls + o), _mm_set1_pd(lv))));
+#endif
+            for (; o < len2; o++) L2[o] -= Ls[o] * lv;
         }
-        for (o = 0; o < len; o++) Lc[o] /= d;
+        o = 0;
+#ifdef AMPS__SSE2
+        for (; o + 1 < len; o += 2) _mm_storeu_pd(Lc + o, _mm_div_pd(_mm_loadu_pd(Lc + o), _mm_set1_pd(d)));
+#endif
+        for (; o < len; o++) Lc[o] /= d;
     }
     return -1;
 }
