@@ -5928,7 +5928,6 @@ struct amps_update {
         double knorm;    /* ||K-bar||_inf (the base rows and sigma), the scale of the backward error */
         double omega_d;  /* the mixed backward error of a direct solve with the base factor (amps__direct_omega) */
         double cond;     /* kappa_1(K-bar) estimated at the creation of the base (amps_condest; 0: unknown) */
-        double mu;       /* the last full solve's cancellation ratio (amps__cancel_ratio; -1: none) */
     } guard;
     struct {                   /* re-factorization */
         amps_update_opts opts; /* as created (for the engine of a new base) */
@@ -6892,20 +6891,6 @@ typedef struct amps__wcjob {
     amps_int nb, csize;
 } amps__wcjob;
 
-/* The columns of chunk ch of amps__wcols in their lanes (ord[lane] = index in the chunk): ascending
-   by the factor position of their index, so that in a postordered elimination tree the columns
-   whose paths hold a node are consecutive lanes. Returns the chunk's size. */
-static amps_int amps__wc_lanes(const amps_update *U, const amps_int *list, amps_int j0, amps_int m, amps_int *ord) {
-    const amps_factor *F = U->F;
-    amps_int j, i;
-    for (j = 0; j < m; j++) {
-        amps_int p = F->iperm[U->aug.idx[list[j0 + j]]];
-        for (i = j; i > 0 && F->iperm[U->aug.idx[list[j0 + ord[i - 1]]]] > p; i--) ord[i] = ord[i - 1];
-        ord[i] = j;
-    }
-    return m;
-}
-
 /* Chunks [b, e) of amps__wcols. */
 static void amps__wc_chunks(amps_int b, amps_int e, int th, void *arg) {
     amps__wcjob *wj = AMPS__CAST(amps__wcjob *, arg);
@@ -6916,7 +6901,7 @@ static void amps__wc_chunks(amps_int b, amps_int e, int th, void *arg) {
     for (ch = b; ch < e; ch++) {
         double *X = U->work.chunk + (size_t)th * (size_t)U->work.chunk_rows * AMPS__VB;
         amps_int *lmap = U->work.row_map + (size_t)th * (size_t)U->n,
-                 *clo = U->work.closure + (size_t)th * (size_t)U->n, ord[AMPS__VB];
+                 *clo = U->work.closure + (size_t)th * (size_t)U->n;
         unsigned char *lanes = U->work.lanes + (size_t)th * 2 * (size_t)U->n;
         amps_int j0 = ch * csize, m = nb - j0 < csize ? nb - j0 : csize, nc = 0, j, t, k, mw;
         /* union of the root paths, ascending */
@@ -6931,10 +6916,10 @@ static void amps__wc_chunks(amps_int b, amps_int e, int th, void *arg) {
             lanes[2 * t] = (unsigned char)(AMPS__VB - 1);
             lanes[2 * t + 1] = 0;
         }
-        mw = amps__width(amps__wc_lanes(U, list, j0, m, ord));
+        mw = amps__width(m);
         memset(X, 0, sizeof(double) * (size_t)nc * (size_t)mw);
         for (j = 0; j < m; j++) { /* lane j: its unit entry, its bounds up the tree (parents come later) */
-            t = lmap[F->iperm[U->aug.idx[list[j0 + ord[j]]]]];
+            t = lmap[F->iperm[U->aug.idx[list[j0 + j]]]];
             X[(size_t)t * (size_t)mw + (size_t)j] = 1.0;
             if (lanes[2 * t] > j) lanes[2 * t] = (unsigned char)j;
             if (lanes[2 * t + 1] < j) lanes[2 * t + 1] = (unsigned char)j;
@@ -6950,7 +6935,7 @@ static void amps__wc_chunks(amps_int b, amps_int e, int th, void *arg) {
         amps__wsolve(F, clo, nc, lmap, lanes, mw, X);
         /* gather each column along its own path, scaled by D^{-1/2} */
         for (j = 0; j < m; j++) {
-            amps_int aa = list[j0 + ord[j]], len = 0;
+            amps_int aa = list[j0 + j], len = 0;
             double *wv = U->memo.val + U->memo.off[aa];
             amps_int *wi = U->memo.idx + U->memo.off[aa];
             for (k = F->iperm[U->aug.idx[aa]]; k != -1; k = F->parent[k]) {
@@ -6969,20 +6954,12 @@ static void amps__wc_chunks(amps_int b, amps_int e, int th, void *arg) {
    (ascending = topological), X(t, j) row-major over the chunk, so each column of L on the
    union is read once per chunk. The rows of L(:, k) lie on the path of k, so no solve leaves
    the union; a block of L's columns updates only the lanes its columns reach (amps__wsolve).
-   Workspace per slot: work.chunk (chunk_rows * AMPS__VB), work.row_map (n, -1 outside use),
-   work.closure (n), work.lanes (2n). */
-static void amps__wcols(amps_update *U, amps_int *list, amps_int nb) {
-    const amps_factor *F = U->F;
-    amps_int nchunk, csize, k, p, *pmap = U->work.row_map; /* slot 0's row map, -1 between uses */
+   list: by ascending factor position (amps__step1_list). Workspace per slot: work.chunk
+   (chunk_rows * AMPS__VB), work.row_map (n, -1 outside use), work.closure (n), work.lanes (2n). */
+static void amps__wcols(amps_update *U, const amps_int *list, amps_int nb) {
+    amps_int nchunk, csize;
     amps__wcjob wj;
     if (nb <= 0) return;
-    /* the columns by ascending factor position: a chunk's paths share most of their length */
-    for (k = 0; k < nb; k++) pmap[F->iperm[U->aug.idx[list[k]]]] = list[k];
-    for (p = 0, k = 0; p < F->n && k < nb; p++)
-        if (pmap[p] >= 0) {
-            list[k++] = pmap[p];
-            pmap[p] = -1;
-        }
     csize = AMPS__VB;
     nchunk = (nb + csize - 1) / csize;
     wj.U = U;
@@ -7807,16 +7784,21 @@ static amps_status amps__need_memo(amps_ctx *ctx, amps_update *U, size_t vneed) 
     return AMPS_OK;
 }
 
-/* Step 1's list: the memo offsets of the new base positions u_old.. and these positions into
-   list (amps__wcols puts them in the factor's order). Returns their number. */
+/* Step 1's list: the memo offsets of the new base positions u_old.. (in position order), and
+   these positions into list by ascending factor position of their indices (one index per
+   position), the order amps__wcols takes: a chunk's paths share most of their length, and its
+   columns whose paths hold a node are consecutive lanes. Returns their number. */
 static amps_int amps__step1_list(amps_update *U, amps_int u_old, amps_int *list) {
-    amps_int a, nb = 0;
+    const amps_factor *F = U->F;
+    amps_int a, k, nb = 0;
     for (a = u_old; a < U->aug.size; a++)
         if (U->aug.idx[a] < U->n) {
             U->memo.off[a] = U->memo.used; /* memo.len was set with the position */
             U->memo.used += (size_t)U->memo.len[a];
-            list[nb++] = a;
+            list[nb++] = F->iperm[U->aug.idx[a]];
         }
+    qsort(list, (size_t)nb, sizeof(amps_int), amps__int_cmp);
+    for (k = 0; k < nb; k++) list[k] = U->aug.pos[F->perm[list[k]]];
     return nb;
 }
 
@@ -8456,8 +8438,6 @@ static void amps__watch_fixed(amps_update *U, const double *fv, double *x) {
     }
 }
 
-/* Steps 4-6 for forces fv (N) with ct = D^{-1/2} L^{-1} P^T fv(0:n) and the prescribed values
-   (hom: zero) into x (N). */
 /* The cancellation ratio of Step 6: mu = || sum_a |w_a| |D^{-1/2} W_a| ||_2 / ||sv||_2, where
    sv = D^{-1/2} ct - sum_a w_a D^{-1/2} W_a is what the backward solve turns into x, from
    t = sum_a |w_a| |D^{-1/2} W_a| (amps__scatter_w; with the local refinement's corrections
@@ -8473,6 +8453,8 @@ static double amps__cancel_ratio(const amps_update *U, const double *sv, const d
     return den > 0 ? sqrt(num / den) : (num > 0 ? HUGE_VAL : 0.0);
 }
 
+/* Steps 4-6 for forces fv (N) with ct = D^{-1/2} L^{-1} P^T fv(0:n) and the prescribed values
+   (hom: zero) into x (N). A full solve that amps__accuracy may skip sets stats.cancel_ratio. */
 static void amps__solve_core(amps_update *U, const double *ct, const double *fv, int hom, int watched, double *x) {
     const amps_factor *F = U->F;
     amps_int u = U->aug.size, n = U->n, a, k;
@@ -8504,7 +8486,7 @@ static void amps__solve_core(amps_update *U, const double *ct, const double *fv,
             }
         }
     }
-    if (mt) U->guard.mu = amps__cancel_ratio(U, sv, mt);
+    if (mt) U->stats.cancel_ratio = amps__cancel_ratio(U, sv, mt);
     if (watched) {
         amps__watch_fixed(U, fv, x);
         if (watched == 2) {
@@ -8857,8 +8839,8 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    test_dynamics.c, test_scene.c and test_corot.c (5,227 solves), every solve the omega trigger
    refined had mu >= 11.2, and where mu <= 4 omega stayed within 3.0 omega_d (never 4 omega_d);
    so with the guard off and no forward step due, a solve with mu <= AMPS__MU_SKIP takes no
-   product with K^ (stats.checks_skipped; all solves of bench/refine_cost's bunny20k cut, whose
-   mu is 0.4-3.3, the check then being 9-10% of the step's instructions).
+   product with K^ (stats.checks_skipped; bench/refine_cost's bunny20k cut: the first 22 of 30 cut
+   steps, mu 0.05-3.8, where the check was 9-10% of the step's instructions).
    Forward error. A backward error at a direct solve's level does not give its forward error:
    on beam 5x5x256 (kappa 8.7e9, tests/test_stress.c fwd_*) the augmented solve reaches omega
    0.7-1.4 eps (omega_d 0.5 eps, no step taken) and a residual 1.4-2.2x CHOLMOD's, yet its error
@@ -8887,8 +8869,8 @@ static int amps__accuracy(amps_update *U, int pass) {
     /* the forward trigger: a solve on an ill-conditioned base (kappa eps above
        AMPS__FWD_KAPPA_EPS) takes one step */
     int fwd = tol > 0 && U->guard.cond * 2.220446049250313e-16 > AMPS__FWD_KAPPA_EPS;
-    U->stats.cancel_ratio = U->guard.mu;
-    if (gtol <= 0 && !fwd && U->guard.mu >= 0 && U->guard.mu <= AMPS__MU_SKIP) {
+    double mu = U->stats.cancel_ratio;
+    if (gtol <= 0 && !fwd && mu >= 0 && mu <= AMPS__MU_SKIP) {
         /* Step 6 cancelled little: x has a direct solve's rounding, no product with K^ */
         U->stats.backward_error = -1;
         U->stats.checks_skipped++;
@@ -8942,7 +8924,7 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
     }
 again:
     amps__solve_stats_begin(U);
-    U->guard.mu = -1;
+    U->stats.cancel_ratio = -1;
     amps__solve_core(U, U->force.ct, U->force.f, 0, 0, U->sol.x);
     U->stats.guard_steps = 0;
     U->stats.guard_result = AMPS_GUARD_MET;
