@@ -50,9 +50,11 @@
      AMPS_NO_STDIO        no <stdio.h>: leaves out the file readers and writers (amps_mesh_read*,
                           amps_mesh_write_*); the *_mem readers stay. Error messages never use
                           stdio (a private formatter, the same in every build).
-     AMPS_NO_THREADS      leave out amps' own background threads (pthreads); OpenMP is separate
+     AMPS_NO_THREADS      leave out amps' own threads (pthreads): the kernels' workers
+                          (AMPS_BACKEND_THREADS) and the background re-factorization
      AMPS_NO_SIMD         plain C where SSE2 intrinsics would be used (the residual check)
-     OpenMP kernels are used when compiled with -fopenmp (_OPENMP defined), else none.
+     Parallel kernels: see amps_backend. By default (ctx->nthreads 0) they use
+     omp_get_max_threads() participants when compiled with -fopenmp, else one.
 
    ERRORS AND OWNERSHIP
      Every call that can fail takes an amps_ctx* and returns an amps_status (or NULL, or -1 for
@@ -80,6 +82,9 @@
      haptic thread can evaluate one model while another thread changes the scene and builds the
      next into a second one (amps_scene_haptic_build; the caller swaps the two).
      An amps_ctx is used by one call at a time (it records the last error).
+     Worker threads (AMPS_BACKEND_THREADS, the default with nthreads > 1): each factor and
+     engine owns nthreads - 1 of them from its creation to its free; they run only chunks of
+     loops of their own object's calls and sleep between them, touching nothing else.
      Task callbacks (ctx->enqueue_task, ctx->finish_task): enqueue either returns NULL (not
      queued: amps runs [0, n) itself) or a handle, and the host then runs task on sub-ranges that
      cover [0, n) once each (at least min_range long, except the last), on any threads, in any
@@ -157,13 +162,32 @@ typedef void amps_task_fn(amps_int begin, amps_int end, int worker, void *task_c
 typedef void *amps_enqueue_task_fn(amps_task_fn *task, amps_int n, amps_int min_range, void *task_ctx, void *user);
 typedef void amps_finish_task_fn(void *handle, void *user);
 
+/* Where the kernels' parallel loops run when no task callbacks are set (amps_ctx.backend).
+   AMPS_BACKEND_THREADS: amps' own worker threads (POSIX threads; not with AMPS_NO_THREADS), one
+   set per factor and per engine, started when the object is made (amps_analyze,
+   amps_update_create) and joined when it is freed. The calling thread claims chunks too and
+   waits only for chunks a worker has begun, never for a worker that has not started: beside
+   other busy processes a loop takes at most about as long as running it alone. A loop that finds
+   its object's workers busy (a concurrent solve of one factor) runs serially.
+   AMPS_BACKEND_OPENMP: an OpenMP parallel region per loop (compiled with -fopenmp); the region
+   ends when every thread of the team has arrived, so under load a loop waits for the slowest to
+   get a core. */
+typedef enum amps_backend {
+    AMPS_BACKEND_AUTO = 0,    /* THREADS where available, else OPENMP where compiled, else serial */
+    AMPS_BACKEND_THREADS = 1, /* amps' own threads (serial where there are none) */
+    AMPS_BACKEND_OPENMP = 2,  /* OpenMP regions (serial without -fopenmp) */
+    AMPS_BACKEND_SERIAL = 3   /* every loop on the calling thread */
+} amps_backend;
+
 /* Caller-owned context: allocator user pointer, threads or the host's task system, and the last
    error. The kernels run on the host's task system when enqueue_task and finish_task are set
-   (both or neither), else on OpenMP threads (compiled with -fopenmp), else serially. */
+   (both or neither), else as backend says, on nthreads participants. */
 typedef struct amps_ctx {
-    void *alloc_user;                   /* passed as u to AMPS_MALLOC/AMPS_REALLOC/AMPS_FREE */
-    int nthreads;                       /* OpenMP threads used by amps kernels; 0 = OpenMP default, 1 = serial */
-    amps_enqueue_task_fn *enqueue_task; /* host back end (both or neither); NULL = OpenMP/serial */
+    void *alloc_user; /* passed as u to AMPS_MALLOC/AMPS_REALLOC/AMPS_FREE */
+    int nthreads;     /* participants of a parallel loop (the caller and nthreads - 1 workers);
+                         0 = omp_get_max_threads() with OpenMP, else 1; 1 = serial */
+    amps_backend backend;               /* without task callbacks (0 = AMPS_BACKEND_AUTO) */
+    amps_enqueue_task_fn *enqueue_task; /* host back end (both or neither); NULL = backend */
     amps_finish_task_fn *finish_task;
     void *task_user;  /* passed as user to both */
     int worker_count; /* workers of the host system (>= 1; worker indices < it); 0 = 1 */
@@ -298,7 +322,7 @@ typedef struct amps_factor {
    opts may be NULL (AMPS_ORDER_AUTO, block detection). With AMPS_FULL only entries with row <= column
    are read (A is taken as symmetric). Also builds the pattern Li and the scatter map of A into L, and
    the workspace of amps_factorize for the participants of ctx's back end (host workers + 1, or
-   ctx->nthreads OpenMP threads, 0: the OpenMP default). */
+   ctx->nthreads); starts the factor's worker threads (AMPS_BACKEND_THREADS). */
 AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts);
 /* Numeric LDL^T of A, which must have the pattern given to amps_analyze, stored as the same
    triangle (values may differ; AMPS_ERR_PATTERN otherwise).
@@ -357,7 +381,7 @@ AMPS_API void amps_ltsolve_closure(const amps_factor *F, amps_int cnt, const amp
 /* Solves K X = B for nrhs right-hand sides: columns of B (leading dimension ldb >= n) into X
    (ldx >= n; X may equal B), original numbering. Blocks of 4 columns run in parallel on ctx's
    back end. work: amps_solve_multi_work(ctx, F, nrhs) doubles (4n per participant: host workers
-   + 1, or OpenMP threads; query it with the same ctx settings). Allocates nothing. */
+   + 1, or ctx->nthreads; query it with the same ctx settings). Allocates nothing. */
 AMPS_API amps_status amps_solve_multi(amps_ctx *ctx, const amps_factor *F, amps_int nrhs, const double *B, amps_int ldb,
                                       double *X, amps_int ldx, double *work);
 AMPS_API size_t amps_solve_multi_work(const amps_ctx *ctx, const amps_factor *F, amps_int nrhs);
@@ -470,7 +494,7 @@ typedef struct amps_update_opts {
                                       couplings a change cancelled exactly leave the pattern too.
                                       AMD often has less fill but a tall elimination tree: long
                                       closures make Steps 1-2 slower */
-    int refactor_threads;           /* OpenMP threads of the background factorization; default 1: the
+    int refactor_threads;           /* threads of the background factorization; default 1: the
                                       worker, and (when the engine's back end has 2 or more participants)
                                       one helper thread that takes the factorization's parallel chunks
                                       only while no commit or solve of the engine runs; same bits */
@@ -1715,9 +1739,11 @@ static int amps__isfinite(double v) { return v - v == 0.0; }
    same for any participant count and schedule.
    Back ends: the host's task system (ctx->enqueue_task/finish_task): the caller enqueues
    min(nt - 1, chunks - 1) items, each claiming chunks under slot = its item index, claims
-   chunks itself under the last slot, then calls finish; OpenMP (no callbacks, -fopenmp): a team
-   of nt threads claims chunks (slot = thread number); serial otherwise, when nt <= 1, when
-   there is one chunk, or when the mode choice below picks serial.
+   chunks itself under the last slot, then calls finish; the owner's workers (amps__pool, the
+   default): workers below nt - 1 and the caller (slot nt - 1) claim chunks, and the caller
+   waits only for chunks begun; OpenMP (AMPS_BACKEND_OPENMP, or AUTO where no workers could
+   start): a team of nt threads claims chunks (slot = thread number); serial otherwise, when
+   nt <= 1, when there is one chunk, or when the mode choice below picks serial.
    Mode choice: a parallel loop ends when its slowest participant does; beside other busy
    processes a woken worker may wait a time slice for a core while the caller waits for it at
    the end of the loop, and the loop is then slower than the serial one. So every owner times
@@ -1746,6 +1772,9 @@ static double amps__dload(const double *p) {
 static void amps__dstore(double *p, double v) { __atomic_store(p, &v, __ATOMIC_RELAXED); }
 #define AMPS__ZLOAD(p) __atomic_load_n((p), __ATOMIC_RELAXED)
 #define AMPS__ZSTORE(p, v) __atomic_store_n((p), (v), __ATOMIC_RELAXED)
+#if !defined(AMPS_NO_THREADS)
+#define AMPS__HAVE_POOL 1 /* amps' own workers: POSIX threads and these atomics */
+#endif
 #elif defined(_MSC_VER)
 #include <intrin.h>
 #define AMPS__HAVE_ATOMICS 1
@@ -1767,8 +1796,12 @@ static void amps__dstore(double *p, double v) { *p = v; }
 #else
 #define AMPS__HAVE_OMP 0
 #endif
+#ifndef AMPS__HAVE_POOL
+#define AMPS__HAVE_POOL 0
+#endif
 
 typedef void amps__chunk_fn(amps_int begin, amps_int end, int slot, void *arg);
+typedef struct amps__pool amps__pool;
 
 /* Loop timing of one owner (relaxed atomics: the solves of one factor may run concurrently,
    and a background job shares its engine's state). slot[k] holds kernel key[k] (the hashed fn
@@ -1779,33 +1812,46 @@ typedef struct amps__parbo {
     long tick; /* loops timed so far: the exploration's pseudo-random sequence */
 } amps__parbo;
 
-/* A back end captured from a context; bo points at the owner's loop timing (or NULL). */
+/* A back end captured from a context: the host's callbacks, else the owner's workers (pool),
+   else OpenMP regions (omp), else serial; bo points at the owner's loop timing (or NULL). */
 typedef struct amps__par {
     amps_enqueue_task_fn *enqueue;
     amps_finish_task_fn *finish;
     void *user;
+    amps__pool *pool;
+    int omp;
     amps__parbo *bo;
 } amps__par;
 
 /* Participants (scratch slots) of the context's back end: worker_count + 1 (the caller claims
-   chunks too) with callbacks, else the OpenMP threads (ctx->nthreads, else the OpenMP
-   default), else 1. */
+   chunks too) with callbacks, else ctx->nthreads, else the OpenMP default, else 1. */
 static int amps__par_slots(const amps_ctx *ctx) {
     int t = 1;
     if (ctx && ctx->enqueue_task && ctx->finish_task) return (ctx->worker_count > 1 ? ctx->worker_count : 1) + 1;
+    if (ctx && ctx->backend == AMPS_BACKEND_SERIAL) return 1;
+    if (ctx && ctx->nthreads > 0) return ctx->nthreads;
 #ifdef _OPENMP
-    t = (ctx && ctx->nthreads > 0) ? ctx->nthreads : omp_get_max_threads();
-#else
-    (void)ctx;
+    t = omp_get_max_threads();
 #endif
     return t < 1 ? 1 : t;
 }
 
-static amps__par amps__par_of(const amps_ctx *ctx, amps__parbo *bo) {
+/* Whether ctx asks for amps' own workers (no callbacks; AUTO or THREADS; 2 or more slots). */
+static int amps__par_wants_pool(const amps_ctx *ctx) {
+    return AMPS__HAVE_POOL && !(ctx && ctx->enqueue_task && ctx->finish_task) &&
+           (!ctx || ctx->backend == AMPS_BACKEND_AUTO || ctx->backend == AMPS_BACKEND_THREADS) &&
+           amps__par_slots(ctx) > 1;
+}
+
+/* The back end of a call with ctx on an object whose workers are pool (NULL: none). */
+static amps__par amps__par_of(const amps_ctx *ctx, amps__parbo *bo, amps__pool *pool) {
     amps__par p;
+    amps_backend be = ctx ? ctx->backend : AMPS_BACKEND_AUTO;
     p.enqueue = ctx && ctx->finish_task ? ctx->enqueue_task : NULL;
     p.finish = p.enqueue ? ctx->finish_task : NULL;
     p.user = p.enqueue ? ctx->task_user : NULL;
+    p.pool = !p.enqueue && amps__par_wants_pool(ctx) ? pool : NULL;
+    p.omp = AMPS__HAVE_OMP && !p.enqueue && !p.pool && (be == AMPS_BACKEND_AUTO || be == AMPS_BACKEND_OPENMP);
     p.bo = bo;
     return p;
 }
@@ -1815,6 +1861,7 @@ typedef struct amps__job {
     void *arg;
     amps_int n, chunk;
     long nchunk, next; /* chunks; the next one to claim (atomic) */
+    int nt;            /* participants: slots 0 .. nt - 1 */
 } amps__job;
 
 /* Runs chunks of j under slot until none is left. */
@@ -1837,6 +1884,152 @@ static void amps__par_task(amps_int begin, amps_int end, int worker, void *task_
     (void)worker;
     amps__par_claim(AMPS__CAST(amps__job *, task_ctx), (int)begin);
 }
+
+/* ---- amps' own workers (AMPS_BACKEND_THREADS) ----
+   nw threads; worker w is participant (slot) w of a loop, the caller the last one (nt - 1).
+   Posting a loop: the caller publishes the job and a new generation under the mutex (waking
+   sleeping workers), claims chunks like everyone else, then closes the job (job = NULL) and
+   waits until no worker is inside it. A worker enters a job only under the mutex, while it is
+   open, and counts itself in users; one that wakes after the close finds no job and sleeps
+   again. So the caller waits for chunks begun, never for a worker that has not started: beside
+   busy processes a loop costs about its serial time, or less. A worker spins AMPS__POOL_SPIN
+   pauses on the generation before it sleeps (loops follow each other closely in a step). */
+#ifndef AMPS__POOL_SPIN
+#define AMPS__POOL_SPIN 2000
+#endif
+#define AMPS__POOL_MAX 64
+#if AMPS__HAVE_POOL
+struct amps__pool_arg {
+    amps__pool *pool;
+    int id; /* the worker's slot */
+};
+struct amps__pool {
+    pthread_mutex_t m;
+    pthread_cond_t wake;  /* workers: a new generation, or stop */
+    pthread_cond_t idle;  /* the caller: users fell to 0 */
+    long gen;             /* loops posted (written under m, atomically: spinning workers read it) */
+    amps__job *job;       /* the open job (NULL: none); under m */
+    int users, sleepers;  /* workers inside job; waiting on wake; under m */
+    int closing, stop;    /* the caller waits on idle; the workers exit; under m */
+    int busy;             /* a caller owns the pool (atomic exchange) */
+    int nw;               /* worker threads */
+    pthread_t th[AMPS__POOL_MAX];
+    struct amps__pool_arg arg[AMPS__POOL_MAX];
+};
+
+static void amps__cpu_pause(void) {
+#if defined(__x86_64__) || defined(__i386__)
+    __builtin_ia32_pause();
+#elif defined(__aarch64__)
+    __asm__ __volatile__("yield");
+#endif
+}
+
+static void *amps__pool_main(void *varg) {
+    struct amps__pool_arg *a = AMPS__CAST(struct amps__pool_arg *, varg);
+    amps__pool *P = a->pool;
+    long seen = 0;
+    for (;;) {
+        amps__job *j;
+        int k;
+        for (k = 0; k < AMPS__POOL_SPIN && __atomic_load_n(&P->gen, __ATOMIC_RELAXED) == seen; k++) amps__cpu_pause();
+        pthread_mutex_lock(&P->m);
+        while (!P->stop && P->gen == seen) {
+            P->sleepers++;
+            pthread_cond_wait(&P->wake, &P->m);
+            P->sleepers--;
+        }
+        if (P->stop) break;
+        seen = P->gen;
+        j = P->job && a->id < P->job->nt - 1 ? P->job : NULL; /* slots below the caller's only */
+        if (j) P->users++;
+        pthread_mutex_unlock(&P->m);
+        if (!j) continue;
+        amps__par_claim(j, a->id);
+        pthread_mutex_lock(&P->m);
+        if (--P->users == 0 && P->closing) pthread_cond_signal(&P->idle);
+        pthread_mutex_unlock(&P->m);
+    }
+    pthread_mutex_unlock(&P->m);
+    return NULL;
+}
+
+static void amps__pool_free(amps_ctx *ctx, amps__pool *P) {
+    int w;
+    if (!P) return;
+    pthread_mutex_lock(&P->m);
+    P->stop = 1;
+    pthread_cond_broadcast(&P->wake);
+    pthread_mutex_unlock(&P->m);
+    for (w = 0; w < P->nw; w++) pthread_join(P->th[w], NULL);
+    pthread_cond_destroy(&P->wake);
+    pthread_cond_destroy(&P->idle);
+    pthread_mutex_destroy(&P->m);
+    amps__free(ctx, P);
+}
+
+/* The workers of an object made with ctx (slots - 1 threads), or NULL: ctx wants none, or no
+   thread could start (the object's loops then run serially; not an error). */
+static amps__pool *amps__pool_new(amps_ctx *ctx) {
+    amps__pool *P;
+    int nw = amps__par_slots(ctx) - 1, w;
+    if (!amps__par_wants_pool(ctx)) return NULL;
+    if (nw > AMPS__POOL_MAX) nw = AMPS__POOL_MAX;
+    P = AMPS__CAST(amps__pool *, amps__calloc(ctx, 1, sizeof(amps__pool)));
+    if (!P) return NULL;
+    if (pthread_mutex_init(&P->m, NULL)) goto fail_m;
+    if (pthread_cond_init(&P->wake, NULL)) goto fail_w;
+    if (pthread_cond_init(&P->idle, NULL)) goto fail_i;
+    for (w = 0; w < nw; w++) {
+        P->arg[w].pool = P;
+        P->arg[w].id = w;
+        if (pthread_create(&P->th[w], NULL, amps__pool_main, &P->arg[w])) break;
+        P->nw = w + 1;
+    }
+    if (P->nw > 0) return P;
+    pthread_cond_destroy(&P->idle);
+fail_i:
+    pthread_cond_destroy(&P->wake);
+fail_w:
+    pthread_mutex_destroy(&P->m);
+fail_m:
+    amps__free(ctx, P);
+    return NULL;
+}
+
+/* Runs j on P's workers and the calling thread (slot nt - 1); 0 if another loop holds P (the
+   caller then runs j serially). */
+static int amps__pool_run(amps__pool *P, amps__job *j, int nt) {
+    int wake;
+    if (__atomic_exchange_n(&P->busy, 1, __ATOMIC_ACQUIRE)) return 0;
+    if (nt > P->nw + 1) nt = P->nw + 1;
+    j->nt = nt;
+    pthread_mutex_lock(&P->m);
+    P->job = j;
+    __atomic_store_n(&P->gen, P->gen + 1, __ATOMIC_RELAXED);
+    wake = P->sleepers > 0;
+    pthread_mutex_unlock(&P->m);
+    if (wake) pthread_cond_broadcast(&P->wake);
+    amps__par_claim(j, nt - 1);
+    pthread_mutex_lock(&P->m);
+    P->job = NULL; /* closed: a worker that wakes from now on finds nothing */
+    P->closing = 1;
+    while (P->users > 0) pthread_cond_wait(&P->idle, &P->m);
+    P->closing = 0;
+    pthread_mutex_unlock(&P->m);
+    __atomic_store_n(&P->busy, 0, __ATOMIC_RELEASE);
+    return 1;
+}
+#else
+static void amps__pool_free(amps_ctx *ctx, amps__pool *P) {
+    (void)ctx;
+    (void)P;
+}
+static amps__pool *amps__pool_new(amps_ctx *ctx) {
+    (void)ctx;
+    return NULL;
+}
+#endif
 
 /* The timing slot of kernel fn in bo (an existing one, else a free one, else the home slot,
    whose averages it then takes over). */
@@ -1892,7 +2085,8 @@ static void amps__par_for(const amps__par *par, int nt, amps_int n, amps_int chu
     j.nchunk = (long)((n - 1) / chunk + 1);
     j.next = 0;
     if (nt > j.nchunk) nt = (int)j.nchunk;
-    if (!AMPS__HAVE_ATOMICS || nt <= 1 || (!par->enqueue && !AMPS__HAVE_OMP)) {
+    j.nt = nt;
+    if (!AMPS__HAVE_ATOMICS || nt <= 1 || (!par->enqueue && !par->pool && !par->omp)) {
         fn(0, n, 0, arg);
         return;
     }
@@ -1907,6 +2101,11 @@ static void amps__par_for(const amps__par *par, int nt, amps_int n, amps_int chu
         amps__par_claim(&j, nt - 1);
         if (h) par->finish(h, par->user); /* not queued (NULL): the caller claimed every chunk */
     }
+#if AMPS__HAVE_POOL
+    else if (par->pool) {
+        if (!amps__pool_run(par->pool, &j, nt)) fn(0, n, 0, arg);
+    }
+#endif
 #ifdef _OPENMP
     else {
 #pragma omp parallel num_threads(nt)
@@ -4086,6 +4285,7 @@ typedef struct amps__fpriv {
     double pargroup;              /* top groups with (entries of their columns) x (width) >= this run on all threads */
     double touch;                 /* AMPS_COUNT_TOUCH: L entries read by sparse/partial solves */
     amps__parbo bo;               /* loop timing of the factorization's and the solves' parallel loops */
+    amps__pool *pool;             /* the factor's workers (AMPS_BACKEND_THREADS; NULL: none) */
 } amps__fpriv;
 
 /* Relative pivot threshold: pivot d of column c is accepted iff d > AMPS_PIVOT_TOL * A(c,c) (original
@@ -4254,6 +4454,7 @@ static void amps__fpriv_free(amps_ctx *ctx, amps__fpriv *P) {
     amps__free(ctx, P->topg);
     amps__free(ctx, P->iwork);
     amps__free(ctx, P->fail);
+    amps__pool_free(ctx, P->pool);
     amps__free(ctx, P);
 }
 
@@ -4646,6 +4847,7 @@ static amps_status amps__analyze_workspace(amps_ctx *ctx, const amps_csc *A, amp
     P->nthr = nthr;
     P->iwork = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nthr * 2, (size_t)F->n * sizeof(amps_int)));
     if (!P->iwork) return amps__analyze_oom(ctx, F->n, P->nnzA);
+    P->pool = amps__pool_new(ctx);
     P->hash = amps__pattern_hash(A);
     P->pargroup = AMPS__PARGROUP;
     P->parmin = AMPS__PARMIN;
@@ -4734,6 +4936,7 @@ static amps_factor *amps__factor_clone_symbolic(amps_ctx *ctx, const amps_factor
     Q->topg = AMPS__CAST(amps_int *, amps__dup(ctx, P->topg, (size_t)P->ntop, sizeof(amps_int)));
     Q->fail = AMPS__CAST(amps_int *, amps__malloc(ctx, ns + 1, sizeof(amps_int)));
     Q->iwork = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nthr * 2, (n ? n : 1) * sizeof(amps_int)));
+    Q->pool = amps__pool_new(ctx);
     if (!G->perm || !G->iperm || !G->parent || !G->Lp || !G->Li || !G->Lx || !G->D || !Q->gs || !Q->cgrp || !Q->Sp ||
         !Q->Ssrc || !Q->Sdst || !Q->dsrc || !Q->head || !Q->next || !Q->gpos || !Q->gsub || !Q->subp || !Q->subg ||
         !Q->topg || !Q->fail || !Q->iwork) {
@@ -5078,7 +5281,7 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
     for (g = 0; g < P->ng; g++) P->head[g] = -1;
     for (i = 0; i <= nsub; i++) P->fail[i] = -1;
     nt = P->work < P->parmin ? 1 : amps__nthreads(ctx, P->nthr < nsub ? P->nthr : (nsub > 0 ? nsub : 1));
-    par = amps__par_of(ctx, &P->bo);
+    par = amps__par_of(ctx, &P->bo, P->pool);
     fj.F = F;
     fj.P = P;
     fj.Ax = Ax;
@@ -5523,7 +5726,7 @@ AMPS_API amps_status amps_solve(amps_ctx *ctx, const amps_factor *F, const doubl
     amps_dsolve(F, work);
     {
         amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
-        amps__par par = amps__par_of(ctx, P ? &P->bo : NULL);
+        amps__par par = amps__par_of(ctx, P ? &P->bo : NULL, P ? P->pool : NULL);
         amps__ltsolve_par(F, work, &par, amps__nthreads(ctx, 1024));
     }
     for (k = 0; k < n; k++) x[F->perm[k]] = work[k];
@@ -5684,7 +5887,10 @@ AMPS_API amps_status amps_solve_multi(amps_ctx *ctx, const amps_factor *F, amps_
     j.X = X;
     j.ldx = ldx;
     j.work = work;
-    par = amps__par_of(ctx, F->priv ? &AMPS__CAST(amps__fpriv *, F->priv)->bo : NULL);
+    {
+        amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
+        par = amps__par_of(ctx, P ? &P->bo : NULL, P ? P->pool : NULL);
+    }
     amps__par_for(&par, amps__nthreads(ctx, nblk > 0 ? nblk : 1), nblk, 1, amps__ms_blocks, &j);
     return AMPS_OK;
 }
@@ -5954,6 +6160,7 @@ struct amps_update {
     amps_update_stats stats;
     amps__par par; /* the kernels' back end (from the ctx at create; bo points at this handle's bo) */
     amps__parbo bo;
+    amps__pool *pool; /* the engine's workers (par.pool; NULL: none), kept across re-factorizations */
     struct {                   /* the two-phase commit (amps_update_commit_begin) */
         int state;             /* 0 none, 1 begun, 2 run */
         amps_int u_old, nlist; /* |U| before it; the new base positions (list) */
@@ -6142,6 +6349,7 @@ static amps_status amps__commit_fold(amps_ctx *ctx, amps_update *U);
 AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     if (!U) return;
     amps__bg_discard(ctx, U);
+    amps__pool_free(ctx, U->pool);
     amps__free(ctx, U->cjob.J);
     amps__free(ctx, U->cjob.delta);
     amps__free(ctx, U->cjob.con);
@@ -6427,7 +6635,8 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
     U->cap_N = n + o.cap_new;
     U->nthr = amps__par_slots(ctx);
     U->nbuf = U->nthr;
-    U->par = amps__par_of(ctx, &U->bo);
+    U->pool = amps__pool_new(ctx);
+    U->par = amps__par_of(ctx, &U->bo, U->pool);
     if (amps__sym_full(ctx, K, stype, &U->base.Kp, &U->base.Ki, &U->base.Kx)) goto fail;
     U->memo.cap = o.cap_vpool > 0 ? (size_t)o.cap_vpool : (size_t)o.cap_mod * (size_t)(F->height > 0 ? F->height : 1);
     U->delta.cap = o.cap_delta > 0 ? o.cap_delta : 96 * o.cap_mod;
@@ -9684,7 +9893,9 @@ static amps_status amps__bg_engine(amps_ctx *c2, amps__bg *b) {
     c2->finish_task = b->snap.par.finish;   /* the swap, on the owner's thread (nthr = 1 here) */
     c2->task_user = b->snap.par.user;
     c2->worker_count = b->snap.nbuf - 1;
+    c2->backend = AMPS_BACKEND_OPENMP; /* no workers of its own: the swap gives V the owner's */
     V = b->result.U = amps_update_create(c2, b->result.K, AMPS_UPPER, b->result.F, &o2);
+    c2->backend = AMPS_BACKEND_AUTO;
     c2->enqueue_task = NULL; /* this thread never calls the host */
     c2->finish_task = NULL;
     if (!V) return c2->status;
@@ -9935,6 +10146,8 @@ static void amps__bg_take(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg
     U->grow = old.grow;
     U->nthr = old.nbuf;
     U->par = old.par;
+    U->pool = old.pool; /* V has none (amps__bg_engine) */
+    old.pool = NULL;
     U->guard.tol = old.guard.tol;
     U->refac = old.refac;
     U->refac.job = NULL;

@@ -3,9 +3,10 @@
 
    usage: load run <mesh> <cut|deform> <steps> <conf> <load> <out.csv>
             the cut or deformation sequence of bench/harness (bench.h) on amps.h alone, primal
-            form, background re-factorization off; conf: 1 (ctx.nthreads = 1), omp2 (2 OpenMP
-            threads), jobs2 (2 workers of the example job system, examples/jobs.h, through
-            ctx->enqueue_task / finish_task; the caller helps). Appends one row per step:
+            form, background re-factorization off; conf: 1 (ctx.nthreads = 1), thr2 (2
+            participants on amps' own workers, the default back end), omp2 (2 OpenMP threads,
+            AMPS_BACKEND_OPENMP), jobs2 (2 workers of the example job system, examples/jobs.h,
+            through ctx->enqueue_task / finish_task; the caller helps). Appends one row per step:
             case,load,conf,step,time (seconds: the change plus the solve) and prints the median.
           load tick [seconds]
             the haptic-loop load: a 1 kHz loop (absolute deadlines) that works 0.3 ms (spins on
@@ -41,12 +42,15 @@ static int run(int argc, char **argv) {
     if (argc < 8) return 2;
     amps_ctx_init(&ctx);
     if (!strcmp(conf, "1")) ctx.nthreads = 1;
-    else if (!strcmp(conf, "omp2")) ctx.nthreads = 2;
-    else if (!strcmp(conf, "jobs2")) {
+    else if (!strcmp(conf, "thr2")) ctx.nthreads = 2;
+    else if (!strcmp(conf, "omp2")) {
+        ctx.nthreads = 2;
+        ctx.backend = AMPS_BACKEND_OPENMP;
+    } else if (!strcmp(conf, "jobs2")) {
         if (!(P = jobs_create(2))) bench_die("jobs_create", "cannot start the workers");
         jobs_attach(P, &ctx);
         ctx.nthreads = 2;
-    } else bench_die("conf", "not 1, omp2 or jobs2");
+    } else bench_die("conf", "not 1, thr2, omp2 or jobs2");
     bench_mesh_name(spec, name, sizeof(name));
     M = bench_mesh(&ctx, spec);
     bench_scen_init(&sc, M, spec, cut, steps);
@@ -152,7 +156,7 @@ int main(int argc, char **argv) {
     else if (argc >= 2 && !strcmp(argv[1], "tick")) r = tick(argc > 2 ? atof(argv[2]) : 0);
     else if (argc >= 4 && !strcmp(argv[1], "scn")) r = scn(argv[2], atoi(argv[3]));
     if (r == 2)
-        fprintf(stderr, "usage: load run <mesh> <cut|deform> <steps> <1|omp2|jobs2> <load> <out.csv>\n"
+        fprintf(stderr, "usage: load run <mesh> <cut|deform> <steps> <1|thr2|omp2|jobs2> <load> <out.csv>\n"
                         "       load tick [seconds]\n       load scn <mesh.node> <ncuts>\n");
     return r;
 }

@@ -6,8 +6,9 @@
 # Loads, each started before and stopped after its runs:
 #   idle; spin1, spin2: one / two `yes > /dev/null` processes; tick: bench/load tick (a 1 kHz
 #   loop working 0.3 ms per period, a haptic thread).
-# Configurations: 1 (one thread), omp2 (two OpenMP threads, today's default on 2 cores), jobs2
-# (two workers of examples/jobs.h through ctx->enqueue_task/finish_task). Cases: the cut and
+# Configurations: 1 (one thread), thr2 (two participants on amps' own workers: the default on 2
+# cores), omp2 (two OpenMP threads, AMPS_BACKEND_OPENMP), jobs2 (two workers of examples/jobs.h
+# through ctx->enqueue_task/finish_task). Cases: the cut and
 # deformation sequences of bench/harness on bunny20k and bunny50k (amps.h alone, bench/load run),
 # 12 steps each, and a bunny incision (bunny9k, 20 cuts) through tools/amps_replay (its
 # --jobs option for jobs2). The configurations of a case alternate within each load, so drift of
@@ -70,20 +71,23 @@ awk -F, 'NR > 1 { k = $1 "," $2 "," $3; v[k, ++n[k]] = $5; keys[k] = 1 }
     return m % 2 ? a[(m + 1) / 2] : 0.5 * (a[m / 2] + a[m / 2 + 1]) }
   END {
     for (k in keys) { split(k, p, ","); M[p[1], p[2], p[3]] = 1e3 * med(k); C[p[1]] = 1; L[p[2]] = 1 }
-    printf "%-18s %-6s %9s %9s %9s %10s %10s\n", "case", "load", "1 (ms)", "omp2", "jobs2", "omp2/1", "jobs2/1"
+    printf "%-18s %-6s %9s %9s %9s %9s %8s %8s %8s\n", "case", "load", "1 (ms)", "thr2", "omp2", "jobs2", "thr2/1", "omp2/1", "jobs2/1"
     nl = split("idle spin1 spin2 tick", lo, " ")
     for (c in C) for (i = 1; i <= nl; i++) { l = lo[i]; if (!((c, l, "1") in M)) continue
-      one = M[c, l, "1"]; o = M[c, l, "omp2"]; j = ((c, l, "jobs2") in M) ? M[c, l, "jobs2"] : -1
-      printf "%-18s %-6s %9.2f %9.2f %9s %10.2f %10s\n", c, l, one, o, j < 0 ? "-" : sprintf("%.2f", j), o / one, j < 0 ? "-" : sprintf("%.2f", j / one) }
+      one = M[c, l, "1"]; printf "%-18s %-6s %9.2f", c, l, one
+      for (q = 1; q <= 3; q++) { cf = q == 1 ? "thr2" : q == 2 ? "omp2" : "jobs2"; printf " %9s", ((c, l, cf) in M) ? sprintf("%.2f", M[c, l, cf]) : "-" }
+      for (q = 1; q <= 3; q++) { cf = q == 1 ? "thr2" : q == 2 ? "omp2" : "jobs2"; printf " %8s", ((c, l, cf) in M) ? sprintf("%.2f", M[c, l, cf] / one) : "-" }
+      printf "\n" }
   }' "$csv" | { read -r h; echo "$h"; sort; } | tee "$out/load_summary.txt"
-echo "targets: under spin1/spin2/tick the default (omp2) at most 1.1x the 1-thread step; idle omp2/1 at most 0.7 on cut_bunny50k"
+echo "targets: under spin1/spin2/tick the default (thr2) at most 1.1x the 1-thread step; idle thr2/1 at most 0.7 on cut_bunny50k"
 }
 if [ -n "${only_summary:-}" ]; then summary; exit 0; fi
 echo "case,load,conf,step,time" > "$csv"
 # replay <load> <conf>: one row per solve after the first (its step time, from the step lines)
 replay() {
   local t="--threads 1"
-  [ "$2" = omp2 ] && t="--threads 2"
+  [ "$2" = thr2 ] && t="--threads 2"
+  [ "$2" = omp2 ] && t="--threads 2 --openmp"
   [ "$2" = jobs2 ] && t="--threads 1 --jobs 2"
   (cd build/bench && $TS ./amps_replay $t "$scn" 2> /dev/null) | # dump/write lines write here
     awk -v l="$1" -v c="$2" '/^step / && $2 > 1 { for (k = 1; k < NF; k++) if ($(k+1) == "ms") print "incision," l "," c "," $2 "," $k / 1000 }' >> "$csv"
@@ -92,7 +96,7 @@ replay() {
 # load of the cases it finished
 for load in $loads; do
   start_load $load
-  for conf in 1 omp2 jobs2 1 omp2 jobs2; do replay $load $conf; done
+  for conf in 1 thr2 omp2 jobs2 1 thr2 omp2 jobs2; do replay $load $conf; done
   stop_load
 done
 for r in $runs; do
@@ -101,7 +105,7 @@ for r in $runs; do
   mesh=$(IFS=:; echo "${f[*]:0:n-2}")
   for load in $loads; do
     start_load $load
-    for conf in 1 omp2 jobs2; do $TS build/bench/load run "$mesh" "${f[n-2]}" "${f[n-1]}" $conf $load "$csv" || exit 1; done
+    for conf in 1 thr2 omp2 jobs2; do $TS build/bench/load run "$mesh" "${f[n-2]}" "${f[n-1]}" $conf $load "$csv" || exit 1; done
     stop_load
   done
 done

@@ -1,8 +1,9 @@
 /* The parallel layer: every parallel kernel (numeric factorization with the parallel top groups,
    solves: tree-parallel backward, closure, multi-RHS; the update engine's Steps 1-4, its dense
    factorization and the residual check) run on the test job system (tests/jobs_test.h: inline, 4 workers, 4 workers
-   with random delays, refusing to queue) and on OpenMP teams of 2 and 3 gives the bits of the
-   serial run; each kernel is checked to have gone through the host's enqueue. */
+   with random delays, refusing to queue), on OpenMP teams of 2 and 3 and on amps' own workers
+   (2 and 4 participants) gives the bits of the serial run; each kernel is checked to have gone
+   through the host's enqueue. */
 #define AMPS_IMPLEMENTATION
 #define AMPS__PAR_ADAPT 0 /* every eligible loop parallel, whatever the timing says */
 #define AMPS__BE_PARMIN 0 /* the residual check's blocks on the layer at any size */
@@ -20,7 +21,8 @@ static void *count_enqueue(amps_task_fn *task, amps_int n, amps_int min_range, v
     return t_jobs_enqueue(task, n, min_range, task_ctx, user);
 }
 
-/* Context variant v: 0 serial, 1..4 the job system's modes, 5/6 OpenMP teams of 2/3. */
+/* Context variant v: 0 serial, 1..4 the job system's modes, 5/6 OpenMP teams of 2/3, 7/8 amps'
+   own workers, 2/4 participants. */
 static void ctx_variant(amps_ctx *ctx, int v) {
     amps_ctx_init(ctx);
     ctx->enqueue_task = NULL;
@@ -29,9 +31,16 @@ static void ctx_variant(amps_ctx *ctx, int v) {
     if (v >= 1 && v <= 4) {
         t_jobs_ctx(ctx, v);
         ctx->enqueue_task = count_enqueue;
-    } else if (v >= 5) ctx->nthreads = v - 3;
+    } else if (v == 5 || v == 6) {
+        ctx->nthreads = v - 3;
+        ctx->backend = AMPS_BACKEND_OPENMP;
+    } else if (v >= 7) {
+        ctx->nthreads = v == 7 ? 2 : 4;
+        ctx->backend = AMPS_BACKEND_THREADS;
+    }
 }
-static const char *vname[7] = {"serial", "inline", "pool", "delays", "refuse", "omp2", "omp3"};
+#define NVAR 9
+static const char *vname[NVAR] = {"serial", "inline", "pool", "delays", "refuse", "omp2", "omp3", "threads2", "threads4"};
 
 /* amps__par_for covers [0, n) by its chunks exactly once, with slots below nt. */
 static void chunk_mark(amps_int b, amps_int e, int slot, void *arg) {
@@ -40,13 +49,16 @@ static void chunk_mark(amps_int b, amps_int e, int slot, void *arg) {
 }
 static void check_layer(void) {
     int v, nt;
-    for (v = 0; v < 7; v++)
+    for (v = 0; v < NVAR; v++)
         for (nt = 1; nt <= 6; nt++) {
             amps_ctx ctx;
             amps__par par;
+            amps__pool *pool;
             int a[1001], k, once = 1, slots = 1;
             ctx_variant(&ctx, v);
-            par = amps__par_of(&ctx, NULL);
+            pool = amps__pool_new(&ctx);
+            CHECK((pool != NULL) == (AMPS__HAVE_POOL && v >= 7), "layer %s: workers %p", vname[v], (void *)pool);
+            par = amps__par_of(&ctx, NULL, pool);
             memset(a, 0, sizeof(a));
             amps__par_for(&par, nt, 1000, 7, chunk_mark, a);
             for (k = 0; k < 1000; k++) {
@@ -54,7 +66,46 @@ static void check_layer(void) {
                 slots &= a[k] / 1000 < nt;
             }
             CHECK(once && slots && a[1000] == 0, "layer %s nt %d: items once %d, slots %d", vname[v], nt, once, slots);
+            amps__pool_free(&ctx, pool);
         }
+}
+
+/* amps' own workers take chunks: the caller's first chunk waits (up to 5 s) until a worker ran
+   one; a loop whose worker is slow finishes, and the workers are joined at free. */
+typedef struct wait_arg {
+    int nt, by_worker;
+} wait_arg;
+static void chunk_wait(amps_int b, amps_int e, int slot, void *arg) {
+    wait_arg *w = (wait_arg *)arg;
+    (void)b;
+    (void)e;
+    if (slot < w->nt - 1) {
+        __atomic_store_n(&w->by_worker, 1, __ATOMIC_RELEASE);
+        return;
+    }
+    if (b == 0 || b == 1) {
+        double t0 = amps_now();
+        while (!__atomic_load_n(&w->by_worker, __ATOMIC_ACQUIRE) && amps_now() - t0 < 5.0) {}
+    }
+}
+static void check_workers(void) {
+#if AMPS__HAVE_POOL
+    int rep;
+    for (rep = 0; rep < 20; rep++) {
+        amps_ctx ctx;
+        amps__pool *pool;
+        amps__par par;
+        wait_arg w;
+        ctx_variant(&ctx, rep % 2 ? 8 : 7);
+        pool = amps__pool_new(&ctx);
+        par = amps__par_of(&ctx, NULL, pool);
+        w.nt = ctx.nthreads;
+        w.by_worker = 0;
+        amps__par_for(&par, w.nt, 64, 1, chunk_wait, &w);
+        CHECK(w.by_worker, "%s: no chunk ran on a worker", vname[rep % 2 ? 8 : 7]);
+        amps__pool_free(&ctx, pool);
+    }
+#endif
 }
 
 typedef struct result {
@@ -73,7 +124,7 @@ static void result_free(result *r) {
     free(r->rho);
 }
 
-static double *dup(const double *p, size_t n) {
+static double *dupd(const double *p, size_t n) {
     double *q = (double *)malloc(sizeof(double) * (n ? n : 1));
     memcpy(q, p, sizeof(double) * n);
     return q;
@@ -105,8 +156,8 @@ static void run_all(int v, const amps_csc *K, const int *perm, result *r, int *n
     CHECK(amps_factorize(&ctx, F, K) == AMPS_OK, "%s: factorize: %s", vname[v], ctx.msg);
     nenq[0] = t_nenq - before;
     r->nnz = (size_t)F->Lp[n];
-    r->Lx = dup(F->Lx, r->nnz);
-    r->D = dup(F->D, (size_t)n);
+    r->Lx = dupd(F->Lx, r->nnz);
+    r->D = dupd(F->D, (size_t)n);
     /* solve (tree-parallel backward) */
     for (k = 0; k < n; k++) b[k] = sin(0.1 * k) + 0.5;
     r->x = (double *)malloc(sizeof(double) * n);
@@ -125,9 +176,9 @@ static void run_all(int v, const amps_csc *K, const int *perm, result *r, int *n
     CHECK(amps_marker_init(&ctx, &mk, n) == AMPS_OK, "marker");
     for (k = 0; k < nreq; k++) req[k] = (k * 7919) % n;
     ncl = amps_closure(F, nreq, req, clo, &mk);
-    r->y = dup(b, (size_t)n);
+    r->y = dupd(b, (size_t)n);
     {
-        amps__par par = amps__par_of(&ctx, NULL);
+        amps__par par = amps__par_of(&ctx, NULL, ((amps__fpriv *)F->priv)->pool);
         before = t_nenq;
         amps__ltsolve_closure_par(F, ncl, clo, r->y, &par, amps__nthreads(&ctx, 1024), iw);
         nenq[3] = t_nenq - before;
@@ -175,7 +226,7 @@ static void run_all(int v, const amps_csc *K, const int *perm, result *r, int *n
             double rn;
             before = t_nenq;
             r->be[0] = amps__backward_error(U, U->sol.x, U->work.resid, &rn, 0, &r->be[1]);
-            r->rho = dup(U->work.resid, (size_t)n);
+            r->rho = dupd(U->work.resid, (size_t)n);
             nenq[5] = t_nenq - before;
         }
         amps_update_free(&ctx, U);
@@ -204,6 +255,7 @@ int main(void) {
     (void)m_analyze;
     (void)fe_beam;
     check_layer();
+    check_workers();
     amps_ctx_init(&ctx);
     K = m_fe(&ctx, fe_brick(9), 1);
     n = K->ncol;
@@ -217,7 +269,7 @@ int main(void) {
         int nenq[6];
         run_all(0, K, perm, &r0, nenq);
     }
-    for (v = 1; v < 7; v++) {
+    for (v = 1; v < NVAR; v++) {
         int nenq[6] = {0, 0, 0, 0, 0, 0};
         run_all(v, K, perm, &r, nenq);
         CHECK(r.nnz == r0.nnz && same(r.Lx, r0.Lx, r0.nnz) && same(r.D, r0.D, (size_t)n), "%s: factor differs",

@@ -72,7 +72,7 @@ static void check_solves(const char *name, const amps_csc *A, const int *perm) {
             memcpy(y, z, sizeof(double) * n);
             amps_ltsolve(F, y);
             {
-                amps__par tp = amps__par_of(&ctx, NULL);
+                amps__par tp = amps__par_of(&ctx, NULL, NULL);
                 amps__ltsolve_par(F, z, &tp, nt);
             }
             CHECK(memcmp(y, z, sizeof(double) * n) == 0, "%s: parallel backward solve on %d threads differs", name, nt);
@@ -140,7 +140,7 @@ static void check_solves(const char *name, const amps_csc *A, const int *perm) {
             memcpy(z, w, sizeof(double) * n);
             amps_touch_reset(F);
             {
-                amps__par tp = amps__par_of(&ctx, NULL);
+                amps__par tp = amps__par_of(&ctx, NULL, NULL);
                 amps__ltsolve_closure_par(F, cnt, cl, z, &tp, 2 + t % 2, cl2);
             }
             CHECK(memcmp(y, z, sizeof(double) * n) == 0, "%s: parallel closure solve differs", name);

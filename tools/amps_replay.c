@@ -1,10 +1,11 @@
 /* amps_replay: runs a scenario (mesh, material, fixed nodes, forces, pins, cuts, solves) with
    amps.h and prints one line per solve and a summary.
 
-   usage: amps_replay [-q] [--residual] [--threads N] [--jobs N] [--order auto|amd|nd|metis|natural]
+   usage: amps_replay [-q] [--residual] [--threads N] [--openmp] [--jobs N] [--order auto|amd|nd|metis|natural]
                       [--dual] [--xs-from-dense] [--surface FILE] scenario
    --jobs N runs amps.h's parallel loops on N worker threads of examples/jobs.h (the host task
-   system of amps_ctx: enqueue_task/finish_task; the calling thread helps) instead of OpenMP.
+   system of amps_ctx: enqueue_task/finish_task; the calling thread helps) instead of amps' own
+   workers; --openmp runs them in OpenMP regions (AMPS_BACKEND_OPENMP).
    --surface FILE writes the deformed boundary triangles (cut faces included) at the end, one
    block of 4 lines "x y z |u|" per triangle, for gnuplot's "with polygons".
 
@@ -680,6 +681,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[a], "--xs-from-dense")) R.opts.update.xs_from_dense = 1;
         else if (!strcmp(argv[a], "--threads") && a + 1 < argc) R.ctx.nthreads = atoi(argv[++a]);
         else if (!strcmp(argv[a], "--jobs") && a + 1 < argc) njobs = atoi(argv[++a]);
+        else if (!strcmp(argv[a], "--openmp")) R.ctx.backend = AMPS_BACKEND_OPENMP;
         else if (!strcmp(argv[a], "--surface") && a + 1 < argc) surface = argv[++a];
         else if (!strcmp(argv[a], "--order") && a + 1 < argc) {
             const char *o = argv[++a];
@@ -699,7 +701,7 @@ int main(int argc, char **argv) {
     }
     if (!path) {
         fprintf(stderr,
-                "usage: amps_replay [-q] [--residual] [--threads N] [--jobs N] [--order auto|amd|nd|metis|natural] [--dual] [--xs-from-dense] [--surface FILE] scenario\n");
+                "usage: amps_replay [-q] [--residual] [--threads N] [--openmp] [--jobs N] [--order auto|amd|nd|metis|natural] [--dual] [--xs-from-dense] [--surface FILE] scenario\n");
         return 2;
     }
 #ifdef _OPENMP
