@@ -164,16 +164,17 @@ typedef void amps_finish_task_fn(void *handle, void *user);
 
 /* Where the kernels' parallel loops run when no task callbacks are set (amps_ctx.backend).
    AMPS_BACKEND_THREADS: amps' own worker threads (POSIX threads; not with AMPS_NO_THREADS), one
-   set per factor and per engine, started when the object is made (amps_analyze,
-   amps_update_create) and joined when it is freed. The calling thread claims chunks too and
-   waits only for chunks a worker has begun, never for a worker that has not started: beside
-   other busy processes a loop takes at most about as long as running it alone. A loop that finds
-   its object's workers busy (a concurrent solve of one factor) runs serially.
+   set per engine and per factor large enough to factor in parallel, started by
+   amps_update_create and by the factor's first parallel amps_factorize, joined when the object
+   is freed. The calling thread claims chunks too and waits only for chunks a worker has begun,
+   never for a worker that has not started: beside other busy processes a loop takes at most
+   about as long as running it alone. A loop that finds its object's workers busy (a concurrent
+   solve of one factor) runs serially.
    AMPS_BACKEND_OPENMP: an OpenMP parallel region per loop (compiled with -fopenmp); the region
    ends when every thread of the team has arrived, so under load a loop waits for the slowest to
    get a core. */
 typedef enum amps_backend {
-    AMPS_BACKEND_AUTO = 0,    /* THREADS where available, else OPENMP where compiled, else serial */
+    AMPS_BACKEND_AUTO = 0,    /* THREADS where compiled (pthreads), else OPENMP where compiled, else serial */
     AMPS_BACKEND_THREADS = 1, /* amps' own threads (serial where there are none) */
     AMPS_BACKEND_OPENMP = 2,  /* OpenMP regions (serial without -fopenmp) */
     AMPS_BACKEND_SERIAL = 3   /* every loop on the calling thread */
@@ -322,14 +323,16 @@ typedef struct amps_factor {
    opts may be NULL (AMPS_ORDER_AUTO, block detection). With AMPS_FULL only entries with row <= column
    are read (A is taken as symmetric). Also builds the pattern Li and the scatter map of A into L, and
    the workspace of amps_factorize for the participants of ctx's back end (host workers + 1, or
-   ctx->nthreads); starts the factor's worker threads (AMPS_BACKEND_THREADS). */
+   ctx->nthreads). */
 AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts);
 /* Numeric LDL^T of A, which must have the pattern given to amps_analyze, stored as the same
    triangle (values may differ; AMPS_ERR_PATTERN otherwise).
    A pivot must be finite and exceed AMPS_PIVOT_TOL (default 1e-12) times the column's diagonal entry
    of A, else AMPS_ERR_NOT_SPD names the failing column in the original numbering; F is then not
    numeric. Runs on ctx's back end (at most the participants of amps_analyze); the result does
-   not depend on the back end or the thread count. Allocates nothing. */
+   not depend on the back end or the thread count. Allocates nothing, except that the first call
+   that factors in parallel on amps' own workers starts the factor's nthreads - 1 threads (kept
+   until amps_factor_free; none if they cannot start: the loops then run serially). */
 AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_csc *A);
 AMPS_API void amps_factor_free(amps_ctx *ctx, amps_factor *F);
 /* Number of entries of L, counting the unit diagonal. */
@@ -1741,9 +1744,10 @@ static int amps__isfinite(double v) { return v - v == 0.0; }
    min(nt - 1, chunks - 1) items, each claiming chunks under slot = its item index, claims
    chunks itself under the last slot, then calls finish; the owner's workers (amps__pool, the
    default): workers below nt - 1 and the caller (slot nt - 1) claim chunks, and the caller
-   waits only for chunks begun; OpenMP (AMPS_BACKEND_OPENMP, or AUTO where no workers could
-   start): a team of nt threads claims chunks (slot = thread number); serial otherwise, when
-   nt <= 1, when there is one chunk, or when the mode choice below picks serial.
+   waits only for chunks begun; OpenMP (AMPS_BACKEND_OPENMP, or AUTO in a build without
+   AMPS__HAVE_POOL): a team of nt threads claims chunks (slot = thread number); serial
+   otherwise (also an object without workers), when nt <= 1, when there is one chunk, or when
+   the mode choice below picks serial.
    Mode choice: a parallel loop ends when its slowest participant does; beside other busy
    processes a woken worker may wait a time slice for a core while the caller waits for it at
    the end of the loop, and the loop is then slower than the serial one. So every owner times
@@ -1843,7 +1847,8 @@ static int amps__par_wants_pool(const amps_ctx *ctx) {
            amps__par_slots(ctx) > 1;
 }
 
-/* The back end of a call with ctx on an object whose workers are pool (NULL: none). */
+/* The back end of a call with ctx on an object whose workers are pool (NULL: none; where amps
+   has workers, AUTO then runs serially, as on a factor too small to start any). */
 static amps__par amps__par_of(const amps_ctx *ctx, amps__parbo *bo, amps__pool *pool) {
     amps__par p;
     amps_backend be = ctx ? ctx->backend : AMPS_BACKEND_AUTO;
@@ -1851,7 +1856,7 @@ static amps__par amps__par_of(const amps_ctx *ctx, amps__parbo *bo, amps__pool *
     p.finish = p.enqueue ? ctx->finish_task : NULL;
     p.user = p.enqueue ? ctx->task_user : NULL;
     p.pool = !p.enqueue && amps__par_wants_pool(ctx) ? pool : NULL;
-    p.omp = AMPS__HAVE_OMP && !p.enqueue && !p.pool && (be == AMPS_BACKEND_AUTO || be == AMPS_BACKEND_OPENMP);
+    p.omp = AMPS__HAVE_OMP && !p.enqueue && (be == AMPS_BACKEND_OPENMP || (be == AMPS_BACKEND_AUTO && !AMPS__HAVE_POOL));
     p.bo = bo;
     return p;
 }
@@ -4285,7 +4290,8 @@ typedef struct amps__fpriv {
     double pargroup;              /* top groups with (entries of their columns) x (width) >= this run on all threads */
     double touch;                 /* AMPS_COUNT_TOUCH: L entries read by sparse/partial solves */
     amps__parbo bo;               /* loop timing of the factorization's and the solves' parallel loops */
-    amps__pool *pool;             /* the factor's workers (AMPS_BACKEND_THREADS; NULL: none) */
+    amps__pool *pool;             /* the factor's workers (AMPS_BACKEND_THREADS; NULL: none), started by
+                                     the first amps_factorize that runs in parallel */
 } amps__fpriv;
 
 /* Relative pivot threshold: pivot d of column c is accepted iff d > AMPS_PIVOT_TOL * A(c,c) (original
@@ -4847,7 +4853,6 @@ static amps_status amps__analyze_workspace(amps_ctx *ctx, const amps_csc *A, amp
     P->nthr = nthr;
     P->iwork = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nthr * 2, (size_t)F->n * sizeof(amps_int)));
     if (!P->iwork) return amps__analyze_oom(ctx, F->n, P->nnzA);
-    P->pool = amps__pool_new(ctx);
     P->hash = amps__pattern_hash(A);
     P->pargroup = AMPS__PARGROUP;
     P->parmin = AMPS__PARMIN;
@@ -4936,7 +4941,6 @@ static amps_factor *amps__factor_clone_symbolic(amps_ctx *ctx, const amps_factor
     Q->topg = AMPS__CAST(amps_int *, amps__dup(ctx, P->topg, (size_t)P->ntop, sizeof(amps_int)));
     Q->fail = AMPS__CAST(amps_int *, amps__malloc(ctx, ns + 1, sizeof(amps_int)));
     Q->iwork = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nthr * 2, (n ? n : 1) * sizeof(amps_int)));
-    Q->pool = amps__pool_new(ctx);
     if (!G->perm || !G->iperm || !G->parent || !G->Lp || !G->Li || !G->Lx || !G->D || !Q->gs || !Q->cgrp || !Q->Sp ||
         !Q->Ssrc || !Q->Sdst || !Q->dsrc || !Q->head || !Q->next || !Q->gpos || !Q->gsub || !Q->subp || !Q->subg ||
         !Q->topg || !Q->fail || !Q->iwork) {
@@ -5281,6 +5285,7 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
     for (g = 0; g < P->ng; g++) P->head[g] = -1;
     for (i = 0; i <= nsub; i++) P->fail[i] = -1;
     nt = P->work < P->parmin ? 1 : amps__nthreads(ctx, P->nthr < nsub ? P->nthr : (nsub > 0 ? nsub : 1));
+    if (nt > 1 && !P->pool) P->pool = amps__pool_new(ctx); /* a factor too small to factor in parallel starts none */
     par = amps__par_of(ctx, &P->bo, P->pool);
     fj.F = F;
     fj.P = P;
@@ -6047,6 +6052,8 @@ struct amps_update {
         double *Kx;         /* K, both triangles, original numbering */
         double *inv_sqrt_d; /* n: D^{-1/2} */
         int blk3;           /* K's pattern is made of 3x3 blocks (node blocks): amps__resid_blk */
+        amps_int *bcol;     /* blk3: first column of each block, block row B's at Kp[3B] / 9 (the
+                               check streams Kx and these, a ninth of Ki) */
     } base;
     struct {                          /* forces and ct = D^{-1/2} L^{-1} P^T f_ct */
         double *f;                    /* cap_N: f^ */
@@ -6363,6 +6370,7 @@ AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     amps__free(ctx, U->refac.origin);
     amps__free(ctx, U->base.Kp);
     amps__free(ctx, U->base.Ki);
+    amps__free(ctx, U->base.bcol);
     amps__free(ctx, U->base.Kx);
     amps__free(ctx, U->base.inv_sqrt_d);
     amps__free(ctx, U->force.f);
@@ -6651,6 +6659,13 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
             if (U->base.Ki[p] == j) s += U->base.Kx[p];
     U->sigma = n > 0 && s > 0 ? s / (double)n : 1.0;
     U->base.blk3 = amps__blk3(n, U->base.Kp, U->base.Ki);
+    if (U->base.blk3) {
+        amps_int B, k, nz = U->base.Kp[n];
+        if (!(U->base.bcol = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nz / 9 + 1, sizeof(amps_int))))) goto fail;
+        for (B = 0; B < n / 3; B++)
+            for (k = 0; k < U->base.Kp[3 * B + 1] - U->base.Kp[3 * B]; k += 3)
+                U->base.bcol[U->base.Kp[3 * B] / 9 + k / 3] = U->base.Ki[U->base.Kp[3 * B] + k];
+    }
     U->guard.knorm = U->sigma;
     for (j = 0; j < n; j++) {
         double sa = 0;
@@ -8810,12 +8825,13 @@ static void amps__blk_row(const double *a, __m128d X0, __m128d X1, __m128d X2, _
 #endif
 
 /* Rows 3B..3B+2 of the base part of K^ x (base.blk3): s[r] = (K x)_{3B+r}, t[r] = (|K| |x|)_{3B+r},
-   one column index per 3x3 block. The order of the sums is fixed by the pattern alone (with
+   one column index per 3x3 block (base.bcol: the pass reads 8 bytes of K and 4/9 of an index per
+   entry, against 12 with Ki). The order of the sums is fixed by the pattern alone (with
    SSE2: two lanes, entries 2i and 2i+1 of the row, added at the end, then a last odd block), so
    a result does not depend on threads or schedule; it differs from amps__resid_row's by rounding,
    which only the check (its trigger and stats) sees. */
 static void amps__resid_blk(const amps_update *U, amps_int B, const double *x, double s[3], double t[3]) {
-    const amps_int *ki = U->base.Ki + U->base.Kp[3 * B];
+    const amps_int *bc = U->base.bcol + U->base.Kp[3 * B] / 9; /* block k / 3 starts at column bc[k / 3] */
     const double *a0 = U->base.Kx + U->base.Kp[3 * B], *a1 = U->base.Kx + U->base.Kp[3 * B + 1],
                  *a2 = U->base.Kx + U->base.Kp[3 * B + 2];
     amps_int k = 0, len = U->base.Kp[3 * B + 1] - U->base.Kp[3 * B];
@@ -8827,7 +8843,7 @@ static void amps__resid_blk(const amps_update *U, amps_int B, const double *x, d
         /* two blocks (6 entries of each row) at a time: X0 X1 X2 = x of columns c, c+1 | c+2, d |
            d+1, d+2, where c and d are the blocks' first columns */
         for (; k + 6 <= len; k += 6) {
-            const double *xc = x + ki[k], *xd = x + ki[k + 3];
+            const double *xc = x + bc[k / 3], *xd = x + bc[k / 3 + 1];
             X0 = _mm_loadu_pd(xc);
             X1 = _mm_loadh_pd(_mm_load_sd(xc + 2), xd);
             X2 = _mm_loadu_pd(xd + 1);
@@ -8841,7 +8857,7 @@ static void amps__resid_blk(const amps_update *U, amps_int B, const double *x, d
     }
 #endif
     for (; k < len; k += 3) {
-        const double *xc = x + ki[k];
+        const double *xc = x + bc[k / 3];
         double x0 = xc[0], x1 = xc[1], x2 = xc[2], q;
         q = a0[k] * x0, s0 += q, t0 += fabs(q);
         q = a1[k] * x0, s1 += q, t1 += fabs(q);

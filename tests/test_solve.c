@@ -72,7 +72,10 @@ static void check_solves(const char *name, const amps_csc *A, const int *perm) {
             memcpy(y, z, sizeof(double) * n);
             amps_ltsolve(F, y);
             {
-                amps__par tp = amps__par_of(&ctx, NULL, NULL);
+                amps_ctx co = ctx; /* OpenMP regions (a pool-less AUTO runs serially) */
+                amps__par tp;
+                co.backend = AMPS_BACKEND_OPENMP;
+                tp = amps__par_of(&co, NULL, NULL);
                 amps__ltsolve_par(F, z, &tp, nt);
             }
             CHECK(memcmp(y, z, sizeof(double) * n) == 0, "%s: parallel backward solve on %d threads differs", name, nt);
@@ -140,7 +143,10 @@ static void check_solves(const char *name, const amps_csc *A, const int *perm) {
             memcpy(z, w, sizeof(double) * n);
             amps_touch_reset(F);
             {
-                amps__par tp = amps__par_of(&ctx, NULL, NULL);
+                amps_ctx co = ctx; /* OpenMP regions (a pool-less AUTO runs serially) */
+                amps__par tp;
+                co.backend = AMPS_BACKEND_OPENMP;
+                tp = amps__par_of(&co, NULL, NULL);
                 amps__ltsolve_closure_par(F, cnt, cl, z, &tp, 2 + t % 2, cl2);
             }
             CHECK(memcmp(y, z, sizeof(double) * n) == 0, "%s: parallel closure solve differs", name);
