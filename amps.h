@@ -6141,6 +6141,8 @@ struct amps_update {
         double knorm;    /* ||K-bar||_inf (the base rows and sigma), the scale of the backward error */
         double omega_d;  /* the mixed backward error of a direct solve with the base factor (amps__direct_omega) */
         double cond;     /* kappa_1(K-bar) estimated at the creation of the base (amps_condest; 0: unknown) */
+        double cal_mu;   /* solves with mu <= cal_mu may skip the check (calibrated by the last check; 0: none) */
+        int cal_left;    /* skips the calibration still allows */
     } guard;
     struct {                   /* re-factorization */
         amps_update_opts opts; /* as created (for the engine of a new base) */
@@ -9066,6 +9068,15 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    so with the guard off and no forward step due, a solve with mu <= AMPS__MU_SKIP takes no
    product with K^ (stats.checks_skipped; bench/refine_cost's bunny20k cut: the first 22 of 30 cut
    steps, mu 0.05-3.8, where the check was 9-10% of the step's instructions).
+   Calibrated skips. Above AMPS__MU_SKIP a check measures the engine's own rounding: with
+   omega <= omega_d + s mu (a direct solve's floor plus Step 6's rounding, linear in mu), the
+   check at (mu_c, omega_c) bounds s <= omega_c / mu_c, so a later solve with
+   mu <= cal_mu = min(AMPS__CAL_GROW mu_c, omega_d mu_c / omega_c) has omega <= 2 omega_d, half
+   the trigger. Only an unrefined check with omega_c <= 2 omega_d calibrates, and after
+   AMPS__CAL_SKIPS such skips the next solve checks again (the columns of S u C change between
+   solves; a fresh base starts uncalibrated). On bench/harness's bunny20k deformation (a pin
+   added each step, mu 3.6-11.6 while omega stays near omega_d) this leaves about one check in
+   AMPS__CAL_SKIPS + 1 solves.
    Forward error. A backward error at a direct solve's level does not give its forward error:
    on beam 5x5x256 (kappa 8.7e9, tests/test_stress.c fwd_*) the augmented solve reaches omega
    0.7-1.4 eps (omega_d 0.5 eps, no step taken) and a residual 1.4-2.2x CHOLMOD's, yet its error
@@ -9084,9 +9095,21 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    cut, tests/test_stress.c with AMPS_STRESS_COUNT=1). */
 #define AMPS__DIRECT_RATIO 4.0
 #define AMPS__MU_SKIP 4.0
+#define AMPS__CAL_GROW 4.0
+#define AMPS__CAL_SKIPS 8
 #ifndef AMPS__FWD_KAPPA_EPS /* (overridable for bench/refine_cost only) */
 #define AMPS__FWD_KAPPA_EPS 2e-9
 #endif
+/* The calibrated skips' bound from a check at cancellation ratio mu with omega om (see above). */
+static void amps__calibrate(amps_update *U, double mu, double om) {
+    double od = U->guard.omega_d;
+    U->guard.cal_mu = 0;
+    U->guard.cal_left = 0;
+    if (mu <= 0 || od <= 0 || !(om <= 2 * od)) return;
+    U->guard.cal_mu = om > od / AMPS__CAL_GROW ? od * mu / om : AMPS__CAL_GROW * mu;
+    U->guard.cal_left = AMPS__CAL_SKIPS;
+}
+
 static int amps__accuracy(amps_update *U, int pass) {
     double *rho = U->work.resid, *dx = U->work.resid + U->cap_N, tol = U->refac.opts.refine_tol, om;
     double gtol = U->guard.tol, rn, den, eta, rel, eta0, rel0;
@@ -9095,14 +9118,18 @@ static int amps__accuracy(amps_update *U, int pass) {
        AMPS__FWD_KAPPA_EPS) takes one step */
     int fwd = tol > 0 && U->guard.cond * 2.220446049250313e-16 > AMPS__FWD_KAPPA_EPS;
     double mu = U->stats.cancel_ratio;
-    if (gtol <= 0 && !fwd && mu >= 0 && mu <= AMPS__MU_SKIP) {
-        /* Step 6 cancelled little: x has a direct solve's rounding, no product with K^ */
+    if (gtol <= 0 && !fwd && mu >= 0 &&
+        (mu <= AMPS__MU_SKIP || (U->guard.cal_left > 0 && mu <= U->guard.cal_mu))) {
+        /* Step 6 cancelled little, or no more than the last check found harmless: x has a direct
+           solve's rounding, no product with K^ */
+        if (mu > AMPS__MU_SKIP) U->guard.cal_left--;
         U->stats.backward_error = -1;
         U->stats.checks_skipped++;
         return 0;
     }
     den = gtol > 0 ? amps__rhs_norm(U, U->guard.scratch) : 0;
     eta = amps__backward_error(U, U->sol.x, rho, &rn, 0, &om);
+    amps__calibrate(U, mu, om);
     rel = den > 0 ? rn / den : rn;
     for (it = 0; it < 3; it++) {
         int want_g = gtol > 0 && rel > gtol, want_e = tol > 0 && om > tol && om > AMPS__DIRECT_RATIO * U->guard.omega_d;
