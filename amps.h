@@ -1855,7 +1855,7 @@ static amps__par amps__par_of(const amps_ctx *ctx, amps__parbo *bo, amps__pool *
     p.enqueue = ctx && ctx->finish_task ? ctx->enqueue_task : NULL;
     p.finish = p.enqueue ? ctx->finish_task : NULL;
     p.user = p.enqueue ? ctx->task_user : NULL;
-    p.pool = !p.enqueue && amps__par_wants_pool(ctx) ? pool : NULL;
+    p.pool = amps__par_wants_pool(ctx) ? pool : NULL; /* never beside callbacks */
     p.omp = AMPS__HAVE_OMP && !p.enqueue && (be == AMPS_BACKEND_OPENMP || (be == AMPS_BACKEND_AUTO && !AMPS__HAVE_POOL));
     p.bo = bo;
     return p;
@@ -6502,6 +6502,15 @@ static int amps__blk3(amps_int n, const amps_int *Kp, const amps_int *Ki) {
     return 1;
 }
 
+/* The first column of each 3x3 block of a pattern amps__blk3 accepted, block row B's blocks from
+   Kp[3B] / 9 (Kp[3B] is 9 times the blocks before it); NULL when out of memory. */
+static amps_int *amps__blk3_cols(amps_ctx *ctx, amps_int n, const amps_int *Kp, const amps_int *Ki) {
+    amps_int B, k, *bc = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)Kp[n] / 9 + 1, sizeof(amps_int)));
+    for (B = 0; bc && B < n / 3; B++)
+        for (k = Kp[3 * B]; k < Kp[3 * B + 1]; k += 3) bc[Kp[3 * B] / 9 + (k - Kp[3 * B]) / 3] = Ki[k];
+    return bc;
+}
+
 /* Options of a new engine: opts (NULL: the defaults) with the sizes and rates that are 0 or
    negative replaced by the defaults of amps_update_opts_default. */
 static amps_status amps__create_opts(amps_ctx *ctx, const amps_update_opts *opts, amps_update_opts *o) {
@@ -6661,13 +6670,7 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
             if (U->base.Ki[p] == j) s += U->base.Kx[p];
     U->sigma = n > 0 && s > 0 ? s / (double)n : 1.0;
     U->base.blk3 = amps__blk3(n, U->base.Kp, U->base.Ki);
-    if (U->base.blk3) {
-        amps_int B, k, nz = U->base.Kp[n];
-        if (!(U->base.bcol = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nz / 9 + 1, sizeof(amps_int))))) goto fail;
-        for (B = 0; B < n / 3; B++)
-            for (k = 0; k < U->base.Kp[3 * B + 1] - U->base.Kp[3 * B]; k += 3)
-                U->base.bcol[U->base.Kp[3 * B] / 9 + k / 3] = U->base.Ki[U->base.Kp[3 * B] + k];
-    }
+    if (U->base.blk3 && !(U->base.bcol = amps__blk3_cols(ctx, n, U->base.Kp, U->base.Ki))) goto fail;
     U->guard.knorm = U->sigma;
     for (j = 0; j < n; j++) {
         double sa = 0;
