@@ -53,6 +53,11 @@
      AMPS_NO_THREADS      leave out amps' own threads (pthreads): the kernels' workers
                           (AMPS_BACKEND_THREADS) and the background re-factorization
      AMPS_NO_SIMD         plain C where SSE2 intrinsics would be used (the residual check)
+     AMPS_NO_AVX2         no AVX2 + FMA kernels: by default (gcc, clang on x86) the update
+                          kernels of amps_factorize, the dense system's products and Step 1's
+                          column blocks run in AVX2 + FMA when the CPU has them (checked at run
+                          time; no -mavx2 needed), else in SSE2. The two round differently; one
+                          machine always gives the same bits, for any number of threads.
      Parallel kernels: see amps_backend. By default (ctx->nthreads 0) they use
      omp_get_max_threads() participants when compiled with -fopenmp, else one.
 
@@ -1404,6 +1409,11 @@ AMPS_API amps_status amps_pvd_write(amps_ctx *ctx, const char *path, amps_int n,
 #if !defined(AMPS_NO_SIMD) && (defined(__SSE2__) || defined(_M_X64) || (defined(_M_IX86_FP) && _M_IX86_FP >= 2))
 #include <emmintrin.h> /* two-row kernels: the factorization updates, the solves, the residual check */
 #define AMPS__SSE2 1
+#if !defined(AMPS_NO_AVX2) && (defined(__x86_64__) || defined(__i386__)) && (defined(__GNUC__) || defined(__clang__))
+#include <immintrin.h> /* AVX2 + FMA kernels, chosen at run time (amps__cpu_avx2) */
+#define AMPS__AVX2 1
+#define AMPS__TARGET_AVX2 __attribute__((target("avx2,fma")))
+#endif
 #endif
 #ifndef AMPS_NO_THREADS
 #include <pthread.h>
@@ -4292,6 +4302,7 @@ typedef struct amps__fpriv {
     amps__parbo bo;               /* loop timing of the factorization's and the solves' parallel loops */
     amps__pool *pool;             /* the factor's workers (AMPS_BACKEND_THREADS; NULL: none), started by
                                      the first amps_factorize that runs in parallel */
+    int avx2;                     /* the update kernels in AVX2 + FMA (amps__cpu_avx2, set by amps_factorize) */
 } amps__fpriv;
 
 /* Relative pivot threshold: pivot d of column c is accepted iff d > AMPS_PIVOT_TOL * A(c,c) (original
@@ -4433,6 +4444,122 @@ static const amps__dkern_fn amps__dkern[4][4] = {
     {amps__dkern41, amps__dkern42, amps__dkern43, amps__dkern44}
 };
 /* clang-format on */
+#ifdef AMPS__AVX2
+/* Source columns per pass of the AVX2 update kernels (AMPS__SBLK is a multiple of it). */
+#define AMPS__KW 32
+/* d_t[r_i] -= a_t[i] for the four rows r_i = rel[Si[p+i]] (gather) or p+i (dense), t < TC. */
+AMPS__KERNEL AMPS__TARGET_AVX2 void amps__wstore(int TC, int gather, const amps_int *Si, const amps_int *rel,
+                                                 amps_int p, const __m256d *a, double *const *d) {
+    int t, i;
+    amps_int r[4];
+    r[0] = gather ? rel[Si[p]] : p;
+    r[3] = gather ? rel[Si[p + 3]] : p + 3;
+    if (r[3] == r[0] + 3) { /* rel increases along Si: contiguous rows */
+        AMPS__UNROLL
+        for (t = 0; t < TC; t++) _mm256_storeu_pd(d[t] + r[0], _mm256_sub_pd(_mm256_loadu_pd(d[t] + r[0]), a[t]));
+        return;
+    }
+    r[1] = rel[Si[p + 1]];
+    r[2] = rel[Si[p + 2]];
+    AMPS__UNROLL
+    for (t = 0; t < TC; t++) {
+        double v[4];
+        _mm256_storeu_pd(v, a[t]);
+        AMPS__UNROLL
+        for (i = 0; i < 4; i++) d[t][r[i]] -= v[i];
+    }
+}
+/* AVX2 + FMA update kernel of a block of nk <= AMPS__KW source columns: for p in [0,m), with
+   r = rel[Si[p]] (gather) or p (dense), d_t[r] -= sum_{k < nk} s_k[p] W[4k+t] for t < TC: the sum
+   is formed first (ascending k, fused multiply-adds from 0: four rows to a vector, and
+   the same on the last m mod 4 rows one at a time), then subtracted once: an entry gets the same
+   bits whichever block holds it (amps__wsum too). */
+AMPS__KERNEL AMPS__TARGET_AVX2 void amps__wkern_body(int TC, int gather, amps_int m, const amps_int *Si,
+                                                     const amps_int *rel, int nk, const double *const *s,
+                                                     const double *W, double *const *d) {
+    amps_int p = 0;
+    int k, t;
+    for (; p + 7 < m; p += 8) {
+        __m256d a[4], b[4];
+        AMPS__UNROLL
+        for (t = 0; t < TC; t++) a[t] = b[t] = _mm256_setzero_pd();
+        for (k = 0; k < nk; k++) {
+            __m256d l = _mm256_loadu_pd(s[k] + p), h = _mm256_loadu_pd(s[k] + p + 4);
+            AMPS__UNROLL
+            for (t = 0; t < TC; t++) {
+                __m256d wv = _mm256_broadcast_sd(W + 4 * k + t);
+                a[t] = _mm256_fmadd_pd(l, wv, a[t]);
+                b[t] = _mm256_fmadd_pd(h, wv, b[t]);
+            }
+        }
+        amps__wstore(TC, gather, Si, rel, p, a, d);
+        amps__wstore(TC, gather, Si, rel, p + 4, b, d);
+    }
+    if (p + 3 < m) {
+        __m256d a[4];
+        AMPS__UNROLL
+        for (t = 0; t < TC; t++) a[t] = _mm256_setzero_pd();
+        for (k = 0; k < nk; k++) {
+            __m256d l = _mm256_loadu_pd(s[k] + p);
+            AMPS__UNROLL
+            for (t = 0; t < TC; t++) a[t] = _mm256_fmadd_pd(l, _mm256_broadcast_sd(W + 4 * k + t), a[t]);
+        }
+        amps__wstore(TC, gather, Si, rel, p, a, d);
+        p += 4;
+    }
+    for (; p < m; p++) {
+        amps_int r0 = gather ? rel[Si[p]] : p;
+        __m128d a[4];
+        AMPS__UNROLL
+        for (t = 0; t < TC; t++) a[t] = _mm_setzero_pd();
+        for (k = 0; k < nk; k++) {
+            __m128d l = _mm_load_sd(s[k] + p);
+            AMPS__UNROLL
+            for (t = 0; t < TC; t++) a[t] = _mm_fmadd_sd(l, _mm_load_sd(W + 4 * k + t), a[t]);
+        }
+        AMPS__UNROLL
+        for (t = 0; t < TC; t++) d[t][r0] -= _mm_cvtsd_f64(a[t]);
+    }
+}
+/* sum_{k < nk} s_k[p] W[4k+t] with the kernels' fused multiply-adds (ascending k, from 0). */
+static AMPS__TARGET_AVX2 double amps__wsum(const double *const *s, amps_int p, const double *W, int t, amps_int nk) {
+    __m128d a = _mm_setzero_pd();
+    amps_int k;
+    for (k = 0; k < nk; k++) a = _mm_fmadd_sd(_mm_load_sd(s[k] + p), _mm_load_sd(W + 4 * k + t), a);
+    return _mm_cvtsd_f64(a);
+}
+#define AMPS__WKERN(T)                                                                                         \
+    static AMPS__TARGET_AVX2 void amps__wkern##T(amps_int m, const amps_int *Si, const amps_int *rel, int nk, \
+                                                 const double *const *s, const double *W, double *const *d) { \
+        if (Si) amps__wkern_body(T, 1, m, Si, rel, nk, s, W, d);                                               \
+        else amps__wkern_body(T, 0, m, NULL, NULL, nk, s, W, d);                                               \
+    }
+AMPS__WKERN(1) AMPS__WKERN(2) AMPS__WKERN(3) AMPS__WKERN(4)
+#undef AMPS__WKERN
+/* amps__wkern[TC-1]; Si NULL: the dense form (r = p). */
+typedef void (*amps__wkern_fn)(amps_int, const amps_int *, const amps_int *, int, const double *const *,
+                               const double *, double *const *);
+static const amps__wkern_fn amps__wkern[4] = {amps__wkern1, amps__wkern2, amps__wkern3, amps__wkern4};
+#else
+#define AMPS__KW 4
+#endif
+
+/* Source columns per pass of the factorization's update kernels: AMPS__KW with AVX2, else 4. */
+#ifdef AMPS__AVX2
+#define AMPS__KWIDTH(P) ((P)->avx2 ? AMPS__KW : 4)
+#else
+#define AMPS__KWIDTH(P) 4
+#endif
+
+/* 1 when this CPU runs the AVX2 + FMA kernels (AMPS_NO_AVX2 or another target: 0). */
+static int amps__cpu_avx2(void) {
+#ifdef AMPS__AVX2
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+#else
+    return 0;
+#endif
+}
 
 /* FNV-1a style hash of the pattern (p, i) of A. */
 static unsigned long long amps__pattern_hash(const amps_csc *A) {
@@ -4499,7 +4626,7 @@ static int amps__nthreads(const amps_ctx *ctx, amps_int cap) {
 }
 
 #ifndef AMPS__SBLK
-#define AMPS__SBLK 64 /* superblock width (multiple of 4) in the parallel factorization of a group */
+#define AMPS__SBLK 64 /* superblock width (a multiple of AMPS__KW) in the parallel factorization of a group */
 #endif
 #ifndef AMPS__PARGROUP
 #define AMPS__PARGROUP 2e6 /* top groups with (entries of their columns) x (width) >= this use all threads */
@@ -4983,7 +5110,7 @@ static void amps__update(amps_factor *F, const amps__fpriv *P, amps_int K, amps_
     double *Lx = F->Lx, *D = F->D;
     amps_int ks = P->gs[K], ke = P->gs[K + 1] - 1, nK = Lp[ke + 1] - Lp[ke];
     const amps_int *SK = F->Li + Lp[ke];
-    amps_int q0, q1, k0, i, k, pp;
+    amps_int q0, q1, k0, i, k, pp, kw = AMPS__KWIDTH(P);
     for (q0 = a; q0 < b; q0 = q1) {
         amps_int tc;
         double *dst[4];
@@ -4994,15 +5121,25 @@ static void amps__update(amps_factor *F, const amps__fpriv *P, amps_int K, amps_
         for (q1 = q0 + 1; q1 < b && q1 - q0 < 4 && (T == 1 || AMPS__OWNER(SK[q1], s, T) == tid); q1++) {}
         tc = q1 - q0;
         for (i = 0; i < tc; i++) dst[i] = Lx + Lp[SK[q0 + i]] + (e - SK[q0 + i]);
-        for (k0 = ks; k0 <= ke; k0 += 4) {
-            amps_int kc = ke + 1 - k0 < 4 ? ke + 1 - k0 : 4;
-            const double *src[4], *srq[4];
-            double W[16];
+        for (k0 = ks; k0 <= ke; k0 += kw) {
+            amps_int kc = ke + 1 - k0 < kw ? ke + 1 - k0 : kw;
+            const double *src[AMPS__KW], *srq[AMPS__KW];
+            double W[4 * AMPS__KW];
             for (k = 0; k < kc; k++) {
                 src[k] = Lx + Lp[k0 + k] + (ke - k0 - k);
                 for (i = 0; i < tc; i++) W[4 * k + i] = D[k0 + k] * src[k][q0 + i];
                 srq[k] = src[k] + q1;
             }
+#ifdef AMPS__AVX2
+            if (P->avx2) { /* the kernel's arithmetic, so that an entry's bits do not depend on tc */
+                for (i = 0; i < tc; i++) {
+                    D[SK[q0 + i]] -= amps__wsum(src, q0 + i, W, (int)i, kc);
+                    for (pp = q0 + i + 1; pp < q1; pp++) dst[i][rel[SK[pp]]] -= amps__wsum(src, pp, W, (int)i, kc);
+                }
+                amps__wkern[tc - 1](nK - q1, SK + q1, rel, (int)kc, srq, W, dst);
+                continue;
+            }
+#endif
             for (i = 0; i < tc; i++) {
                 double sm = 0;
                 for (k = 0; k < kc; k++) sm += src[k][q0 + i] * W[4 * k + i];
@@ -5038,25 +5175,32 @@ static void amps__rowmaps(const amps_factor *F, amps_int s, amps_int e, amps_int
 }
 
 /* Updates of panel [c0, c0+tc) of a group from its columns [klo, khi) (khi <= c0; klo - (group start) a
-   multiple of 4), for the rows [r0, r1) of the rows below the panel (the group's rows after the panel,
+   multiple of AMPS__KW), for the rows [r0, r1) of the rows below the panel (the group's rows after the panel,
    then its S), which are stored consecutively in every column of the group. */
-static void amps__panel_rect(amps_factor *F, amps_int klo, amps_int khi, amps_int c0, amps_int tc, amps_int r0,
-                             amps_int r1) {
+static void amps__panel_rect(amps_factor *F, const amps__fpriv *P, amps_int klo, amps_int khi, amps_int c0,
+                             amps_int tc, amps_int r0, amps_int r1) {
     const amps_int *Lp = F->Lp;
     double *Lx = F->Lx, *D = F->D;
-    amps_int c1 = c0 + tc, k0, k, i;
+    amps_int c1 = c0 + tc, k0, k, i, kw = AMPS__KWIDTH(P);
     double *dst[4];
+    (void)P;
     if (r1 <= r0) return;
     for (i = 0; i < tc; i++) dst[i] = Lx + Lp[c0 + i] + (c1 - c0 - i - 1) + r0;
-    for (k0 = klo; k0 < khi; k0 += 4) {
-        amps_int kc = khi - k0 < 4 ? khi - k0 : 4;
-        const double *srq[4];
-        double W[16];
+    for (k0 = klo; k0 < khi; k0 += kw) {
+        amps_int kc = khi - k0 < kw ? khi - k0 : kw;
+        const double *srq[AMPS__KW];
+        double W[4 * AMPS__KW];
         for (k = 0; k < kc; k++) {
             const double *src = Lx + Lp[k0 + k] + (c0 - k0 - k - 1); /* row c0 of column k0+k */
             for (i = 0; i < tc; i++) W[4 * k + i] = D[k0 + k] * src[i];
             srq[k] = src + tc + r0;
         }
+#ifdef AMPS__AVX2
+        if (P->avx2) {
+            amps__wkern[tc - 1](r1 - r0, NULL, NULL, (int)kc, srq, W, dst);
+            continue;
+        }
+#endif
         amps__dkern[kc - 1][tc - 1](r1 - r0, srq, W, dst);
     }
 }
@@ -5133,7 +5277,7 @@ static amps_int amps__fgroup(amps_factor *F, amps__fpriv *P, const double *Ax, a
     }
     for (c0 = s; c0 <= e; c0 += 4) {
         amps_int tc = e + 1 - c0 < 4 ? e + 1 - c0 : 4;
-        amps__panel_rect(F, s, c0, c0, tc, 0, (e - c0 - tc + 1) + nJ);
+        amps__panel_rect(F, P, s, c0, c0, tc, 0, (e - c0 - tc + 1) + nJ);
         bad = amps__panel_factor(F, P, Ax, e, s, c0, c0, tc, rel, 1);
         if (bad >= 0) return bad;
     }
@@ -5179,7 +5323,7 @@ static void amps__fg_panels(amps_int b, amps_int e, int slot, void *arg) {
     (void)slot;
     for (ip = b; ip < e; ip++) {
         amps_int c0 = g->cb + 4 * ip, tc = g->ce - c0 < 4 ? g->ce - c0 : 4;
-        amps__panel_rect(g->F, g->s, g->cb, c0, tc, 0, (g->e - c0 - tc + 1) + g->nJ);
+        amps__panel_rect(g->F, g->P, g->s, g->cb, c0, tc, 0, (g->e - c0 - tc + 1) + g->nJ);
         amps__panel_factor(g->F, g->P, g->Ax, g->e, g->s, g->cb, c0, tc, g->rel, 0);
     }
 }
@@ -5224,7 +5368,7 @@ static amps_int amps__fgroup_par(amps_factor *F, amps__fpriv *P, const double *A
         if (cb > s) amps__par_for(par, nt, (ce - cb + 3) / 4, 1, amps__fg_panels, &g);
         for (c0 = cb; c0 < ce && bad < 0; c0 += 4) {
             amps_int tc = ce - c0 < 4 ? ce - c0 : 4;
-            amps__panel_rect(F, cb, c0, c0, tc, 0, (e - c0 - tc + 1) + g.nJ);
+            amps__panel_rect(F, P, cb, c0, c0, tc, 0, (e - c0 - tc + 1) + g.nJ);
             bad = amps__panel_factor(F, P, Ax, e, cb, c0, c0, tc, rel, 1);
         }
     }
@@ -5281,6 +5425,7 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
                                  (long long)k, (long long)A->i[p]);
     }
     F->is_numeric = 0;
+    P->avx2 = amps__cpu_avx2();
     nsub = P->nsub;
     for (g = 0; g < P->ng; g++) P->head[g] = -1;
     for (i = 0; i <= nsub; i++) P->fail[i] = -1;
@@ -5900,9 +6045,13 @@ AMPS_API amps_status amps_solve_multi(amps_ctx *ctx, const amps_factor *F, amps_
     return AMPS_OK;
 }
 
-AMPS_API amps_status amps_condest(amps_ctx *ctx, const amps_csc *K, amps_stype stype, const amps_factor *F,
-                                  double *work, double *cond) {
+/* amps_condest; *jstart (if not NULL): on entry a column in [0, n) to start Hager's iteration at
+   (x = e_jstart, as the iteration's own later steps do; else x = 1/n), on success the column the
+   iteration ended at (a warm start for a nearby matrix: 3 solves when it is still the maximizer). */
+static amps_status amps__condest(amps_ctx *ctx, const amps_csc *K, amps_stype stype, const amps_factor *F,
+                                 double *work, double *cond, amps_int *jstart) {
     amps_int n, j, p, it, jmax = 0, jlast = -1;
+    int warm;
     double *w, *x, *y, *sw, knorm = 0, est = 0, alt = 0;
     amps_status s = AMPS_OK;
     if (!K || !F || !cond || !K->p || (K->p[K->ncol] > 0 && !K->i) || !K->x)
@@ -5933,7 +6082,9 @@ AMPS_API amps_status amps_condest(amps_ctx *ctx, const amps_csc *K, amps_stype s
     for (j = 0; j < n; j++)
         if (y[j] > knorm) knorm = y[j];
     /* Hager: maximize ||K^{-1} x||_1 over ||x||_1 = 1 (K^{-1} symmetric, so K^{-T} = K^{-1}) */
-    for (j = 0; j < n; j++) x[j] = 1.0 / (double)n;
+    warm = jstart && *jstart >= 0 && *jstart < n;
+    for (j = 0; j < n; j++) x[j] = warm ? (j == *jstart ? 1.0 : 0.0) : 1.0 / (double)n;
+    if (warm) jlast = *jstart;
     for (it = 0; it < 5; it++) {
         double ny = 0, zx = 0, zmax;
         if ((s = amps_solve(ctx, F, x, y, sw)) != AMPS_OK) goto done;
@@ -5950,7 +6101,7 @@ AMPS_API amps_status amps_condest(amps_ctx *ctx, const amps_csc *K, amps_stype s
                 zmax = fabs(y[j]);
                 jmax = j;
             }
-        if (it > 0 && (zmax <= zx || jmax == jlast)) break;
+        if ((it > 0 || warm) && (zmax <= zx || jmax == jlast)) break;
         jlast = jmax;
         for (j = 0; j < n; j++) x[j] = 0;
         x[jmax] = 1;
@@ -5966,9 +6117,15 @@ AMPS_API amps_status amps_condest(amps_ctx *ctx, const amps_csc *K, amps_stype s
         goto done;
     }
     *cond = est * knorm;
+    if (jstart) *jstart = jlast >= 0 ? jlast : jmax;
 done:
     if (!work) amps__free(ctx, w);
     return s;
+}
+
+AMPS_API amps_status amps_condest(amps_ctx *ctx, const amps_csc *K, amps_stype stype, const amps_factor *F,
+                                  double *work, double *cond) {
+    return amps__condest(ctx, K, stype, F, work, cond, NULL);
 }
 
 /* ==== [amps:update impl] augmented updates: the AMPS engine =================================== */
@@ -6141,6 +6298,7 @@ struct amps_update {
         double knorm;    /* ||K-bar||_inf (the base rows and sigma), the scale of the backward error */
         double omega_d;  /* the mixed backward error of a direct solve with the base factor (amps__direct_omega) */
         double cond;     /* kappa_1(K-bar) estimated at the creation of the base (amps_condest; 0: unknown) */
+        amps_int cond_j; /* the column at which that estimate's iteration ended (-1: none) */
         double cal_mu;   /* solves with mu <= cal_mu may skip the check (calibrated by the last check; 0: none) */
         int cal_left;    /* skips the calibration still allows */
     } guard;
@@ -6617,8 +6775,10 @@ static double amps__direct_omega(amps_update *U) {
     return num > 0 && den > 0 ? sqrt(num / den) : 0.0;
 }
 
-AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_stype stype, const amps_factor *F,
-                                         const amps_update_opts *opts) {
+/* amps_update_create; cond_j >= 0: the column at which the base's condition estimate starts
+   (amps__condest; a re-factorization passes the previous base's). */
+static amps_update *amps__update_new(amps_ctx *ctx, const amps_csc *K, amps_stype stype, const amps_factor *F,
+                                     const amps_update_opts *opts, amps_int cond_j) {
     amps_update_opts o;
     amps_update *U;
     amps_int n, j, p;
@@ -6678,6 +6838,7 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
         if (sa > U->guard.knorm) U->guard.knorm = sa;
     }
     U->guard.omega_d = amps__direct_omega(U);
+    U->guard.cond_j = -1;
     if (o.refine_tol > 0 && n > 0) { /* the forward refinement's yardstick: about 11 solves */
         amps_csc Kb;
         amps_ctx c1; /* serial, silent: this may run on the re-factorization's worker */
@@ -6689,7 +6850,11 @@ AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_
         Kb.p = U->base.Kp;
         Kb.i = U->base.Ki;
         Kb.x = U->base.Kx;
-        if (amps_condest(&c1, &Kb, AMPS_FULL, F, cw, &U->guard.cond) != AMPS_OK) U->guard.cond = 0;
+        U->guard.cond_j = cond_j;
+        if (amps__condest(&c1, &Kb, AMPS_FULL, F, cw, &U->guard.cond, &U->guard.cond_j) != AMPS_OK) {
+            U->guard.cond = 0;
+            U->guard.cond_j = -1;
+        }
         amps__free(ctx, cw);
     }
     U->stats.base_cond = U->guard.cond;
@@ -6700,6 +6865,11 @@ fail:
     if (ctx && ctx->status != AMPS_ERR_OOM) amps__err(ctx, AMPS_ERR_OOM, "amps_update_create: out of memory");
     amps_update_free(ctx, U);
     return NULL;
+}
+
+AMPS_API amps_update *amps_update_create(amps_ctx *ctx, const amps_csc *K, amps_stype stype, const amps_factor *F,
+                                         const amps_update_opts *opts) {
+    return amps__update_new(ctx, K, stype, F, opts, -1);
 }
 
 AMPS_API amps_int amps_update_dim(const amps_update *U) { return U ? U->N + U->pending.n_dofs : 0; }
@@ -7070,11 +7240,37 @@ AMPS__WBLOCK(8)
 AMPS__WBLOCK(12)
 AMPS__WBLOCK(16)
 #undef AMPS__WBLOCK
+#ifdef AMPS__AVX2
+/* The same kernels compiled for AVX2 (4 lanes to a vector; the same operations per lane). */
+#define AMPS__WBLOCK(W)                                                                                  \
+    static AMPS__TARGET_AVX2 void amps__wblock##W##_avx2(const double *const *sl, amps_int b, amps_int ng, \
+                                                         const amps_int *S, amps_int ns, const amps_int *lmap, \
+                                                         size_t ld, double *Xo, double *X) {               \
+        amps__wblock_body(W, sl, b, ng, S, ns, lmap, ld, Xo, X);                                         \
+    }
+AMPS__WBLOCK(4)
+AMPS__WBLOCK(8)
+AMPS__WBLOCK(12)
+AMPS__WBLOCK(16)
+#undef AMPS__WBLOCK
+#endif
 
-/* amps__wblock_body on the lanes [lo, lo + W) of X (row stride mw), W = 4, 8, 12 or 16. */
-static void amps__wblock(amps_int W, const double *const *sl, amps_int b, amps_int ng, const amps_int *S, amps_int ns,
-                         const amps_int *lmap, amps_int mw, amps_int lo, double *Xo, double *X) {
+/* amps__wblock_body on the lanes [lo, lo + W) of X (row stride mw), W = 4, 8, 12 or 16; avx2: the
+   AVX2 build of the kernels (amps__cpu_avx2). */
+static void amps__wblock(int avx2, amps_int W, const double *const *sl, amps_int b, amps_int ng, const amps_int *S,
+                         amps_int ns, const amps_int *lmap, amps_int mw, amps_int lo, double *Xo, double *X) {
     size_t ld = (size_t)mw;
+#ifdef AMPS__AVX2
+    if (avx2) {
+        if (W == 4) amps__wblock4_avx2(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
+        else if (W == 8) amps__wblock8_avx2(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
+        else if (W == 12) amps__wblock12_avx2(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
+        else amps__wblock16_avx2(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
+        return;
+    }
+#else
+    (void)avx2;
+#endif
     if (W == 4) amps__wblock4(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
     else if (W == 8) amps__wblock8(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
     else if (W == 12) amps__wblock12(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
@@ -7091,6 +7287,7 @@ static void amps__wsolve(const amps_factor *F, const amps_int *clo, amps_int nc,
     const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
     const amps_int *Lp = F->Lp;
     amps_int t, c, ke, o, b, i;
+    int avx2 = amps__cpu_avx2();
     for (t = 0; t < nc; t += ke - c + 1) {
         const amps_int *S;
         amps_int ns;
@@ -7109,7 +7306,7 @@ static void amps__wsolve(const amps_factor *F, const amps_int *clo, amps_int nc,
             lo = lanes[2 * top];
             w = amps__width(lanes[2 * top + 1] - lo + 1);
             if (lo > mw - w) lo = mw - w;
-            amps__wblock(w, sl, b, ke + 1 - o - b, S, ns, lmap, mw, lo, X + (size_t)(t + o - c) * (size_t)mw, X);
+            amps__wblock(avx2, w, sl, b, ke + 1 - o - b, S, ns, lmap, mw, lo, X + (size_t)(t + o - c) * (size_t)mw, X);
         }
     }
 }
@@ -7357,8 +7554,8 @@ static int amps__pivot_ok(const amps_update *U, amps_int j, double apiv) {
 }
 
 /* C(r0:r1, 0:w) -= A(r0:r1, k0:k1) B(k0:k1, 0:w), column major, by tiles of 4 columns and
-   2 vectors of rows held in registers (GNU vector extensions where available, else scalars):
-   A and B are read once per tile, C once per call. */
+   2 vectors of rows held in registers (AVX2 + FMA where the CPU has them, else GNU vector
+   extensions where available, else scalars): A and B are read once per tile, C once per call. */
 #if defined(__GNUC__) || defined(__clang__)
 #if defined(__AVX__)
 #define AMPS__VL 4
@@ -7378,9 +7575,69 @@ typedef double amps__vd __attribute__((vector_size(16)));
 #else
 #define AMPS__VL 1
 #endif
+#ifdef AMPS__AVX2
+/* amps__gemm_tile in AVX2 + FMA: each sum over k is a chain of fused multiply-adds from 0 (8 rows
+   at a time in two vectors, the others one at a time, the same bits for a row either way). */
+static AMPS__TARGET_AVX2 void amps__gemm_tile_avx2(amps_int r0, amps_int r1, amps_int w, amps_int k0, amps_int k1,
+                                                   const double *A, size_t lda, const double *B, size_t ldb,
+                                                   double *C, size_t ldc) {
+    amps_int c, r, k;
+    for (c = 0; c + 4 <= w; c += 4) {
+        const double *b[4];
+        double *cc[4];
+        int t;
+        for (t = 0; t < 4; t++) {
+            b[t] = B + (size_t)(c + t) * ldb;
+            cc[t] = C + (size_t)(c + t) * ldc;
+        }
+        for (r = r0; r + 8 <= r1; r += 8) {
+            __m256d s0[4], s1[4];
+            const double *a = A + (size_t)k0 * lda + (size_t)r;
+            for (t = 0; t < 4; t++) s0[t] = s1[t] = _mm256_setzero_pd();
+            for (k = k0; k < k1; k++, a += lda) {
+                __m256d a0 = _mm256_loadu_pd(a), a1 = _mm256_loadu_pd(a + 4);
+                for (t = 0; t < 4; t++) {
+                    __m256d v = _mm256_broadcast_sd(b[t] + k);
+                    s0[t] = _mm256_fmadd_pd(a0, v, s0[t]);
+                    s1[t] = _mm256_fmadd_pd(a1, v, s1[t]);
+                }
+            }
+            for (t = 0; t < 4; t++) {
+                _mm256_storeu_pd(cc[t] + r, _mm256_sub_pd(_mm256_loadu_pd(cc[t] + r), s0[t]));
+                _mm256_storeu_pd(cc[t] + r + 4, _mm256_sub_pd(_mm256_loadu_pd(cc[t] + r + 4), s1[t]));
+            }
+        }
+        for (; r < r1; r++) {
+            __m128d s[4];
+            for (t = 0; t < 4; t++) s[t] = _mm_setzero_pd();
+            for (k = k0; k < k1; k++) {
+                __m128d av = _mm_load_sd(A + (size_t)k * lda + (size_t)r);
+                for (t = 0; t < 4; t++) s[t] = _mm_fmadd_sd(av, _mm_load_sd(b[t] + k), s[t]);
+            }
+            for (t = 0; t < 4; t++) cc[t][r] -= _mm_cvtsd_f64(s[t]);
+        }
+    }
+    for (; c < w; c++) {
+        const double *bc = B + (size_t)c * ldb;
+        double *cc = C + (size_t)c * ldc;
+        for (k = k0; k < k1; k++) {
+            const double *a = A + (size_t)k * lda;
+            double bv = bc[k];
+            if (bv != 0.0)
+                for (r = r0; r < r1; r++) cc[r] -= a[r] * bv;
+        }
+    }
+}
+#endif
 static void amps__gemm_tile(amps_int r0, amps_int r1, amps_int w, amps_int k0, amps_int k1, const double *A, size_t lda,
                             const double *B, size_t ldb, double *C, size_t ldc) {
     amps_int c, r, k;
+#ifdef AMPS__AVX2
+    if (amps__cpu_avx2()) {
+        amps__gemm_tile_avx2(r0, r1, w, k0, k1, A, lda, B, ldb, C, ldc);
+        return;
+    }
+#endif
     for (c = 0; c + 4 <= w; c += 4) {
         const double *b0 = B + (size_t)c * ldb, *b1 = b0 + ldb, *b2 = b1 + ldb, *b3 = b2 + ldb;
         double *c0 = C + (size_t)c * ldc, *c1 = c0 + ldc, *c2 = c1 + ldc, *c3 = c2 + ldc;
@@ -9451,6 +9708,7 @@ enum { AMPS__BG_RUNNING = 1, AMPS__BG_READY = 2, AMPS__BG_FAILED = 3 };
 typedef struct amps__bg {
     struct {                 /* the snapshot at the start (owned) and the parent's base (immutable until the swap) */
         amps_int N, n, nthr; /* order, base order, the parent's threads */
+        amps_int cond_j;     /* where the parent base's condition estimate ended (a warm start) */
         double sigma;
         amps_int nt;
         amps_int *ti, *tj;
@@ -9594,6 +9852,7 @@ static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U, int fold) {
     b->snap.n = U->n;
     b->snap.sigma = U->sigma;
     b->snap.nthr = U->nthr;
+    b->snap.cond_j = U->guard.cond_j;
     b->snap.par = U->par;
     b->snap.nbuf = U->nbuf;
     b->snap.Kp = U->base.Kp;
@@ -9940,7 +10199,7 @@ static amps_status amps__bg_engine(amps_ctx *c2, amps__bg *b) {
     c2->task_user = b->snap.par.user;
     c2->worker_count = b->snap.nbuf - 1;
     c2->backend = AMPS_BACKEND_OPENMP; /* no workers of its own: the swap gives V the owner's */
-    V = b->result.U = amps_update_create(c2, b->result.K, AMPS_UPPER, b->result.F, &o2);
+    V = b->result.U = amps__update_new(c2, b->result.K, AMPS_UPPER, b->result.F, &o2, b->snap.cond_j);
     c2->backend = AMPS_BACKEND_AUTO;
     c2->enqueue_task = NULL; /* this thread never calls the host */
     c2->finish_task = NULL;
@@ -10020,9 +10279,9 @@ static void *amps__bg_help_main(void *arg) {
     return NULL;
 }
 
-/* The worker's back end for its analysis and factorization (worker_count 1): the parallel layer's
-   loops get one helper thread, which runs only while the foreground is idle (amps__bg_help_main);
-   none (NULL: the worker claims every chunk) while it is busy. Other tasks run at once. */
+/* The worker's back end for its analysis and factorization (worker_count 1): a parallel loop of
+   two or more chunks gets one helper thread, which claims chunks only while the foreground is idle
+   (amps__bg_help_main); the worker claims chunks all the time. Other tasks run at once. */
 static void *amps__bg_enqueue(amps_task_fn *task, amps_int n, amps_int min_range, void *task_ctx, void *user) {
     amps__bg *b = AMPS__CAST(amps__bg *, user);
     (void)min_range;
@@ -10030,7 +10289,7 @@ static void *amps__bg_enqueue(amps_task_fn *task, amps_int n, amps_int min_range
         task(0, n, 0, task_ctx);
         return NULL;
     }
-    if (n < 1 || amps__bg_fg_busy(b)) return NULL;
+    if (n < 2) return NULL; /* a helper started while the foreground is busy waits for it to idle */
     b->help.task = task;
     b->help.task_ctx = task_ctx;
     b->help.n = n;

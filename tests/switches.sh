@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # make switches: the compile-time switches AMPS_NO_FEM, AMPS_NO_STDIO, AMPS_NO_THREADS (with
-# AMPS_NO_SIMD), with and without OpenMP. For each combination: the tests that apply build with -Werror and run; the
+# AMPS_NO_SIMD), AMPS_NO_AVX2 (the SSE2 kernels of the factorization on a CPU with AVX2), with and
+# without OpenMP. For each combination: the tests that apply build with -Werror and run; the
 # header compiles warning-free with clang (C99) and g++ (C++11); amps.h compiled with only
 # AMPS_IMPLEMENTATION gives an object whose size is printed. Fails unless AMPS_NO_STDIO pulls
 # in no <stdio.h> and no stdio symbol, and AMPS_NO_FEM and AMPS_NO_STDIO objects are smaller.
@@ -24,6 +25,7 @@ CONFS=(
   "nofem|-DAMPS_NO_FEM|-fopenmp|$LA"
   "nofem+nostdio|-DAMPS_NO_FEM -DAMPS_NO_STDIO|-fopenmp|$LA"
   "nothreads|-DAMPS_NO_THREADS -DAMPS_NO_SIMD|-fopenmp|$LA update"
+  "noavx2|-DAMPS_NO_AVX2|-fopenmp|factor par"
   "all3|$ALL3|-fopenmp|$LA factor"
   "all3-noomp|$ALL3||$LA"
 )

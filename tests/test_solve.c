@@ -237,6 +237,21 @@ static void check_condest(const char *name, const amps_csc *A) {
     CHECK(c1 <= knorm * exact_inv * (1 + 1e-10) && c1 >= knorm * exact_inv / 3, "%s: condest %.4e vs exact %.4e", name,
           c1, knorm * exact_inv);
     printf("  condest %-14s %.4e (exact %.4e)\n", name, c1, knorm * exact_inv);
+    { /* the warm start of a re-factorization's engine: from the column a run ended at, from 0 and n-1 */
+        amps_int js[3], r;
+        js[0] = -1;
+        CHECK(amps__condest(&ctx, A, AMPS_UPPER, F, w, &c2, &js[0]) == AMPS_OK && c2 == c1 && js[0] >= 0 && js[0] < n,
+              "%s: condest reporting its column (%.4e, column %d)", name, c2, (int)js[0]);
+        js[1] = 0;
+        js[2] = n - 1;
+        for (r = 0; r < 3; r++) {
+            amps_int j0 = js[r];
+            c2 = -1;
+            CHECK(amps__condest(&ctx, A, AMPS_UPPER, F, w, &c2, &j0) == AMPS_OK && j0 >= 0 && j0 < n &&
+                      c2 <= knorm * exact_inv * (1 + 1e-10) && c2 >= knorm * exact_inv / 3,
+                  "%s: condest started at column %d: %.4e vs exact %.4e", name, (int)js[r], c2, knorm * exact_inv);
+        }
+    }
     CHECK(amps_condest(&ctx, A, AMPS_UPPER, NULL, w, &c1) == AMPS_ERR_ARG, "%s: NULL factor accepted", name);
     F->is_numeric = 0;
     CHECK(amps_condest(&ctx, A, AMPS_UPPER, F, w, &c1) == AMPS_ERR_STATE, "%s: symbolic factor accepted", name);
