@@ -1246,8 +1246,11 @@ AMPS_API amps_status amps_scene_dynamics(amps_ctx *ctx, amps_scene *S, double dt
 /* nsteps time steps: A w+ = M w + dt (f + M g - K u), u+ = u + dt w+; fixed DOFs w+ = 0, a pin
    with target g has w+ = (g - u)/dt, an orphan node w+ = 0; the free DOFs solve the reduced
    system (one engine solve). K u = (A u - cM M u) / cK takes one product with the engine's
-   matrix, M one pass over the tets (about 0.4 of a solve's instructions on brick R=6). Reactions (amps_scene_reaction) are (A w+ - b)_P / dt; the haptic path
-   amps_scene_solve_reactions gives those of the step that would be taken now. With fracture on,
+   matrix, M one pass over the tets (about 0.4 of a solve's instructions on brick R=6); the
+   product is kept while u and the matrix stay the same, so the haptic calls between two steps
+   (pins moved, amps_scene_solve_reactions) cost O(N) and the dense system only. Reactions
+   (amps_scene_reaction) are (A w+ - b)_P / dt; the haptic path amps_scene_solve_reactions gives
+   those of the step that would be taken now. With fracture on,
    after each step the tets over the threshold are removed (amps_scene_fracture). AMPS_ERR_STATE
    in statics; a failing step returns its error with the earlier steps done. With
    amps_scene_corotational on, every step is the corotational one (see there). */
@@ -12601,8 +12604,13 @@ typedef struct amps__scene_dyn {
     amps_int *idx;          /* scratch: 3 per node */
     double *val;            /* scratch: 3 per node */
     double *vol;            /* ntet: |V| of each tet (reference configuration), NULL until factored */
-    double *xe, *ye;        /* scratch per equation (ncap): u and A u */
+    double *xe, *ye;        /* per equation (ncap): the u of the last K u, A u */
     amps_int ncap;
+    struct {                /* what the last K u was computed with (amps__scene_dyn_ku) */
+        int ok;             /* 0: recompute */
+        amps_int nstruct, nrefactor, N;
+        double cM, cK;
+    } kukey;
     unsigned char *orphan;                        /* 1: the node lies in no tet and is held where it is */
     double sigma_max;                             /* fracture threshold (<= 0: off) */
     amps_int nfreg;                               /* regions with their own threshold */
@@ -12949,6 +12957,7 @@ static void amps__scene_unprepare(amps_ctx *ctx, amps_scene *S) {
     amps_int v;
     amps_update_free(ctx, S->U);
     S->U = NULL;
+    S->dyn.kukey.ok = 0;
     amps_factor_free(ctx, S->F);
     S->F = NULL;
     amps_csc_free(ctx, S->K);
@@ -14631,26 +14640,41 @@ static void amps__scene_dyn_cut(amps_ctx *ctx, amps_scene *S, amps_int v, amps_i
 }
 
 /* K u on every DOF (dyn.ku) as (A u - cM M u) / cK with one product by the engine's committed
-   matrix A. */
+   matrix A; kept when neither u nor A (nor the equations) changed since the last product (the
+   haptic calls between steps move pins only). */
 static amps_status amps__scene_dyn_ku(amps_ctx *ctx, amps_scene *S) {
     const amps_mesh *m = S->m;
+    amps_update *U = S->U;
     amps_int nn = m->nnode, v, e, N;
-    int d;
-    if (S->U->pending.n_delta || S->U->pending.n_dofs) {
-        amps_status s = amps_update_commit(ctx, S->U);
+    int d, same;
+    if (U->pending.n_delta || U->pending.n_dofs) {
+        amps_status s = amps_update_commit(ctx, U);
         if (s != AMPS_OK) return s;
     }
-    N = amps_update_dim(S->U);
+    N = amps_update_dim(U);
     if (N > S->dyn.ncap) {
         if (amps__realloc(ctx, (void **)&S->dyn.xe, (size_t)N, sizeof(double)) ||
             amps__realloc(ctx, (void **)&S->dyn.ye, (size_t)N, sizeof(double)))
             return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory");
         S->dyn.ncap = N;
+        S->dyn.kukey.ok = 0;
     }
+    same = S->dyn.kukey.ok && S->dyn.kukey.nstruct == U->refac.n_struct &&
+           S->dyn.kukey.nrefactor == U->stats.nrefactor && S->dyn.kukey.N == N && S->dyn.kukey.cM == S->dyn.cM &&
+           S->dyn.kukey.cK == S->dyn.cK;
+    for (v = 0; v < 3 * nn && same; v++)
+        if ((e = S->node.dof[v]) >= 0 && S->dyn.xe[e] != S->node.disp[v]) same = 0;
+    if (same) return AMPS_OK;
     for (e = 0; e < N; e++) S->dyn.xe[e] = 0.0;
     for (v = 0; v < 3 * nn; v++)
         if ((e = S->node.dof[v]) >= 0) S->dyn.xe[e] = S->node.disp[v];
-    amps__kmul(S->U, S->dyn.xe, S->dyn.ye);
+    amps__kmul(U, S->dyn.xe, S->dyn.ye);
+    S->dyn.kukey.ok = 1;
+    S->dyn.kukey.nstruct = U->refac.n_struct;
+    S->dyn.kukey.nrefactor = U->stats.nrefactor;
+    S->dyn.kukey.N = N;
+    S->dyn.kukey.cM = S->dyn.cM;
+    S->dyn.kukey.cK = S->dyn.cK;
     for (v = 0; v < nn; v++)
         for (d = 0; d < 3; d++) {
             e = S->node.dof[3 * v + d];
@@ -14662,7 +14686,7 @@ static amps_status amps__scene_dyn_ku(amps_ctx *ctx, amps_scene *S) {
 
 /* The right-hand side and pins of the next step (paper 003 Eq. 27): b = M w + dt (f + M g - K u)
    on every equation, w_P = (g_P - u_P) / dt at the pins (orphans stay at w = 0). Cost: one
-   product with the engine's matrix (amps__scene_dyn_ku). */
+   product with the engine's matrix when u or the matrix changed (amps__scene_dyn_ku), else O(N). */
 static amps_status amps__scene_dyn_load(amps_ctx *ctx, amps_scene *S) {
     amps_int nn = S->m->nnode, v, n = 0;
     double dt = S->dyn.dt, *u = S->node.disp, *ku, *mass;
