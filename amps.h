@@ -4472,11 +4472,18 @@ AMPS__KERNEL AMPS__TARGET_AVX2 void amps__wstore(int TC, int gather, const amps_
         for (i = 0; i < 4; i++) d[t][r[i]] -= v[i];
     }
 }
+/* sum_{k < nk} s_k[p] W[4k+t] with the kernels' fused multiply-adds (ascending k, from 0). */
+static AMPS__TARGET_AVX2 double amps__wsum(const double *const *s, amps_int p, const double *W, int t, amps_int nk) {
+    __m128d a = _mm_setzero_pd();
+    amps_int k;
+    for (k = 0; k < nk; k++) a = _mm_fmadd_sd(_mm_load_sd(s[k] + p), _mm_load_sd(W + 4 * k + t), a);
+    return _mm_cvtsd_f64(a);
+}
 /* AVX2 + FMA update kernel of a block of nk <= AMPS__KW source columns: for p in [0,m), with
    r = rel[Si[p]] (gather) or p (dense), d_t[r] -= sum_{k < nk} s_k[p] W[4k+t] for t < TC: the sum
    is formed first (ascending k, fused multiply-adds from 0: four rows to a vector, and
-   the same on the last m mod 4 rows one at a time), then subtracted once: an entry gets the same
-   bits whichever block holds it (amps__wsum too). */
+   amps__wsum on the last m mod 4 rows), then subtracted once: an entry gets the same bits
+   whichever block holds it. */
 AMPS__KERNEL AMPS__TARGET_AVX2 void amps__wkern_body(int TC, int gather, amps_int m, const amps_int *Si,
                                                      const amps_int *rel, int nk, const double *const *s,
                                                      const double *W, double *const *d) {
@@ -4512,24 +4519,9 @@ AMPS__KERNEL AMPS__TARGET_AVX2 void amps__wkern_body(int TC, int gather, amps_in
     }
     for (; p < m; p++) {
         amps_int r0 = gather ? rel[Si[p]] : p;
-        __m128d a[4];
         AMPS__UNROLL
-        for (t = 0; t < TC; t++) a[t] = _mm_setzero_pd();
-        for (k = 0; k < nk; k++) {
-            __m128d l = _mm_load_sd(s[k] + p);
-            AMPS__UNROLL
-            for (t = 0; t < TC; t++) a[t] = _mm_fmadd_sd(l, _mm_load_sd(W + 4 * k + t), a[t]);
-        }
-        AMPS__UNROLL
-        for (t = 0; t < TC; t++) d[t][r0] -= _mm_cvtsd_f64(a[t]);
+        for (t = 0; t < TC; t++) d[t][r0] -= amps__wsum(s, p, W, t, nk);
     }
-}
-/* sum_{k < nk} s_k[p] W[4k+t] with the kernels' fused multiply-adds (ascending k, from 0). */
-static AMPS__TARGET_AVX2 double amps__wsum(const double *const *s, amps_int p, const double *W, int t, amps_int nk) {
-    __m128d a = _mm_setzero_pd();
-    amps_int k;
-    for (k = 0; k < nk; k++) a = _mm_fmadd_sd(_mm_load_sd(s[k] + p), _mm_load_sd(W + 4 * k + t), a);
-    return _mm_cvtsd_f64(a);
 }
 #define AMPS__WKERN(T)                                                                                         \
     static AMPS__TARGET_AVX2 void amps__wkern##T(amps_int m, const amps_int *Si, const amps_int *rel, int nk, \
@@ -7233,51 +7225,40 @@ AMPS__KERNEL void amps__wblock_body(int W, const double *const *sl, amps_int b, 
     }
 #undef AMPS__WROW
 }
-#define AMPS__WBLOCK(W)                                                                                           \
-    static void amps__wblock##W(const double *const *sl, amps_int b, amps_int ng, const amps_int *S, amps_int ns, \
-                                const amps_int *lmap, size_t ld, double *Xo, double *X) {                         \
-        amps__wblock_body(W, sl, b, ng, S, ns, lmap, ld, Xo, X);                                                  \
+/* Instantiations of amps__wblock_body per width W (ATTR: a target attribute, SUF: a name suffix). */
+#define AMPS__WBLOCK(W, ATTR, SUF)                                                                                \
+    static ATTR void amps__wblock##W##SUF(const double *const *sl, amps_int b, amps_int ng, const amps_int *S,   \
+                                          amps_int ns, const amps_int *lmap, size_t ld, double *Xo, double *X) { \
+        amps__wblock_body(W, sl, b, ng, S, ns, lmap, ld, Xo, X);                                                 \
     }
-AMPS__WBLOCK(4)
-AMPS__WBLOCK(8)
-AMPS__WBLOCK(12)
-AMPS__WBLOCK(16)
-#undef AMPS__WBLOCK
-#ifdef AMPS__AVX2
-/* The same kernels compiled for AVX2 (4 lanes to a vector; the same operations per lane). */
-#define AMPS__WBLOCK(W)                                                                                  \
-    static AMPS__TARGET_AVX2 void amps__wblock##W##_avx2(const double *const *sl, amps_int b, amps_int ng, \
-                                                         const amps_int *S, amps_int ns, const amps_int *lmap, \
-                                                         size_t ld, double *Xo, double *X) {               \
-        amps__wblock_body(W, sl, b, ng, S, ns, lmap, ld, Xo, X);                                         \
-    }
-AMPS__WBLOCK(4)
-AMPS__WBLOCK(8)
-AMPS__WBLOCK(12)
-AMPS__WBLOCK(16)
-#undef AMPS__WBLOCK
+typedef void (*amps__wblock_fn)(const double *const *, amps_int, amps_int, const amps_int *, amps_int,
+                                const amps_int *, size_t, double *, double *);
+AMPS__WBLOCK(4, , )
+AMPS__WBLOCK(8, , )
+AMPS__WBLOCK(12, , )
+AMPS__WBLOCK(16, , )
+static const amps__wblock_fn amps__wblocks[4] = {amps__wblock4, amps__wblock8, amps__wblock12, amps__wblock16};
+#ifdef AMPS__AVX2 /* the same kernels compiled for AVX2 (4 lanes to a vector; the same operations per lane) */
+AMPS__WBLOCK(4, AMPS__TARGET_AVX2, _avx2)
+AMPS__WBLOCK(8, AMPS__TARGET_AVX2, _avx2)
+AMPS__WBLOCK(12, AMPS__TARGET_AVX2, _avx2)
+AMPS__WBLOCK(16, AMPS__TARGET_AVX2, _avx2)
+static const amps__wblock_fn amps__wblocks_avx2[4] = {amps__wblock4_avx2, amps__wblock8_avx2, amps__wblock12_avx2,
+                                                      amps__wblock16_avx2};
 #endif
+#undef AMPS__WBLOCK
 
 /* amps__wblock_body on the lanes [lo, lo + W) of X (row stride mw), W = 4, 8, 12 or 16; avx2: the
    AVX2 build of the kernels (amps__cpu_avx2). */
 static void amps__wblock(int avx2, amps_int W, const double *const *sl, amps_int b, amps_int ng, const amps_int *S,
                          amps_int ns, const amps_int *lmap, amps_int mw, amps_int lo, double *Xo, double *X) {
-    size_t ld = (size_t)mw;
+    amps__wblock_fn fn = amps__wblocks[W / 4 - 1];
 #ifdef AMPS__AVX2
-    if (avx2) {
-        if (W == 4) amps__wblock4_avx2(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
-        else if (W == 8) amps__wblock8_avx2(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
-        else if (W == 12) amps__wblock12_avx2(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
-        else amps__wblock16_avx2(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
-        return;
-    }
+    if (avx2) fn = amps__wblocks_avx2[W / 4 - 1];
 #else
     (void)avx2;
 #endif
-    if (W == 4) amps__wblock4(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
-    else if (W == 8) amps__wblock8(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
-    else if (W == 12) amps__wblock12(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
-    else amps__wblock16(sl, b, ng, S, ns, lmap, ld, Xo + lo, X + lo);
+    fn(sl, b, ng, S, ns, lmap, (size_t)mw, Xo + lo, X + lo);
 }
 
 /* X := L^{-1} X on the union clo[0..nc-1] (see amps__wblock_body), X with mw lanes. lanes[2t] and
@@ -7578,6 +7559,21 @@ typedef double amps__vd __attribute__((vector_size(16)));
 #else
 #define AMPS__VL 1
 #endif
+/* The columns c0..w-1 of amps__gemm_tile (fewer than 4), one product at a time. */
+static void amps__gemm_rest(amps_int c0, amps_int r0, amps_int r1, amps_int w, amps_int k0, amps_int k1,
+                            const double *A, size_t lda, const double *B, size_t ldb, double *C, size_t ldc) {
+    amps_int c, k, r;
+    for (c = c0; c < w; c++) {
+        const double *b = B + (size_t)c * ldb;
+        double *cc = C + (size_t)c * ldc;
+        for (k = k0; k < k1; k++) {
+            const double *a = A + (size_t)k * lda;
+            double bv = b[k];
+            if (bv != 0.0)
+                for (r = r0; r < r1; r++) cc[r] -= a[r] * bv;
+        }
+    }
+}
 #ifdef AMPS__AVX2
 /* amps__gemm_tile in AVX2 + FMA: each sum over k is a chain of fused multiply-adds from 0 (8 rows
    at a time in two vectors, the others one at a time, the same bits for a row either way). */
@@ -7620,16 +7616,7 @@ static AMPS__TARGET_AVX2 void amps__gemm_tile_avx2(amps_int r0, amps_int r1, amp
             for (t = 0; t < 4; t++) cc[t][r] -= _mm_cvtsd_f64(s[t]);
         }
     }
-    for (; c < w; c++) {
-        const double *bc = B + (size_t)c * ldb;
-        double *cc = C + (size_t)c * ldc;
-        for (k = k0; k < k1; k++) {
-            const double *a = A + (size_t)k * lda;
-            double bv = bc[k];
-            if (bv != 0.0)
-                for (r = r0; r < r1; r++) cc[r] -= a[r] * bv;
-        }
-    }
+    amps__gemm_rest(c, r0, r1, w, k0, k1, A, lda, B, ldb, C, ldc);
 }
 #endif
 static void amps__gemm_tile(amps_int r0, amps_int r1, amps_int w, amps_int k0, amps_int k1, const double *A, size_t lda,
@@ -7690,16 +7677,7 @@ static void amps__gemm_tile(amps_int r0, amps_int r1, amps_int w, amps_int k0, a
             c3[r] -= s3;
         }
     }
-    for (; c < w; c++) {
-        const double *b = B + (size_t)c * ldb;
-        double *cc = C + (size_t)c * ldc;
-        for (k = k0; k < k1; k++) {
-            const double *a = A + (size_t)k * lda;
-            double bv = b[k];
-            if (bv != 0.0)
-                for (r = r0; r < r1; r++) cc[r] -= a[r] * bv;
-        }
-    }
+    amps__gemm_rest(c, r0, r1, w, k0, k1, A, lda, B, ldb, C, ldc);
 }
 
 /* s[i] = a_i(0:n)^T b(0:n) for the nr <= 4 vectors a_i = a + i lda: b is read once for all. */
