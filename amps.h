@@ -587,7 +587,8 @@ typedef struct amps_update_stats {
                                -1 when neither it nor the guard is on, or the check was skipped */
     amps_int refine_solves;         /* refinement steps (one forward and one backward solve each) so far */
     amps_int checks_skipped;        /* full solves whose product with K^ was skipped (cancellation ratio at
-                                       most 4, no forward step, guard off; backward_error -1 then) */
+                                       most 1, or within a recent check's calibration; no forward step,
+                                       guard off; backward_error -1 then) */
     double cancel_ratio;            /* Step 6's cancellation ratio mu of the last full solve (-1: none) */
     double base_cond;               /* kappa_1(K-bar) of the current base, estimated at its creation when
                                opts.refine_tol > 0 (amps_condest; it sets the forward refinement) */
@@ -8444,6 +8445,7 @@ static amps_status amps__commit_finish(amps_ctx *ctx, amps_update *U, amps_int u
     U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
     U->sol.commit_unsolved = 1;
     U->stats.ncommit++;
+    if (structural) U->guard.cal_left = 0; /* K^ changed: the next solve checks (amps__accuracy) */
     amps__bg_after_commit(ctx, U, structural || U->aug.size > u_old, may_swap);
     return AMPS_OK;
 fail:
@@ -9305,17 +9307,20 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    sum rides on Step 6's own pass over the memoized columns, then O(n)) says how far that is from
    a direct solve's rounding of sv. Over the full solves of tests/test_stress.c, test_update.c,
    test_dynamics.c, test_scene.c and test_corot.c (5,227 solves), every solve the omega trigger
-   refined had mu >= 11.2, and where mu <= 4 omega stayed within 3.0 omega_d (never 4 omega_d);
-   so with the guard off and no forward step due, a solve with mu <= AMPS__MU_SKIP takes no
-   product with K^ (stats.checks_skipped; bench/refine_cost's bunny20k cut: the first 22 of 30 cut
-   steps, mu 0.05-3.8, where the check was 9-10% of the step's instructions).
+   refined had mu >= 11.2, and where mu <= 4 omega stayed within 3.0 omega_d; but the long mode
+   of tests/test_stress.c (soft_layer_1000, a 1000x softer layer, 60 steps) has first solves after
+   a change of K^ at mu 1.2 and 3.5 with omega 4.4 and 6.6 omega_d, whose unrefined residuals are
+   12-13x CHOLMOD's. So with the guard off and no forward step due, a solve with mu <=
+   AMPS__MU_SKIP = 1 takes no product with K^ (stats.checks_skipped; bench/refine_cost's bunny20k
+   cut: mu 0.05-3.8 over the first 30 cut steps, where the check was 9-10% of the step's
+   instructions).
    Calibrated skips. Above AMPS__MU_SKIP a check measures the engine's own rounding: with
    omega <= omega_d + s mu (a direct solve's floor plus Step 6's rounding, linear in mu), the
    check at (mu_c, omega_c) bounds s <= omega_c / mu_c, so a later solve with
    mu <= cal_mu = min(AMPS__CAL_GROW mu_c, omega_d mu_c / omega_c) has omega <= 2 omega_d, half
    the trigger. Only an unrefined check with omega_c <= 2 omega_d calibrates, and after
-   AMPS__CAL_SKIPS such skips the next solve checks again (the columns of S u C change between
-   solves; a fresh base starts uncalibrated). On bench/harness's bunny20k deformation (a pin
+   AMPS__CAL_SKIPS such skips, or after a commit that changed K^ (a cut, a removal, a material:
+   not a pin), the next solve checks again (a fresh base starts uncalibrated). On bench/harness's bunny20k deformation (a pin
    added each step, mu 3.6-11.6 while omega stays near omega_d) this leaves about one check in
    AMPS__CAL_SKIPS + 1 solves.
    Forward error. A backward error at a direct solve's level does not give its forward error:
@@ -9335,7 +9340,7 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    their orderings' rounding, up to 10.6-11.8x on beams 5x5x256 and 5x5x64 (re-factored after every
    cut, tests/test_stress.c with AMPS_STRESS_COUNT=1). */
 #define AMPS__DIRECT_RATIO 4.0
-#define AMPS__MU_SKIP 4.0
+#define AMPS__MU_SKIP 1.0
 #define AMPS__CAL_GROW 4.0
 #define AMPS__CAL_SKIPS 8
 #ifndef AMPS__FWD_KAPPA_EPS /* (overridable for bench/refine_cost only) */
