@@ -4547,6 +4547,21 @@ static const amps__wkern_fn amps__wkern[4] = {amps__wkern1, amps__wkern2, amps__
 #define AMPS__KWIDTH(P) 4
 #endif
 
+/* sum_{k < nk} s_k[p] W[4k+t] as the update kernels of P form it (amps__wsum with AVX2, else
+   plain products and sums in ascending k), so that an entry's bits do not depend on which of
+   them computes it. */
+static double amps__ksum(const amps__fpriv *P, const double *const *s, amps_int p, const double *W, int t,
+                         amps_int nk) {
+    double sm = 0;
+    amps_int k;
+#ifdef AMPS__AVX2
+    if (P->avx2) return amps__wsum(s, p, W, t, nk);
+#endif
+    (void)P;
+    for (k = 0; k < nk; k++) sm += s[k][p] * W[4 * k + t];
+    return sm;
+}
+
 /* 1 when this CPU runs the AVX2 + FMA kernels (AMPS_NO_AVX2 or another target: 0). */
 static int amps__cpu_avx2(void) {
 #ifdef AMPS__AVX2
@@ -5126,26 +5141,16 @@ static void amps__update(amps_factor *F, const amps__fpriv *P, amps_int K, amps_
                 for (i = 0; i < tc; i++) W[4 * k + i] = D[k0 + k] * src[k][q0 + i];
                 srq[k] = src[k] + q1;
             }
+            for (i = 0; i < tc; i++) { /* the targets' own rows, with the kernel's arithmetic */
+                D[SK[q0 + i]] -= amps__ksum(P, src, q0 + i, W, (int)i, kc);
+                for (pp = q0 + i + 1; pp < q1; pp++) dst[i][rel[SK[pp]]] -= amps__ksum(P, src, pp, W, (int)i, kc);
+            }
 #ifdef AMPS__AVX2
-            if (P->avx2) { /* the kernel's arithmetic, so that an entry's bits do not depend on tc */
-                for (i = 0; i < tc; i++) {
-                    D[SK[q0 + i]] -= amps__wsum(src, q0 + i, W, (int)i, kc);
-                    for (pp = q0 + i + 1; pp < q1; pp++) dst[i][rel[SK[pp]]] -= amps__wsum(src, pp, W, (int)i, kc);
-                }
+            if (P->avx2) {
                 amps__wkern[tc - 1](nK - q1, SK + q1, rel, (int)kc, srq, W, dst);
                 continue;
             }
 #endif
-            for (i = 0; i < tc; i++) {
-                double sm = 0;
-                for (k = 0; k < kc; k++) sm += src[k][q0 + i] * W[4 * k + i];
-                D[SK[q0 + i]] -= sm;
-                for (pp = q0 + i + 1; pp < q1; pp++) {
-                    sm = 0;
-                    for (k = 0; k < kc; k++) sm += src[k][pp] * W[4 * k + i];
-                    dst[i][rel[SK[pp]]] -= sm;
-                }
-            }
             amps__kern[kc - 1][tc - 1](nK - q1, SK + q1, rel, srq, W, dst);
         }
     }
@@ -6200,6 +6205,7 @@ struct amps_update {
     int nthr;             /* threads of the kernels */
     int nbuf;             /* threads the per-thread buffers are sized for (>= nthr) */
     amps_int n, N, cap_N; /* base order, committed order n + k, capacity of N */
+    unsigned long kver;   /* version of K^: counts the commits that changed it (Delta, new DOFs) and the swaps */
     struct {              /* the base matrix */
         amps_int *Kp, *Ki;
         double *Kx;         /* K, both triangles, original numbering */
@@ -7250,7 +7256,7 @@ static const amps__wblock_fn amps__wblocks_avx2[4] = {amps__wblock4_avx2, amps__
 #undef AMPS__WBLOCK
 
 /* amps__wblock_body on the lanes [lo, lo + W) of X (row stride mw), W = 4, 8, 12 or 16; avx2: the
-   AVX2 build of the kernels (amps__cpu_avx2). */
+   AVX2 build of the kernels (the factor's amps__fpriv.avx2). */
 static void amps__wblock(int avx2, amps_int W, const double *const *sl, amps_int b, amps_int ng, const amps_int *S,
                          amps_int ns, const amps_int *lmap, amps_int mw, amps_int lo, double *Xo, double *X) {
     amps__wblock_fn fn = amps__wblocks[W / 4 - 1];
@@ -7272,7 +7278,7 @@ static void amps__wsolve(const amps_factor *F, const amps_int *clo, amps_int nc,
     const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
     const amps_int *Lp = F->Lp;
     amps_int t, c, ke, o, b, i;
-    int avx2 = amps__cpu_avx2();
+    int avx2 = P ? P->avx2 : 0; /* amps_factorize's choice */
     for (t = 0; t < nc; t += ke - c + 1) {
         const amps_int *S;
         amps_int ns;
@@ -8445,7 +8451,10 @@ static amps_status amps__commit_finish(amps_ctx *ctx, amps_update *U, amps_int u
     U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
     U->sol.commit_unsolved = 1;
     U->stats.ncommit++;
-    if (structural) U->guard.cal_left = 0; /* K^ changed: the next solve checks (amps__accuracy) */
+    if (structural) {
+        U->kver++;
+        U->guard.cal_left = 0; /* the next solve checks (amps__accuracy) */
+    }
     amps__bg_after_commit(ctx, U, structural || U->aug.size > u_old, may_swap);
     return AMPS_OK;
 fail:
@@ -10478,6 +10487,7 @@ static void amps__bg_take(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg
     U->sol.commit_unsolved = old.sol.commit_unsolved;
     U->stats = old.stats;
     U->stats.nrefactor++;
+    U->kver = old.kver + 1;
     U->stats.t_refactor = b->t1 - b->t0;
     U->stats.t_refactor_order = b->ph.order;
     U->stats.t_refactor_symbolic = b->ph.symbolic;
@@ -12591,7 +12601,7 @@ typedef struct amps__scene_dyn {
     amps_int ncap;
     struct {                /* what the last K u was computed with (amps__scene_dyn_ku) */
         int ok;             /* 0: recompute */
-        amps_int nstruct, nrefactor, N;
+        unsigned long kver; /* the engine's version of K^ */
         double cM, cK;
     } kukey;
     unsigned char *orphan;                        /* 1: the node lies in no tet and is held where it is */
@@ -14642,8 +14652,7 @@ static amps_status amps__scene_dyn_ku(amps_ctx *ctx, amps_scene *S) {
         S->dyn.ncap = N;
         S->dyn.kukey.ok = 0;
     }
-    same = S->dyn.kukey.ok && S->dyn.kukey.nstruct == U->refac.n_struct &&
-           S->dyn.kukey.nrefactor == U->stats.nrefactor && S->dyn.kukey.N == N && S->dyn.kukey.cM == S->dyn.cM &&
+    same = S->dyn.kukey.ok && S->dyn.kukey.kver == U->kver && S->dyn.kukey.cM == S->dyn.cM &&
            S->dyn.kukey.cK == S->dyn.cK;
     for (v = 0; v < 3 * nn && same; v++)
         if ((e = S->node.dof[v]) >= 0 && S->dyn.xe[e] != S->node.disp[v]) same = 0;
@@ -14653,9 +14662,7 @@ static amps_status amps__scene_dyn_ku(amps_ctx *ctx, amps_scene *S) {
         if ((e = S->node.dof[v]) >= 0) S->dyn.xe[e] = S->node.disp[v];
     amps__kmul(U, S->dyn.xe, S->dyn.ye);
     S->dyn.kukey.ok = 1;
-    S->dyn.kukey.nstruct = U->refac.n_struct;
-    S->dyn.kukey.nrefactor = U->stats.nrefactor;
-    S->dyn.kukey.N = N;
+    S->dyn.kukey.kver = U->kver;
     S->dyn.kukey.cM = S->dyn.cM;
     S->dyn.kukey.cK = S->dyn.cK;
     for (v = 0; v < nn; v++)
