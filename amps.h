@@ -963,7 +963,9 @@ AMPS_API void amps_sym3_eig(const double s[6], double lam[3]);
    to F (it maximizes tr(R^T F) = s1 + s2 + sign(det F) s3). Inverted tets (det F < 0) get a
    rotation too, never a reflection. Where R is not unique (rank F <= 1, or det F < 0 with
    s2 = s3) R is one of the maximizers; F = 0, a degenerate X or a non-finite F give R = I.
-   Returns det F (0 for a degenerate X). Allocates nothing. */
+   Computed by Newton's iteration for the polar factor where det F is well above 0 (the same R to
+   rounding), else by a one-sided Jacobi SVD. Returns det F (0 for a degenerate X). Allocates
+   nothing. */
 AMPS_API double amps_tet_rotation(const double X[12], const double x[12], double R[9]);
 
 /* ---- boundary ---- */
@@ -1290,10 +1292,14 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    amps_update_solve_rhs, so cuts, removals and pins stay updates; Rn: per node the rotation
    nearest to the volume-weighted mean of its tets' R_e, which makes the preconditioner exact
    for a rigid rotation), to the relative residual ||(b - A_R w+)_F|| / ||(b - A_R w_C)_F|| <= tol
-   (amps_scene_corotational_tol; amps_scene_residual reports it). Products with A_R are
-   matrix-free per tet, parallel on the engine's threads and bitwise independent of their count.
-   Memory from the first step: 36 doubles per tet (reference gradients, volume, R_e, Lame
-   constants, element results), 15 per node, 6 per equation. Stresses (amps_scene_stress and
+   (amps_scene_corotational_tol; amps_scene_residual reports it), started from the
+   extrapolation 2 w - w_prev of the last two steps' velocities. A_R is assembled each step in
+   3x3 blocks by node (the pattern is rebuilt when a cut or a node separation changed the tets'
+   nodes); assembly and products are parallel on the engine's threads and bitwise independent of
+   their count. Memory from the first step: 36 doubles and 20 indices per tet (reference
+   gradients, volume, R_e, Lame constants, element results; the block map), 18 doubles per node,
+   9 doubles and an index per block of A_R (one per pair of nodes sharing a tet), 6 doubles per
+   equation; a rebuilt pattern allocates when it outgrows them. Stresses (amps_scene_stress and
    fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. amps_scene_solve_reactions is
    AMPS_ERR_STATE in this mode (the reactions come with each step). Dynamics only and before
    the first step: AMPS_ERR_STATE otherwise (nothing changes). */
@@ -11055,7 +11061,54 @@ AMPS_API double amps_tet_stress(const double X[12], double E, double nu, const d
     return vol;
 }
 
-/* R of the polar decomposition of F (row-major) as amps_tet_rotation states it: one-sided
+/* R = the orthogonal polar factor of F (row-major) by Newton's iteration X <- (g X + X^-T / g) / 2
+   (g = (||X^-1||_F / ||X||_F)^(1/2) in the first two steps, then 1), which converges
+   quadratically to U V^T when det F > 0; 1 when it converged (a step changed X by at most
+   4 eps), 0 when it stopped (det X <= 1e-6 ||X||_F^3 / 27: nearly degenerate or inverted, or 12
+   steps) and R is not set. */
+static int amps__polar_newton(const double F[9], double R[9]) {
+    double X[9], C[9], nx = 0, det, g, d;
+    int it, i;
+    for (i = 0; i < 9; i++) {
+        X[i] = F[i];
+        nx += F[i] * F[i];
+    }
+    for (it = 0; it < 12; it++) {
+        double nc = 0;
+        C[0] = X[4] * X[8] - X[5] * X[7]; /* the cofactors: X^-T = C / det X */
+        C[1] = X[5] * X[6] - X[3] * X[8];
+        C[2] = X[3] * X[7] - X[4] * X[6];
+        C[3] = X[2] * X[7] - X[1] * X[8];
+        C[4] = X[0] * X[8] - X[2] * X[6];
+        C[5] = X[1] * X[6] - X[0] * X[7];
+        C[6] = X[1] * X[5] - X[2] * X[4];
+        C[7] = X[2] * X[3] - X[0] * X[5];
+        C[8] = X[0] * X[4] - X[1] * X[3];
+        det = X[0] * C[0] + X[1] * C[1] + X[2] * C[2];
+        if (!(det > 1e-6 * nx * sqrt(nx) / 27.0)) return 0;
+        g = 1.0;
+        if (it < 2) {
+            for (i = 0; i < 9; i++) nc += C[i] * C[i];
+            g = sqrt(sqrt(nc) / (det * sqrt(nx)));
+        }
+        d = 0;
+        nx = 0;
+        for (i = 0; i < 9; i++) {
+            double xn = 0.5 * (g * X[i] + C[i] / (g * det));
+            d += (xn - X[i]) * (xn - X[i]);
+            X[i] = xn;
+            nx += xn * xn;
+        }
+        if (d <= 16.0 * 4.93e-32 * nx) {
+            memcpy(R, X, sizeof(X));
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* R of the polar decomposition of F (row-major) as amps_tet_rotation states it: for det F well
+   above 0, Newton's iteration (amps__polar_newton: the same R to rounding); else one-sided
    Jacobi on the columns of W = F V (rotations of pairs until every pair is orthogonal to
    eps), s_i = |w_i| sorted descending, u1 = w1 / s1, u2 = w2 orthogonalized against u1 (any
    unit vector orthogonal to u1 when that vanishes), U = [u1, u2, u1 x u2], and with
@@ -11063,6 +11116,7 @@ AMPS_API double amps_tet_stress(const double X[12], double E, double nu, const d
 static void amps__polar(const double F[9], double R[9]) {
     double W[9], V[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, n[3], u[9], v[9], scale = 0.0;
     int sweep, p, q, i, k, ord[3] = {0, 1, 2};
+    if (amps__polar_newton(F, R)) return;
     for (i = 0; i < 9; i++) {
         if (!amps__isfinite(F[i])) scale = -1.0;
         else if (scale >= 0 && fabs(F[i]) > scale) scale = fabs(F[i]);
@@ -12620,8 +12674,19 @@ typedef struct amps__scene_dyn {
     double *cr_ye;                                /* 12 per tet: element results of the last pass */
     double *cr_gel, *cr_react;                    /* 3 per node: elastic force g, pin reactions of the last step */
     double *cr_Rn;                                /* 9 per node: the node's rotation (the preconditioner's frame) */
+    double *cr_wprev;                             /* 3 per node: w before the last step (the PCG start extrapolates) */
+    amps_int cr_nprev;                            /* nodes 0..cr_nprev-1 have cr_wprev (0: none) */
     amps_int cr_cap;                              /* node capacity of cr_gel, cr_react */
     double *cr_vec;                               /* 6 per equation: b, x, r, z, p, q */
+    struct {                                      /* A_R of the step in 3x3 blocks by node (amps__cr_assemble) */
+        amps_int *bp, *bj;                        /* row v: blocks bp[v] .. bp[v+1]-1, nodes bj ascending */
+        double *bx;                               /* 9 per block, row-major */
+        amps_int *map;                            /* 16 per tet: map[16 t + 4 a + b] = block of tet node b in row of node a */
+        amps_int *tet;                            /* 4 per tet: the nodes the pattern was built for */
+        amps_int *wrow, *wcnt;                    /* workspace of a rebuild: 16 per tet; 2 per node + 2 */
+        amps_int nnode, ntet;                     /* the mesh it was built for (0: none) */
+        size_t cap_row, cap_blk;                  /* capacities of bp (nodes + 1) and bj, bx */
+    } crA;
     unsigned char *cr_con;                        /* 1 per equation: constrained in the engine */
     amps_int cr_ncap;                             /* equation capacity of cr_vec, cr_con */
     amps_scene_step_stats info;                   /* the last step (amps_scene_step_info) */
@@ -12722,7 +12787,15 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->dyn.cr_gel);
     amps__free(ctx, S->dyn.cr_react);
     amps__free(ctx, S->dyn.cr_Rn);
+    amps__free(ctx, S->dyn.cr_wprev);
     amps__free(ctx, S->dyn.cr_vec);
+    amps__free(ctx, S->dyn.crA.bp);
+    amps__free(ctx, S->dyn.crA.bj);
+    amps__free(ctx, S->dyn.crA.bx);
+    amps__free(ctx, S->dyn.crA.map);
+    amps__free(ctx, S->dyn.crA.tet);
+    amps__free(ctx, S->dyn.crA.wrow);
+    amps__free(ctx, S->dyn.crA.wcnt);
     amps__free(ctx, S->dyn.cr_con);
     amps__free(ctx, S->dyn.rm_list);
     amps__free(ctx, S->dyn.rm_flag);
@@ -15028,7 +15101,7 @@ AMPS_API amps_status amps_scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n,
 }
 
 static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S);
-static void amps__cr_pass(amps_scene *S, int mode, const double *v, double *y);
+static void amps__cr_pass(amps_scene *S, int mode);
 static void amps__cr_sigma(const amps_scene *S, amps_int t, const double *G, const double *Rt, double sigma[6]);
 
 /* Tets whose largest principal stress magnitude exceeds sigma_max are removed (default policy). */
@@ -15046,7 +15119,7 @@ static amps_status amps__scene_fracture_step(amps_ctx *ctx, amps_scene *S) {
         return s;
     list = S->dyn.rm_list;
     if (S->dyn.corot && S->dyn.cr_G) { /* the rotations of the new state (kept for the next step) */
-        amps__cr_pass(S, 2, NULL, NULL);
+        amps__cr_pass(S, 2);
         S->dyn.cr_rvalid = 1;
     }
     for (t = 0; t < m->ntet; t++) {
@@ -15242,14 +15315,13 @@ static amps_status amps__scene_set_material_all(amps_ctx *ctx, amps_scene *S, do
 #define AMPS_TEST_COROT_IDENTITY 0
 #endif
 
-/* A pass of the corotational step: mode 0 rotations R_e, Lame constants and elastic forces
-   g_e = R K0 (R^T x - X) per tet into cr_ye, then per node g and the lumped mass; mode 1
-   y = A_R v (equations); mode 2 the rotations only. */
+/* A pass of the corotational step over every tet and node: mode 0 rotations R_e, Lame
+   constants and elastic forces g_e = R K0 (R^T x - X) per tet into cr_ye, then per node g, and
+   the node rotations Rn; mode 2 the rotations only. */
 typedef struct amps__crjob {
     const amps_scene *S;
-    const double *v;
-    double *y;
     int mode;
+    amps_int np; /* the parts of the node pass */
 } amps__crjob;
 
 /* F = I + sum_a u_a G_a^T of tet t from the displacements u (3 per node). */
@@ -15264,9 +15336,8 @@ static void amps__cr_deform(const amps_scene *S, amps_int t, const double *G, do
     }
 }
 
-/* Per tet t in [b, e): H (the displacement gradient in the rotated frame: R^T F - I in mode 0,
-   sum_a (R^T v_a) G_a^T in mode 1), sigma = lambda V tr(H) I + mu V (H + H^T) and
-   ye_a = R sigma G_a. */
+/* Per tet t in [b, e): R (mode 0 and 2); in mode 0 H = R^T F - I (the displacement gradient in
+   the rotated frame), sigma = lambda V tr(H) I + mu V (H + H^T) and ye_a = R sigma G_a. */
 static void amps__cr_tets(amps_int b, amps_int e, int slot, void *arg) {
     const amps__crjob *j = AMPS__CAST(const amps__crjob *, arg);
     const amps_scene *S = j->S;
@@ -15279,34 +15350,19 @@ static void amps__cr_tets(amps_int b, amps_int e, int slot, void *arg) {
         double H[9], F[9], sg[9], tr;
         int a, i, k;
         if (m->removed && m->removed[t]) continue;
-        if (j->mode != 1) {
-            amps__cr_deform(S, t, G, F);
-            if (!S->dyn.cr_rvalid) {
-                if (AMPS_TEST_COROT_IDENTITY)
-                    for (i = 0; i < 9; i++) R[i] = (i % 4 == 0) ? 1.0 : 0.0;
-                else amps__polar(F, R);
-            }
-            if (j->mode == 2) continue;
-            amps__lame(m->E[t], m->nu[t], lm, lm + 1);
-            lm[0] *= S->dyn.vol[t];
-            lm[1] *= S->dyn.vol[t];
-            for (i = 0; i < 3; i++)
-                for (k = 0; k < 3; k++)
-                    H[3 * i + k] = R[i] * F[k] + R[3 + i] * F[3 + k] + R[6 + i] * F[6 + k] - (i == k ? 1.0 : 0.0);
-        } else {
-            const amps_int *tv = m->tet + 4 * t;
-            for (i = 0; i < 9; i++) H[i] = 0.0;
-            for (a = 0; a < 4; a++) {
-                double w[3], l[3];
-                for (i = 0; i < 3; i++) {
-                    amps_int q = S->node.dof[3 * tv[a] + i];
-                    w[i] = q >= 0 ? j->v[q] : 0.0;
-                }
-                for (i = 0; i < 3; i++) l[i] = R[i] * w[0] + R[3 + i] * w[1] + R[6 + i] * w[2];
-                for (i = 0; i < 3; i++)
-                    for (k = 0; k < 3; k++) H[3 * i + k] += l[i] * G[3 * a + k];
-            }
+        amps__cr_deform(S, t, G, F);
+        if (!S->dyn.cr_rvalid) {
+            if (AMPS_TEST_COROT_IDENTITY)
+                for (i = 0; i < 9; i++) R[i] = (i % 4 == 0) ? 1.0 : 0.0;
+            else amps__polar(F, R);
         }
+        if (j->mode == 2) continue;
+        amps__lame(m->E[t], m->nu[t], lm, lm + 1);
+        lm[0] *= S->dyn.vol[t];
+        lm[1] *= S->dyn.vol[t];
+        for (i = 0; i < 3; i++)
+            for (k = 0; k < 3; k++)
+                H[3 * i + k] = R[i] * F[k] + R[3 + i] * F[3 + k] + R[6 + i] * F[6 + k] - (i == k ? 1.0 : 0.0);
         tr = lm[0] * (H[0] + H[4] + H[8]);
         for (i = 0; i < 3; i++)
             for (k = 0; k < 3; k++) sg[3 * i + k] = lm[1] * (H[3 * i + k] + H[3 * k + i]) + (i == k ? tr : 0.0);
@@ -15319,50 +15375,248 @@ static void amps__cr_tets(amps_int b, amps_int e, int slot, void *arg) {
     }
 }
 
-/* Per node v in [b, e): the sum of the element results of its tets (in incidence order); mode 0
-   stores it as g_v with the node rotation Rn_v, mode 1 as y = cM m_v v + cK (K_R v)_v. */
-static void amps__cr_nodes(amps_int b, amps_int e, int slot, void *arg) {
+/* The nodes of parts [p0, p1) of np (part k: nodes [k nnode / np, (k+1) nnode / np)): g_v = the
+   sum of the element results of its live tets and the node rotation Rn_v (nearest to the
+   volume-weighted mean of their R_e), the tets in index order (streamed; the same sums for any np). */
+static void amps__cr_nodes(amps_int p0, amps_int p1, int slot, void *arg) {
     const amps__crjob *j = AMPS__CAST(const amps__crjob *, arg);
     const amps_scene *S = j->S;
     const amps_mesh *m = S->m;
-    amps_int v, k;
+    amps_int np = j->np, lo = (amps_int)((double)p0 * m->nnode / np), hi, v, t;
+    double *g = S->dyn.cr_gel, *Rn = S->dyn.cr_Rn;
     (void)slot;
-    for (v = b; v < e; v++) {
-        double sum[3] = {0, 0, 0}, Rs[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+    hi = p1 == np ? m->nnode : (amps_int)((double)p1 * m->nnode / np);
+    memset(g + 3 * (size_t)lo, 0, sizeof(double) * 3 * (size_t)(hi - lo));
+    memset(Rn + 9 * (size_t)lo, 0, sizeof(double) * 9 * (size_t)(hi - lo));
+    for (t = 0; t < m->ntet; t++) {
+        const amps_int *tv = m->tet + 4 * t;
+        const double *ye = S->dyn.cr_ye + 12 * t, *R = S->dyn.cr_R + 9 * t;
         int a, d;
-        if (j->mode == 1 && S->node.dof[3 * v] < 0) continue;
-        for (k = 0; k < m->inc_len[v]; k++) {
-            amps_int t = m->inc[m->inc_ptr[v] + k];
-            const double *ye = S->dyn.cr_ye + 12 * t;
-            for (a = 0; a < 3 && m->tet[4 * t + a] != v; a++) {}
-            for (d = 0; d < 3; d++) sum[d] += ye[3 * a + d];
-            if (j->mode == 0)
-                for (d = 0; d < 9; d++) Rs[d] += S->dyn.vol[t] * S->dyn.cr_R[9 * t + d];
+        if ((tv[0] < lo || tv[0] >= hi) && (tv[1] < lo || tv[1] >= hi) && (tv[2] < lo || tv[2] >= hi) &&
+            (tv[3] < lo || tv[3] >= hi))
+            continue;
+        if (m->removed && m->removed[t]) continue;
+        for (a = 0; a < 4; a++) {
+            amps_int w = tv[a];
+            if (w < lo || w >= hi) continue;
+            for (d = 0; d < 3; d++) g[3 * w + d] += ye[3 * a + d];
+            for (d = 0; d < 9; d++) Rn[9 * w + d] += S->dyn.vol[t] * R[d];
         }
-        if (j->mode == 0) {
-            amps__polar(Rs, S->dyn.cr_Rn + 9 * v); /* the rotation nearest to the volume-weighted mean */
-            for (d = 0; d < 3; d++) S->dyn.cr_gel[3 * v + d] = sum[d];
-        } else
-            for (d = 0; d < 3; d++) {
-                amps_int q = S->node.dof[3 * v + d];
-                if (q >= 0) j->y[q] = S->dyn.cM * S->node.mass[v] * j->v[q] + S->dyn.cK * sum[d];
-            }
+    }
+    for (v = lo; v < hi; v++) {
+        double Rs[9];
+        memcpy(Rs, Rn + 9 * v, sizeof(Rs));
+        amps__polar(Rs, Rn + 9 * v);
     }
 }
 
 /* One pass (see amps__crjob) over every tet and node; parallel on the engine's threads. */
-static void amps__cr_pass(amps_scene *S, int mode, const double *v, double *y) {
+static void amps__cr_pass(amps_scene *S, int mode) {
     amps__crjob j;
     int nt = S->U->nthr;
     j.S = S;
-    j.v = v;
-    j.y = y;
     j.mode = mode;
+    j.np = S->m->nnode > 2048 ? nt : 1;
     amps__par_for(&S->U->par, S->m->ntet > 2048 ? nt : 1, S->m->ntet, 256, amps__cr_tets, &j);
-    if (mode != 2) amps__par_for(&S->U->par, S->m->nnode > 2048 ? nt : 1, S->m->nnode, 256, amps__cr_nodes, &j);
-    if (mode == 1) S->dyn.info.products++;
+    if (mode == 0) amps__par_for(&S->U->par, (int)j.np, j.np, 1, amps__cr_nodes, &j);
 }
 
+/* ---- the assembled A_R: 3x3 blocks by node ---- */
+
+/* The block pattern of every tet, removed ones included (a removal then leaves it valid): row v
+   holds node w when a tet holds both (v itself included), ascending; crA.map locates each tet's
+   16 blocks. Rebuilt when a tet's nodes or the node count changed (cuts, node separation).
+   Allocates at the first call and when the nodes or the blocks outgrow their capacities. */
+static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
+    const amps_mesh *m = S->m;
+    amps_int nn = m->nnode, nt = m->ntet, v, t, k, nb = 0, *cnt, *mark, *tmp;
+    size_t need;
+    int a, b;
+    if (S->dyn.crA.nnode == nn && S->dyn.crA.ntet == nt &&
+        !memcmp(S->dyn.crA.tet, m->tet, sizeof(amps_int) * 4 * (size_t)nt))
+        return AMPS_OK;
+    S->dyn.crA.nnode = 0;
+    if ((size_t)nn + 1 > S->dyn.crA.cap_row) { /* room for the nodes: bp and the counts */
+        size_t c = (size_t)(m->node_cap > nn ? m->node_cap : nn) + 1;
+        if (amps__realloc(ctx, (void **)&S->dyn.crA.bp, c, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&S->dyn.crA.wcnt, 2 * c, sizeof(amps_int)))
+            goto oom;
+        S->dyn.crA.cap_row = c;
+    }
+    if (!S->dyn.crA.map && (amps__realloc(ctx, (void **)&S->dyn.crA.map, 16 * (size_t)nt + 1, sizeof(amps_int)) ||
+                            amps__realloc(ctx, (void **)&S->dyn.crA.tet, 4 * (size_t)nt + 1, sizeof(amps_int)) ||
+                            amps__realloc(ctx, (void **)&S->dyn.crA.wrow, 16 * (size_t)nt + 1, sizeof(amps_int))))
+        goto oom;
+    /* rows with repeats: 4 entries per tet and node of it, by a counting pass */
+    cnt = S->dyn.crA.wcnt;
+    tmp = S->dyn.crA.wrow;
+    memset(cnt, 0, sizeof(amps_int) * ((size_t)nn + 1));
+    mark = cnt + nn + 1;
+    for (k = 0; k < 4 * nt; k++) cnt[m->tet[k] + 1] += 4;
+    for (v = 0; v < nn; v++) cnt[v + 1] += cnt[v];
+    for (t = 0; t < nt; t++)
+        for (a = 0; a < 4; a++)
+            for (b = 0; b < 4; b++) tmp[cnt[m->tet[4 * t + a]]++] = m->tet[4 * t + b];
+    for (v = nn; v > 0; v--) cnt[v] = cnt[v - 1]; /* back to the row starts */
+    cnt[0] = 0;
+    /* unique and sorted per row, in place */
+    for (v = 0; v < nn; v++) mark[v] = -1;
+    for (v = 0; v < nn; v++) {
+        amps_int p0 = cnt[v], p1 = cnt[v + 1], q, r, w, start = nb;
+        for (q = p0; q < p1; q++)
+            if (mark[w = tmp[q]] != v) {
+                mark[w] = v;
+                for (r = nb; r > start && tmp[r - 1] > w; r--) tmp[r] = tmp[r - 1];
+                tmp[r] = w;
+                nb++;
+            }
+        cnt[v] = start;
+    }
+    cnt[nn] = nb;
+    need = (size_t)nb;
+    if (need > S->dyn.crA.cap_blk) {
+        size_t c = need + need / 2 + 16;
+        if (amps__realloc(ctx, (void **)&S->dyn.crA.bj, c, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&S->dyn.crA.bx, 9 * c, sizeof(double)))
+            goto oom;
+        S->dyn.crA.cap_blk = c;
+    }
+    memcpy(S->dyn.crA.bp, cnt, sizeof(amps_int) * ((size_t)nn + 1));
+    memcpy(S->dyn.crA.bj, tmp, sizeof(amps_int) * need);
+    for (t = 0; t < nt; t++) /* the block of node b in the row of node a, by bisection */
+        for (a = 0; a < 4; a++) {
+            amps_int row = m->tet[4 * t + a];
+            for (b = 0; b < 4; b++) {
+                amps_int lo = S->dyn.crA.bp[row], hi = S->dyn.crA.bp[row + 1] - 1, w = m->tet[4 * t + b];
+                while (lo < hi) {
+                    amps_int mid = lo + (hi - lo) / 2;
+                    if (S->dyn.crA.bj[mid] < w) lo = mid + 1;
+                    else hi = mid;
+                }
+                S->dyn.crA.map[16 * t + 4 * a + b] = lo;
+            }
+        }
+    memcpy(S->dyn.crA.tet, m->tet, sizeof(amps_int) * 4 * (size_t)nt);
+    S->dyn.crA.nnode = nn;
+    S->dyn.crA.ntet = nt;
+    return AMPS_OK;
+oom:
+    return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory (corotational)");
+}
+
+/* The rows of A_R = cM M + cK K_R owned by parts [p0, p1) of nthr (part k: the nodes
+   [k nnode / np, (k+1) nnode / np)): cM m_v I on the diagonal, then per live tet in index order
+   (the tet arrays are streamed; every block is summed in that order for any np) and node a of it
+   in the range, for each node b of it the block cK V (lambda h_a h_b^T + mu h_b h_a^T +
+   mu (g_a . g_b) I), h = R g (g: the reference gradients). */
+typedef struct amps__crasm {
+    amps_scene *S;
+    amps_int np;
+} amps__crasm;
+
+static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
+    const amps__crasm *j = AMPS__CAST(const amps__crasm *, arg);
+    amps_scene *S = j->S;
+    const amps_mesh *m = S->m;
+    const amps_int *map = S->dyn.crA.map, *bp = S->dyn.crA.bp, *bj = S->dyn.crA.bj;
+    amps_int lo = (amps_int)((double)p0 * m->nnode / j->np), hi = (amps_int)((double)p1 * m->nnode / j->np), v, t;
+    double *bx = S->dyn.crA.bx, cK = S->dyn.cK;
+    (void)slot;
+    if (p1 == j->np) hi = m->nnode;
+    memset(bx + 9 * (size_t)bp[lo], 0, sizeof(double) * 9 * (size_t)(bp[hi] - bp[lo]));
+    for (v = lo; v < hi; v++) { /* the mass: the diagonal block, found by bisection */
+        amps_int l = bp[v], h = bp[v + 1] - 1;
+        double mv = S->dyn.cM * S->node.mass[v], *B;
+        while (l < h) {
+            amps_int mid = l + (h - l) / 2;
+            if (bj[mid] < v) l = mid + 1;
+            else h = mid;
+        }
+        B = bx + 9 * (size_t)l;
+        B[0] = B[4] = B[8] = mv;
+    }
+    for (t = 0; t < m->ntet; t++) {
+        const amps_int *tv = m->tet + 4 * t;
+        const double *G, *R, *lm;
+        double h[12], la, mu;
+        int a, b, i, k, any = 0;
+        for (a = 0; a < 4; a++) any |= tv[a] >= lo && tv[a] < hi;
+        if (!any || (m->removed && m->removed[t])) continue;
+        G = S->dyn.cr_G + 12 * t;
+        R = S->dyn.cr_R + 9 * t;
+        lm = S->dyn.cr_lm + 2 * t;
+        la = cK * lm[0];
+        mu = cK * lm[1];
+        for (b = 0; b < 4; b++)
+            for (i = 0; i < 3; i++)
+                h[3 * b + i] = R[3 * i] * G[3 * b] + R[3 * i + 1] * G[3 * b + 1] + R[3 * i + 2] * G[3 * b + 2];
+        for (a = 0; a < 4; a++) {
+            if (tv[a] < lo || tv[a] >= hi || S->node.dof[3 * tv[a]] < 0) continue;
+            for (b = 0; b < 4; b++) {
+                double *B = bx + 9 * (size_t)map[16 * t + 4 * a + b];
+                double gg = mu * (G[3 * a] * G[3 * b] + G[3 * a + 1] * G[3 * b + 1] + G[3 * a + 2] * G[3 * b + 2]);
+                for (i = 0; i < 3; i++)
+                    for (k = 0; k < 3; k++)
+                        B[3 * i + k] += la * h[3 * a + i] * h[3 * b + k] + mu * h[3 * b + i] * h[3 * a + k];
+                B[0] += gg;
+                B[4] += gg;
+                B[8] += gg;
+            }
+        }
+    }
+}
+
+/* A_R of the step into crA (pattern first; after the mode 0 pass). */
+static amps_status amps__cr_assemble(amps_ctx *ctx, amps_scene *S) {
+    amps_status s = amps__cr_pattern(ctx, S);
+    if (s != AMPS_OK) return s;
+    amps__crasm j;
+    j.S = S;
+    j.np = S->m->nnode > 2048 ? S->U->nthr : 1;
+    amps__par_for(&S->U->par, (int)j.np, j.np, 1, amps__cr_rows, &j);
+    return AMPS_OK;
+}
+
+/* y = A_R v on the equations (rows of nodes with equations; v read on them only). */
+typedef struct amps__crmul {
+    const amps_scene *S;
+    const double *v;
+    double *y;
+} amps__crmul;
+
+static void amps__cr_mul_rows(amps_int b0, amps_int e0, int slot, void *arg) {
+    const amps__crmul *j = AMPS__CAST(const amps__crmul *, arg);
+    const amps_scene *S = j->S;
+    const amps_int *dof = S->node.dof, *bj = S->dyn.crA.bj;
+    amps_int v, q;
+    (void)slot;
+    for (v = b0; v < e0; v++) {
+        amps_int e = dof[3 * v];
+        double y0 = 0, y1 = 0, y2 = 0;
+        if (e < 0) continue;
+        for (q = S->dyn.crA.bp[v]; q < S->dyn.crA.bp[v + 1]; q++) {
+            amps_int f = dof[3 * bj[q]];
+            const double *B = S->dyn.crA.bx + 9 * (size_t)q, *x;
+            if (f < 0) continue;
+            x = j->v + f;
+            y0 += B[0] * x[0] + B[1] * x[1] + B[2] * x[2];
+            y1 += B[3] * x[0] + B[4] * x[1] + B[5] * x[2];
+            y2 += B[6] * x[0] + B[7] * x[1] + B[8] * x[2];
+        }
+        j->y[e] = y0;
+        j->y[e + 1] = y1;
+        j->y[e + 2] = y2;
+    }
+}
+
+static void amps__cr_mul(amps_scene *S, const double *v, double *y) {
+    amps__crmul j;
+    j.S = S;
+    j.v = v;
+    j.y = y;
+    amps__par_for(&S->U->par, S->m->nnode > 2048 ? S->U->nthr : 1, S->m->nnode, 256, amps__cr_mul_rows, &j);
+    S->dyn.info.products++;
+}
 /* The corotational workspace: per tet (gradients and volumes at the first call), per node and
    per equation (N). */
 static amps_status amps__cr_room(amps_ctx *ctx, amps_scene *S, amps_int N) {
@@ -15390,7 +15644,8 @@ static amps_status amps__cr_room(amps_ctx *ctx, amps_scene *S, amps_int N) {
         size_t c = (size_t)(m->node_cap > m->nnode ? m->node_cap : m->nnode);
         if (amps__realloc(ctx, (void **)&D->cr_gel, 3 * c, sizeof(double)) ||
             amps__realloc(ctx, (void **)&D->cr_react, 3 * c, sizeof(double)) ||
-            amps__realloc(ctx, (void **)&D->cr_Rn, 9 * c, sizeof(double)))
+            amps__realloc(ctx, (void **)&D->cr_Rn, 9 * c, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->cr_wprev, 3 * c, sizeof(double)))
             return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory (corotational)");
         D->cr_cap = (amps_int)c;
     }
@@ -15427,6 +15682,7 @@ static void amps__cr_rhs(amps_scene *S, amps_int N, double *b, double *x) {
             b[e] = S->node.mass[v] * D->vel[k] + D->dt * (S->node.force[k] + S->node.mass[v] * D->g[d] - D->cr_gel[k]);
             x[e] = D->orphan[v]        ? 0.0
                    : S->node.pinned[v] ? (S->node.pin_value[k] - S->node.disp[k]) / D->dt
+                   : v < D->cr_nprev   ? 2.0 * D->vel[k] - D->cr_wprev[k]
                                        : D->vel[k];
         }
 }
@@ -15461,19 +15717,19 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
     int restart;
     amps_status s;
     for (e = 0; e < N; e++) p[e] = D->cr_con[e] ? x[e] : 0.0;
-    amps__cr_pass(S, 1, p, q);
+    amps__cr_mul(S, p, q);
     for (e = 0; e < N; e++) r[e] = D->cr_con[e] ? 0.0 : b[e] - q[e];
     *bn = sqrt(amps__cr_dot(S, N, r, r));
     if (*bn == 0) {
         for (e = 0; e < N; e++)
             if (!D->cr_con[e]) x[e] = 0.0;
-        amps__cr_pass(S, 1, x, q);
+        amps__cr_mul(S, x, q);
         *relres = 0;
         return 0;
     }
     for (restart = 0; restart < 3; restart++) {
         /* r = b - A_R x on the free equations (the true residual) */
-        amps__cr_pass(S, 1, x, q);
+        amps__cr_mul(S, x, q);
         for (e = 0; e < N; e++) r[e] = D->cr_con[e] ? 0.0 : b[e] - q[e];
         rn = sqrt(amps__cr_dot(S, N, r, r));
         *relres = rn / *bn;
@@ -15487,7 +15743,7 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
             beta = rz != 0 ? rz1 / rz : 0.0;
             for (e = 0; e < N; e++) p[e] = D->cr_con[e] ? 0.0 : z[e] + beta * p[e];
             rz = rz1;
-            amps__cr_pass(S, 1, p, q);
+            amps__cr_mul(S, p, q);
             alpha = amps__cr_dot(S, N, p, q);
             if (!(alpha > 0)) break; /* not positive definite on this direction (rounding): stop */
             alpha = rz / alpha;
@@ -15522,7 +15778,8 @@ static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
     for (a = 0; a < S->U->aug.size; a++)
         if (S->U->aug.kind[a] & AMPS__UCON) D->cr_con[S->U->aug.idx[a]] = 1;
     D->info.products = 0;
-    amps__cr_pass(S, 0, NULL, NULL);
+    amps__cr_pass(S, 0);
+    if ((s = amps__cr_assemble(ctx, S)) != AMPS_OK) return s;
     amps__cr_rhs(S, N, b, x);
     D->info.t_rotation = amps_now() - t0;
     t0 = amps_now();
@@ -15534,9 +15791,11 @@ static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
             amps_int k = 3 * v + d;
             e = S->node.dof[k];
             D->cr_react[k] = (e >= 0 && S->node.pinned[v] && !D->orphan[v]) ? (q[e] - b[e]) / D->dt : 0.0;
+            D->cr_wprev[k] = D->vel[k];
             D->vel[k] = e >= 0 ? x[e] : 0.0;
             S->node.disp[k] += D->dt * D->vel[k];
         }
+    D->cr_nprev = S->m->nnode;
     D->cr_rvalid = 0;
     D->info.corotational = 1;
     D->info.iterations = it;

@@ -848,8 +848,70 @@ static void test_solve_rhs(void) {
     amps_scene_free(&ctx, S);
 }
 
+/* The step on 1, 2 and 3 threads gives the same bits (with the deterministic re-factorization
+   policy): a beam large enough for the parallel passes (rotations, the assembly of A_R, its
+   products), its end turned by pins through an arc, gravity, and a cut in the middle (a rebuilt
+   pattern of A_R). */
+static void test_threads_bitwise(void) {
+    double *ref = NULL;
+    size_t nref = 0;
+    int nt;
+    for (nt = 1; nt <= 3; nt++) {
+        amps_ctx ctx;
+        amps_scene *S;
+        const amps_mesh *m;
+        amps_int v, vc, fixed[25], nfix = 0;
+        double ax[3] = {1, 0, 0}, c[3] = {2, 2, 90}, gv[3] = {0, -9.81, 0}, p[3] = {2, 2, 50}, n[3] = {0.3, 1, 0.1};
+        int step, d;
+        amps_scene_opts so;
+        amps_ctx_init(&ctx);
+        ctx.nthreads = nt;
+        amps_scene_opts_default(&so);
+        so.update.refactor = AMPS_REFACTOR_COUNT; /* AUTO's re-factorizations depend on the clock */
+        S = amps_scene_create(&ctx, amps_mesh_beam(&ctx, 91), &so);
+        CHECK(S != NULL, "threads: scene: %s", ctx.msg);
+        if (!S) return;
+        m = amps_scene_mesh(S);
+        CHECK(m->nnode > 2048 && m->ntet > 2048, "threads: the beam is too small for the parallel passes");
+        for (v = 0; v < m->nnode; v++)
+            if (m->xyz[3 * v + 2] == 0) fixed[nfix++] = v;
+        amps_scene_set_material(&ctx, S, 1000.0, 0.3);
+        CHECK(amps_scene_fix(&ctx, S, nfix, fixed) == AMPS_OK && amps_scene_gravity(&ctx, S, gv) == AMPS_OK &&
+                      amps_scene_dynamics(&ctx, S, 0.05, 0.1, 0.01) == AMPS_OK &&
+                      amps_scene_corotational(&ctx, S, 1) == AMPS_OK,
+              "threads: setup: %s", ctx.msg);
+        for (step = 0; step < 8; step++) {
+            for (v = 0; v < m->nfile; v++)
+                if (m->xyz[3 * v + 2] == 90) {
+                    double q[3], g[3];
+                    t_arc(ax, 0.1 * (step + 1), c, m->xyz + 3 * v, q);
+                    for (d = 0; d < 3; d++) g[d] = q[d] - m->xyz[3 * v + d];
+                    amps_scene_pin(&ctx, S, v, g);
+                }
+            if (step == 3)
+                CHECK(amps_scene_cut(&ctx, S, 2 + 5 * (2 + 5 * 50), p, n, &vc) == AMPS_OK, "threads: cut: %s",
+                      ctx.msg);
+            CHECK(amps_scene_step(&ctx, S, 1) == AMPS_OK, "threads: step: %s", ctx.msg);
+        }
+        if (nt == 1) {
+            nref = 3 * (size_t)m->nnode;
+            ref = (double *)malloc(sizeof(double) * 2 * nref);
+            memcpy(ref, amps_scene_displacements(S), sizeof(double) * nref);
+            memcpy(ref + nref, amps_scene_velocities(S), sizeof(double) * nref);
+        } else {
+            CHECK(3 * (size_t)m->nnode == nref && !memcmp(ref, amps_scene_displacements(S), sizeof(double) * nref) &&
+                          !memcmp(ref + nref, amps_scene_velocities(S), sizeof(double) * nref),
+                  "threads: %d threads differ from 1 in the bits of u or w", nt);
+        }
+        amps_scene_free(&ctx, S);
+    }
+    printf("  1, 2 and 3 threads: the same bits\n");
+    free(ref);
+}
+
 int main(void) {
     test_rotation_kernel();
+    test_threads_bitwise();
     test_solve_rhs();
     test_identity_is_linear();
     test_rigid_motion();
