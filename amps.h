@@ -1287,17 +1287,23 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    A_R w+ = M w + dt (f + M g_grav - g), A_R = cM M + cK K_R, with the constraint rules of
    amps_scene_step (fixed, pins w_P = (g_P - u_P) / dt, orphans w = 0), u+ = u + dt w+; the
    reactions (amps_scene_reaction) are (A_R w+ - b)_P / dt. With every R_e = I it is the linear
-   step. Nothing is re-factored for it: conjugate gradients on the reduced A_R from w,
-   preconditioned by Rn A^-1 Rn^T (A^-1: the engine's exact solve with the current linear A,
-   amps_update_solve_rhs, so cuts, removals and pins stay updates; Rn: per node the rotation
-   nearest to the volume-weighted mean of its tets' R_e, which makes the preconditioner exact
-   for a rigid rotation), to the relative residual ||(b - A_R w+)_F|| / ||(b - A_R w_C)_F|| <= tol
-   (amps_scene_corotational_tol; amps_scene_residual reports it), started from the
-   extrapolation 2 w - w_prev of the last two steps' velocities. A_R is assembled each step in
+   step. Nothing is re-factored for it: conjugate gradients on the reduced A_R, started from the
+   extrapolation 2 w - w_prev of the last two steps' velocities, to the relative residual
+   ||(b - A_R w+)_F|| / ||(b - A_R w_C)_F|| <= tol (amps_scene_corotational_tol;
+   amps_scene_residual reports it), preconditioned by one of two: Rn A^-1 Rn^T (A^-1: the
+   engine's exact solve with the current linear A, amps_update_solve_rhs, so cuts, removals and
+   pins stay updates; Rn: per node the rotation nearest to the volume-weighted mean of its tets'
+   R_e, which makes it exact for a rigid rotation), or block Jacobi (the inverses of A_R's 3x3
+   diagonal blocks: far cheaper per iteration, and enough where the mass dominates A_R, as with
+   small dt). The step takes the one whose last iteration count times its cost per iteration
+   (bytes streamed: the factor's and A_R's entries, a model, so the choice is reproducible) is
+   smaller; block Jacobi is tried on the second step and every 32 steps, and left for the
+   engine's (from the current iterate) once it has cost 1.5 times the engine's last step.
+   amps_scene_step_info reports the iterations of each. A_R is assembled each step in
    3x3 blocks by node (the pattern is rebuilt when a cut or a node separation changed the tets'
    nodes); assembly and products are parallel on the engine's threads and bitwise independent of
    their count. Memory from the first step: 36 doubles and 20 indices per tet (reference
-   gradients, volume, R_e, Lame constants, element results; the block map), 18 doubles per node,
+   gradients, volume, R_e, Lame constants, element results; the block map), 27 doubles per node,
    9 doubles and an index per block of A_R (one per pair of nodes sharing a tet), 6 doubles per
    equation; a rebuilt pattern allocates when it outgrows them. Stresses (amps_scene_stress and
    fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. amps_scene_solve_reactions is
@@ -1305,18 +1311,21 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    the first step: AMPS_ERR_STATE otherwise (nothing changes). */
 AMPS_API amps_status amps_scene_corotational(amps_ctx *ctx, amps_scene *S, int on);
 /* PCG tolerance (0 < tol < 1, default 1e-10) and iteration cap (maxit >= 1, 0: default 200) of
-   the corotational step; a step that does not reach tol within maxit iterations is still taken
-   and amps_scene_step returns AMPS_WARN_INACCURATE. AMPS_ERR_VALUE otherwise. */
+   the corotational step: at most the work of maxit iterations with the engine's preconditioner
+   (a block Jacobi iteration counts as its cost ratio to one of those); a step that does not reach
+   tol within it is still taken and amps_scene_step returns AMPS_WARN_INACCURATE.
+   AMPS_ERR_VALUE otherwise. */
 AMPS_API amps_status amps_scene_corotational_tol(amps_ctx *ctx, amps_scene *S, double tol, amps_int maxit);
 /* What the last step did. */
 typedef struct amps_scene_step_stats {
     int corotational;          /* 1: the step was corotational */
-    amps_int iterations;       /* PCG iterations (preconditioner solves) of the last step */
+    amps_int iterations;       /* PCG iterations (preconditioner applications) of the last step */
     double relres;             /* its final relative residual (recomputed, not the recursion's); -1: linear */
     amps_int products;         /* products with A_R */
     double t_rotation;         /* seconds: rotations, elastic forces, masses */
     double t_solve;            /* seconds: the PCG */
     amps_int iterations_total; /* PCG iterations of all steps */
+    amps_int iterations_jacobi; /* of the last step's iterations, those with the block Jacobi preconditioner */
 } amps_scene_step_stats;
 /* Fills st with the last step's statistics (zeros before the first step). AMPS_ERR_ARG for NULL. */
 AMPS_API amps_status amps_scene_step_info(const amps_scene *S, amps_scene_step_stats *st);
@@ -12675,12 +12684,15 @@ typedef struct amps__scene_dyn {
     double *cr_gel, *cr_react;                    /* 3 per node: elastic force g, pin reactions of the last step */
     double *cr_Rn;                                /* 9 per node: the node's rotation (the preconditioner's frame) */
     double *cr_wprev;                             /* 3 per node: w before the last step (the PCG start extrapolates) */
+    amps_int cr_it[2];                            /* iterations of the last step with each preconditioner (0: none yet) */
+    amps_int cr_probe;                            /* steps since the other preconditioner was last tried */
     amps_int cr_nprev;                            /* nodes 0..cr_nprev-1 have cr_wprev (0: none) */
     amps_int cr_cap;                              /* node capacity of cr_gel, cr_react */
     double *cr_vec;                               /* 6 per equation: b, x, r, z, p, q */
     struct {                                      /* A_R of the step in 3x3 blocks by node (amps__cr_assemble) */
         amps_int *bp, *bj;                        /* row v: blocks bp[v] .. bp[v+1]-1, nodes bj ascending */
         double *bx;                               /* 9 per block, row-major */
+        double *dinv;                             /* 9 per node: the inverse of its diagonal block */
         amps_int *map;                            /* 16 per tet: map[16 t + 4 a + b] = block of tet node b in row of node a */
         amps_int *tet;                            /* 4 per tet: the nodes the pattern was built for */
         amps_int *wrow, *wcnt;                    /* workspace of a rebuild: 16 per tet; 2 per node + 2 */
@@ -12792,6 +12804,7 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->dyn.crA.bp);
     amps__free(ctx, S->dyn.crA.bj);
     amps__free(ctx, S->dyn.crA.bx);
+    amps__free(ctx, S->dyn.crA.dinv);
     amps__free(ctx, S->dyn.crA.map);
     amps__free(ctx, S->dyn.crA.tet);
     amps__free(ctx, S->dyn.crA.wrow);
@@ -15439,6 +15452,7 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
     if ((size_t)nn + 1 > S->dyn.crA.cap_row) { /* room for the nodes: bp and the counts */
         size_t c = (size_t)(m->node_cap > nn ? m->node_cap : nn) + 1;
         if (amps__realloc(ctx, (void **)&S->dyn.crA.bp, c, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&S->dyn.crA.dinv, 9 * c, sizeof(double)) ||
             amps__realloc(ctx, (void **)&S->dyn.crA.wcnt, 2 * c, sizeof(amps_int)))
             goto oom;
         S->dyn.crA.cap_row = c;
@@ -15563,6 +15577,30 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
                 B[8] += gg;
             }
         }
+    }
+    for (v = lo; v < hi; v++) { /* the inverses of the diagonal blocks */
+        amps_int l = bp[v], h2 = bp[v + 1] - 1;
+        const double *B;
+        double *Di = S->dyn.crA.dinv + 9 * (size_t)v, det;
+        int q;
+        while (l < h2) {
+            amps_int mid = l + (h2 - l) / 2;
+            if (bj[mid] < v) l = mid + 1;
+            else h2 = mid;
+        }
+        B = bx + 9 * (size_t)l;
+        Di[0] = B[4] * B[8] - B[5] * B[7];
+        Di[1] = B[2] * B[7] - B[1] * B[8];
+        Di[2] = B[1] * B[5] - B[2] * B[4];
+        Di[3] = B[5] * B[6] - B[3] * B[8];
+        Di[4] = B[0] * B[8] - B[2] * B[6];
+        Di[5] = B[2] * B[3] - B[0] * B[5];
+        Di[6] = B[3] * B[7] - B[4] * B[6];
+        Di[7] = B[1] * B[6] - B[0] * B[7];
+        Di[8] = B[0] * B[4] - B[1] * B[3];
+        det = B[0] * Di[0] + B[1] * Di[3] + B[2] * Di[6];
+        det = det != 0.0 ? 1.0 / det : 0.0;
+        for (q = 0; q < 9; q++) Di[q] *= det;
     }
 }
 
@@ -15708,13 +15746,58 @@ static void amps__cr_rotate(const amps_scene *S, const double *x, double *y, int
    a rigid rotation of the whole model); *bn receives ||(b - A_R w_C)_F||, *relres the final
    relative residual, q (the fifth vector of cr_vec) A_R x. Returns the iterations, or a negative
    status. */
+/* z = M^-1 r on the free equations with the preconditioner kind: 0 Rn A^-1 Rn^T (the engine's
+   exact solve with the current linear A in the frame of the node rotations), 1 block Jacobi
+   (the inverses of A_R's diagonal 3x3 blocks). */
+static amps_status amps__cr_prec(amps_ctx *ctx, amps_scene *S, amps_int N, int kind, const double *r, double *z) {
+    const amps__scene_dyn *D = &S->dyn;
+    amps_int v, e;
+    if (kind == 0) {
+        amps_status s;
+        amps__cr_rotate(S, r, z, 1);
+        if ((s = amps_update_solve_rhs(ctx, S->U, z, z)) != AMPS_OK) return s;
+        amps__cr_rotate(S, z, z, 0);
+        return AMPS_OK;
+    }
+    for (e = 0; e < N; e++) z[e] = 0.0;
+    for (v = 0; v < S->m->nnode; v++) {
+        const double *Di = D->crA.dinv + 9 * (size_t)v;
+        int i;
+        if ((e = S->node.dof[3 * v]) < 0 || D->cr_con[e]) continue;
+        for (i = 0; i < 3; i++) z[e + i] = Di[3 * i] * r[e] + Di[3 * i + 1] * r[e + 1] + Di[3 * i + 2] * r[e + 2];
+    }
+    return AMPS_OK;
+}
+
+/* The cost of a PCG iteration with preconditioner kind, in bytes streamed (a model; the same on
+   every machine, so the choice is reproducible): the product with A_R (76 per block), the
+   vector updates (48 per equation), and the engine's forward and backward solves (24 per entry
+   of L) and dense system (16 per entry) or the diagonal blocks (72 per node). */
+static double amps__cr_cost(const amps_scene *S, amps_int N, int kind) {
+    double c = 76.0 * (double)S->dyn.crA.bp[S->dyn.crA.nnode] + 48.0 * (double)N;
+    if (kind == 1) return c + 72.0 * (double)S->m->nnode;
+    {
+        const amps_factor *F = amps_update_factor(S->U);
+        double u = (double)S->U->aug.size;
+        return c + 24.0 * (double)F->Lp[F->n] + 16.0 * u * u;
+    }
+}
+
+/* PCG on the reduced A_R w_F = (b - A_R w_C)_F from x (x_C: the prescribed values), in place;
+   *bn receives ||(b - A_R w_C)_F||, *relres the final relative residual, q (the fifth vector of
+   cr_vec) A_R x. The preconditioner (amps__cr_prec) is the one whose last iterations times its
+   cost per iteration (amps__cr_cost) is smaller; block Jacobi is tried on the second step and
+   every 32 steps after a step without it, and abandoned for the engine's (a restart from the
+   current x) after 1.5 times the cost of the engine's last step. maxit caps the cost at maxit
+   iterations with the engine's preconditioner (a block Jacobi iteration counts cj / ce of one).
+   Returns the iterations of both, or a negative status. */
 static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const double *b, double *x, double *bn,
                              double *relres) {
     amps__scene_dyn *D = &S->dyn;
     double *r = D->cr_vec + 2 * (size_t)D->cr_ncap, *z = r + D->cr_ncap, *p = z + D->cr_ncap, *q = p + D->cr_ncap;
-    double tol = D->corot_tol > 0 ? D->corot_tol : 1e-10, rz = 0, rn, alpha, beta;
-    amps_int maxit = D->corot_maxit > 0 ? D->corot_maxit : 200, it = 0, e;
-    int restart;
+    double tol = D->corot_tol > 0 ? D->corot_tol : 1e-10, rz = 0, rn, alpha, beta, ce, cj;
+    amps_int maxit = D->corot_maxit > 0 ? D->corot_maxit : 200, it = 0, e, cap = 0, kit = 0;
+    int restart, kind = 0;
     amps_status s;
     for (e = 0; e < N; e++) p[e] = D->cr_con[e] ? x[e] : 0.0;
     amps__cr_mul(S, p, q);
@@ -15727,18 +15810,26 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
         *relres = 0;
         return 0;
     }
-    for (restart = 0; restart < 3; restart++) {
+    /* the preconditioner: the cheaper by the last iterations, block Jacobi tried now and then */
+    ce = amps__cr_cost(S, N, 0);
+    cj = amps__cr_cost(S, N, 1);
+    if (D->cr_it[0] > 0) {
+        cap = (amps_int)(1.5 * (double)D->cr_it[0] * ce / cj) + 1;
+        if (cap > (amps_int)((double)maxit * ce / cj)) cap = (amps_int)((double)maxit * ce / cj);
+        if (D->cr_it[1] == 0 || D->cr_probe >= 32 || (double)D->cr_it[1] * cj < (double)D->cr_it[0] * ce) kind = 1;
+    }
+    D->cr_probe = kind ? 0 : D->cr_probe + 1;
+    for (restart = 0; restart < 4; restart++) {
         /* r = b - A_R x on the free equations (the true residual) */
         amps__cr_mul(S, x, q);
         for (e = 0; e < N; e++) r[e] = D->cr_con[e] ? 0.0 : b[e] - q[e];
         rn = sqrt(amps__cr_dot(S, N, r, r));
         *relres = rn / *bn;
-        if (*relres <= tol || it >= maxit) break;
-        for (; it < maxit && rn > tol * *bn; it++) {
+        if (*relres <= tol || (!kind && (double)it * ce + (double)kit * cj >= (double)maxit * ce)) break;
+        for (; rn > tol * *bn && (kind ? kit < cap : (double)it * ce + (double)kit * cj < (double)maxit * ce);
+             it += !kind, kit += kind) {
             double rz1;
-            amps__cr_rotate(S, r, z, 1);
-            if ((s = amps_update_solve_rhs(ctx, S->U, z, z)) != AMPS_OK) return s;
-            amps__cr_rotate(S, z, z, 0);
+            if ((s = amps__cr_prec(ctx, S, N, kind, r, z)) != AMPS_OK) return s;
             rz1 = amps__cr_dot(S, N, r, z);
             beta = rz != 0 ? rz1 / rz : 0.0;
             for (e = 0; e < N; e++) p[e] = D->cr_con[e] ? 0.0 : z[e] + beta * p[e];
@@ -15754,9 +15845,16 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
                 }
             rn = sqrt(amps__cr_dot(S, N, r, r));
         }
+        if (kind && rn > tol * *bn) { /* block Jacobi too slow: on with the engine's, from x */
+            D->cr_it[1] = kit + (amps_int)((double)D->cr_it[0] * ce / cj); /* its estimate: above the cap */
+            kind = 0;
+        }
         rz = 0; /* a restart begins with the steepest descent direction */
     }
-    return it;
+    if (kind) D->cr_it[1] = kit > 0 ? kit : 1;
+    else D->cr_it[0] = it > 0 ? it : 1;
+    D->info.iterations_jacobi = kit;
+    return it + kit;
 }
 
 /* One corotational step (see amps_scene_corotational): rotations and elastic forces, b, PCG,

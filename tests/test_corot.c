@@ -396,6 +396,7 @@ static int ref_corot(amps_ctx *ctx, const amps_mesh *m, const cref *w, const dou
 }
 
 static double worst_err = 0;
+static int n_jacobi = 0, n_engine = 0; /* steps whose PCG ended with each preconditioner */
 
 /* One step of S against ref_corot from the scene's state before it. */
 static void check_step(amps_ctx *ctx, amps_scene *S, cref *w, const char *what, int step) {
@@ -424,6 +425,8 @@ static void check_step(amps_ctx *ctx, amps_scene *S, cref *w, const char *what, 
           st.relres);
     if (ew > worst_err) worst_err = ew;
     if (eu > worst_err) worst_err = eu;
+    if (st.iterations > st.iterations_jacobi) n_engine++;
+    else n_jacobi++;
     free(u0);
     free(w0);
     free(ur);
@@ -462,6 +465,7 @@ static void random_sequence(const char *what, int nz, int nops, unsigned long lo
     int op, v, step = 0, ncut = 0, nrem = 0;
     double ax[3], c[3] = {1, 1, 0}, angle = 0, l;
     memset(&w, 0, sizeof(w));
+    n_jacobi = n_engine = 0;
     amps_ctx_init(&ctx);
     t_seed(seed);
     m = amps_mesh_grid(&ctx, 3, 3, nz, 1, 1, 1);
@@ -538,8 +542,9 @@ static void random_sequence(const char *what, int nz, int nops, unsigned long lo
         }
     }
     check_step(&ctx, S, &w, what, step++);
-    printf("  %-16s steps %d, cuts %d, removals %d, final angle %.0f deg, worst error %.2e\n", what, step, ncut, nrem,
-           angle * 180 / 3.14159265358979, worst_err);
+    printf("  %-16s steps %d, cuts %d, removals %d, final angle %.0f deg, worst error %.2e; preconditioner: "
+           "block Jacobi %d steps, engine %d\n",
+           what, step, ncut, nrem, angle * 180 / 3.14159265358979, worst_err, n_jacobi, n_engine);
     amps_scene_free(&ctx, S);
     shadow_free(&w.sh);
 }
@@ -766,7 +771,7 @@ static void test_inverted(void) {
 static void test_bad_input(void) {
     amps_ctx ctx;
     amps_scene *S;
-    amps_scene_step_stats st = {0, 0, 0, 0, 0, 0, 0};
+    amps_scene_step_stats st = {0, 0, 0, 0, 0, 0, 0, 0};
     double g[3] = {0, 0.5, 0.5};
     amps_ctx_init(&ctx);
     S = amps_scene_create(&ctx, amps_mesh_grid(&ctx, 3, 3, 5, 1, 1, 1), NULL);
@@ -783,7 +788,8 @@ static void test_bad_input(void) {
     CHECK(amps_scene_step(&ctx, S, 1) == AMPS_OK && amps_scene_step_info(S, &st) == AMPS_OK && !st.corotational,
           "bad: the refused call turned the mode on");
     amps_scene_free(&ctx, S);
-    /* the cap: one iteration for 1e-15 is not enough; the step is taken with a warning */
+    /* the cap: the work of one iteration with the engine's preconditioner is not enough for 1e-15;
+       the step is taken with a warning */
     S = amps_scene_create(&ctx, amps_mesh_grid(&ctx, 3, 3, 5, 1, 1, 1), NULL);
     amps_scene_fix_where(&ctx, S, 2, AMPS_LT, 0.5, NULL);
     amps_scene_dynamics(&ctx, S, 0.05, 0.1, 0.01);
@@ -794,8 +800,9 @@ static void test_bad_input(void) {
     g[0] = 2;
     amps_scene_pin(&ctx, S, 40, g);
     CHECK(amps_scene_step(&ctx, S, 1) == AMPS_WARN_INACCURATE, "cap: no warning: %s", ctx.msg);
-    CHECK(amps_scene_step_info(S, &st) == AMPS_OK && st.iterations == 1 && st.relres > 1e-15, "cap: stats %ld %.2e",
-          (long)st.iterations, st.relres);
+    CHECK(amps_scene_step_info(S, &st) == AMPS_OK && st.iterations >= 1 && st.relres > 1e-15 &&
+                  st.iterations - st.iterations_jacobi <= 1,
+          "cap: stats %ld %.2e", (long)st.iterations, st.relres);
     CHECK(amps_scene_solve_reactions(&ctx, S) == AMPS_ERR_STATE, "cap: haptic path in the corotational mode");
     amps_scene_free(&ctx, S);
 }
