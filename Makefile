@@ -2,8 +2,9 @@
 #   make test          build and run every test (last line: "N passed, N failed")
 #   make test SAN=1    the same under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make test OMP=     the same without OpenMP
-#   make tsan          ThreadSanitizer on the tests that run background re-factorizations and
-#                      on tests/test_par.c (the parallel layer on a pthread job system)
+#   make tsan          ThreadSanitizer on the tests that run background re-factorizations, on
+#                      tests/test_par.c (the parallel layer on a pthread job system) and on
+#                      tests/test_corot.c (the corotational passes on 1-3 threads)
 #   make test-tasks    the tests with every context on the host-task back end (tests/jobs_test.h)
 #   make examples      build the examples (build/default/readme_example, haptic_loop, frame_loop)
 #   make switches      AMPS_NO_FEM / NO_STDIO / NO_THREADS combinations: build, tests, object sizes
@@ -112,9 +113,9 @@ cxx: | $(BUILD)
 # libgomp is not instrumented, so without OpenMP; the threads are the re-factorization's
 tsan:
 	$(MAKE) SAN=thread OMP= BUILD=build/tsan OPT="-O1 -g" build/tsan/test_update build/tsan/test_scene \
-	  build/tsan/test_par
+	  build/tsan/test_par build/tsan/test_corot
 	@TSAN_OPTIONS="halt_on_error=1 suppressions=$(abspath tests/tsan.supp)" AMPS_BUILD=build/tsan \
-	  bash tests/run.sh build/tsan/test_update build/tsan/test_scene build/tsan/test_par
+	  bash tests/run.sh build/tsan/test_update build/tsan/test_scene build/tsan/test_par build/tsan/test_corot
 
 # The whole suite on the host-callback back end (tests/jobs_test.h's pool of 4 workers), no OpenMP.
 test-tasks:

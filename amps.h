@@ -11070,6 +11070,20 @@ AMPS_API double amps_tet_stress(const double X[12], double E, double nu, const d
     return vol;
 }
 
+/* C = the cofactors of A (3x3, row-major): A^-T = C / det A, A^-1 = C^T / det A; returns det A. */
+static double amps__cof3(const double A[9], double C[9]) {
+    C[0] = A[4] * A[8] - A[5] * A[7];
+    C[1] = A[5] * A[6] - A[3] * A[8];
+    C[2] = A[3] * A[7] - A[4] * A[6];
+    C[3] = A[2] * A[7] - A[1] * A[8];
+    C[4] = A[0] * A[8] - A[2] * A[6];
+    C[5] = A[1] * A[6] - A[0] * A[7];
+    C[6] = A[1] * A[5] - A[2] * A[4];
+    C[7] = A[2] * A[3] - A[0] * A[5];
+    C[8] = A[0] * A[4] - A[1] * A[3];
+    return A[0] * C[0] + A[1] * C[1] + A[2] * C[2];
+}
+
 /* R = the orthogonal polar factor of F (row-major) by Newton's iteration X <- (g X + X^-T / g) / 2
    (g = (||X^-1||_F / ||X||_F)^(1/2) in the first two steps, then 1), which converges
    quadratically to U V^T when det F > 0; 1 when it converged (a step changed X by at most
@@ -11084,16 +11098,7 @@ static int amps__polar_newton(const double F[9], double R[9]) {
     }
     for (it = 0; it < 12; it++) {
         double nc = 0;
-        C[0] = X[4] * X[8] - X[5] * X[7]; /* the cofactors: X^-T = C / det X */
-        C[1] = X[5] * X[6] - X[3] * X[8];
-        C[2] = X[3] * X[7] - X[4] * X[6];
-        C[3] = X[2] * X[7] - X[1] * X[8];
-        C[4] = X[0] * X[8] - X[2] * X[6];
-        C[5] = X[1] * X[6] - X[0] * X[7];
-        C[6] = X[1] * X[5] - X[2] * X[4];
-        C[7] = X[2] * X[3] - X[0] * X[5];
-        C[8] = X[0] * X[4] - X[1] * X[3];
-        det = X[0] * C[0] + X[1] * C[1] + X[2] * C[2];
+        det = amps__cof3(X, C); /* X^-T = C / det X */
         if (!(det > 1e-6 * nx * sqrt(nx) / 27.0)) return 0;
         g = 1.0;
         if (it < 2) {
@@ -15436,6 +15441,16 @@ static void amps__cr_pass(amps_scene *S, int mode) {
 
 /* ---- the assembled A_R: 3x3 blocks by node ---- */
 
+/* The position of node w among the sorted bj[lo..hi] (w present), by bisection. */
+static amps_int amps__cr_find(const amps_int *bj, amps_int lo, amps_int hi, amps_int w) {
+    while (lo < hi) {
+        amps_int mid = lo + (hi - lo) / 2;
+        if (bj[mid] < w) lo = mid + 1;
+        else hi = mid;
+    }
+    return lo;
+}
+
 /* The block pattern of every tet, removed ones included (a removal then leaves it valid): row v
    holds node w when a tet holds both (v itself included), ascending; crA.map locates each tet's
    16 blocks. Rebuilt when a tet's nodes or the node count changed (cuts, node separation).
@@ -15500,15 +15515,9 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
     for (t = 0; t < nt; t++) /* the block of node b in the row of node a, by bisection */
         for (a = 0; a < 4; a++) {
             amps_int row = m->tet[4 * t + a];
-            for (b = 0; b < 4; b++) {
-                amps_int lo = S->dyn.crA.bp[row], hi = S->dyn.crA.bp[row + 1] - 1, w = m->tet[4 * t + b];
-                while (lo < hi) {
-                    amps_int mid = lo + (hi - lo) / 2;
-                    if (S->dyn.crA.bj[mid] < w) lo = mid + 1;
-                    else hi = mid;
-                }
-                S->dyn.crA.map[16 * t + 4 * a + b] = lo;
-            }
+            for (b = 0; b < 4; b++)
+                S->dyn.crA.map[16 * t + 4 * a + b] = amps__cr_find(S->dyn.crA.bj, S->dyn.crA.bp[row],
+                                                                   S->dyn.crA.bp[row + 1] - 1, m->tet[4 * t + b]);
         }
     memcpy(S->dyn.crA.tet, m->tet, sizeof(amps_int) * 4 * (size_t)nt);
     S->dyn.crA.nnode = nn;
@@ -15538,15 +15547,8 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
     (void)slot;
     if (p1 == j->np) hi = m->nnode;
     memset(bx + 9 * (size_t)bp[lo], 0, sizeof(double) * 9 * (size_t)(bp[hi] - bp[lo]));
-    for (v = lo; v < hi; v++) { /* the mass: the diagonal block, found by bisection */
-        amps_int l = bp[v], h = bp[v + 1] - 1;
-        double mv = S->dyn.cM * S->node.mass[v], *B;
-        while (l < h) {
-            amps_int mid = l + (h - l) / 2;
-            if (bj[mid] < v) l = mid + 1;
-            else h = mid;
-        }
-        B = bx + 9 * (size_t)l;
+    for (v = lo; v < hi; v++) { /* the mass on the diagonal block */
+        double mv = S->dyn.cM * S->node.mass[v], *B = bx + 9 * (size_t)amps__cr_find(bj, bp[v], bp[v + 1] - 1, v);
         B[0] = B[4] = B[8] = mv;
     }
     for (t = 0; t < m->ntet; t++) {
@@ -15578,29 +15580,13 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
             }
         }
     }
-    for (v = lo; v < hi; v++) { /* the inverses of the diagonal blocks */
-        amps_int l = bp[v], h2 = bp[v + 1] - 1;
-        const double *B;
-        double *Di = S->dyn.crA.dinv + 9 * (size_t)v, det;
-        int q;
-        while (l < h2) {
-            amps_int mid = l + (h2 - l) / 2;
-            if (bj[mid] < v) l = mid + 1;
-            else h2 = mid;
-        }
-        B = bx + 9 * (size_t)l;
-        Di[0] = B[4] * B[8] - B[5] * B[7];
-        Di[1] = B[2] * B[7] - B[1] * B[8];
-        Di[2] = B[1] * B[5] - B[2] * B[4];
-        Di[3] = B[5] * B[6] - B[3] * B[8];
-        Di[4] = B[0] * B[8] - B[2] * B[6];
-        Di[5] = B[2] * B[3] - B[0] * B[5];
-        Di[6] = B[3] * B[7] - B[4] * B[6];
-        Di[7] = B[1] * B[6] - B[0] * B[7];
-        Di[8] = B[0] * B[4] - B[1] * B[3];
-        det = B[0] * Di[0] + B[1] * Di[3] + B[2] * Di[6];
+    for (v = lo; v < hi; v++) { /* the inverses of the diagonal blocks: C^T / det */
+        double C[9], *Di = S->dyn.crA.dinv + 9 * (size_t)v,
+                     det = amps__cof3(bx + 9 * (size_t)amps__cr_find(bj, bp[v], bp[v + 1] - 1, v), C);
+        int q, r;
         det = det != 0.0 ? 1.0 / det : 0.0;
-        for (q = 0; q < 9; q++) Di[q] *= det;
+        for (q = 0; q < 3; q++)
+            for (r = 0; r < 3; r++) Di[3 * q + r] = C[3 * r + q] * det;
     }
 }
 
