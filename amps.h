@@ -1080,9 +1080,11 @@ AMPS_API void amps_haptic_free(amps_ctx *ctx, amps_haptic *h);
 /* Builds h for the current scene (after amps_scene_solve_reactions' commit: moved pins and forces
    are included). Cost: that haptic step plus one solve with the engine's dense factor per pinned
    DOF (in blocks of up to 16 that share each pass over the factor), O(3n |S u C|^2) in all,
-   O(9 n^2) to store; allocates only when n exceeds h->cap. Errors (h
-   unchanged): AMPS_ERR_ARG (NULL), AMPS_ERR_STATE (corotational mode, a two-phase commit in
-   progress), AMPS_ERR_OOM, the commit's. No pin: AMPS_WARN_NOOP with h->n = 0. */
+   O(9 n^2) to store; allocates only when n exceeds h->cap. In the corotational mode r0 and g0
+   are those of its haptic call and H = Rb H_A Rb^T / dt^2 (H_A: the Schur complement of the
+   linear A, Rb: the pinned nodes' frames; see amps_scene_corotational). Errors (h unchanged):
+   AMPS_ERR_ARG (NULL), AMPS_ERR_STATE (a two-phase commit in progress), AMPS_ERR_OOM, the
+   commit's. No pin: AMPS_WARN_NOOP with h->n = 0. */
 AMPS_API amps_status amps_scene_haptic_build(amps_ctx *ctx, amps_scene *S, amps_haptic *h);
 /* r = r0 + H (g - g0) (3 h->n entries each; g NULL: r = r0). O(9 n^2), allocates nothing, reads
    only h: callable from any thread concurrently with anything on the scene. AMPS_ERR_ARG (NULL h
@@ -1306,9 +1308,16 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    gradients, volume, R_e, Lame constants, element results; the block map), 27 doubles per node,
    9 doubles and an index per block of A_R (one per pair of nodes sharing a tet), 6 doubles per
    equation; a rebuilt pattern allocates when it outgrows them. Stresses (amps_scene_stress and
-   fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. amps_scene_solve_reactions is
-   AMPS_ERR_STATE in this mode (the reactions come with each step). Dynamics only and before
-   the first step: AMPS_ERR_STATE otherwise (nothing changes). */
+   fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. The haptic path between steps
+   (amps_scene_solve_reactions, amps_scene_haptic_build) is a model, not the next step: per
+   pinned node r = r0 + Rn dr, r0 the last step's reaction (0 for a pin made since), dr the
+   reaction of the engine's linear A to the pin moves since the step (g - g0, g0 the target at
+   the step, or the node's displacement for a new pin) taken into the node frames Rn of the
+   current state (Rn^T (g - g0)): the cost of the linear haptic step (the dense system, O(N)),
+   plus one pass of the rotations per state. Its response to pin moves is that of the next step
+   exactly when every R_e is the same (a rigid rotation, or R = I), to first order in the spread
+   of the rotations otherwise; r0 lags by a step (the state moves on in a step). Dynamics only and
+   before the first step: AMPS_ERR_STATE otherwise (nothing changes). */
 AMPS_API amps_status amps_scene_corotational(amps_ctx *ctx, amps_scene *S, int on);
 /* PCG tolerance (0 < tol < 1, default 1e-10) and iteration cap (maxit >= 1, 0: default 200) of
    the corotational step: at most the work of maxit iterations with the engine's preconditioner
@@ -12692,6 +12701,9 @@ typedef struct amps__scene_dyn {
     amps_int cr_it[2];                            /* iterations of the last step with each preconditioner (0: none yet) */
     amps_int cr_probe;                            /* steps since the other preconditioner was last tried */
     amps_int cr_nprev;                            /* nodes 0..cr_nprev-1 have cr_wprev (0: none) */
+    double *cr_hg0, *cr_hr0;                      /* 3 per node: pin targets and reactions of the last step (haptic) */
+    unsigned char *cr_hpin;                       /* per node: pinned at the last step */
+    long cr_hkey[3];                              /* the state the node frames were taken at: steps, nodes, removals */
     amps_int cr_cap;                              /* node capacity of cr_gel, cr_react */
     double *cr_vec;                               /* 6 per equation: b, x, r, z, p, q */
     struct {                                      /* A_R of the step in 3x3 blocks by node (amps__cr_assemble) */
@@ -12805,6 +12817,9 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->dyn.cr_react);
     amps__free(ctx, S->dyn.cr_Rn);
     amps__free(ctx, S->dyn.cr_wprev);
+    amps__free(ctx, S->dyn.cr_hg0);
+    amps__free(ctx, S->dyn.cr_hr0);
+    amps__free(ctx, S->dyn.cr_hpin);
     amps__free(ctx, S->dyn.cr_vec);
     amps__free(ctx, S->dyn.crA.bp);
     amps__free(ctx, S->dyn.crA.bj);
@@ -13630,14 +13645,15 @@ AMPS_API amps_status amps_scene_solve_watched(amps_ctx *ctx, amps_scene *S) {
     return s;
 }
 
+static amps_status amps__scene_corot_haptic(amps_ctx *ctx, amps_scene *S);
+static void amps__cr_haptic_rotate(const amps_scene *S, amps_haptic *h);
+
 AMPS_API amps_status amps_scene_solve_reactions(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_reactions: NULL scene");
-    if (S->dyn.corot)
-        return amps__err(ctx, AMPS_ERR_STATE,
-                         "amps_scene_solve_reactions: corotational: the reactions come with each step");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
+    if (S->dyn.corot) return amps__scene_corot_haptic(ctx, S);
     if (S->dyn.on && (s = amps__scene_dyn_load(ctx, S)) != AMPS_OK) return s;
     return amps_update_solve_reactions(ctx, S->U);
 }
@@ -13794,9 +13810,6 @@ AMPS_API amps_status amps_scene_haptic_build(amps_ctx *ctx, amps_scene *S, amps_
     amps_status s;
     double sc;
     if (!S || !h) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_haptic_build: NULL argument");
-    if (S->dyn.corot)
-        return amps__err(ctx, AMPS_ERR_STATE,
-                         "amps_scene_haptic_build: corotational: the reactions come with each step");
     if (S->batch.committing)
         return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_haptic_build: a two-phase commit is in progress");
     if ((s = amps_scene_solve_reactions(ctx, S)) < 0) return s;
@@ -13850,6 +13863,7 @@ AMPS_API amps_status amps_scene_haptic_build(amps_ctx *ctx, amps_scene *S, amps_
     sc = S->dyn.on ? 1.0 / (S->dyn.dt * S->dyn.dt) : 1.0;
     if (sc != 1.0)
         for (k = 0; k < m * m; k++) h->H[k] *= sc;
+    if (S->dyn.corot) amps__cr_haptic_rotate(S, h);
     return AMPS_OK;
 }
 
@@ -15335,7 +15349,7 @@ static amps_status amps__scene_set_material_all(amps_ctx *ctx, amps_scene *S, do
 
 /* A pass of the corotational step over every tet and node: mode 0 rotations R_e, Lame
    constants and elastic forces g_e = R K0 (R^T x - X) per tet into cr_ye, then per node g, and
-   the node rotations Rn; mode 2 the rotations only. */
+   the node rotations Rn; mode 2 the rotations only; mode 3 the rotations and Rn. */
 typedef struct amps__crjob {
     const amps_scene *S;
     int mode;
@@ -15354,7 +15368,7 @@ static void amps__cr_deform(const amps_scene *S, amps_int t, const double *G, do
     }
 }
 
-/* Per tet t in [b, e): R (mode 0 and 2); in mode 0 H = R^T F - I (the displacement gradient in
+/* Per tet t in [b, e): R (unless cr_rvalid); in mode 0 H = R^T F - I (the displacement gradient in
    the rotated frame), sigma = lambda V tr(H) I + mu V (H + H^T) and ye_a = R sigma G_a. */
 static void amps__cr_tets(amps_int b, amps_int e, int slot, void *arg) {
     const amps__crjob *j = AMPS__CAST(const amps__crjob *, arg);
@@ -15374,7 +15388,7 @@ static void amps__cr_tets(amps_int b, amps_int e, int slot, void *arg) {
                 for (i = 0; i < 9; i++) R[i] = (i % 4 == 0) ? 1.0 : 0.0;
             else amps__polar(F, R);
         }
-        if (j->mode == 2) continue;
+        if (j->mode != 0) continue;
         amps__lame(m->E[t], m->nu[t], lm, lm + 1);
         lm[0] *= S->dyn.vol[t];
         lm[1] *= S->dyn.vol[t];
@@ -15394,7 +15408,7 @@ static void amps__cr_tets(amps_int b, amps_int e, int slot, void *arg) {
 }
 
 /* The nodes of parts [p0, p1) of np (part k: nodes [k nnode / np, (k+1) nnode / np)): g_v = the
-   sum of the element results of its live tets and the node rotation Rn_v (nearest to the
+   sum of the element results of its live tets (mode 0) and the node rotation Rn_v (nearest to the
    volume-weighted mean of their R_e), the tets in index order (streamed; the same sums for any np). */
 static void amps__cr_nodes(amps_int p0, amps_int p1, int slot, void *arg) {
     const amps__crjob *j = AMPS__CAST(const amps__crjob *, arg);
@@ -15404,7 +15418,7 @@ static void amps__cr_nodes(amps_int p0, amps_int p1, int slot, void *arg) {
     double *g = S->dyn.cr_gel, *Rn = S->dyn.cr_Rn;
     (void)slot;
     hi = p1 == np ? m->nnode : (amps_int)((double)p1 * m->nnode / np);
-    memset(g + 3 * (size_t)lo, 0, sizeof(double) * 3 * (size_t)(hi - lo));
+    if (j->mode == 0) memset(g + 3 * (size_t)lo, 0, sizeof(double) * 3 * (size_t)(hi - lo));
     memset(Rn + 9 * (size_t)lo, 0, sizeof(double) * 9 * (size_t)(hi - lo));
     for (t = 0; t < m->ntet; t++) {
         const amps_int *tv = m->tet + 4 * t;
@@ -15417,7 +15431,8 @@ static void amps__cr_nodes(amps_int p0, amps_int p1, int slot, void *arg) {
         for (a = 0; a < 4; a++) {
             amps_int w = tv[a];
             if (w < lo || w >= hi) continue;
-            for (d = 0; d < 3; d++) g[3 * w + d] += ye[3 * a + d];
+            if (j->mode == 0)
+                for (d = 0; d < 3; d++) g[3 * w + d] += ye[3 * a + d];
             for (d = 0; d < 9; d++) Rn[9 * w + d] += S->dyn.vol[t] * R[d];
         }
     }
@@ -15436,7 +15451,7 @@ static void amps__cr_pass(amps_scene *S, int mode) {
     j.mode = mode;
     j.np = S->m->nnode > 2048 ? nt : 1;
     amps__par_for(&S->U->par, S->m->ntet > 2048 ? nt : 1, S->m->ntet, 256, amps__cr_tets, &j);
-    if (mode == 0) amps__par_for(&S->U->par, (int)j.np, j.np, 1, amps__cr_nodes, &j);
+    if (mode != 2) amps__par_for(&S->U->par, (int)j.np, j.np, 1, amps__cr_nodes, &j);
 }
 
 /* ---- the assembled A_R: 3x3 blocks by node ---- */
@@ -15669,9 +15684,15 @@ static amps_status amps__cr_room(amps_ctx *ctx, amps_scene *S, amps_int N) {
         if (amps__realloc(ctx, (void **)&D->cr_gel, 3 * c, sizeof(double)) ||
             amps__realloc(ctx, (void **)&D->cr_react, 3 * c, sizeof(double)) ||
             amps__realloc(ctx, (void **)&D->cr_Rn, 9 * c, sizeof(double)) ||
-            amps__realloc(ctx, (void **)&D->cr_wprev, 3 * c, sizeof(double)))
+            amps__realloc(ctx, (void **)&D->cr_wprev, 3 * c, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->cr_hg0, 3 * c, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->cr_hr0, 3 * c, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->cr_hpin, c, 1))
             return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory (corotational)");
+        memset(D->cr_hpin + D->cr_cap, 0, c - (size_t)D->cr_cap);
+        memset(D->cr_react + 3 * (size_t)D->cr_cap, 0, sizeof(double) * 3 * (c - (size_t)D->cr_cap));
         D->cr_cap = (amps_int)c;
+        D->cr_hkey[0] = -1;
     }
     if (N > D->cr_ncap) {
         size_t c = (size_t)N + (size_t)N / 2 + 16;
@@ -15880,6 +15901,14 @@ static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
             S->node.disp[k] += D->dt * D->vel[k];
         }
     D->cr_nprev = S->m->nnode;
+    for (v = 0; v < S->m->nnode; v++) { /* the anchor of the haptic calls until the next step */
+        D->cr_hpin[v] = S->node.pinned[v] && !D->orphan[v];
+        for (d = 0; d < 3; d++) {
+            D->cr_hg0[3 * v + d] = S->node.pin_value[3 * v + d];
+            D->cr_hr0[3 * v + d] = D->cr_react[3 * v + d];
+        }
+    }
+    D->cr_hkey[0] = -1;
     D->cr_rvalid = 0;
     D->info.corotational = 1;
     D->info.iterations = it;
@@ -15892,6 +15921,86 @@ static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
                          "(tolerance %.3g)",
                          relres, (long)it, tol);
     return AMPS_OK;
+}
+
+/* The node frames Rn of the current state, once per state (steps, nodes, removals). */
+static void amps__cr_frames(amps_scene *S) {
+    amps__scene_dyn *D = &S->dyn;
+    if (D->cr_hkey[0] == (long)D->nstep && D->cr_hkey[1] == (long)S->m->nnode &&
+        D->cr_hkey[2] == (long)S->m->nremoved)
+        return;
+    amps__cr_pass(S, 3);
+    D->cr_rvalid = 1; /* R of the current u: the next step's pass keeps them */
+    D->cr_hkey[0] = (long)D->nstep;
+    D->cr_hkey[1] = (long)S->m->nnode;
+    D->cr_hkey[2] = (long)S->m->nremoved;
+}
+
+/* The haptic call of the corotational mode (amps_scene_solve_reactions): for each pinned node,
+   r = r0 + Rn dr, r0 the last step's reaction (0 for a node pinned since), dr the reaction of
+   the engine's linear system to the pin moves since the step (g - g0, g0 the target at the step
+   or, for a pin made since, the node's displacement) taken into the node frame (Rn^T), with zero
+   forces: one commit and the dense system (amps_update_solve_reactions), O(N) besides. */
+static amps_status amps__scene_corot_haptic(amps_ctx *ctx, amps_scene *S) {
+    amps__scene_dyn *D = &S->dyn;
+    amps_int nn = S->m->nnode, v, n = 0, N;
+    amps_status s;
+    int d;
+    if ((s = amps__scene_dyn_room(ctx, S, nn)) != AMPS_OK || (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s;
+    N = amps_update_dim(S->U);
+    if ((s = amps__cr_room(ctx, S, N)) != AMPS_OK) return s;
+    for (v = 0; v < N; v++) /* the engine's forces: zero (the response to the moves alone) */
+        if (S->U->force.f[v] != 0.0) {
+            S->dyn.idx[n] = v;
+            S->dyn.val[n++] = 0.0;
+        }
+    if (n && (s = amps_update_set_force(ctx, S->U, n, S->dyn.idx, S->dyn.val)) != AMPS_OK) return s;
+    amps__cr_frames(S);
+    for (n = 0, v = 0; v < nn; v++) {
+        const double *R = D->cr_Rn + 9 * v, *g0 = D->cr_hpin[v] ? D->cr_hg0 + 3 * v : S->node.disp + 3 * v;
+        double dg[3];
+        if (!S->node.pinned[v] || D->orphan[v] || S->node.dof[3 * v] < 0) continue;
+        for (d = 0; d < 3; d++) dg[d] = S->node.pin_value[3 * v + d] - g0[d];
+        for (d = 0; d < 3; d++) { /* Rn^T dg / dt: the moved velocities in the node frame */
+            S->dyn.idx[n] = S->node.dof[3 * v + d];
+            S->dyn.val[n++] = (R[d] * dg[0] + R[3 + d] * dg[1] + R[6 + d] * dg[2]) / D->dt;
+        }
+    }
+    if (n && (s = amps_update_constrain(ctx, S->U, n, S->dyn.idx, S->dyn.val)) != AMPS_OK) return s;
+    if ((s = amps_update_solve_reactions(ctx, S->U)) < 0) return s;
+    for (v = 0; v < nn; v++) {
+        const double *R = D->cr_Rn + 9 * v;
+        double dr[3];
+        for (d = 0; d < 3; d++) D->cr_react[3 * v + d] = 0.0;
+        if (!S->node.pinned[v] || D->orphan[v] || S->node.dof[3 * v] < 0) continue;
+        for (d = 0; d < 3; d++) dr[d] = amps_update_reaction(S->U, S->node.dof[3 * v + d]) / D->dt;
+        for (d = 0; d < 3; d++)
+            D->cr_react[3 * v + d] = (D->cr_hpin[v] ? D->cr_hr0[3 * v + d] : 0.0) + R[3 * d] * dr[0] +
+                                     R[3 * d + 1] * dr[1] + R[3 * d + 2] * dr[2];
+    }
+    return s;
+}
+
+/* H <- Rb H Rb^T for the haptic model of the corotational mode: Rb = the node frames of the
+   pinned nodes h->node on the diagonal (H: 3n x 3n, column major). */
+static void amps__cr_haptic_rotate(const amps_scene *S, amps_haptic *h) {
+    amps_int m = 3 * h->n, k, l;
+    for (k = 0; k < h->n; k++)
+        for (l = 0; l < h->n; l++) {
+            const double *Rk = S->dyn.cr_Rn + 9 * h->node[k], *Rl = S->dyn.cr_Rn + 9 * h->node[l];
+            double B[9], T[9];
+            int i, j, q;
+            for (i = 0; i < 3; i++)
+                for (j = 0; j < 3; j++) B[3 * i + j] = h->H[(size_t)(3 * l + j) * m + 3 * k + i];
+            for (i = 0; i < 3; i++) /* T = Rk B */
+                for (j = 0; j < 3; j++) T[3 * i + j] = Rk[3 * i] * B[j] + Rk[3 * i + 1] * B[3 + j] + Rk[3 * i + 2] * B[6 + j];
+            for (i = 0; i < 3; i++) /* T Rl^T */
+                for (j = 0; j < 3; j++) {
+                    double t = 0;
+                    for (q = 0; q < 3; q++) t += T[3 * i + q] * Rl[3 * j + q];
+                    h->H[(size_t)(3 * l + j) * m + 3 * k + i] = t;
+                }
+        }
 }
 
 /* sigma (6, Voigt) of tet t from eps = sym(R^T F - I) with R = cr_R (cr_rvalid) or the polar

@@ -1,7 +1,10 @@
 /* Corotational dynamics (paper "GPU-accelerated surgery simulation for opening a brain fissure",
    Corotational FEM, Appendix A-B) per step, side by side on one scenario:
-     amps     amps.h's corotational step (PCG preconditioned by the engine's exact solve with the
-              current linear A in the frame of the node rotations; never re-factors)
+     amps     amps.h's corotational step (PCG on the assembled A_R preconditioned by the engine's
+              exact solve with the current linear A in the frame of the node rotations, or by
+              block Jacobi where the cost model finds it cheaper; never re-factors), and between
+              steps BENCH_HAPTIC (default 20) haptic calls (amps_scene_solve_reactions) with the
+              pins moved by that fraction of a step's travel each
      cholmod  CHOLMOD re-factorization of the step's A_R (cholmod_analyze once per pattern,
               cholmod_factorize and one solve each sampled step), assembly of A_R timed apart
      jacobi   Jacobi-PCG on the assembled A_R at 1e-6, 1e-8, 1e-10 (paper 003's solver)
@@ -137,9 +140,9 @@ static amps_scene *make_scene(amps_ctx *ctx, scen *sc, const char *dir, int coro
 
 /* The pins of step k (before it): the bunny's grasper turned by 90 k / steps degrees about x
    through the mesh centre; the spatulas moved apart by 0.04 k / steps each. */
-static void set_pins(amps_ctx *ctx, amps_scene *S, const scen *sc, int k) {
+static void set_pins(amps_ctx *ctx, amps_scene *S, const scen *sc, double k) {
     const amps_mesh *m = amps_scene_mesh(S);
-    double f = (double)(k < sc->steps ? k : sc->steps) / sc->steps;
+    double f = (k < sc->steps ? k : sc->steps) / sc->steps;
     amps_int j;
     for (j = 0; j < sc->npin; j++) {
         amps_int v = sc->pin[j];
@@ -362,7 +365,8 @@ int main(int argc, char **argv) {
     int kind, steps, every, k, ns = 0, nre = 0, ti, fn = -1;
     size_t fnz = 0;
     double *t_amps, *t_solve, *t_lin, *it_amps, *t_chol, *t_asm, *t_jac[3], *it_jac[3], *e_jac[3], *e_amps, rr_max = 0;
-    double vol_c, vol_l, react_t = 0, react_f = 0;
+    double vol_c, vol_l, react_t = 0, react_f = 0, *t_hap;
+    int nhap = getenv("BENCH_HAPTIC") ? atoi(getenv("BENCH_HAPTIC")) : 20, khap = 0;
     const char *dir = argc > 5 ? argv[5] : "bench/data";
     FILE *csv;
     if (argc < 5) die("usage", "corot <beam|bunny|brain> <steps> <every> <out.csv> [<data dir>]");
@@ -379,6 +383,7 @@ int main(int argc, char **argv) {
     L = make_scene(&ctx, &sl, dir, 0, 0); /* the linear step alone: no fracture removals in its time */
     t_amps = (double *)xalloc(sizeof(double) * steps);
     t_lin = (double *)xalloc(sizeof(double) * steps);
+    t_hap = (double *)xalloc(sizeof(double) * ((size_t)steps * (size_t)(nhap > 0 ? nhap : 1) + 1));
     t_solve = (double *)xalloc(sizeof(double) * steps);
     it_amps = (double *)xalloc(sizeof(double) * steps);
     t_chol = (double *)xalloc(sizeof(double) * steps);
@@ -484,6 +489,12 @@ int main(int argc, char **argv) {
             }
             react_t += now() - t0;
             react_f = sum;
+            for (i = 1; i <= nhap && k + 1 < steps; i++) { /* the haptic loop: pins towards the next step's */
+                set_pins(&ctx, S, &sc, k + 1 + (double)i / nhap);
+                t0 = now();
+                if (amps_scene_solve_reactions(&ctx, S) < 0) die("amps_scene_solve_reactions", ctx.msg);
+                t_hap[khap++] = now() - t0;
+            }
         }
         t0 = now();
         if (amps_scene_step(&ctx, L, 1) < 0) die("linear step", ctx.msg);
@@ -514,6 +525,14 @@ int main(int argc, char **argv) {
             1e3 * quant(t_amps, steps, 0.9), steps);
     fprintf(csv, "%s,linear_step,%.4f,%.4f,,,,%d,vol=%.4f\n", names[kind], 1e3 * quant(t_lin, steps, 0.5),
             1e3 * quant(t_lin, steps, 0.9), steps, vol_l);
+    if (khap > 0) {
+        double hm = quant(t_hap, khap, 0.5), h99 = quant(t_hap, khap, 0.99);
+        fprintf(csv, "%s,amps_haptic_call,%.4f,%.4f,,,,%d,rate_hz=%.0f p99_ms=%.4f\n", names[kind], 1e3 * hm,
+                1e3 * quant(t_hap, khap, 0.9), khap, hm > 0 ? 1.0 / hm : 0.0, 1e3 * h99);
+        printf("%s: haptic calls between steps: %d, median %.3f ms (%.0f Hz), p99 %.3f ms\n", names[kind], khap,
+               1e3 * hm, hm > 0 ? 1.0 / hm : 0.0, 1e3 * h99);
+    }
+    free(t_hap);
     fprintf(csv, "%s,cholmod_refactor,%.4f,%.4f,,,,%d,assembly_ms=%.3f analyses=%d\n", names[kind],
             1e3 * quant(t_chol, ns, 0.5), 1e3 * quant(t_chol, ns, 0.9), ns, 1e3 * quant(t_asm, ns, 0.5), nre);
     for (ti = 0; ti < 3; ti++)
