@@ -12689,6 +12689,7 @@ typedef struct amps__scene_dyn {
     amps_int nstep, nfractured, nfractured_total; /* steps taken; tets fractured by the last step, in all */
     int corot;                                    /* corotational steps (amps_scene_corotational) */
     int cr_rvalid;                                /* cr_R holds the rotations of the current u */
+    int cr_rn_ok;                                 /* cr_Rn holds the node frames of the current u */
     double corot_tol;                             /* PCG relative residual (<= 0: 1e-10) */
     amps_int corot_maxit;                         /* PCG iteration cap (<= 0: 200) */
     double *cr_G;                                 /* 12 per tet: reference gradients (NULL until the first step) */
@@ -15353,6 +15354,7 @@ static amps_status amps__scene_set_material_all(amps_ctx *ctx, amps_scene *S, do
 typedef struct amps__crjob {
     const amps_scene *S;
     int mode;
+    int frames;  /* the node pass computes Rn */
     amps_int np; /* the parts of the node pass */
 } amps__crjob;
 
@@ -15381,7 +15383,7 @@ static void amps__cr_tets(amps_int b, amps_int e, int slot, void *arg) {
         double *R = S->dyn.cr_R + 9 * t, *lm = S->dyn.cr_lm + 2 * t, *ye = S->dyn.cr_ye + 12 * t;
         double H[9], F[9], sg[9], tr;
         int a, i, k;
-        if (m->removed && m->removed[t]) continue;
+        if ((m->removed && m->removed[t]) || (j->mode != 0 && S->dyn.cr_rvalid)) continue;
         amps__cr_deform(S, t, G, F);
         if (!S->dyn.cr_rvalid) {
             if (AMPS_TEST_COROT_IDENTITY)
@@ -15419,7 +15421,7 @@ static void amps__cr_nodes(amps_int p0, amps_int p1, int slot, void *arg) {
     (void)slot;
     hi = p1 == np ? m->nnode : (amps_int)((double)p1 * m->nnode / np);
     if (j->mode == 0) memset(g + 3 * (size_t)lo, 0, sizeof(double) * 3 * (size_t)(hi - lo));
-    memset(Rn + 9 * (size_t)lo, 0, sizeof(double) * 9 * (size_t)(hi - lo));
+    if (j->frames) memset(Rn + 9 * (size_t)lo, 0, sizeof(double) * 9 * (size_t)(hi - lo));
     for (t = 0; t < m->ntet; t++) {
         const amps_int *tv = m->tet + 4 * t;
         const double *ye = S->dyn.cr_ye + 12 * t, *R = S->dyn.cr_R + 9 * t;
@@ -15433,25 +15435,37 @@ static void amps__cr_nodes(amps_int p0, amps_int p1, int slot, void *arg) {
             if (w < lo || w >= hi) continue;
             if (j->mode == 0)
                 for (d = 0; d < 3; d++) g[3 * w + d] += ye[3 * a + d];
-            for (d = 0; d < 9; d++) Rn[9 * w + d] += S->dyn.vol[t] * R[d];
+            if (j->frames)
+                for (d = 0; d < 9; d++) Rn[9 * w + d] += S->dyn.vol[t] * R[d];
         }
     }
-    for (v = lo; v < hi; v++) {
+    for (v = lo; v < hi && j->frames; v++) {
         double Rs[9];
         memcpy(Rs, Rn + 9 * v, sizeof(Rs));
         amps__polar(Rs, Rn + 9 * v);
     }
 }
 
-/* One pass (see amps__crjob) over every tet and node; parallel on the engine's threads. */
+/* One pass (see amps__crjob) over every tet and node; parallel on the engine's threads. Mode 0
+   computes Rn only when the last step's PCG ended with the engine's preconditioner (the frames
+   are its; amps__cr_need_frames makes them when a step turns to it). R is then that of the
+   current u (cr_rvalid) until the step moves it. */
 static void amps__cr_pass(amps_scene *S, int mode) {
     amps__crjob j;
     int nt = S->U->nthr;
     j.S = S;
     j.mode = mode;
+    j.frames = mode == 3 || (mode == 0 && (S->dyn.info.iterations == 0 || S->dyn.info.iterations > S->dyn.info.iterations_jacobi));
     j.np = S->m->nnode > 2048 ? nt : 1;
     amps__par_for(&S->U->par, S->m->ntet > 2048 ? nt : 1, S->m->ntet, 256, amps__cr_tets, &j);
     if (mode != 2) amps__par_for(&S->U->par, (int)j.np, j.np, 1, amps__cr_nodes, &j);
+    S->dyn.cr_rvalid = 1;
+    if (mode != 2) S->dyn.cr_rn_ok = j.frames;
+}
+
+/* Rn of the current state for the engine's preconditioner, if the step's pass left it out. */
+static void amps__cr_need_frames(amps_scene *S) {
+    if (!S->dyn.cr_rn_ok) amps__cr_pass(S, 3);
 }
 
 /* ---- the assembled A_R: 3x3 blocks by node ---- */
@@ -15761,6 +15775,7 @@ static amps_status amps__cr_prec(amps_ctx *ctx, amps_scene *S, amps_int N, int k
     amps_int v, e;
     if (kind == 0) {
         amps_status s;
+        amps__cr_need_frames(S);
         amps__cr_rotate(S, r, z, 1);
         if ((s = amps_update_solve_rhs(ctx, S->U, z, z)) != AMPS_OK) return s;
         amps__cr_rotate(S, z, z, 0);
@@ -15910,6 +15925,7 @@ static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
     }
     D->cr_hkey[0] = -1;
     D->cr_rvalid = 0;
+    D->cr_rn_ok = 0;
     D->info.corotational = 1;
     D->info.iterations = it;
     D->info.iterations_total += it;
