@@ -1314,7 +1314,8 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    reaction of the engine's linear A to the pin moves since the step (g - g0, g0 the target at
    the step, or the node's displacement for a new pin) taken into the node frames Rn of the
    current state (Rn^T (g - g0)): the cost of the linear haptic step (the dense system, O(N)),
-   plus one pass of the rotations per state. Its response to pin moves is that of the next step
+   plus one pass of the rotations per state (once a haptic call was made, each step ends with
+   it, so the calls do not). Its response to pin moves is that of the next step
    exactly when every R_e is the same (a rigid rotation, or R = I), to first order in the spread
    of the rotations otherwise; r0 lags by a step (the state moves on in a step). Dynamics only and
    before the first step: AMPS_ERR_STATE otherwise (nothing changes). */
@@ -12705,6 +12706,7 @@ typedef struct amps__scene_dyn {
     double *cr_hg0, *cr_hr0;                      /* 3 per node: pin targets and reactions of the last step (haptic) */
     unsigned char *cr_hpin;                       /* per node: pinned at the last step */
     long cr_hkey[3];                              /* the state the node frames were taken at: steps, nodes, removals */
+    int cr_hused;                                 /* a haptic call was made: each step ends with the frames */
     amps_int cr_cap;                              /* node capacity of cr_gel, cr_react */
     double *cr_vec;                               /* 6 per equation: b, x, r, z, p, q */
     struct {                                      /* A_R of the step in 3x3 blocks by node (amps__cr_assemble) */
@@ -15134,6 +15136,7 @@ AMPS_API amps_status amps_scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n,
 }
 
 static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S);
+static void amps__cr_frames(amps_scene *S);
 static void amps__cr_pass(amps_scene *S, int mode);
 static void amps__cr_sigma(const amps_scene *S, amps_int t, const double *G, const double *Rt, double sigma[6]);
 
@@ -15217,6 +15220,7 @@ AMPS_API amps_status amps_scene_step(amps_ctx *ctx, amps_scene *S, amps_int nste
         S->dyn.nstep++;
         S->dyn.nfractured = 0;
         if ((S->dyn.sigma_max > 0 || S->dyn.nfreg > 0) && (s = amps__scene_fracture_step(ctx, S)) != AMPS_OK) return s;
+        if (S->dyn.corot && S->dyn.cr_hused) amps__cr_frames(S); /* for the haptic calls to come */
     }
     return w;
 }
@@ -15962,6 +15966,7 @@ static amps_status amps__scene_corot_haptic(amps_ctx *ctx, amps_scene *S) {
     amps_int nn = S->m->nnode, v, n = 0, N;
     amps_status s;
     int d;
+    D->cr_hused = 1;
     if ((s = amps__scene_dyn_room(ctx, S, nn)) != AMPS_OK || (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s;
     N = amps_update_dim(S->U);
     if ((s = amps__cr_room(ctx, S, N)) != AMPS_OK) return s;
