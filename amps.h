@@ -15456,7 +15456,7 @@ static void amps__cr_nodes(amps_int p0, amps_int p1, int slot, void *arg) {
    current u (cr_rvalid) until the step moves it. */
 static void amps__cr_pass(amps_scene *S, int mode) {
     amps__crjob j;
-    int nt = S->U->nthr;
+    int nt = S->batch.committing ? 1 : S->U->nthr; /* a two-phase commit's run may hold the workers */
     j.S = S;
     j.mode = mode;
     j.frames = mode == 3 || (mode == 0 && (S->dyn.info.iterations == 0 || S->dyn.info.iterations > S->dyn.info.iterations_jacobi));
@@ -15967,7 +15967,7 @@ static amps_status amps__scene_corot_haptic(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     int d;
     D->cr_hused = 1;
-    if ((s = amps__scene_dyn_room(ctx, S, nn)) != AMPS_OK || (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s;
+    if ((s = amps__scene_dyn_room(ctx, S, nn)) != AMPS_OK) return s;
     N = amps_update_dim(S->U);
     if ((s = amps__cr_room(ctx, S, N)) != AMPS_OK) return s;
     for (v = 0; v < N; v++) /* the engine's forces: zero (the response to the moves alone) */
