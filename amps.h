@@ -1304,10 +1304,11 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    amps_scene_step_info reports the iterations of each. A_R is assembled each step in
    3x3 blocks by node (the pattern is rebuilt when a cut or a node separation changed the tets'
    nodes); assembly and products are parallel on the engine's threads and bitwise independent of
-   their count. Memory from the first step: 36 doubles and 20 indices per tet (reference
-   gradients, volume, R_e, Lame constants, element results; the block map), 27 doubles per node,
-   9 doubles and an index per block of A_R (one per pair of nodes sharing a tet), 6 doubles per
-   equation; a rebuilt pattern allocates when it outgrows them. Stresses (amps_scene_stress and
+   their count. Memory from the first step: 36 doubles and 36 indices per tet (reference
+   gradients, volume, R_e, Lame constants, element results; the block map and the workspace of
+   its rebuild), 33 doubles and 3 indices per node, 9 doubles and an index per block of A_R (one
+   per pair of nodes sharing a tet), 6 doubles per equation; a rebuilt pattern allocates when it
+   outgrows them. Stresses (amps_scene_stress and
    fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. The haptic path between steps
    (amps_scene_solve_reactions, amps_scene_haptic_build) is a model, not the next step: per
    pinned node r = r0 + Rn dr, r0 the last step's reaction (0 for a pin made since), dr the
