@@ -12700,25 +12700,29 @@ typedef struct amps__scene_dyn {
     double *cr_ye;                                /* 12 per tet: element results of the last pass */
     double *cr_gel, *cr_react;                    /* 3 per node: elastic force g, pin reactions of the last step */
     double *cr_Rn;                                /* 9 per node: the node's rotation (the preconditioner's frame) */
-    double *cr_wprev;                             /* 3 per node: w before the last step (the PCG start extrapolates) */
-    amps_int cr_it[2];                            /* iterations of the last step with each preconditioner (0: none yet) */
-    amps_int cr_probe;                            /* steps since the other preconditioner was last tried */
-    amps_int cr_nprev;                            /* nodes 0..cr_nprev-1 have cr_wprev (0: none) */
-    double *cr_hg0, *cr_hr0;                      /* 3 per node: pin targets and reactions of the last step (haptic) */
-    unsigned char *cr_hpin;                       /* per node: pinned at the last step */
-    long cr_hkey[3];                              /* the state the node frames were taken at: steps, nodes, removals */
-    int cr_hused;                                 /* a haptic call was made: each step ends with the frames */
+    struct {                                      /* the PCG's start and its choice of preconditioner */
+        double *wprev;                            /* 3 per node: w before the last step (the start extrapolates) */
+        amps_int nprev;                           /* nodes 0..nprev-1 have wprev (0: none) */
+        amps_int it[2]; /* iterations of the last step with each preconditioner (0: none yet) */
+        amps_int probe; /* steps since block Jacobi was last tried */
+    } crP;
+    struct {                /* the haptic path between corotational steps */
+        double *g0, *r0;    /* 3 per node: pin targets and reactions of the last step */
+        unsigned char *pin; /* per node: pinned at the last step */
+        long key[3];        /* the state the node frames were taken at: steps, nodes, removals */
+        int used;           /* a haptic call was made: each step ends with the frames */
+    } crH;
     amps_int cr_cap;                              /* node capacity of cr_gel, cr_react */
     double *cr_vec;                               /* 6 per equation: b, x, r, z, p, q */
     struct {                                      /* A_R of the step in 3x3 blocks by node (amps__cr_assemble) */
         amps_int *bp, *bj;                        /* row v: blocks bp[v] .. bp[v+1]-1, nodes bj ascending */
         double *bx;                               /* 9 per block, row-major */
         double *dinv;                             /* 9 per node: the inverse of its diagonal block */
-        amps_int *map;                            /* 16 per tet: map[16 t + 4 a + b] = block of tet node b in row of node a */
-        amps_int *tet;                            /* 4 per tet: the nodes the pattern was built for */
-        amps_int *wrow, *wcnt;                    /* workspace of a rebuild: 16 per tet; 2 per node + 2 */
-        amps_int nnode, ntet;                     /* the mesh it was built for (0: none) */
-        size_t cap_row, cap_blk;                  /* capacities of bp (nodes + 1) and bj, bx */
+        amps_int *map;           /* 16 per tet: map[16 t + 4 a + b] = block of tet node b in row of node a */
+        amps_int *tet;           /* 4 per tet: the nodes the pattern was built for */
+        amps_int *wrow, *wcnt;   /* workspace of a rebuild: 16 per tet; 2 per node + 2 */
+        amps_int nnode, ntet;    /* the mesh it was built for (0: none) */
+        size_t cap_row, cap_blk; /* capacities of bp (nodes + 1) and bj, bx */
     } crA;
     unsigned char *cr_con;                        /* 1 per equation: constrained in the engine */
     amps_int cr_ncap;                             /* equation capacity of cr_vec, cr_con */
@@ -12820,10 +12824,10 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->dyn.cr_gel);
     amps__free(ctx, S->dyn.cr_react);
     amps__free(ctx, S->dyn.cr_Rn);
-    amps__free(ctx, S->dyn.cr_wprev);
-    amps__free(ctx, S->dyn.cr_hg0);
-    amps__free(ctx, S->dyn.cr_hr0);
-    amps__free(ctx, S->dyn.cr_hpin);
+    amps__free(ctx, S->dyn.crP.wprev);
+    amps__free(ctx, S->dyn.crH.g0);
+    amps__free(ctx, S->dyn.crH.r0);
+    amps__free(ctx, S->dyn.crH.pin);
     amps__free(ctx, S->dyn.cr_vec);
     amps__free(ctx, S->dyn.crA.bp);
     amps__free(ctx, S->dyn.crA.bj);
@@ -15221,7 +15225,7 @@ AMPS_API amps_status amps_scene_step(amps_ctx *ctx, amps_scene *S, amps_int nste
         S->dyn.nstep++;
         S->dyn.nfractured = 0;
         if ((S->dyn.sigma_max > 0 || S->dyn.nfreg > 0) && (s = amps__scene_fracture_step(ctx, S)) != AMPS_OK) return s;
-        if (S->dyn.corot && S->dyn.cr_hused) amps__cr_frames(S); /* for the haptic calls to come */
+        if (S->dyn.corot && S->dyn.crH.used) amps__cr_frames(S); /* for the haptic calls to come */
     }
     return w;
 }
@@ -15460,7 +15464,8 @@ static void amps__cr_pass(amps_scene *S, int mode) {
     int nt = S->batch.committing ? 1 : S->U->nthr; /* a two-phase commit's run may hold the workers */
     j.S = S;
     j.mode = mode;
-    j.frames = mode == 3 || (mode == 0 && (S->dyn.info.iterations == 0 || S->dyn.info.iterations > S->dyn.info.iterations_jacobi));
+    j.frames = mode == 3 ||
+               (mode == 0 && (S->dyn.info.iterations == 0 || S->dyn.info.iterations > S->dyn.info.iterations_jacobi));
     j.np = S->m->nnode > 2048 ? nt : 1;
     amps__par_for(&S->U->par, S->m->ntet > 2048 ? nt : 1, S->m->ntet, 256, amps__cr_tets, &j);
     if (mode != 2) amps__par_for(&S->U->par, (int)j.np, j.np, 1, amps__cr_nodes, &j);
@@ -15550,8 +15555,8 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
         for (a = 0; a < 4; a++) {
             amps_int row = m->tet[4 * t + a];
             for (b = 0; b < 4; b++)
-                S->dyn.crA.map[16 * t + 4 * a + b] = amps__cr_find(S->dyn.crA.bj, S->dyn.crA.bp[row],
-                                                                   S->dyn.crA.bp[row + 1] - 1, m->tet[4 * t + b]);
+                S->dyn.crA.map[16 * t + 4 * a + b] =
+                        amps__cr_find(S->dyn.crA.bj, S->dyn.crA.bp[row], S->dyn.crA.bp[row + 1] - 1, m->tet[4 * t + b]);
         }
     memcpy(S->dyn.crA.tet, m->tet, sizeof(amps_int) * 4 * (size_t)nt);
     S->dyn.crA.nnode = nn;
@@ -15703,15 +15708,15 @@ static amps_status amps__cr_room(amps_ctx *ctx, amps_scene *S, amps_int N) {
         if (amps__realloc(ctx, (void **)&D->cr_gel, 3 * c, sizeof(double)) ||
             amps__realloc(ctx, (void **)&D->cr_react, 3 * c, sizeof(double)) ||
             amps__realloc(ctx, (void **)&D->cr_Rn, 9 * c, sizeof(double)) ||
-            amps__realloc(ctx, (void **)&D->cr_wprev, 3 * c, sizeof(double)) ||
-            amps__realloc(ctx, (void **)&D->cr_hg0, 3 * c, sizeof(double)) ||
-            amps__realloc(ctx, (void **)&D->cr_hr0, 3 * c, sizeof(double)) ||
-            amps__realloc(ctx, (void **)&D->cr_hpin, c, 1))
+            amps__realloc(ctx, (void **)&D->crP.wprev, 3 * c, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->crH.g0, 3 * c, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->crH.r0, 3 * c, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->crH.pin, c, 1))
             return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory (corotational)");
-        memset(D->cr_hpin + D->cr_cap, 0, c - (size_t)D->cr_cap);
+        memset(D->crH.pin + D->cr_cap, 0, c - (size_t)D->cr_cap);
         memset(D->cr_react + 3 * (size_t)D->cr_cap, 0, sizeof(double) * 3 * (c - (size_t)D->cr_cap));
         D->cr_cap = (amps_int)c;
-        D->cr_hkey[0] = -1;
+        D->crH.key[0] = -1;
     }
     if (N > D->cr_ncap) {
         size_t c = (size_t)N + (size_t)N / 2 + 16;
@@ -15746,7 +15751,7 @@ static void amps__cr_rhs(amps_scene *S, amps_int N, double *b, double *x) {
             b[e] = S->node.mass[v] * D->vel[k] + D->dt * (S->node.force[k] + S->node.mass[v] * D->g[d] - D->cr_gel[k]);
             x[e] = D->orphan[v]        ? 0.0
                    : S->node.pinned[v] ? (S->node.pin_value[k] - S->node.disp[k]) / D->dt
-                   : v < D->cr_nprev   ? 2.0 * D->vel[k] - D->cr_wprev[k]
+                   : v < D->crP.nprev  ? 2.0 * D->vel[k] - D->crP.wprev[k]
                                        : D->vel[k];
         }
 }
@@ -15840,12 +15845,12 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
     /* the preconditioner: the cheaper by the last iterations, block Jacobi tried now and then */
     ce = amps__cr_cost(S, N, 0);
     cj = amps__cr_cost(S, N, 1);
-    if (D->cr_it[0] > 0) {
-        cap = (amps_int)(1.5 * (double)D->cr_it[0] * ce / cj) + 1;
+    if (D->crP.it[0] > 0) {
+        cap = (amps_int)(1.5 * (double)D->crP.it[0] * ce / cj) + 1;
         if (cap > (amps_int)((double)maxit * ce / cj)) cap = (amps_int)((double)maxit * ce / cj);
-        if (D->cr_it[1] == 0 || D->cr_probe >= 32 || (double)D->cr_it[1] * cj < (double)D->cr_it[0] * ce) kind = 1;
+        if (D->crP.it[1] == 0 || D->crP.probe >= 32 || (double)D->crP.it[1] * cj < (double)D->crP.it[0] * ce) kind = 1;
     }
-    D->cr_probe = kind ? 0 : D->cr_probe + 1;
+    D->crP.probe = kind ? 0 : D->crP.probe + 1;
     for (restart = 0; restart < 4; restart++) {
         /* r = b - A_R x on the free equations (the true residual) */
         amps__cr_mul(S, x, q);
@@ -15873,13 +15878,13 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
             rn = sqrt(amps__cr_dot(S, N, r, r));
         }
         if (kind && rn > tol * *bn) { /* block Jacobi too slow: on with the engine's, from x */
-            D->cr_it[1] = kit + (amps_int)((double)D->cr_it[0] * ce / cj); /* its estimate: above the cap */
+            D->crP.it[1] = kit + (amps_int)((double)D->crP.it[0] * ce / cj); /* its estimate: above the cap */
             kind = 0;
         }
         rz = 0; /* a restart begins with the steepest descent direction */
     }
-    if (kind) D->cr_it[1] = kit > 0 ? kit : 1;
-    else D->cr_it[0] = it > 0 ? it : 1;
+    if (kind) D->crP.it[1] = kit > 0 ? kit : 1;
+    else D->crP.it[0] = it > 0 ? it : 1;
     D->info.iterations_jacobi = kit;
     return it + kit;
 }
@@ -15916,19 +15921,19 @@ static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
             amps_int k = 3 * v + d;
             e = S->node.dof[k];
             D->cr_react[k] = (e >= 0 && S->node.pinned[v] && !D->orphan[v]) ? (q[e] - b[e]) / D->dt : 0.0;
-            D->cr_wprev[k] = D->vel[k];
+            D->crP.wprev[k] = D->vel[k];
             D->vel[k] = e >= 0 ? x[e] : 0.0;
             S->node.disp[k] += D->dt * D->vel[k];
         }
-    D->cr_nprev = S->m->nnode;
+    D->crP.nprev = S->m->nnode;
     for (v = 0; v < S->m->nnode; v++) { /* the anchor of the haptic calls until the next step */
-        D->cr_hpin[v] = S->node.pinned[v] && !D->orphan[v];
+        D->crH.pin[v] = S->node.pinned[v] && !D->orphan[v];
         for (d = 0; d < 3; d++) {
-            D->cr_hg0[3 * v + d] = S->node.pin_value[3 * v + d];
-            D->cr_hr0[3 * v + d] = D->cr_react[3 * v + d];
+            D->crH.g0[3 * v + d] = S->node.pin_value[3 * v + d];
+            D->crH.r0[3 * v + d] = D->cr_react[3 * v + d];
         }
     }
-    D->cr_hkey[0] = -1;
+    D->crH.key[0] = -1;
     D->cr_rvalid = 0;
     D->cr_rn_ok = 0;
     D->info.corotational = 1;
@@ -15947,14 +15952,13 @@ static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
 /* The node frames Rn of the current state, once per state (steps, nodes, removals). */
 static void amps__cr_frames(amps_scene *S) {
     amps__scene_dyn *D = &S->dyn;
-    if (D->cr_hkey[0] == (long)D->nstep && D->cr_hkey[1] == (long)S->m->nnode &&
-        D->cr_hkey[2] == (long)S->m->nremoved)
+    if (D->crH.key[0] == (long)D->nstep && D->crH.key[1] == (long)S->m->nnode && D->crH.key[2] == (long)S->m->nremoved)
         return;
     amps__cr_pass(S, 3);
     D->cr_rvalid = 1; /* R of the current u: the next step's pass keeps them */
-    D->cr_hkey[0] = (long)D->nstep;
-    D->cr_hkey[1] = (long)S->m->nnode;
-    D->cr_hkey[2] = (long)S->m->nremoved;
+    D->crH.key[0] = (long)D->nstep;
+    D->crH.key[1] = (long)S->m->nnode;
+    D->crH.key[2] = (long)S->m->nremoved;
 }
 
 /* The haptic call of the corotational mode (amps_scene_solve_reactions): for each pinned node,
@@ -15967,7 +15971,7 @@ static amps_status amps__scene_corot_haptic(amps_ctx *ctx, amps_scene *S) {
     amps_int nn = S->m->nnode, v, n = 0, N;
     amps_status s;
     int d;
-    D->cr_hused = 1;
+    D->crH.used = 1;
     if ((s = amps__scene_dyn_room(ctx, S, nn)) != AMPS_OK) return s;
     N = amps_update_dim(S->U);
     if ((s = amps__cr_room(ctx, S, N)) != AMPS_OK) return s;
@@ -15979,7 +15983,7 @@ static amps_status amps__scene_corot_haptic(amps_ctx *ctx, amps_scene *S) {
     if (n && (s = amps_update_set_force(ctx, S->U, n, S->dyn.idx, S->dyn.val)) != AMPS_OK) return s;
     amps__cr_frames(S);
     for (n = 0, v = 0; v < nn; v++) {
-        const double *R = D->cr_Rn + 9 * v, *g0 = D->cr_hpin[v] ? D->cr_hg0 + 3 * v : S->node.disp + 3 * v;
+        const double *R = D->cr_Rn + 9 * v, *g0 = D->crH.pin[v] ? D->crH.g0 + 3 * v : S->node.disp + 3 * v;
         double dg[3];
         if (!S->node.pinned[v] || D->orphan[v] || S->node.dof[3 * v] < 0) continue;
         for (d = 0; d < 3; d++) dg[d] = S->node.pin_value[3 * v + d] - g0[d];
@@ -15997,7 +16001,7 @@ static amps_status amps__scene_corot_haptic(amps_ctx *ctx, amps_scene *S) {
         if (!S->node.pinned[v] || D->orphan[v] || S->node.dof[3 * v] < 0) continue;
         for (d = 0; d < 3; d++) dr[d] = amps_update_reaction(S->U, S->node.dof[3 * v + d]) / D->dt;
         for (d = 0; d < 3; d++)
-            D->cr_react[3 * v + d] = (D->cr_hpin[v] ? D->cr_hr0[3 * v + d] : 0.0) + R[3 * d] * dr[0] +
+            D->cr_react[3 * v + d] = (D->crH.pin[v] ? D->crH.r0[3 * v + d] : 0.0) + R[3 * d] * dr[0] +
                                      R[3 * d + 1] * dr[1] + R[3 * d + 2] * dr[2];
     }
     return s;
@@ -16015,7 +16019,8 @@ static void amps__cr_haptic_rotate(const amps_scene *S, amps_haptic *h) {
             for (i = 0; i < 3; i++)
                 for (j = 0; j < 3; j++) B[3 * i + j] = h->H[(size_t)(3 * l + j) * m + 3 * k + i];
             for (i = 0; i < 3; i++) /* T = Rk B */
-                for (j = 0; j < 3; j++) T[3 * i + j] = Rk[3 * i] * B[j] + Rk[3 * i + 1] * B[3 + j] + Rk[3 * i + 2] * B[6 + j];
+                for (j = 0; j < 3; j++)
+                    T[3 * i + j] = Rk[3 * i] * B[j] + Rk[3 * i + 1] * B[3 + j] + Rk[3 * i + 2] * B[6 + j];
             for (i = 0; i < 3; i++) /* T Rl^T */
                 for (j = 0; j < 3; j++) {
                     double t = 0;

@@ -895,8 +895,7 @@ static void test_threads_bitwise(void) {
                     amps_scene_pin(&ctx, S, v, g);
                 }
             if (step == 3)
-                CHECK(amps_scene_cut(&ctx, S, 2 + 5 * (2 + 5 * 50), p, n, &vc) == AMPS_OK, "threads: cut: %s",
-                      ctx.msg);
+                CHECK(amps_scene_cut(&ctx, S, 2 + 5 * (2 + 5 * 50), p, n, &vc) == AMPS_OK, "threads: cut: %s", ctx.msg);
             CHECK(amps_scene_step(&ctx, S, 1) == AMPS_OK, "threads: step: %s", ctx.msg);
         }
         if (nt == 1) {
