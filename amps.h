@@ -10833,27 +10833,36 @@ AMPS_API amps_status amps_update_set_origin(amps_ctx *ctx, amps_update *U, amps_
 
 /* ---- P1 element ---- */
 
+/* c = a x b. */
+static void amps__cross3(const double a[3], const double b[3], double c[3]) {
+    c[0] = a[1] * b[2] - a[2] * b[1];
+    c[1] = a[2] * b[0] - a[0] * b[2];
+    c[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+/* C = the cofactors of A (3x3, row-major; row i of C = row i+1 x row i+2 of A): A^-T = C / det A,
+   A^-1 = C^T / det A; returns det A. */
+static double amps__cof3(const double A[9], double C[9]) {
+    amps__cross3(A + 3, A + 6, C);
+    amps__cross3(A + 6, A, C + 3);
+    amps__cross3(A, A + 3, C + 6);
+    return A[0] * C[0] + A[1] * C[1] + A[2] * C[2];
+}
+
 AMPS_API double amps_tet_gradients(const double X[12], double G[12]) {
-    double J[9], det, inv;
+    double J[9], C[9], det, inv;
     int a, b, c;
     for (a = 0; a < 3; a++)
         for (b = 0; b < 3; b++) J[3 * a + b] = X[3 * (b + 1) + a] - X[a];
-    det = J[0] * (J[4] * J[8] - J[5] * J[7]) - J[1] * (J[3] * J[8] - J[5] * J[6]) + J[2] * (J[3] * J[7] - J[4] * J[6]);
+    det = amps__cof3(J, C);
     if (det == 0.0 || !amps__isfinite(det)) {
         for (a = 0; a < 12; a++) G[a] = 0.0;
         return 0.0;
     }
     inv = 1.0 / det;
-    /* rows 1..3 of G = rows of J^{-1} (cofactors / det); row 0 = -(sum of the others) */
-    G[3] = (J[4] * J[8] - J[5] * J[7]) * inv;
-    G[4] = (J[2] * J[7] - J[1] * J[8]) * inv;
-    G[5] = (J[1] * J[5] - J[2] * J[4]) * inv;
-    G[6] = (J[5] * J[6] - J[3] * J[8]) * inv;
-    G[7] = (J[0] * J[8] - J[2] * J[6]) * inv;
-    G[8] = (J[2] * J[3] - J[0] * J[5]) * inv;
-    G[9] = (J[3] * J[7] - J[4] * J[6]) * inv;
-    G[10] = (J[1] * J[6] - J[0] * J[7]) * inv;
-    G[11] = (J[0] * J[4] - J[1] * J[3]) * inv;
+    /* rows 1..3 of G = rows of J^{-1} = C^T / det; row 0 = -(sum of the others) */
+    for (a = 0; a < 3; a++)
+        for (b = 0; b < 3; b++) G[3 + 3 * a + b] = C[3 * b + a] * inv;
     for (c = 0; c < 3; c++) G[c] = -(G[3 + c] + G[6 + c] + G[9 + c]);
     return det / 6.0;
 }
@@ -11081,20 +11090,6 @@ AMPS_API double amps_tet_stress(const double X[12], double E, double nu, const d
     return vol;
 }
 
-/* C = the cofactors of A (3x3, row-major): A^-T = C / det A, A^-1 = C^T / det A; returns det A. */
-static double amps__cof3(const double A[9], double C[9]) {
-    C[0] = A[4] * A[8] - A[5] * A[7];
-    C[1] = A[5] * A[6] - A[3] * A[8];
-    C[2] = A[3] * A[7] - A[4] * A[6];
-    C[3] = A[2] * A[7] - A[1] * A[8];
-    C[4] = A[0] * A[8] - A[2] * A[6];
-    C[5] = A[1] * A[6] - A[0] * A[7];
-    C[6] = A[1] * A[5] - A[2] * A[4];
-    C[7] = A[2] * A[3] - A[0] * A[5];
-    C[8] = A[0] * A[4] - A[1] * A[3];
-    return A[0] * C[0] + A[1] * C[1] + A[2] * C[2];
-}
-
 /* R = the orthogonal polar factor of F (row-major) by Newton's iteration X <- (g X + X^-T / g) / 2
    (g = (||X^-1||_F / ||X||_F)^(1/2) in the first two steps, then 1), which converges
    quadratically to U V^T when det F > 0; 1 when it converged (a step changed X by at most
@@ -11201,18 +11196,14 @@ static void amps__polar(const double F[9], double R[9]) {
         }
         for (i = 0; i < 3; i++) u[3 + i] /= l;
     }
-    u[6] = u[1] * u[5] - u[2] * u[4];
-    u[7] = u[2] * u[3] - u[0] * u[5];
-    u[8] = u[0] * u[4] - u[1] * u[3];
-    v[6] = v[1] * v[5] - v[2] * v[4];
-    v[7] = v[2] * v[3] - v[0] * v[5];
-    v[8] = v[0] * v[4] - v[1] * v[3];
+    amps__cross3(u, u + 3, u + 6);
+    amps__cross3(v, v + 3, v + 6);
     for (i = 0; i < 3; i++)
         for (k = 0; k < 3; k++) R[3 * i + k] = u[i] * v[k] + u[3 + i] * v[3 + k] + u[6 + i] * v[6 + k];
 }
 
 AMPS_API double amps_tet_rotation(const double X[12], const double x[12], double R[9]) {
-    double G[12], F[9];
+    double G[12], F[9], C[9];
     int a, i, j;
     if (amps_tet_gradients(X, G) == 0.0) {
         for (i = 0; i < 9; i++) R[i] = (i % 4 == 0) ? 1.0 : 0.0;
@@ -11225,7 +11216,7 @@ AMPS_API double amps_tet_rotation(const double X[12], const double x[12], double
             F[3 * i + j] = f;
         }
     amps__polar(F, R);
-    return F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) + F[2] * (F[3] * F[7] - F[4] * F[6]);
+    return amps__cof3(F, C);
 }
 
 /* ---- mesh ---- */
@@ -12691,7 +12682,7 @@ typedef struct amps__scene_dyn {
     amps_int nstep, nfractured, nfractured_total; /* steps taken; tets fractured by the last step, in all */
     int corot;                                    /* corotational steps (amps_scene_corotational) */
     int cr_rvalid;                                /* cr_R holds the rotations of the current u */
-    int cr_rn_ok;                                 /* cr_Rn holds the node frames of the current u */
+    long cr_rnkey[3];                             /* the state cr_Rn holds the node frames of: steps, nodes, removals */
     double corot_tol;                             /* PCG relative residual (<= 0: 1e-10) */
     amps_int corot_maxit;                         /* PCG iteration cap (<= 0: 200) */
     double *cr_G;                                 /* 12 per tet: reference gradients (NULL until the first step) */
@@ -12709,7 +12700,6 @@ typedef struct amps__scene_dyn {
     struct {                /* the haptic path between corotational steps */
         double *g0, *r0;    /* 3 per node: pin targets and reactions of the last step */
         unsigned char *pin; /* per node: pinned at the last step */
-        long key[3];        /* the state the node frames were taken at: steps, nodes, removals */
         int used;           /* a haptic call was made: each step ends with the frames */
     } crH;
     amps_int cr_cap;                              /* node capacity of cr_gel, cr_react */
@@ -15418,6 +15408,25 @@ static void amps__cr_tets(amps_int b, amps_int e, int slot, void *arg) {
     }
 }
 
+/* [*lo, *hi): the nodes of parts [p0, p1) of np, part k the nodes [k nnode / np, (k+1) nnode / np). */
+static void amps__cr_part(const amps_mesh *m, amps_int p0, amps_int p1, amps_int np, amps_int *lo, amps_int *hi) {
+    *lo = (amps_int)((double)p0 * m->nnode / np);
+    *hi = p1 == np ? m->nnode : (amps_int)((double)p1 * m->nnode / np);
+}
+
+/* 1 if one of the 4 nodes tv lies in [lo, hi). */
+static int amps__cr_touches(const amps_int *tv, amps_int lo, amps_int hi) {
+    return (tv[0] >= lo && tv[0] < hi) || (tv[1] >= lo && tv[1] < hi) || (tv[2] >= lo && tv[2] < hi) ||
+           (tv[3] >= lo && tv[3] < hi);
+}
+
+/* 1 if cr_Rn holds the node frames of the current state. */
+static int amps__cr_frames_valid(const amps_scene *S) {
+    const amps__scene_dyn *D = &S->dyn;
+    return D->cr_rnkey[0] == (long)D->nstep && D->cr_rnkey[1] == (long)S->m->nnode &&
+           D->cr_rnkey[2] == (long)S->m->nremoved;
+}
+
 /* The nodes of parts [p0, p1) of np (part k: nodes [k nnode / np, (k+1) nnode / np)): g_v = the
    sum of the element results of its live tets (mode 0) and the node rotation Rn_v (nearest to the
    volume-weighted mean of their R_e), the tets in index order (streamed; the same sums for any np). */
@@ -15425,20 +15434,17 @@ static void amps__cr_nodes(amps_int p0, amps_int p1, int slot, void *arg) {
     const amps__crjob *j = AMPS__CAST(const amps__crjob *, arg);
     const amps_scene *S = j->S;
     const amps_mesh *m = S->m;
-    amps_int np = j->np, lo = (amps_int)((double)p0 * m->nnode / np), hi, v, t;
+    amps_int lo, hi, v, t;
     double *g = S->dyn.cr_gel, *Rn = S->dyn.cr_Rn;
     (void)slot;
-    hi = p1 == np ? m->nnode : (amps_int)((double)p1 * m->nnode / np);
+    amps__cr_part(m, p0, p1, j->np, &lo, &hi);
     if (j->mode == 0) memset(g + 3 * (size_t)lo, 0, sizeof(double) * 3 * (size_t)(hi - lo));
     if (j->frames) memset(Rn + 9 * (size_t)lo, 0, sizeof(double) * 9 * (size_t)(hi - lo));
     for (t = 0; t < m->ntet; t++) {
         const amps_int *tv = m->tet + 4 * t;
         const double *ye = S->dyn.cr_ye + 12 * t, *R = S->dyn.cr_R + 9 * t;
         int a, d;
-        if ((tv[0] < lo || tv[0] >= hi) && (tv[1] < lo || tv[1] >= hi) && (tv[2] < lo || tv[2] >= hi) &&
-            (tv[3] < lo || tv[3] >= hi))
-            continue;
-        if (m->removed && m->removed[t]) continue;
+        if (!amps__cr_touches(tv, lo, hi) || (m->removed && m->removed[t])) continue;
         for (a = 0; a < 4; a++) {
             amps_int w = tv[a];
             if (w < lo || w >= hi) continue;
@@ -15457,25 +15463,30 @@ static void amps__cr_nodes(amps_int p0, amps_int p1, int slot, void *arg) {
 
 /* One pass (see amps__crjob) over every tet and node; parallel on the engine's threads. Mode 0
    computes Rn only when the last step's PCG ended with the engine's preconditioner (the frames
-   are its; amps__cr_need_frames makes them when a step turns to it). R is then that of the
-   current u (cr_rvalid) until the step moves it. */
+   are its; amps__cr_frames makes them when a step turns to it) and they are not already those
+   of this state. R is then that of the current u (cr_rvalid) until the step moves it. */
 static void amps__cr_pass(amps_scene *S, int mode) {
     amps__crjob j;
     int nt = S->batch.committing ? 1 : S->U->nthr; /* a two-phase commit's run may hold the workers */
     j.S = S;
     j.mode = mode;
-    j.frames = mode == 3 ||
-               (mode == 0 && (S->dyn.info.iterations == 0 || S->dyn.info.iterations > S->dyn.info.iterations_jacobi));
+    j.frames = mode == 3 || (mode == 0 && !amps__cr_frames_valid(S) &&
+                             (S->dyn.info.iterations == 0 || S->dyn.info.iterations > S->dyn.info.iterations_jacobi));
     j.np = S->m->nnode > 2048 ? nt : 1;
     amps__par_for(&S->U->par, S->m->ntet > 2048 ? nt : 1, S->m->ntet, 256, amps__cr_tets, &j);
     if (mode != 2) amps__par_for(&S->U->par, (int)j.np, j.np, 1, amps__cr_nodes, &j);
     S->dyn.cr_rvalid = 1;
-    if (mode != 2) S->dyn.cr_rn_ok = j.frames;
+    if (j.frames) {
+        S->dyn.cr_rnkey[0] = (long)S->dyn.nstep;
+        S->dyn.cr_rnkey[1] = (long)S->m->nnode;
+        S->dyn.cr_rnkey[2] = (long)S->m->nremoved;
+    }
 }
 
-/* Rn of the current state for the engine's preconditioner, if the step's pass left it out. */
-static void amps__cr_need_frames(amps_scene *S) {
-    if (!S->dyn.cr_rn_ok) amps__cr_pass(S, 3);
+/* The node frames Rn of the current state (the engine's preconditioner, the haptic path), once
+   per state. */
+static void amps__cr_frames(amps_scene *S) {
+    if (!amps__cr_frames_valid(S)) amps__cr_pass(S, 3);
 }
 
 /* ---- the assembled A_R: 3x3 blocks by node ---- */
@@ -15581,10 +15592,10 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
     amps_scene *S = j->S;
     const amps_mesh *m = S->m;
     const amps_int *map = S->dyn.crA.map, *bp = S->dyn.crA.bp, *bj = S->dyn.crA.bj;
-    amps_int lo = (amps_int)((double)p0 * m->nnode / j->np), hi = (amps_int)((double)p1 * m->nnode / j->np), v, t;
+    amps_int lo, hi, v, t;
     double *bx = S->dyn.crA.bx, cK = S->dyn.cK;
     (void)slot;
-    if (p1 == j->np) hi = m->nnode;
+    amps__cr_part(m, p0, p1, j->np, &lo, &hi);
     memset(bx + 9 * (size_t)bp[lo], 0, sizeof(double) * 9 * (size_t)(bp[hi] - bp[lo]));
     for (v = lo; v < hi; v++) { /* the mass on the diagonal block */
         double mv = S->dyn.cM * S->node.mass[v], *B = bx + 9 * (size_t)amps__cr_find(bj, bp[v], bp[v + 1] - 1, v);
@@ -15594,9 +15605,8 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
         const amps_int *tv = m->tet + 4 * t;
         const double *G, *R, *lm;
         double h[12], la, mu;
-        int a, b, i, k, any = 0;
-        for (a = 0; a < 4; a++) any |= tv[a] >= lo && tv[a] < hi;
-        if (!any || (m->removed && m->removed[t])) continue;
+        int a, b, i, k;
+        if (!amps__cr_touches(tv, lo, hi) || (m->removed && m->removed[t])) continue;
         G = S->dyn.cr_G + 12 * t;
         R = S->dyn.cr_R + 9 * t;
         lm = S->dyn.cr_lm + 2 * t;
@@ -15632,8 +15642,8 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
 /* A_R of the step into crA (pattern first; after the mode 0 pass). */
 static amps_status amps__cr_assemble(amps_ctx *ctx, amps_scene *S) {
     amps_status s = amps__cr_pattern(ctx, S);
-    if (s != AMPS_OK) return s;
     amps__crasm j;
+    if (s != AMPS_OK) return s;
     j.S = S;
     j.np = S->m->nnode > 2048 ? S->U->nthr : 1;
     amps__par_for(&S->U->par, (int)j.np, j.np, 1, amps__cr_rows, &j);
@@ -15716,7 +15726,6 @@ static amps_status amps__cr_room(amps_ctx *ctx, amps_scene *S, amps_int N) {
         memset(D->crH.pin + D->cr_cap, 0, c - (size_t)D->cr_cap);
         memset(D->cr_react + 3 * (size_t)D->cr_cap, 0, sizeof(double) * 3 * (c - (size_t)D->cr_cap));
         D->cr_cap = (amps_int)c;
-        D->crH.key[0] = -1;
     }
     if (N > D->cr_ncap) {
         size_t c = (size_t)N + (size_t)N / 2 + 16;
@@ -15756,27 +15765,30 @@ static void amps__cr_rhs(amps_scene *S, amps_int N, double *b, double *x) {
         }
 }
 
+/* y = R^T a (transpose) or R a for the 3x3 R (row-major); y may be a. */
+static void amps__rot3(const double R[9], const double a[3], int transpose, double y[3]) {
+    double t[3];
+    int i;
+    for (i = 0; i < 3; i++)
+        t[i] = transpose ? R[i] * a[0] + R[3 + i] * a[1] + R[6 + i] * a[2]
+                         : R[3 * i] * a[0] + R[3 * i + 1] * a[1] + R[3 * i + 2] * a[2];
+    for (i = 0; i < 3; i++) y[i] = t[i];
+}
+
 /* y = Rn^T x (transpose) or Rn x per node, on the equations of the nodes (y may be x). */
 static void amps__cr_rotate(const amps_scene *S, const double *x, double *y, int transpose) {
     amps_int v;
     for (v = 0; v < S->m->nnode; v++) {
         const amps_int *e = S->node.dof + 3 * v;
-        const double *R = S->dyn.cr_Rn + 9 * v;
         double a[3];
         int i;
         if (e[0] < 0) continue;
         for (i = 0; i < 3; i++) a[i] = x[e[i]];
-        for (i = 0; i < 3; i++)
-            y[e[i]] = transpose ? R[i] * a[0] + R[3 + i] * a[1] + R[6 + i] * a[2]
-                                : R[3 * i] * a[0] + R[3 * i + 1] * a[1] + R[3 * i + 2] * a[2];
+        amps__rot3(S->dyn.cr_Rn + 9 * v, a, transpose, a);
+        for (i = 0; i < 3; i++) y[e[i]] = a[i];
     }
 }
 
-/* PCG on the reduced A_R w_F = (b - A_R w_C)_F from x (x_C: the prescribed values), in place,
-   preconditioned by Rn A^-1 Rn^T (A: the engine's linear matrix, Rn the node rotations: exact for
-   a rigid rotation of the whole model); *bn receives ||(b - A_R w_C)_F||, *relres the final
-   relative residual, q (the fifth vector of cr_vec) A_R x. Returns the iterations, or a negative
-   status. */
 /* z = M^-1 r on the free equations with the preconditioner kind: 0 Rn A^-1 Rn^T (the engine's
    exact solve with the current linear A in the frame of the node rotations), 1 block Jacobi
    (the inverses of A_R's diagonal 3x3 blocks). */
@@ -15785,7 +15797,7 @@ static amps_status amps__cr_prec(amps_ctx *ctx, amps_scene *S, amps_int N, int k
     amps_int v, e;
     if (kind == 0) {
         amps_status s;
-        amps__cr_need_frames(S);
+        amps__cr_frames(S);
         amps__cr_rotate(S, r, z, 1);
         if ((s = amps_update_solve_rhs(ctx, S->U, z, z)) != AMPS_OK) return s;
         amps__cr_rotate(S, z, z, 0);
@@ -15827,7 +15839,7 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
                              double *relres) {
     amps__scene_dyn *D = &S->dyn;
     double *r = D->cr_vec + 2 * (size_t)D->cr_ncap, *z = r + D->cr_ncap, *p = z + D->cr_ncap, *q = p + D->cr_ncap;
-    double tol = D->corot_tol > 0 ? D->corot_tol : 1e-10, rz = 0, rn, alpha, beta, ce, cj;
+    double tol = D->corot_tol > 0 ? D->corot_tol : 1e-10, rz = 0, rn, alpha, beta, ce, cj, budget;
     amps_int maxit = D->corot_maxit > 0 ? D->corot_maxit : 200, it = 0, e, cap = 0, kit = 0;
     int restart, kind = 0;
     amps_status s;
@@ -15845,9 +15857,10 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
     /* the preconditioner: the cheaper by the last iterations, block Jacobi tried now and then */
     ce = amps__cr_cost(S, N, 0);
     cj = amps__cr_cost(S, N, 1);
+    budget = (double)maxit * ce;
     if (D->crP.it[0] > 0) {
         cap = (amps_int)(1.5 * (double)D->crP.it[0] * ce / cj) + 1;
-        if (cap > (amps_int)((double)maxit * ce / cj)) cap = (amps_int)((double)maxit * ce / cj);
+        if (cap > (amps_int)(budget / cj)) cap = (amps_int)(budget / cj);
         if (D->crP.it[1] == 0 || D->crP.probe >= 32 || (double)D->crP.it[1] * cj < (double)D->crP.it[0] * ce) kind = 1;
     }
     D->crP.probe = kind ? 0 : D->crP.probe + 1;
@@ -15857,8 +15870,8 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
         for (e = 0; e < N; e++) r[e] = D->cr_con[e] ? 0.0 : b[e] - q[e];
         rn = sqrt(amps__cr_dot(S, N, r, r));
         *relres = rn / *bn;
-        if (*relres <= tol || (!kind && (double)it * ce + (double)kit * cj >= (double)maxit * ce)) break;
-        for (; rn > tol * *bn && (kind ? kit < cap : (double)it * ce + (double)kit * cj < (double)maxit * ce);
+        if (*relres <= tol || (!kind && (double)it * ce + (double)kit * cj >= budget)) break;
+        for (; rn > tol * *bn && (kind ? kit < cap : (double)it * ce + (double)kit * cj < budget);
              it += !kind, kit += kind) {
             double rz1;
             if ((s = amps__cr_prec(ctx, S, N, kind, r, z)) != AMPS_OK) return s;
@@ -15915,27 +15928,23 @@ static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
     t0 = amps_now();
     it = amps__cr_pcg(ctx, S, N, b, x, &bn, &relres);
     if (it < 0) return (amps_status)it;
-    /* reactions (A_R w+ - b)_P / dt, q = A_R w+ from the PCG */
-    for (v = 0; v < S->m->nnode; v++)
+    /* reactions (A_R w+ - b)_P / dt (q = A_R w+ from the PCG), the new state, and the anchor of
+       the haptic calls until the next step (pins, targets, reactions) */
+    for (v = 0; v < S->m->nnode; v++) {
+        D->crH.pin[v] = S->node.pinned[v] && !D->orphan[v];
         for (d = 0; d < 3; d++) {
             amps_int k = 3 * v + d;
             e = S->node.dof[k];
-            D->cr_react[k] = (e >= 0 && S->node.pinned[v] && !D->orphan[v]) ? (q[e] - b[e]) / D->dt : 0.0;
+            D->cr_react[k] = (e >= 0 && D->crH.pin[v]) ? (q[e] - b[e]) / D->dt : 0.0;
+            D->crH.r0[k] = D->cr_react[k];
+            D->crH.g0[k] = S->node.pin_value[k];
             D->crP.wprev[k] = D->vel[k];
             D->vel[k] = e >= 0 ? x[e] : 0.0;
             S->node.disp[k] += D->dt * D->vel[k];
         }
-    D->crP.nprev = S->m->nnode;
-    for (v = 0; v < S->m->nnode; v++) { /* the anchor of the haptic calls until the next step */
-        D->crH.pin[v] = S->node.pinned[v] && !D->orphan[v];
-        for (d = 0; d < 3; d++) {
-            D->crH.g0[3 * v + d] = S->node.pin_value[3 * v + d];
-            D->crH.r0[3 * v + d] = D->cr_react[3 * v + d];
-        }
     }
-    D->crH.key[0] = -1;
+    D->crP.nprev = S->m->nnode;
     D->cr_rvalid = 0;
-    D->cr_rn_ok = 0;
     D->info.corotational = 1;
     D->info.iterations = it;
     D->info.iterations_total += it;
@@ -15947,18 +15956,6 @@ static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
                          "(tolerance %.3g)",
                          relres, (long)it, tol);
     return AMPS_OK;
-}
-
-/* The node frames Rn of the current state, once per state (steps, nodes, removals). */
-static void amps__cr_frames(amps_scene *S) {
-    amps__scene_dyn *D = &S->dyn;
-    if (D->crH.key[0] == (long)D->nstep && D->crH.key[1] == (long)S->m->nnode && D->crH.key[2] == (long)S->m->nremoved)
-        return;
-    amps__cr_pass(S, 3);
-    D->cr_rvalid = 1; /* R of the current u: the next step's pass keeps them */
-    D->crH.key[0] = (long)D->nstep;
-    D->crH.key[1] = (long)S->m->nnode;
-    D->crH.key[2] = (long)S->m->nremoved;
 }
 
 /* The haptic call of the corotational mode (amps_scene_solve_reactions): for each pinned node,
@@ -15982,27 +15979,25 @@ static amps_status amps__scene_corot_haptic(amps_ctx *ctx, amps_scene *S) {
         }
     if (n && (s = amps_update_set_force(ctx, S->U, n, S->dyn.idx, S->dyn.val)) != AMPS_OK) return s;
     amps__cr_frames(S);
-    for (n = 0, v = 0; v < nn; v++) {
-        const double *R = D->cr_Rn + 9 * v, *g0 = D->crH.pin[v] ? D->crH.g0 + 3 * v : S->node.disp + 3 * v;
+    for (n = 0, v = 0; v < nn; v++) { /* the constraints: Rn^T (g - g0) / dt */
+        const double *g0 = D->crH.pin[v] ? D->crH.g0 + 3 * v : S->node.disp + 3 * v;
         double dg[3];
         if (!S->node.pinned[v] || D->orphan[v] || S->node.dof[3 * v] < 0) continue;
-        for (d = 0; d < 3; d++) dg[d] = S->node.pin_value[3 * v + d] - g0[d];
-        for (d = 0; d < 3; d++) { /* Rn^T dg / dt: the moved velocities in the node frame */
+        for (d = 0; d < 3; d++) dg[d] = (S->node.pin_value[3 * v + d] - g0[d]) / D->dt;
+        amps__rot3(D->cr_Rn + 9 * v, dg, 1, dg);
+        for (d = 0; d < 3; d++) {
             S->dyn.idx[n] = S->node.dof[3 * v + d];
-            S->dyn.val[n++] = (R[d] * dg[0] + R[3 + d] * dg[1] + R[6 + d] * dg[2]) / D->dt;
+            S->dyn.val[n++] = dg[d];
         }
     }
     if (n && (s = amps_update_constrain(ctx, S->U, n, S->dyn.idx, S->dyn.val)) != AMPS_OK) return s;
     if ((s = amps_update_solve_reactions(ctx, S->U)) < 0) return s;
-    for (v = 0; v < nn; v++) {
-        const double *R = D->cr_Rn + 9 * v;
-        double dr[3];
-        for (d = 0; d < 3; d++) D->cr_react[3 * v + d] = 0.0;
-        if (!S->node.pinned[v] || D->orphan[v] || S->node.dof[3 * v] < 0) continue;
-        for (d = 0; d < 3; d++) dr[d] = amps_update_reaction(S->U, S->node.dof[3 * v + d]) / D->dt;
-        for (d = 0; d < 3; d++)
-            D->cr_react[3 * v + d] = (D->crH.pin[v] ? D->crH.r0[3 * v + d] : 0.0) + R[3 * d] * dr[0] +
-                                     R[3 * d + 1] * dr[1] + R[3 * d + 2] * dr[2];
+    for (v = 0; v < nn; v++) { /* r0 + Rn dr at the pins, 0 elsewhere */
+        double dr[3] = {0, 0, 0};
+        int live = S->node.pinned[v] && !D->orphan[v] && S->node.dof[3 * v] >= 0;
+        for (d = 0; d < 3 && live; d++) dr[d] = amps_update_reaction(S->U, S->node.dof[3 * v + d]) / D->dt;
+        if (live) amps__rot3(D->cr_Rn + 9 * v, dr, 0, dr);
+        for (d = 0; d < 3; d++) D->cr_react[3 * v + d] = (live && D->crH.pin[v] ? D->crH.r0[3 * v + d] : 0.0) + dr[d];
     }
     return s;
 }

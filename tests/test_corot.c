@@ -613,6 +613,23 @@ static void test_identity_is_linear(void) {
 /* A cut model pinned at every node to a rigid motion (90 degrees about an oblique axis plus a
    translation): corotational elastic forces (the reactions once at rest) and stresses vanish to
    1e-12; linear FEM has large ones. */
+/* Pins every node of S to its place turned by 90 degrees about the unit axis ax through c and
+   shifted by tv; 0 or the first failing status. */
+static amps_status pin_rigid_turn(amps_ctx *ctx, amps_scene *S, const double ax[3], const double c[3],
+                                  const double tv[3]) {
+    const amps_mesh *m = amps_scene_mesh(S);
+    amps_int v;
+    int d;
+    for (v = 0; v < m->nnode; v++) {
+        double q[3], g[3];
+        amps_status s;
+        t_arc(ax, 3.14159265358979323846 / 2, c, m->xyz + 3 * v, q);
+        for (d = 0; d < 3; d++) g[d] = q[d] + tv[d] - m->xyz[3 * v + d];
+        if ((s = amps_scene_pin(ctx, S, v, g)) != AMPS_OK) return s;
+    }
+    return AMPS_OK;
+}
+
 static void test_rigid_motion(void) {
     amps_ctx ctx;
     int lin;
@@ -627,7 +644,6 @@ static void test_rigid_motion(void) {
         const amps_mesh *m;
         double p[3] = {1, 1, 1.5}, n[3] = {0.2, 0.1, 1}, *vm, rmax = 0, smax;
         amps_int v;
-        int d;
         amps_scene_set_material(&ctx, S, 10.0, 0.35);
         amps_scene_dynamics(&ctx, S, 0.1, 0.1, 0.01);
         if (!lin) amps_scene_corotational(&ctx, S, 1);
@@ -637,12 +653,7 @@ static void test_rigid_motion(void) {
             amps_scene_pin(&ctx, S, v, g);
         }
         CHECK(amps_scene_cut(&ctx, S, 1 + 3 * (1 + 3 * 1), p, n, &v) == AMPS_OK, "rigid: cut: %s", ctx.msg);
-        for (v = 0; v < m->nnode; v++) {
-            double q[3], g[3];
-            t_arc(ax, 3.14159265358979323846 / 2, c, m->xyz + 3 * v, q);
-            for (d = 0; d < 3; d++) g[d] = q[d] + tv[d] - m->xyz[3 * v + d];
-            CHECK(amps_scene_pin(&ctx, S, v, g) == AMPS_OK, "rigid: pin %ld: %s", (long)v, ctx.msg);
-        }
+        CHECK(pin_rigid_turn(&ctx, S, ax, c, tv) == AMPS_OK, "rigid: pin: %s", ctx.msg);
         CHECK(amps_scene_step(&ctx, S, 3) == AMPS_OK, "rigid: steps: %s", ctx.msg);
         for (v = 0; v < m->nnode; v++) {
             double r[3];
@@ -922,7 +933,6 @@ static amps_scene *haptic_scene(amps_ctx *ctx, const double ax[3]) {
     const amps_mesh *m;
     double c[3] = {0.3, -0.2, 0.5}, tv[3] = {0.7, -1.1, 2.0};
     amps_int v;
-    int d;
     amps_scene_opts_default(&so);
     so.update.refactor = AMPS_REFACTOR_COUNT;
     S = amps_scene_create(ctx, amps_mesh_grid(ctx, 3, 3, 4, 1, 1, 1), &so);
@@ -931,12 +941,7 @@ static amps_scene *haptic_scene(amps_ctx *ctx, const double ax[3]) {
     amps_scene_dynamics(ctx, S, 0.1, 0.1, 0.01);
     amps_scene_corotational(ctx, S, 1);
     m = amps_scene_mesh(S);
-    for (v = 0; v < m->nnode; v++) {
-        double q[3], g[3];
-        t_arc(ax, 3.14159265358979323846 / 2, c, m->xyz + 3 * v, q);
-        for (d = 0; d < 3; d++) g[d] = q[d] + tv[d] - m->xyz[3 * v + d];
-        amps_scene_pin(ctx, S, v, g);
-    }
+    pin_rigid_turn(ctx, S, ax, c, tv);
     amps_scene_step(ctx, S, 3);
     for (v = 0; v < m->nnode; v++)
         if (m->xyz[3 * v + 2] != 0) amps_scene_release(ctx, S, v);
