@@ -1303,11 +1303,13 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    engine's (from the current iterate) once it has cost 1.5 times the engine's last step.
    amps_scene_step_info reports the iterations of each. A_R is assembled each step in
    3x3 blocks by node (the pattern is rebuilt when a cut or a node separation changed the tets'
-   nodes); assembly and products are parallel on the engine's threads and bitwise independent of
-   their count. Memory from the first step: 36 doubles and 36 indices per tet (reference
-   gradients, volume, R_e, Lame constants, element results; the block map and the workspace of
-   its rebuild), 33 doubles and 3 indices per node, 9 doubles and an index per block of A_R (one
-   per pair of nodes sharing a tet), 6 doubles per equation; a rebuilt pattern allocates when it
+   nodes); assembly, products and the PCG's vector updates are parallel on the engine's threads
+   and bitwise independent of their count (dot products are summed per chunk of 256 nodes, then
+   over the chunks in order). Memory from the first step: 36 doubles and 36 indices per tet
+   (reference gradients, volume, R_e, Lame constants, element results; the block map and the
+   workspace of its rebuild), 33 doubles and 3 indices per node (and 3 doubles per 256 nodes),
+   9 doubles and 2 indices per block of A_R (one per pair of nodes sharing a tet), 6 doubles per
+   equation; a rebuilt pattern allocates when it
    outgrows them. Stresses (amps_scene_stress and
    fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. The haptic path between steps
    (amps_scene_solve_reactions, amps_scene_haptic_build) is a model, not the next step: per
@@ -12704,9 +12706,11 @@ typedef struct amps__scene_dyn {
     } crH;
     amps_int cr_cap;                              /* node capacity of cr_gel, cr_react */
     double *cr_vec;                               /* 6 per equation: b, x, r, z, p, q */
+    double *cr_part;                              /* 3 per 256 nodes: the PCG's partial sums */
     struct {                                      /* A_R of the step in 3x3 blocks by node (amps__cr_assemble) */
         amps_int *bp, *bj;                        /* row v: blocks bp[v] .. bp[v+1]-1, nodes bj ascending */
         double *bx;                               /* 9 per block, row-major */
+        amps_int *be;                             /* per block: the first equation of its column node (< 0: none) */
         double *dinv;                             /* 9 per node: the inverse of its diagonal block */
         amps_int *map;           /* 16 per tet: map[16 t + 4 a + b] = block of tet node b in row of node a */
         amps_int *tet;           /* 4 per tet: the nodes the pattern was built for */
@@ -12819,9 +12823,11 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->dyn.crH.r0);
     amps__free(ctx, S->dyn.crH.pin);
     amps__free(ctx, S->dyn.cr_vec);
+    amps__free(ctx, S->dyn.cr_part);
     amps__free(ctx, S->dyn.crA.bp);
     amps__free(ctx, S->dyn.crA.bj);
     amps__free(ctx, S->dyn.crA.bx);
+    amps__free(ctx, S->dyn.crA.be);
     amps__free(ctx, S->dyn.crA.dinv);
     amps__free(ctx, S->dyn.crA.map);
     amps__free(ctx, S->dyn.crA.tet);
@@ -15556,6 +15562,7 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
     if (need > S->dyn.crA.cap_blk) {
         size_t c = need + need / 2 + 16;
         if (amps__realloc(ctx, (void **)&S->dyn.crA.bj, c, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&S->dyn.crA.be, c, sizeof(amps_int)) ||
             amps__realloc(ctx, (void **)&S->dyn.crA.bx, 9 * c, sizeof(double)))
             goto oom;
         S->dyn.crA.cap_blk = c;
@@ -15592,7 +15599,7 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
     amps_scene *S = j->S;
     const amps_mesh *m = S->m;
     const amps_int *map = S->dyn.crA.map, *bp = S->dyn.crA.bp, *bj = S->dyn.crA.bj;
-    amps_int lo, hi, v, t;
+    amps_int lo, hi, v, t, q;
     double *bx = S->dyn.crA.bx, cK = S->dyn.cK;
     (void)slot;
     amps__cr_part(m, p0, p1, j->np, &lo, &hi);
@@ -15629,13 +15636,14 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
             }
         }
     }
+    for (q = bp[lo]; q < bp[hi]; q++) S->dyn.crA.be[q] = S->node.dof[3 * bj[q]]; /* the products' columns */
     for (v = lo; v < hi; v++) { /* the inverses of the diagonal blocks: C^T / det */
         double C[9], *Di = S->dyn.crA.dinv + 9 * (size_t)v,
                      det = amps__cof3(bx + 9 * (size_t)amps__cr_find(bj, bp[v], bp[v + 1] - 1, v), C);
-        int q, r;
+        int i, k;
         det = det != 0.0 ? 1.0 / det : 0.0;
-        for (q = 0; q < 3; q++)
-            for (r = 0; r < 3; r++) Di[3 * q + r] = C[3 * r + q] * det;
+        for (i = 0; i < 3; i++)
+            for (k = 0; k < 3; k++) Di[3 * i + k] = C[3 * k + i] * det;
     }
 }
 
@@ -15650,45 +15658,116 @@ static amps_status amps__cr_assemble(amps_ctx *ctx, amps_scene *S) {
     return AMPS_OK;
 }
 
-/* y = A_R v on the equations (rows of nodes with equations; v read on them only). */
-typedef struct amps__crmul {
-    const amps_scene *S;
-    const double *v;
-    double *y;
-} amps__crmul;
+/* The PCG's vector work in node chunks of AMPS__CR_CHUNK: each dot product is summed per chunk
+   into cr_part, then over the chunks in order (the same bits for any number of threads). */
+#define AMPS__CR_CHUNK 256
 
-static void amps__cr_mul_rows(amps_int b0, amps_int e0, int slot, void *arg) {
-    const amps__crmul *j = AMPS__CAST(const amps__crmul *, arg);
-    const amps_scene *S = j->S;
-    const amps_int *dof = S->node.dof, *bj = S->dyn.crA.bj;
-    amps_int v, q;
-    (void)slot;
-    for (v = b0; v < e0; v++) {
-        amps_int e = dof[3 * v];
-        double y0 = 0, y1 = 0, y2 = 0;
-        if (e < 0) continue;
-        for (q = S->dyn.crA.bp[v]; q < S->dyn.crA.bp[v + 1]; q++) {
-            amps_int f = dof[3 * bj[q]];
-            const double *B = S->dyn.crA.bx + 9 * (size_t)q, *x;
-            if (f < 0) continue;
-            x = j->v + f;
-            y0 += B[0] * x[0] + B[1] * x[1] + B[2] * x[2];
-            y1 += B[3] * x[0] + B[4] * x[1] + B[5] * x[2];
-            y2 += B[6] * x[0] + B[7] * x[1] + B[8] * x[2];
+/* A sweep of the nodes with equations, a parallel loop:
+   op 0: y = A_R v (v read on the equations only) and the sum v . y;
+   op 1: p = z + beta p (0 on the constrained equations);
+   op 2: x += alpha p, r -= alpha q (if upd) and the sum r . r; with block Jacobi (bj) also
+         z = D^-1 r and a second sum r . z.
+   The sums run over the free equations, per chunk into cr_part. */
+typedef struct amps__crsweep {
+    const amps_scene *S;
+    int op, upd, bj;
+    const double *v;
+    double *y, *x, *r, *z, *p, *q;
+    double alpha, beta;
+} amps__crsweep;
+
+/* v_v . y_v on the free equations of node v (first equation e). */
+static double amps__cr_dot_node(const unsigned char *con, amps_int e, const double *x, const double *y) {
+    return (con[e] ? 0.0 : x[e] * y[e]) + (con[e + 1] ? 0.0 : x[e + 1] * y[e + 1]) +
+           (con[e + 2] ? 0.0 : x[e + 2] * y[e + 2]);
+}
+
+/* The product rows of node v (first equation e): y_v = sum_w B_vw x_w; returns x_v . y_v on its
+   free equations. */
+static double amps__cr_mul_node(const amps_scene *S, amps_int v, amps_int e, const double *x, double *y) {
+    const amps_int *be = S->dyn.crA.be;
+    amps_int q;
+    double y0 = 0, y1 = 0, y2 = 0;
+    for (q = S->dyn.crA.bp[v]; q < S->dyn.crA.bp[v + 1]; q++) {
+        const double *B = S->dyn.crA.bx + 9 * (size_t)q, *u = x + be[q];
+        if (be[q] < 0) continue;
+        y0 += B[0] * u[0] + B[1] * u[1] + B[2] * u[2];
+        y1 += B[3] * u[0] + B[4] * u[1] + B[5] * u[2];
+        y2 += B[6] * u[0] + B[7] * u[1] + B[8] * u[2];
+    }
+    y[e] = y0;
+    y[e + 1] = y1;
+    y[e + 2] = y2;
+    return amps__cr_dot_node(S->dyn.cr_con, e, x, y);
+}
+
+/* The update of node v's equations e..e+2 (op 2); d[0] += r . r, d[1] += r . z. */
+static void amps__cr_update_node(const amps__crsweep *j, amps_int v, amps_int e, double d[2]) {
+    const unsigned char *con = j->S->dyn.cr_con + e;
+    const double *Di = j->S->dyn.crA.dinv + 9 * (size_t)v;
+    double *r = j->r + e;
+    int i;
+    for (i = 0; i < 3; i++)
+        if (!con[i] && j->upd) {
+            j->x[e + i] += j->alpha * j->p[e + i];
+            r[i] -= j->alpha * j->q[e + i];
         }
-        j->y[e] = y0;
-        j->y[e + 1] = y1;
-        j->y[e + 2] = y2;
+    for (i = 0; i < 3; i++)
+        if (!con[i]) d[0] += r[i] * r[i];
+    if (!j->bj) return;
+    for (i = 0; i < 3; i++) {
+        double zi = con[0] ? 0.0 : Di[3 * i] * r[0] + Di[3 * i + 1] * r[1] + Di[3 * i + 2] * r[2];
+        j->z[e + i] = zi;
+        if (!con[i]) d[1] += r[i] * zi;
     }
 }
 
-static void amps__cr_mul(amps_scene *S, const double *v, double *y) {
-    amps__crmul j;
-    j.S = S;
+static void amps__cr_sweep_rows(amps_int b0, amps_int e0, int slot, void *arg) {
+    const amps__crsweep *j = AMPS__CAST(const amps__crsweep *, arg);
+    const amps_scene *S = j->S;
+    const unsigned char *con = S->dyn.cr_con;
+    double *part = S->dyn.cr_part;
+    amps_int c, v;
+    (void)slot;
+    for (c = b0; c < e0; c += AMPS__CR_CHUNK) {
+        amps_int c1 = c + AMPS__CR_CHUNK < e0 ? c + AMPS__CR_CHUNK : e0;
+        double d[2] = {0, 0};
+        for (v = c; v < c1; v++) {
+            amps_int e = S->node.dof[3 * v];
+            int i;
+            if (e < 0) continue;
+            if (j->op == 0) d[0] += amps__cr_mul_node(S, v, e, j->v, j->y);
+            else if (j->op == 1)
+                for (i = 0; i < 3; i++) j->p[e + i] = con[e + i] ? 0.0 : j->z[e + i] + j->beta * j->p[e + i];
+            else amps__cr_update_node(j, v, e, d);
+        }
+        part[3 * (c / AMPS__CR_CHUNK)] = d[0];
+        part[3 * (c / AMPS__CR_CHUNK) + 1] = d[1];
+    }
+}
+
+/* Runs the sweep j over every node; returns its (first) sum, *rz (may be NULL) the second. */
+static double amps__cr_sweep(amps_scene *S, amps__crsweep *j, double *rz) {
+    amps_int nn = S->m->nnode, c, nc = (nn + AMPS__CR_CHUNK - 1) / AMPS__CR_CHUNK;
+    double d0 = 0, d1 = 0;
+    j->S = S;
+    amps__par_for(&S->U->par, nn > 2048 ? S->U->nthr : 1, nn, AMPS__CR_CHUNK, amps__cr_sweep_rows, j);
+    if (j->op == 0) S->dyn.info.products++;
+    for (c = 0; c < nc; c++) {
+        d0 += S->dyn.cr_part[3 * c];
+        d1 += S->dyn.cr_part[3 * c + 1];
+    }
+    if (rz) *rz = d1;
+    return d0;
+}
+
+/* y = A_R v on the equations; returns v . y on the free equations. */
+static double amps__cr_mul(amps_scene *S, const double *v, double *y) {
+    amps__crsweep j;
+    memset(&j, 0, sizeof(j));
     j.v = v;
     j.y = y;
-    amps__par_for(&S->U->par, S->m->nnode > 2048 ? S->U->nthr : 1, S->m->nnode, 256, amps__cr_mul_rows, &j);
-    S->dyn.info.products++;
+    return amps__cr_sweep(S, &j, NULL);
 }
 /* The corotational workspace: per tet (gradients and volumes at the first call), per node and
    per equation (N). */
@@ -15721,7 +15800,8 @@ static amps_status amps__cr_room(amps_ctx *ctx, amps_scene *S, amps_int N) {
             amps__realloc(ctx, (void **)&D->crP.wprev, 3 * c, sizeof(double)) ||
             amps__realloc(ctx, (void **)&D->crH.g0, 3 * c, sizeof(double)) ||
             amps__realloc(ctx, (void **)&D->crH.r0, 3 * c, sizeof(double)) ||
-            amps__realloc(ctx, (void **)&D->crH.pin, c, 1))
+            amps__realloc(ctx, (void **)&D->crH.pin, c, 1) ||
+            amps__realloc(ctx, (void **)&D->cr_part, 3 * (c / AMPS__CR_CHUNK + 1), sizeof(double)))
             return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory (corotational)");
         memset(D->crH.pin + D->cr_cap, 0, c - (size_t)D->cr_cap);
         memset(D->cr_react + 3 * (size_t)D->cr_cap, 0, sizeof(double) * 3 * (c - (size_t)D->cr_cap));
@@ -15789,27 +15869,14 @@ static void amps__cr_rotate(const amps_scene *S, const double *x, double *y, int
     }
 }
 
-/* z = M^-1 r on the free equations with the preconditioner kind: 0 Rn A^-1 Rn^T (the engine's
-   exact solve with the current linear A in the frame of the node rotations), 1 block Jacobi
-   (the inverses of A_R's diagonal 3x3 blocks). */
-static amps_status amps__cr_prec(amps_ctx *ctx, amps_scene *S, amps_int N, int kind, const double *r, double *z) {
-    const amps__scene_dyn *D = &S->dyn;
-    amps_int v, e;
-    if (kind == 0) {
-        amps_status s;
-        amps__cr_frames(S);
-        amps__cr_rotate(S, r, z, 1);
-        if ((s = amps_update_solve_rhs(ctx, S->U, z, z)) != AMPS_OK) return s;
-        amps__cr_rotate(S, z, z, 0);
-        return AMPS_OK;
-    }
-    for (e = 0; e < N; e++) z[e] = 0.0;
-    for (v = 0; v < S->m->nnode; v++) {
-        const double *Di = D->crA.dinv + 9 * (size_t)v;
-        int i;
-        if ((e = S->node.dof[3 * v]) < 0 || D->cr_con[e]) continue;
-        for (i = 0; i < 3; i++) z[e + i] = Di[3 * i] * r[e] + Di[3 * i + 1] * r[e + 1] + Di[3 * i + 2] * r[e + 2];
-    }
+/* z = M^-1 r with the engine's preconditioner: Rn A^-1 Rn^T, the engine's exact solve with the
+   current linear A in the frame of the node rotations (block Jacobi: amps__cr_update_node). */
+static amps_status amps__cr_prec(amps_ctx *ctx, amps_scene *S, const double *r, double *z) {
+    amps_status s;
+    amps__cr_frames(S);
+    amps__cr_rotate(S, r, z, 1);
+    if ((s = amps_update_solve_rhs(ctx, S->U, z, z)) != AMPS_OK) return s;
+    amps__cr_rotate(S, z, z, 0);
     return AMPS_OK;
 }
 
@@ -15839,10 +15906,18 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
                              double *relres) {
     amps__scene_dyn *D = &S->dyn;
     double *r = D->cr_vec + 2 * (size_t)D->cr_ncap, *z = r + D->cr_ncap, *p = z + D->cr_ncap, *q = p + D->cr_ncap;
-    double tol = D->corot_tol > 0 ? D->corot_tol : 1e-10, rz = 0, rn, alpha, beta, ce, cj, budget;
+    double tol = D->corot_tol > 0 ? D->corot_tol : 1e-10, rz = 0, rzn = 0, rn, alpha, beta, ce, cj, budget;
     amps_int maxit = D->corot_maxit > 0 ? D->corot_maxit : 200, it = 0, e, cap = 0, kit = 0;
-    int restart, kind = 0;
+    int restart, kind = 0, zok;
+    amps__crsweep sw;
     amps_status s;
+    memset(&sw, 0, sizeof(sw));
+    sw.x = x;
+    sw.r = r;
+    sw.z = z;
+    sw.p = p;
+    sw.q = q;
+    sw.op = 2;
     for (e = 0; e < N; e++) p[e] = D->cr_con[e] ? x[e] : 0.0;
     amps__cr_mul(S, p, q);
     for (e = 0; e < N; e++) r[e] = D->cr_con[e] ? 0.0 : b[e] - q[e];
@@ -15871,24 +15946,32 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
         rn = sqrt(amps__cr_dot(S, N, r, r));
         *relres = rn / *bn;
         if (*relres <= tol || (!kind && (double)it * ce + (double)kit * cj >= budget)) break;
-        for (; rn > tol * *bn && (kind ? kit < cap : (double)it * ce + (double)kit * cj < budget);
+        for (zok = 0; rn > tol * *bn && (kind ? kit < cap : (double)it * ce + (double)kit * cj < budget);
              it += !kind, kit += kind) {
-            double rz1;
-            if ((s = amps__cr_prec(ctx, S, N, kind, r, z)) != AMPS_OK) return s;
-            rz1 = amps__cr_dot(S, N, r, z);
+            double rz1, pq;
+            if (!kind) { /* z = M^-1 r by the engine; block Jacobi's came with the last update */
+                if ((s = amps__cr_prec(ctx, S, r, z)) != AMPS_OK) return s;
+                rz1 = amps__cr_dot(S, N, r, z);
+            } else if (!zok) {
+                sw.op = 2;
+                sw.upd = 0;
+                sw.bj = 1;
+                (void)amps__cr_sweep(S, &sw, &rz1);
+            } else rz1 = rzn;
             beta = rz != 0 ? rz1 / rz : 0.0;
-            for (e = 0; e < N; e++) p[e] = D->cr_con[e] ? 0.0 : z[e] + beta * p[e];
             rz = rz1;
-            amps__cr_mul(S, p, q);
-            alpha = amps__cr_dot(S, N, p, q);
-            if (!(alpha > 0)) break; /* not positive definite on this direction (rounding): stop */
-            alpha = rz / alpha;
-            for (e = 0; e < N; e++)
-                if (!D->cr_con[e]) {
-                    x[e] += alpha * p[e];
-                    r[e] -= alpha * q[e];
-                }
-            rn = sqrt(amps__cr_dot(S, N, r, r));
+            sw.op = 1; /* p = z + beta p */
+            sw.beta = beta;
+            (void)amps__cr_sweep(S, &sw, NULL);
+            pq = amps__cr_mul(S, p, q);
+            if (!(pq > 0)) break; /* not positive definite on this direction (rounding): stop */
+            alpha = rz / pq;
+            sw.op = 2; /* x += alpha p, r -= alpha q, and z = D^-1 r for block Jacobi */
+            sw.upd = 1;
+            sw.bj = kind;
+            sw.alpha = alpha;
+            rn = sqrt(amps__cr_sweep(S, &sw, &rzn));
+            zok = kind;
         }
         if (kind && rn > tol * *bn) { /* block Jacobi too slow: on with the engine's, from x */
             D->crP.it[1] = kit + (amps_int)((double)D->crP.it[0] * ce / cj); /* its estimate: above the cap */

@@ -17,7 +17,8 @@
    region 2, the spatula reactions every step).
    usage: corot <beam|bunny|brain> <steps> <every> <out.csv> [<data dir>]
    BENCH_CPU=1 times with the calling thread's CPU time (robust to a loaded machine; run with
-   OMP_NUM_THREADS=1 then), BENCH_FRACTURE=0 turns the brain's fracture off. */
+   OMP_NUM_THREADS=1 then), BENCH_FRACTURE=0 turns the brain's fracture off, BENCH_TRACE=1 prints
+   each step's times (whole step, rotations and assembly, PCG), iterations and products. */
 #define _POSIX_C_SOURCE 200809L
 #define AMPS_IMPLEMENTATION
 #include "amps.h"
@@ -479,6 +480,10 @@ int main(int argc, char **argv) {
         it_amps[k] = (double)st.iterations;
         t_solve[k] = getenv("BENCH_CPU") ? t_amps[k] : st.t_rotation + st.t_solve;
         if (st.relres > rr_max) rr_max = st.relres;
+        if (getenv("BENCH_TRACE"))
+            fprintf(stderr, "trace %d: total %.2f rot %.2f solve %.2f it %d jac %d prod %d\n", k, 1e3 * t_amps[k],
+                    1e3 * st.t_rotation, 1e3 * st.t_solve, (int)st.iterations, (int)st.iterations_jacobi,
+                    (int)st.products);
         if (sc.npin > 0) { /* the reactions of the pins (spatulas, grasper) */
             double r[3], sum = 0;
             amps_int j;
