@@ -11100,6 +11100,7 @@ AMPS_API double amps_tet_stress(const double X[12], double E, double nu, const d
 static int amps__polar_newton(const double F[9], double R[9]) {
     double X[9], C[9], nx = 0, det, g, d;
     int it, i;
+    AMPS__UNROLL
     for (i = 0; i < 9; i++) {
         X[i] = F[i];
         nx += F[i] * F[i];
@@ -11110,11 +11111,13 @@ static int amps__polar_newton(const double F[9], double R[9]) {
         if (!(det > 1e-6 * nx * sqrt(nx) / 27.0)) return 0;
         g = 1.0;
         if (it < 2) {
+            AMPS__UNROLL
             for (i = 0; i < 9; i++) nc += C[i] * C[i];
             g = sqrt(sqrt(nc) / (det * sqrt(nx)));
         }
         d = 0;
         nx = 0;
+        AMPS__UNROLL
         for (i = 0; i < 9; i++) {
             double xn = 0.5 * (g * X[i] + C[i] / (g * det));
             d += (xn - X[i]) * (xn - X[i]);
@@ -15168,6 +15171,7 @@ static amps_status amps__scene_fracture_step(amps_ctx *ctx, amps_scene *S) {
             if (S->dyn.freg_id[k] == (m->region ? m->region[t] : 0)) smax = S->dyn.freg_sigma[k];
         if (smax <= 0) continue;
         amps_mesh_tet_coords(m, t, X);
+        AMPS__UNROLL
         for (a = 0; a < 12; a++) u[a] = S->node.disp[3 * m->tet[4 * t + a / 3] + a % 3];
         if (S->dyn.corot && S->dyn.cr_G) amps__cr_sigma(S, t, S->dyn.cr_G + 12 * t, S->dyn.cr_R + 9 * t, sg);
         else amps_tet_stress(X, m->E[t], m->nu[t], u, sg, NULL, NULL);
@@ -15367,9 +15371,12 @@ typedef struct amps__crjob {
 static void amps__cr_deform(const amps_scene *S, amps_int t, const double *G, double F[9]) {
     const amps_int *tv = S->m->tet + 4 * t;
     int a, i, j;
+    AMPS__UNROLL
     for (i = 0; i < 9; i++) F[i] = (i % 4 == 0) ? 1.0 : 0.0;
+    AMPS__UNROLL
     for (a = 0; a < 4; a++) {
         const double *u = S->node.disp + 3 * tv[a];
+        AMPS__UNROLL
         for (i = 0; i < 3; i++)
             for (j = 0; j < 3; j++) F[3 * i + j] += u[i] * G[3 * a + j];
     }
@@ -15399,16 +15406,21 @@ static void amps__cr_tets(amps_int b, amps_int e, int slot, void *arg) {
         amps__lame(m->E[t], m->nu[t], lm, lm + 1);
         lm[0] *= S->dyn.vol[t];
         lm[1] *= S->dyn.vol[t];
+        AMPS__UNROLL
         for (i = 0; i < 3; i++)
             for (k = 0; k < 3; k++)
                 H[3 * i + k] = R[i] * F[k] + R[3 + i] * F[3 + k] + R[6 + i] * F[6 + k] - (i == k ? 1.0 : 0.0);
         tr = lm[0] * (H[0] + H[4] + H[8]);
+        AMPS__UNROLL
         for (i = 0; i < 3; i++)
             for (k = 0; k < 3; k++) sg[3 * i + k] = lm[1] * (H[3 * i + k] + H[3 * k + i]) + (i == k ? tr : 0.0);
+        AMPS__UNROLL
         for (a = 0; a < 4; a++) {
             double f[3];
+            AMPS__UNROLL
             for (i = 0; i < 3; i++)
                 f[i] = sg[3 * i] * G[3 * a] + sg[3 * i + 1] * G[3 * a + 1] + sg[3 * i + 2] * G[3 * a + 2];
+            AMPS__UNROLL
             for (i = 0; i < 3; i++) ye[3 * a + i] = R[3 * i] * f[0] + R[3 * i + 1] * f[1] + R[3 * i + 2] * f[2];
         }
     }
@@ -15451,6 +15463,7 @@ static void amps__cr_nodes(amps_int p0, amps_int p1, int slot, void *arg) {
         const double *ye = S->dyn.cr_ye + 12 * t, *R = S->dyn.cr_R + 9 * t;
         int a, d;
         if (!amps__cr_touches(tv, lo, hi) || (m->removed && m->removed[t])) continue;
+        AMPS__UNROLL
         for (a = 0; a < 4; a++) {
             amps_int w = tv[a];
             if (w < lo || w >= hi) continue;
@@ -15619,14 +15632,18 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
         lm = S->dyn.cr_lm + 2 * t;
         la = cK * lm[0];
         mu = cK * lm[1];
+        AMPS__UNROLL
         for (b = 0; b < 4; b++)
             for (i = 0; i < 3; i++)
                 h[3 * b + i] = R[3 * i] * G[3 * b] + R[3 * i + 1] * G[3 * b + 1] + R[3 * i + 2] * G[3 * b + 2];
+        AMPS__UNROLL
         for (a = 0; a < 4; a++) {
             if (tv[a] < lo || tv[a] >= hi || S->node.dof[3 * tv[a]] < 0) continue;
+            AMPS__UNROLL
             for (b = 0; b < 4; b++) {
                 double *B = bx + 9 * (size_t)map[16 * t + 4 * a + b];
                 double gg = mu * (G[3 * a] * G[3 * b] + G[3 * a + 1] * G[3 * b + 1] + G[3 * a + 2] * G[3 * b + 2]);
+                AMPS__UNROLL
                 for (i = 0; i < 3; i++)
                     for (k = 0; k < 3; k++)
                         B[3 * i + k] += la * h[3 * a + i] * h[3 * b + k] + mu * h[3 * b + i] * h[3 * a + k];
@@ -15642,6 +15659,7 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
                      det = amps__cof3(bx + 9 * (size_t)amps__cr_find(bj, bp[v], bp[v + 1] - 1, v), C);
         int i, k;
         det = det != 0.0 ? 1.0 / det : 0.0;
+        AMPS__UNROLL
         for (i = 0; i < 3; i++)
             for (k = 0; k < 3; k++) Di[3 * i + k] = C[3 * k + i] * det;
     }
@@ -15849,9 +15867,11 @@ static void amps__cr_rhs(amps_scene *S, amps_int N, double *b, double *x) {
 static void amps__rot3(const double R[9], const double a[3], int transpose, double y[3]) {
     double t[3];
     int i;
+    AMPS__UNROLL
     for (i = 0; i < 3; i++)
         t[i] = transpose ? R[i] * a[0] + R[3 + i] * a[1] + R[6 + i] * a[2]
                          : R[3 * i] * a[0] + R[3 * i + 1] * a[1] + R[3 * i + 2] * a[2];
+    AMPS__UNROLL
     for (i = 0; i < 3; i++) y[i] = t[i];
 }
 
@@ -15863,8 +15883,10 @@ static void amps__cr_rotate(const amps_scene *S, const double *x, double *y, int
         double a[3];
         int i;
         if (e[0] < 0) continue;
+        AMPS__UNROLL
         for (i = 0; i < 3; i++) a[i] = x[e[i]];
         amps__rot3(S->dyn.cr_Rn + 9 * v, a, transpose, a);
+        AMPS__UNROLL
         for (i = 0; i < 3; i++) y[e[i]] = a[i];
     }
 }
