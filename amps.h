@@ -15617,9 +15617,9 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
     (void)slot;
     amps__cr_part(m, p0, p1, j->np, &lo, &hi);
     memset(bx + 9 * (size_t)bp[lo], 0, sizeof(double) * 9 * (size_t)(bp[hi] - bp[lo]));
-    for (v = lo; v < hi; v++) { /* the mass on the diagonal block */
-        double mv = S->dyn.cM * S->node.mass[v], *B = bx + 9 * (size_t)amps__cr_find(bj, bp[v], bp[v + 1] - 1, v);
-        B[0] = B[4] = B[8] = mv;
+    for (v = lo; v < hi; v++) { /* the mass on the diagonal block (none: a node in no tet) */
+        double *B = bx + 9 * (size_t)amps__cr_find(bj, bp[v], bp[v + 1] - 1, v);
+        if (bp[v] < bp[v + 1]) B[0] = B[4] = B[8] = S->dyn.cM * S->node.mass[v];
     }
     for (t = 0; t < m->ntet; t++) {
         const amps_int *tv = m->tet + 4 * t;
@@ -15655,9 +15655,10 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
     }
     for (q = bp[lo]; q < bp[hi]; q++) S->dyn.crA.be[q] = S->node.dof[3 * bj[q]]; /* the products' columns */
     for (v = lo; v < hi; v++) { /* the inverses of the diagonal blocks: C^T / det */
-        double C[9], *Di = S->dyn.crA.dinv + 9 * (size_t)v,
-                     det = amps__cof3(bx + 9 * (size_t)amps__cr_find(bj, bp[v], bp[v + 1] - 1, v), C);
+        double C[9], *Di = S->dyn.crA.dinv + 9 * (size_t)v, det;
         int i, k;
+        if (bp[v] == bp[v + 1]) continue;
+        det = amps__cof3(bx + 9 * (size_t)amps__cr_find(bj, bp[v], bp[v + 1] - 1, v), C);
         det = det != 0.0 ? 1.0 / det : 0.0;
         AMPS__UNROLL
         for (i = 0; i < 3; i++)

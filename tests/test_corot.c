@@ -1033,6 +1033,54 @@ static void test_haptic(void) {
     free(gp);
 }
 
+/* A node in no tet (a stray point of the file) in the middle of the numbering: its row of A_R is
+   empty; the steps equal those of the same mesh without it (to the PCG's tolerance). */
+static void test_stray_node(void) {
+    amps_ctx ctx;
+    amps_mesh *g, *m[2];
+    amps_scene *S[2];
+    double *xyz, gv[3] = {0, -9.81, 0}, err = 0;
+    amps_int *tet, k = 20, v, t, i;
+    int step, d;
+    amps_ctx_init(&ctx);
+    g = amps_mesh_grid(&ctx, 3, 3, 6, 1, 1, 1);
+    xyz = (double *)malloc(sizeof(double) * 3 * ((size_t)g->nnode + 1));
+    tet = (amps_int *)malloc(sizeof(amps_int) * 4 * (size_t)g->ntet);
+    for (v = 0; v <= g->nnode; v++) /* node k: the stray one, far away */
+        for (d = 0; d < 3; d++) xyz[3 * v + d] = v == k ? 10.0 + d : g->xyz[3 * (v - (v > k)) + d];
+    for (t = 0; t < 4 * g->ntet; t++) tet[t] = g->tet[t] + (g->tet[t] >= k);
+    m[0] = g;
+    m[1] = amps_mesh_create(&ctx, g->nnode + 1, xyz, g->ntet, tet);
+    CHECK(m[1] != NULL, "stray: mesh: %s", ctx.msg);
+    for (i = 0; i < 2 && m[1]; i++) {
+        amps_mesh_set_density(&ctx, m[i], 1.0);
+        S[i] = amps_scene_create(&ctx, m[i], NULL);
+        CHECK(S[i] && amps_scene_fix_where(&ctx, S[i], 2, AMPS_LT, 0.5, NULL) == AMPS_OK &&
+                      amps_scene_gravity(&ctx, S[i], gv) == AMPS_OK &&
+                      amps_scene_dynamics(&ctx, S[i], 0.05, 0.1, 0.01) == AMPS_OK &&
+                      amps_scene_corotational(&ctx, S[i], 1) == AMPS_OK,
+              "stray: setup %ld: %s", (long)i, ctx.msg);
+        for (step = 0; step < 6; step++)
+            CHECK(amps_scene_step(&ctx, S[i], 1) == AMPS_OK, "stray: step %d: %s", step, ctx.msg);
+    }
+    if (m[1]) {
+        const double *w0 = amps_scene_velocities(S[0]), *w1 = amps_scene_velocities(S[1]);
+        double nw = 0;
+        for (v = 0; v < g->nnode; v++)
+            for (d = 0; d < 3; d++) {
+                double a = w0[3 * v + d], b = w1[3 * (v + (v >= k)) + d];
+                err = fabs(a - b) > err ? fabs(a - b) : err;
+                nw = fabs(a) > nw ? fabs(a) : nw;
+            }
+        CHECK(err <= 1e-8 * nw && nw > 0 && amps_scene_velocities(S[1])[3 * k] == 0,
+              "stray: velocities differ by %.2e (max %.2e)", err, nw);
+        amps_scene_free(&ctx, S[0]);
+        amps_scene_free(&ctx, S[1]);
+    }
+    free(xyz);
+    free(tet);
+}
+
 int main(void) {
     test_rotation_kernel();
     test_threads_bitwise();
@@ -1043,6 +1091,7 @@ int main(void) {
     test_bent_bar();
     test_inverted();
     test_bad_input();
+    test_stray_node();
     random_sequence("corot seq 1", 6, 60, 1);
     random_sequence("corot seq 2", 8, 60, 2);
     t_identity = 1;
