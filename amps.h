@@ -1307,10 +1307,9 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    and bitwise independent of their count (dot products are summed per chunk of 256 nodes, then
    over the chunks in order). Memory from the first step: 36 doubles and 36 indices per tet
    (reference gradients, volume, R_e, Lame constants, element results; the block map and the
-   workspace of its rebuild), 33 doubles and 3 indices per node (and 3 doubles per 256 nodes),
+   workspace of its rebuild), 33 doubles and 3 indices per node (and 2 doubles per 256 nodes),
    9 doubles and 2 indices per block of A_R (one per pair of nodes sharing a tet), 6 doubles per
-   equation; a rebuilt pattern allocates when it
-   outgrows them. Stresses (amps_scene_stress and
+   equation; a rebuilt pattern allocates when it outgrows them. Stresses (amps_scene_stress and
    fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. The haptic path between steps
    (amps_scene_solve_reactions, amps_scene_haptic_build) is a model, not the next step: per
    pinned node r = r0 + Rn dr, r0 the last step's reaction (0 for a pin made since), dr the
@@ -12709,7 +12708,7 @@ typedef struct amps__scene_dyn {
     } crH;
     amps_int cr_cap;                              /* node capacity of cr_gel, cr_react */
     double *cr_vec;                               /* 6 per equation: b, x, r, z, p, q */
-    double *cr_part;                              /* 3 per 256 nodes: the PCG's partial sums */
+    double *cr_part;                              /* 2 per 256 nodes: the PCG's partial sums */
     struct {                                      /* A_R of the step in 3x3 blocks by node (amps__cr_assemble) */
         amps_int *bp, *bj;                        /* row v: blocks bp[v] .. bp[v+1]-1, nodes bj ascending */
         double *bx;                               /* 9 per block, row-major */
@@ -15170,11 +15169,12 @@ static amps_status amps__scene_fracture_step(amps_ctx *ctx, amps_scene *S) {
         for (k = 0; k < S->dyn.nfreg; k++)
             if (S->dyn.freg_id[k] == (m->region ? m->region[t] : 0)) smax = S->dyn.freg_sigma[k];
         if (smax <= 0) continue;
-        amps_mesh_tet_coords(m, t, X);
-        AMPS__UNROLL
-        for (a = 0; a < 12; a++) u[a] = S->node.disp[3 * m->tet[4 * t + a / 3] + a % 3];
         if (S->dyn.corot && S->dyn.cr_G) amps__cr_sigma(S, t, S->dyn.cr_G + 12 * t, S->dyn.cr_R + 9 * t, sg);
-        else amps_tet_stress(X, m->E[t], m->nu[t], u, sg, NULL, NULL);
+        else {
+            amps_mesh_tet_coords(m, t, X); /* linear: from the reference shape and the displacements */
+            for (a = 0; a < 12; a++) u[a] = S->node.disp[3 * m->tet[4 * t + a / 3] + a % 3];
+            amps_tet_stress(X, m->E[t], m->nu[t], u, sg, NULL, NULL);
+        }
         /* max |sigma_i| lies in [|sigma|_F / sqrt 3, |sigma|_F]: the eigenvalues only in between */
         fr = sg[0] * sg[0] + sg[1] * sg[1] + sg[2] * sg[2] + 2 * (sg[3] * sg[3] + sg[4] * sg[4] + sg[5] * sg[5]);
         if (!(fr > smax * smax)) continue;
@@ -15760,8 +15760,8 @@ static void amps__cr_sweep_rows(amps_int b0, amps_int e0, int slot, void *arg) {
                 for (i = 0; i < 3; i++) j->p[e + i] = con[e + i] ? 0.0 : j->z[e + i] + j->beta * j->p[e + i];
             else amps__cr_update_node(j, v, e, d);
         }
-        part[3 * (c / AMPS__CR_CHUNK)] = d[0];
-        part[3 * (c / AMPS__CR_CHUNK) + 1] = d[1];
+        part[2 * (c / AMPS__CR_CHUNK)] = d[0];
+        part[2 * (c / AMPS__CR_CHUNK) + 1] = d[1];
     }
 }
 
@@ -15773,8 +15773,8 @@ static double amps__cr_sweep(amps_scene *S, amps__crsweep *j, double *rz) {
     amps__par_for(&S->U->par, nn > 2048 ? S->U->nthr : 1, nn, AMPS__CR_CHUNK, amps__cr_sweep_rows, j);
     if (j->op == 0) S->dyn.info.products++;
     for (c = 0; c < nc; c++) {
-        d0 += S->dyn.cr_part[3 * c];
-        d1 += S->dyn.cr_part[3 * c + 1];
+        d0 += S->dyn.cr_part[2 * c];
+        d1 += S->dyn.cr_part[2 * c + 1];
     }
     if (rz) *rz = d1;
     return d0;
@@ -15820,7 +15820,7 @@ static amps_status amps__cr_room(amps_ctx *ctx, amps_scene *S, amps_int N) {
             amps__realloc(ctx, (void **)&D->crH.g0, 3 * c, sizeof(double)) ||
             amps__realloc(ctx, (void **)&D->crH.r0, 3 * c, sizeof(double)) ||
             amps__realloc(ctx, (void **)&D->crH.pin, c, 1) ||
-            amps__realloc(ctx, (void **)&D->cr_part, 3 * (c / AMPS__CR_CHUNK + 1), sizeof(double)))
+            amps__realloc(ctx, (void **)&D->cr_part, 2 * (c / AMPS__CR_CHUNK + 1), sizeof(double)))
             return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory (corotational)");
         memset(D->crH.pin + D->cr_cap, 0, c - (size_t)D->cr_cap);
         memset(D->cr_react + 3 * (size_t)D->cr_cap, 0, sizeof(double) * 3 * (c - (size_t)D->cr_cap));
@@ -15893,7 +15893,8 @@ static void amps__cr_rotate(const amps_scene *S, const double *x, double *y, int
 }
 
 /* z = M^-1 r with the engine's preconditioner: Rn A^-1 Rn^T, the engine's exact solve with the
-   current linear A in the frame of the node rotations (block Jacobi: amps__cr_update_node). */
+   current linear A in the frame of the node rotations (block Jacobi's z comes with the update
+   sweep, amps__cr_update_node). */
 static amps_status amps__cr_prec(amps_ctx *ctx, amps_scene *S, const double *r, double *z) {
     amps_status s;
     amps__cr_frames(S);
@@ -15940,7 +15941,6 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
     sw.z = z;
     sw.p = p;
     sw.q = q;
-    sw.op = 2;
     for (e = 0; e < N; e++) p[e] = D->cr_con[e] ? x[e] : 0.0;
     amps__cr_mul(S, p, q);
     for (e = 0; e < N; e++) r[e] = D->cr_con[e] ? 0.0 : b[e] - q[e];
