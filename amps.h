@@ -442,7 +442,9 @@ typedef enum amps_formulation {
    are re-expressed on the new base, whose augmentation is then C and m' only. The swap costs a
    commit of those changes. The indices keep their numbering.
    Memory: at most two factorizations (and two augmentations) exist at a time; the old ones are
-   freed at the swap. A failed re-factorization (not SPD, out of memory) is reported by
+   freed at the swap, except the storage of a retired base's L (about 15 bytes per entry of L),
+   which the next re-factorization reuses (fresh pages cost a page fault each on first touch) and
+   amps_update_free frees. A failed re-factorization (not SPD, out of memory) is reported by
    amps_update_refactor_wait / the stats and the engine goes on with the old factors.
    With AMPS_NO_THREADS there is no background thread: AUTO does nothing and start/refactor
    run synchronously. Custom allocators (AMPS_MALLOC) must then be thread-safe.
@@ -598,6 +600,7 @@ typedef struct amps_update_stats {
     double t_refactor_numeric;  /* numeric factorization */
     double t_refactor_catchup;  /* the new base's engine and the changes replayed in the worker */
     int refactor_order_kept;    /* 0 fresh ordering, 1 the base's kept (DOFs placed), 2 its analysis kept */
+    int refactor_reused;        /* 1: it took a retired base's storage for L (see the memory note above) */
     double refactor_fill;       /* its nnz(L) / (nnz(L) per matrix entry of the last fresh ordering x nnz) */
 } amps_update_stats;
 
@@ -4312,6 +4315,7 @@ typedef struct amps__fpriv {
     amps_stype stype;
     amps_int nnzA;                /* A->p[n] at analysis */
     unsigned long long hash;      /* hash of A's pattern */
+    size_t lcap;                  /* entries allocated for Li and Lx (>= Lp[n]) */
     amps_int ng;                  /* number of column groups */
     amps_int *gs;                 /* ng+1 group starts */
     amps_int *cgrp;               /* n: group of each column */
@@ -4677,11 +4681,49 @@ static int amps__nthreads(const amps_ctx *ctx, amps_int cap) {
 #define AMPS__NSUB 8 /* split the tree until no subtree has more than 1/AMPS__NSUB of the subtree work */
 #endif
 
+/* The storage of a retired factor's L (Li, Lx; capacities in entries), kept for the next
+   re-factorization: fresh pages cost a page fault each on first touch (about a third of a
+   millisecond per megabyte on a virtual machine), reused ones do not. */
+typedef struct amps__lspare {
+    void *li, *lx; /* amps_int[nli], double[nlx] */
+    size_t nli, nlx;
+} amps__lspare;
+
+static void amps__spare_free(amps_ctx *ctx, amps__lspare *sp) {
+    amps__free(ctx, sp->li);
+    amps__free(ctx, sp->lx);
+    memset(sp, 0, sizeof(*sp));
+}
+
+/* Storage for need entries of size bytes: *sp (cap entries; taken: *sp = NULL), grown to need
+   plus a quarter when it is smaller (L grows a little from one re-factorization to the next; the
+   pages it had stay), or new (with that quarter when sp is given). *got receives the entries. */
+static void *amps__spare_take(amps_ctx *ctx, void **sp, size_t cap, size_t need, size_t size, size_t *got) {
+    void *p = sp ? *sp : NULL;
+    *got = sp ? need + need / 4 : need;
+    if (p && cap < need && amps__realloc(ctx, &p, *got, size) != AMPS_OK) return NULL; /* *sp kept */
+    if (!p) return amps__malloc(ctx, *got, size);
+    if (cap >= need) *got = cap;
+    *sp = NULL;
+    return p;
+}
+
+/* The storage of F's L back to sp (F keeps none). */
+static void amps__spare_put(amps_ctx *ctx, amps__lspare *sp, amps_factor *F) {
+    amps__spare_free(ctx, sp);
+    sp->li = F->Li;
+    sp->lx = F->Lx;
+    sp->nli = sp->nlx = AMPS__CAST(amps__fpriv *, F->priv)->lcap;
+    F->Li = NULL;
+    F->Lx = NULL;
+}
+
 /* Temporaries of amps_analyze: C = P A P^T as its upper pattern (Up, Ui: column k holds the rows
    <= k) and its strictly lower columns (P->Sp, Cr); column counts cc (n + 1), the tree of the
-   column groups gpar (ng), workspace tw (5n + 1). */
+   column groups gpar (ng), workspace tw (5n + 1); sp: storage for L to reuse. */
 typedef struct amps__ana {
     amps_int *Up, *Ui, *Cr, *cc, *gpar, *tw;
+    amps__lspare *sp; /* storage for L to reuse (NULL: none) */
 } amps__ana;
 
 static void amps__ana_free(amps_ctx *ctx, amps__ana *T) {
@@ -4729,7 +4771,10 @@ static amps_status amps__analyze_alloc(amps_ctx *ctx, const amps_csc *A, amps_st
 static amps_status amps__analyze_order(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts,
                                        amps_factor *F) {
     amps_int k, n = F->n;
-    amps_status st = amps_order(ctx, A, stype, opts, F->perm);
+    amps_status st = AMPS_OK;
+    if (opts && opts->method == AMPS_ORDER_GIVEN && opts->perm) /* checked below; no graph needed */
+        memcpy(F->perm, opts->perm, sizeof(amps_int) * (size_t)n);
+    else st = amps_order(ctx, A, stype, opts, F->perm);
     if (st != AMPS_OK) return st;
     for (k = 0; k < n; k++) F->iperm[k] = -1;
     for (k = 0; k < n; k++) {
@@ -4830,6 +4875,7 @@ static amps_status amps__analyze_counts(amps_ctx *ctx, amps_factor *F, amps__ana
 static amps_status amps__analyze_groups(amps_ctx *ctx, amps_factor *F, amps__ana *T) {
     amps__fpriv *P = AMPS__CAST(amps__fpriv *, F->priv);
     amps_int n = F->n, c, g, ng = 0, *tw = T->tw, *cc = T->cc;
+    size_t gi, gx;
     for (c = 0; c < n; c++) {
         if (c == 0 || !(F->parent[c - 1] == c && cc[c - 1] == cc[c] + 1)) tw[ng++] = c;
         P->cgrp[c] = ng - 1;
@@ -4842,8 +4888,11 @@ static amps_status amps__analyze_groups(amps_ctx *ctx, amps_factor *F, amps__ana
     P->next = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
     P->gpos = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
     P->gsub = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
-    F->Li = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)F->Lp[n], sizeof(amps_int)));
-    F->Lx = AMPS__CAST(double *, amps__malloc(ctx, (size_t)F->Lp[n], sizeof(double)));
+    F->Li = AMPS__CAST(amps_int *, amps__spare_take(ctx, T->sp ? &T->sp->li : NULL, T->sp ? T->sp->nli : 0,
+                                                    (size_t)F->Lp[n], sizeof(amps_int), &gi));
+    F->Lx = AMPS__CAST(double *, amps__spare_take(ctx, T->sp ? &T->sp->lx : NULL, T->sp ? T->sp->nlx : 0,
+                                                  (size_t)F->Lp[n], sizeof(double), &gx));
+    P->lcap = gi < gx ? gi : gx;
     if (!P->gs || !T->gpar || !P->head || !P->next || !P->gpos || !P->gsub || !F->Li || !F->Lx)
         return amps__analyze_oom(ctx, n, P->nnzA);
     memcpy(P->gs, tw, sizeof(amps_int) * ((size_t)ng + 1));
@@ -5024,7 +5073,9 @@ static amps_status amps__analyze_workspace(amps_ctx *ctx, const amps_csc *A, amp
     return AMPS_OK;
 }
 
-AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts) {
+/* amps_analyze with L's storage taken from sp where it is large enough (sp may be NULL). */
+static amps_factor *amps__analyze_reuse(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts,
+                                        amps__lspare *sp) {
     amps_factor *F;
     amps__ana T;
     amps_status st;
@@ -5032,6 +5083,7 @@ AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype 
     F = AMPS__CAST(amps_factor *, amps__calloc(ctx, 1, sizeof(amps_factor)));
     if (!F) return NULL;
     memset(&T, 0, sizeof(T));
+    T.sp = sp;
     st = amps__analyze_alloc(ctx, A, stype, F, &T);
     if (st == AMPS_OK) st = amps__analyze_order(ctx, A, stype, opts, F); /* perm, iperm */
     if (st == AMPS_OK) st = amps__analyze_permute(ctx, A, stype, F, &T); /* pattern of P A P^T */
@@ -5050,6 +5102,10 @@ AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype 
     return NULL;
 }
 
+AMPS_API amps_factor *amps_analyze(amps_ctx *ctx, const amps_csc *A, amps_stype stype, const amps_order_opts *opts) {
+    return amps__analyze_reuse(ctx, A, stype, opts, NULL);
+}
+
 /* 1 if A (stype part) has the pattern F was analyzed with (the test of amps_factorize). */
 static int amps__factor_same_pattern(const amps_factor *F, const amps_csc *A, amps_stype stype) {
     const amps__fpriv *P = F ? AMPS__CAST(const amps__fpriv *, F->priv) : NULL;
@@ -5065,12 +5121,13 @@ static void *amps__dup(amps_ctx *ctx, const void *src, size_t n, size_t size) {
 
 /* A factor with F's analysis (order, pattern of L, groups, subtrees, the scatter map of A) and
    its own values and workspace for ctx's back end, for amps_factorize of a matrix with the
-   pattern F was analyzed with. Reads only the parts of F no factorization or solve writes. */
-static amps_factor *amps__factor_clone_symbolic(amps_ctx *ctx, const amps_factor *F) {
+   pattern F was analyzed with. Reads only the parts of F no factorization or solve writes. L's
+   storage comes from sp where it is large enough (sp may be NULL). */
+static amps_factor *amps__factor_clone_symbolic(amps_ctx *ctx, const amps_factor *F, amps__lspare *sp) {
     const amps__fpriv *P = AMPS__CAST(const amps__fpriv *, F->priv);
     amps_factor *G = AMPS__CAST(amps_factor *, amps__calloc(ctx, 1, sizeof(amps_factor)));
     amps__fpriv *Q = AMPS__CAST(amps__fpriv *, amps__calloc(ctx, 1, sizeof(amps__fpriv)));
-    size_t n = (size_t)F->n, nl = (size_t)F->Lp[F->n], ng = (size_t)P->ng, ns = (size_t)P->nsub;
+    size_t n = (size_t)F->n, nl = (size_t)F->Lp[F->n], ng = (size_t)P->ng, ns = (size_t)P->nsub, gi = 0, gx = 0;
     int nthr = amps__nthreads(ctx, 1024);
     if (!G || !Q) {
         amps__free(ctx, G);
@@ -5085,12 +5142,16 @@ static amps_factor *amps__factor_clone_symbolic(amps_ctx *ctx, const amps_factor
     G->iperm = AMPS__CAST(amps_int *, amps__dup(ctx, F->iperm, n, sizeof(amps_int)));
     G->parent = AMPS__CAST(amps_int *, amps__dup(ctx, F->parent, n, sizeof(amps_int)));
     G->Lp = AMPS__CAST(amps_int *, amps__dup(ctx, F->Lp, n + 1, sizeof(amps_int)));
-    G->Li = AMPS__CAST(amps_int *, amps__dup(ctx, F->Li, nl, sizeof(amps_int)));
-    G->Lx = AMPS__CAST(double *, amps__malloc(ctx, nl ? nl : 1, sizeof(double)));
+    G->Li = AMPS__CAST(amps_int *, amps__spare_take(ctx, sp ? &sp->li : NULL, sp ? sp->nli : 0, nl ? nl : 1,
+                                                    sizeof(amps_int), &gi));
+    G->Lx = AMPS__CAST(double *,
+                       amps__spare_take(ctx, sp ? &sp->lx : NULL, sp ? sp->nlx : 0, nl ? nl : 1, sizeof(double), &gx));
+    if (G->Li && nl) memcpy(G->Li, F->Li, nl * sizeof(amps_int));
     G->D = AMPS__CAST(double *, amps__malloc(ctx, n ? n : 1, sizeof(double)));
     /* the sizes and parameters (the fields before touch; touch and bo are the solves') */
     memcpy(Q, P, (size_t)((const char *)&P->touch - (const char *)P));
     Q->nthr = nthr;
+    Q->lcap = gi < gx ? gi : gx;
     Q->gs = AMPS__CAST(amps_int *, amps__dup(ctx, P->gs, ng + 1, sizeof(amps_int)));
     Q->cgrp = AMPS__CAST(amps_int *, amps__dup(ctx, P->cgrp, n, sizeof(amps_int)));
     Q->Sp = AMPS__CAST(amps_int *, amps__dup(ctx, P->Sp, n + 1, sizeof(amps_int)));
@@ -6335,6 +6396,7 @@ struct amps_update {
         amps_update_opts opts; /* as created (for the engine of a new base) */
         amps_factor *F_own;
         amps_csc *K_own;             /* base factor and matrix owned by the engine (after a swap) */
+        amps__lspare spare;          /* the storage of the last retired F_own's L (the next job's) */
         struct amps__bg *job;        /* the one in progress, or NULL */
         double t_factor;             /* measured (or estimated) factorization time */
         double t_step_base, t_extra; /* step time after the last swap, extra time since */
@@ -6556,6 +6618,7 @@ AMPS_API void amps_update_free(amps_ctx *ctx, amps_update *U) {
     amps__free(ctx, U->cjob.lanes);
     amps_factor_free(ctx, U->refac.F_own);
     amps_csc_free(ctx, U->refac.K_own);
+    amps__spare_free(ctx, &U->refac.spare);
     amps__free(ctx, U->refac.origin);
     amps__free(ctx, U->base.Kp);
     amps__free(ctx, U->base.Ki);
@@ -9750,6 +9813,7 @@ typedef struct amps__bg {
         double fill_ref;      /* the parent's refac.fill_ref */
         int keep;             /* 1: keep the parent's order (opts.refactor_reuse, not the 16th time) */
         int threaded;         /* 1: the worker runs on its own thread */
+        amps__lspare spare;   /* the parent's spare storage for L (owned; amps__lspare) */
     } snap;
     struct { /* the m' log: appended by the engine's thread, read by the worker (under mu) */
         amps__lentry *entries;
@@ -9770,9 +9834,9 @@ typedef struct amps__bg {
     pthread_t th;
     int has_thread, has_mu;
 #endif
-    struct { /* phases of the worker (seconds) and what the ordering kept */
+    struct { /* phases of the worker (seconds), what the ordering kept, L's storage reused */
         double order, symbolic, numeric, catchup, fill, fill_ref;
-        int kept;
+        int kept, reused;
     } ph;
     struct {          /* the foreground (under mu): the factorization's helper waits while it is busy */
         int busy;     /* a commit or solve of the parent is running */
@@ -9825,6 +9889,7 @@ static void amps__bg_free(amps_ctx *ctx, amps__bg *b) {
     amps__free(ctx, b->snap.cg);
     amps__free(ctx, b->snap.f);
     amps__free(ctx, b->snap.org);
+    amps__spare_free(ctx, &b->snap.spare);
     amps__free(ctx, b->log.entries);
 #ifndef AMPS_NO_THREADS
     if (b->has_mu) pthread_mutex_destroy(&b->mu);
@@ -9949,6 +10014,8 @@ static amps__bg *amps__bg_snapshot(amps_ctx *ctx, amps_update *U, int fold) {
     }
     b->has_mu = 1;
 #endif
+    b->snap.spare = U->refac.spare; /* the job owns it now */
+    memset(&U->refac.spare, 0, sizeof(U->refac.spare));
     b->state = AMPS__BG_RUNNING;
     return b;
 }
@@ -10149,10 +10216,12 @@ static amps_status amps__bg_analyze(amps_ctx *c2, amps__bg *b) {
     double t0 = amps_now(), nnzB = (double)K->p[N], bound = AMPS_REFACTOR_FILL_BOUND * b->snap.fill_ref * nnzB;
     amps_order_opts go;
     amps_status s = AMPS_OK;
+    int had = b->snap.spare.lx != NULL;
     b->ph.kept = b->snap.keep ? 1 : 0;
     if (b->snap.keep && amps__factor_same_pattern(F0, K, AMPS_UPPER)) {
         b->ph.kept = 2;
-        if (!(b->result.F = amps__factor_clone_symbolic(c2, F0))) return c2->status ? c2->status : AMPS_ERR_OOM;
+        if (!(b->result.F = amps__factor_clone_symbolic(c2, F0, &b->snap.spare)))
+            return c2->status ? c2->status : AMPS_ERR_OOM;
     } else {
         if (!(perm = AMPS__CAST(amps_int *, amps__malloc(c2, (size_t)N + 1, sizeof(amps_int))))) return AMPS_ERR_OOM;
         go.method = AMPS_ORDER_GIVEN;
@@ -10160,8 +10229,9 @@ static amps_status amps__bg_analyze(amps_ctx *c2, amps__bg *b) {
         go.block = 1;
         go.coords = NULL;
         if (b->ph.kept && (s = amps__bg_order_kept(c2, b, perm)) == AMPS_OK) {
-            b->result.F = amps_analyze(c2, K, AMPS_UPPER, &go);
+            b->result.F = amps__analyze_reuse(c2, K, AMPS_UPPER, &go, &b->snap.spare);
             if (b->result.F && amps_factor_nnz(b->result.F) > bound) { /* too much fill: a fresh ordering */
+                amps__spare_put(c2, &b->snap.spare, b->result.F);
                 amps_factor_free(c2, b->result.F);
                 b->result.F = NULL;
                 b->ph.kept = 0;
@@ -10171,13 +10241,14 @@ static amps_status amps__bg_analyze(amps_ctx *c2, amps__bg *b) {
             double t1 = amps_now();
             s = amps_order(c2, K, AMPS_UPPER, &b->snap.opts.refactor_order, perm);
             b->ph.order = amps_now() - t1;
-            if (s == AMPS_OK) b->result.F = amps_analyze(c2, K, AMPS_UPPER, &go);
+            if (s == AMPS_OK) b->result.F = amps__analyze_reuse(c2, K, AMPS_UPPER, &go, &b->snap.spare);
         }
         amps__free(c2, perm);
         if (s != AMPS_OK) return s;
         if (!b->result.F) return c2->status;
     }
     b->ph.symbolic = amps_now() - t0 - b->ph.order;
+    b->ph.reused = had && !b->snap.spare.lx;
     b->ph.fill_ref = nnzB > 0 ? amps_factor_nnz(b->result.F) / nnzB : 0;
     b->ph.fill = b->snap.fill_ref > 0 ? b->ph.fill_ref / b->snap.fill_ref : 1;
     return AMPS_OK;
@@ -10393,8 +10464,16 @@ static void amps__bg_join(amps__bg *b) {
 
 /* Ends the background job of U (joined, freed); the kernels get their threads back. */
 static void amps__bg_end(amps_ctx *ctx, amps_update *U, int failed) {
-    amps__bg_join(U->refac.job);
-    amps__bg_free(ctx, U->refac.job);
+    amps__bg *b = U->refac.job;
+    if (!b) return;
+    amps__bg_join(b);
+    if (b->result.F) amps__spare_put(ctx, &U->refac.spare, b->result.F); /* its storage: the next job's */
+    else if (b->snap.spare.lx) {
+        amps__spare_free(ctx, &U->refac.spare);
+        U->refac.spare = b->snap.spare;
+        memset(&b->snap.spare, 0, sizeof(b->snap.spare));
+    }
+    amps__bg_free(ctx, b);
     U->refac.job = NULL;
     U->nthr = U->nbuf;
     if (failed) U->stats.refactor_failed++;
@@ -10521,11 +10600,14 @@ static void amps__bg_take(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg
     U->stats.t_refactor_numeric = b->ph.numeric;
     U->stats.t_refactor_catchup = b->ph.catchup;
     U->stats.refactor_order_kept = b->ph.kept;
+    U->stats.refactor_reused = b->ph.reused;
     U->stats.refactor_fill = b->ph.fill;
     if (!b->ph.kept) U->refac.fill_ref = b->ph.fill_ref;
     U->refac.n_kept = b->ph.kept ? U->refac.n_kept + 1 : 0;
     U->refac.fold_flops = 0;
     old.refac.origin = NULL; /* U keeps the table */
+    memset(&old.refac.spare, 0, sizeof(old.refac.spare));                       /* U keeps it */
+    if (old.refac.F_own) amps__spare_put(c2, &U->refac.spare, old.refac.F_own); /* the next job's storage */
     *V = old;
     amps_update_free(c2, V);
 }

@@ -140,6 +140,7 @@ typedef struct model {
                                    L entries the watched solve reads (engine made with refine = 0) */
     double res_ok; /* a residual at most this passes too (the guard's tolerance) */
     int kept[3];   /* bgmode 2: swaps by refactor_order_kept (fresh, order kept, analysis kept) */
+    int reused;    /* bgmode 2: swaps whose factor took the retired base's storage for L */
     int nref_seen; /* bgmode 2: swaps counted in kept */
     int origins;   /* cut_sequence: 1 declares each copy's DOFs copies of the node's (amps_update_set_origin) */
 } model;
@@ -278,6 +279,7 @@ static void model_check(model *m, double tol_err, const char *what) {
         if ((int)st.nrefactor > m->nref_seen) { /* the last swap since the previous step */
             m->nref_seen = (int)st.nrefactor;
             if (st.refactor_order_kept >= 0 && st.refactor_order_kept <= 2) m->kept[st.refactor_order_kept]++;
+            m->reused += st.refactor_reused;
             CHECK(st.refactor_order_kept != 1 || st.refactor_fill <= t_fill_bound * (1 + 1e-12),
                   "%s: kept ordering with fill x%.3f", what, st.refactor_fill);
         }
@@ -1165,9 +1167,13 @@ static void test_refactor_kept(void) {
         CHECK(amps_update_refactor(&m.ctx, m.U) == AMPS_OK, "%s: first (fresh) re-factorization: %s", what, m.ctx.msg);
         cut_sequence(&m, &mesh, 60, 123 + (unsigned long long)ph, 1e-12);
         t_fill_bound = 1.2;
-        printf("  %-36s swaps: fresh %d, order kept %d, analysis kept %d\n", what, m.kept[0], m.kept[1], m.kept[2]);
+        printf("  %-36s swaps: fresh %d, order kept %d, analysis kept %d; L's storage reused %d\n", what, m.kept[0],
+               m.kept[1], m.kept[2], m.reused);
         if (ph < 2) CHECK(m.kept[1] >= 3, "%s: the ordering was kept only %d times", what, m.kept[1]);
         else CHECK(m.kept[1] == 0 && m.kept[0] >= 4, "%s: no fall-back to a fresh ordering", what);
+        /* from the third swap on, a retired base's storage is there (the first base is the caller's) */
+        CHECK(m.reused >= m.kept[0] + m.kept[1] + m.kept[2] - 2, "%s: L's storage reused only %d times", what,
+              m.reused);
         report(what, &m);
         model_free(&m);
         fe_free(&mesh);
