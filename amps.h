@@ -15817,7 +15817,7 @@ static void amps__cr_update_node(const amps__crsweep *j, amps_int v, amps_int e,
         if (!con[i]) d[0] += r[i] * r[i];
     if (!j->bj) return;
     for (i = 0; i < 3; i++) {
-        double zi = con[0] ? 0.0 : Di[3 * i] * r[0] + Di[3 * i + 1] * r[1] + Di[3 * i + 2] * r[2];
+        double zi = con[i] ? 0.0 : Di[3 * i] * r[0] + Di[3 * i + 1] * r[1] + Di[3 * i + 2] * r[2];
         j->z[e + i] = zi;
         if (!con[i]) d[1] += r[i] * zi;
     }
