@@ -442,9 +442,9 @@ typedef enum amps_formulation {
    are re-expressed on the new base, whose augmentation is then C and m' only. The swap costs a
    commit of those changes. The indices keep their numbering.
    Memory: at most two factorizations (and two augmentations) exist at a time; the old ones are
-   freed at the swap, except the storage of a retired base's L (about 15 bytes per entry of L),
-   which the next re-factorization reuses (fresh pages cost a page fault each on first touch) and
-   amps_update_free frees. A failed re-factorization (not SPD, out of memory) is reported by
+   freed at the swap, except the storage of a retired base's L (12 bytes per entry of L, plus up
+   to a quarter), which the next re-factorization reuses (fresh pages cost a page fault each on
+   first touch) and amps_update_free frees. A failed re-factorization (not SPD, out of memory) is reported by
    amps_update_refactor_wait / the stats and the engine goes on with the old factors.
    With AMPS_NO_THREADS there is no background thread: AUTO does nothing and start/refactor
    run synchronously. Custom allocators (AMPS_MALLOC) must then be thread-safe.
