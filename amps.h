@@ -1269,11 +1269,12 @@ AMPS_API const double *amps_scene_velocities(const amps_scene *S);
    edges; report may be NULL), then updates A on the rows of the affected nodes: minus the element
    matrices of the removed tets, separated nodes as new equations (like cut copies, with their
    origin's u and w). Orphans (nodes left in no tet) are held: statics at their displacement,
-   dynamics at w = 0. In statics a removal that leaves a node-connected piece whose fixed and
-   pinned nodes are none or all on one line (it could turn about that line), or a piece the
-   engine finds singular (a hinge inside it under AMPS_SINGULAR_IGNORE), is
-   AMPS_ERR_SINGULAR_UPDATE with the piece named, and the scene is as it was (amps_mesh_unremove); in dynamics a free piece is
-   legal. Errors of amps_mesh_remove (index, removed twice) change nothing. Allocates. */
+   dynamics at w = 0, by rows of their own in A (not constraints, so the next re-factorization
+   takes them out of the dense system). In statics a removal that leaves a node-connected piece
+   whose fixed and pinned nodes are none or all on one line (it could turn about that line), or a
+   piece the engine finds singular (a hinge inside it under AMPS_SINGULAR_IGNORE), is
+   AMPS_ERR_SINGULAR_UPDATE with the piece named, and the scene is as it was
+   (amps_mesh_unremove); in dynamics a free piece is legal. Errors of amps_mesh_remove (index, removed twice) change nothing. Allocates. */
 AMPS_API amps_status amps_scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, const amps_int *tets,
                                        amps_singular_policy policy, amps_mesh_removal *report);
 /* Fracture: after each step, tets with max |principal stress| > sigma_max are removed (default
@@ -12761,6 +12762,7 @@ typedef struct amps__scene_dyn {
         double cM, cK;
     } kukey;
     unsigned char *orphan;                        /* 1: the node lies in no tet and is held where it is */
+    double orphan_d;                              /* an orphan's rows of the engine: this on the diagonal */
     double sigma_max;                             /* fracture threshold (<= 0: off) */
     amps_int nfreg;                               /* regions with their own threshold */
     amps_int *freg_id;                            /* nfreg region ids */
@@ -13196,6 +13198,16 @@ fail:
     return ctx && ctx->status ? ctx->status : AMPS_ERR_OOM;
 }
 
+/* Orphans (nodes left in no tet) keep their equations, held by their own rows rather than by
+   constraints: the rows of K^ (zero up to rounding once the last tet is gone) get dyn.orphan_d
+   on the diagonal, the right-hand side there is orphan_d u (statics) or 0 (dynamics: w = 0), and
+   the scene keeps the displacement (statics) or a zero velocity (dynamics) whatever the solve
+   returns there. As rows they are folded into the base by the next re-factorization and leave
+   the augmentation; as constraints they would stay in its dense system for ever. */
+static int amps__scene_orphan(const amps_scene *S, amps_int v) {
+    return S->dyn.orphan && v < S->dyn.cap && S->dyn.orphan[v];
+}
+
 static amps_status amps__scene_node(amps_ctx *ctx, amps_scene *S, amps_int v, const char *fn) {
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL scene", fn);
     if (v < 0 || v >= S->m->nnode)
@@ -13213,7 +13225,7 @@ AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, 
             return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_force: non-finite force on node %ld", (long)v);
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_force")) != AMPS_OK) return s;
     for (k = 0; k < 3; k++)
-        if (S->prepared && S->node.dof[3 * v + k] >= 0) {
+        if (S->prepared && S->node.dof[3 * v + k] >= 0 && !amps__scene_orphan(S, v)) {
             idx[m] = S->node.dof[3 * v + k];
             val[m] = f[k] + amps__scene_body_force(S, v, (int)k);
             m++;
@@ -13718,6 +13730,7 @@ static void amps__scene_gather(amps_scene *S, amps_int nv, const amps_int *nodes
     if (!nodes) nv = S->m->nnode;
     for (k = 0; k < nv; k++) {
         amps_int v = nodes ? nodes[k] : k;
+        if (amps__scene_orphan(S, v)) continue; /* held where it is */
         for (d = 0; d < 3; d++) {
             amps_int e = S->node.dof[3 * v + d];
             S->node.disp[3 * v + d] = e >= 0 ? x[e] : 0.0;
@@ -13938,7 +13951,7 @@ AMPS_API amps_status amps_scene_haptic_build(amps_ctx *ctx, amps_scene *S, amps_
         h->node[n] = v;
         amps_scene_reaction(ctx, S, v, h->r0 + 3 * n);
         for (d = 0; d < 3; d++) {
-            int orphan = S->dyn.orphan && v < S->dyn.cap && S->dyn.orphan[v];
+            int orphan = amps__scene_orphan(S, v);
             h->g0[3 * n + d] = S->node.pin_value[3 * v + d];
             idx[3 * n + d] = orphan ? -1 : S->node.dof[3 * v + d]; /* orphans: held, not by the pin */
         }
@@ -14805,7 +14818,8 @@ static amps_status amps__scene_refresh_force(amps_ctx *ctx, amps_scene *S, amps_
     for (d = 0; d < 3; d++)
         if (S->node.dof[3 * v + d] >= 0) {
             idx[m] = S->node.dof[3 * v + d];
-            val[m++] = S->node.force[3 * v + d] + amps__scene_body_force(S, v, d);
+            val[m++] = amps__scene_orphan(S, v) ? S->dyn.orphan_d * S->node.disp[3 * v + d]
+                                                : S->node.force[3 * v + d] + amps__scene_body_force(S, v, d);
         }
     return amps_update_set_force(ctx, S->U, m, idx, val);
 }
@@ -14883,7 +14897,9 @@ static amps_status amps__scene_dyn_load(amps_ctx *ctx, amps_scene *S) {
             if (S->node.dof[3 * v + d] >= 0) {
                 amps_int k = 3 * v + d;
                 S->dyn.idx[n] = S->node.dof[k];
-                S->dyn.val[n++] = mass[v] * S->dyn.vel[k] + dt * (S->node.force[k] + mass[v] * S->dyn.g[d] - ku[k]);
+                S->dyn.val[n++] = S->dyn.orphan[v] ? 0.0
+                                                   : mass[v] * S->dyn.vel[k] +
+                                                             dt * (S->node.force[k] + mass[v] * S->dyn.g[d] - ku[k]);
             }
     if ((s = amps_update_set_force(ctx, S->U, n, S->dyn.idx, S->dyn.val)) != AMPS_OK) return s;
     for (n = 0, v = 0; v < nn; v++)
@@ -15095,8 +15111,8 @@ static amps_status amps__scene_removal_held(amps_ctx *ctx, amps_scene *S, const 
 
 /* The engine side of the removal r (the mesh already changed): new equations for the separated
    copies, minus Ae of the removed tets, Ae of the moved tets on their copies minus Ae on the
-   originals, orphans held (statics: at u, dynamics: w = 0), gravity loads of the nodes whose
-   mass changed; one commit. *nflag receives the orphans flagged (undo: amps__scene_removal_undo). */
+   originals, orphans held (amps__scene_orphan), gravity loads of the nodes whose mass changed;
+   one commit. *nflag receives the orphans flagged (undo: amps__scene_removal_undo). */
 static amps_status amps__scene_removal_update(amps_ctx *ctx, amps_scene *S, const amps_mesh_removal *r,
                                               amps_int *rename, amps_int *flagged, amps_int *nflag) {
     const amps_mesh *m = S->m;
@@ -15118,12 +15134,14 @@ static amps_status amps__scene_removal_update(amps_ctx *ctx, amps_scene *S, cons
                 s = amps__trips_tet(ctx, S, &T, r->sep_tets[j], -1.0, rename);
     if (!s) s = amps__trips_add(ctx, S, &T);
     else amps__free(ctx, T.e);
-    for (k = 0; k < 4 * r->ntet && !s; k++) { /* orphans */
+    for (k = 0; k < 4 * r->ntet && !s; k++) { /* orphans: held by their own rows (amps__scene_orphan) */
         amps_int v = m->tet[4 * r->tets[k / 4] + k % 4];
         double val[3];
         if (m->inc_len[v] > 0 || S->dyn.orphan[v] || S->node.dof[3 * v] < 0) continue;
-        for (d = 0; d < 3; d++) val[d] = S->dyn.on ? 0.0 : S->node.disp[3 * v + d];
-        if ((s = amps_update_constrain(ctx, S->U, 3, S->node.dof + 3 * v, val)) != AMPS_OK) break;
+        if (S->dyn.orphan_d == 0) S->dyn.orphan_d = S->U->sigma;
+        for (d = 0; d < 3; d++) val[d] = S->dyn.orphan_d;
+        if (S->node.pinned[v] && (s = amps_update_release(ctx, S->U, 3, S->node.dof + 3 * v)) != AMPS_OK) break;
+        if ((s = amps_update_add(ctx, S->U, 3, S->node.dof + 3 * v, S->node.dof + 3 * v, val)) != AMPS_OK) break;
         S->dyn.orphan[v] = 1 + S->node.pinned[v];
         S->node.pinned[v] = 0;
         flagged[(*nflag)++] = v;
@@ -15296,7 +15314,7 @@ AMPS_API amps_status amps_scene_step(amps_ctx *ctx, amps_scene *S, amps_int nste
         for (v = 0; v < S->m->nnode; v++)
             for (d = 0; d < 3; d++) {
                 amps_int e = S->node.dof[3 * v + d];
-                double wv = e >= 0 ? x[e] : 0.0;
+                double wv = e >= 0 && !S->dyn.orphan[v] ? x[e] : 0.0;
                 S->dyn.vel[3 * v + d] = wv;
                 S->node.disp[3 * v + d] += S->dyn.dt * wv;
             }
@@ -16108,6 +16126,9 @@ static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
     for (e = 0; e < N; e++) D->cr_con[e] = 0;
     for (a = 0; a < S->U->aug.size; a++)
         if (S->U->aug.kind[a] & AMPS__UCON) D->cr_con[S->U->aug.idx[a]] = 1;
+    for (v = 0; v < S->m->nnode; v++) /* orphans: held by their rows in the engine, by w = 0 here */
+        for (d = 0; d < 3; d++)
+            if (D->orphan[v] && (e = S->node.dof[3 * v + d]) >= 0) D->cr_con[e] = 1;
     D->info.products = 0;
     amps__cr_pass(S, 0);
     if ((s = amps__cr_assemble(ctx, S)) != AMPS_OK) return s;

@@ -27,7 +27,7 @@ build() {
 }
 build factor -lcholmod
 build harness -lcholmod -lumfpack
-for b in haptic watch refactor refine_cost; do build $b; done
+for b in haptic watch refactor refine_cost avalanche; do build $b; done
 build corot -lcholmod
 build frameloop -lpthread
 bash bench/make_liver.sh >/dev/null || exit 1
@@ -140,6 +140,8 @@ for r in $cruns; do
   run build/bench/corot "$c" "$st" "$ev" $out/corot.csv
 done
 # implicit dynamics, removal and fracture (bench/dynamics.c; full: about 5 minutes on 2 idle cores)
+# an avalanche-like removal in dynamics (orphans held by rows, out of the dense system; bench/avalanche.c)
+run build/bench/avalanche 64 16 40
 if [ "$mode" = quick ]; then PRE="" bash bench/dynamics.sh quick $out || exit 1
 else PRE=out/ bash bench/dynamics.sh full $out || exit 1; fi
 # under load: spinning processes and a 1 kHz loop beside 1 thread, 2 OpenMP threads and the

@@ -461,6 +461,68 @@ static void test_removal(void) {
     free(ur);
 }
 
+/* Orphans are held by their own rows, not by constraints: after a removal that leaves nodes in
+   no tet, a re-factorization takes them out of the dense system (|S u C| back to the pins'), the
+   orphans keep their displacement (bitwise) and, in dynamics, a zero velocity, and the steps and
+   solves still equal CHOLMOD's. */
+static void test_orphans(void) {
+    int dyn;
+    for (dyn = 0; dyn < 2; dyn++) {
+        const char *what = dyn ? "orphans, dynamics" : "orphans, statics";
+        amps_ctx ctx;
+        amps_scene *S;
+        tstate w;
+        const amps_mesh *m;
+        amps_mesh_removal rr;
+        amps_update_stats st;
+        amps_int v = 5 * 5 * 4 + 12, tets[64], nt, k, pin = 5 * 5 * 6 + 2; /* an inner node; a node near the top */
+        double u[3] = {0, 0.01, 0}, uo[3 * 64];
+        int step = 0, q;
+        amps_ctx_init(&ctx);
+        S = make_scene(&ctx, amps_mesh_beam(&ctx, 8), 0.5, &w);
+        m = amps_scene_mesh(S);
+        w.g[2] = -0.002;
+        CHECK(amps_scene_gravity(&ctx, S, w.g) == AMPS_OK, "%s: gravity: %s", what, ctx.msg);
+        if (dyn) {
+            w.dyn = 1;
+            w.dt = 0.1;
+            CHECK(amps_scene_dynamics(&ctx, S, 0.1, 0, 0) == AMPS_OK, "%s: dynamics: %s", what, ctx.msg);
+        }
+        CHECK(amps_scene_pin(&ctx, S, pin, u) == AMPS_OK, "%s: pin: %s", what, ctx.msg);
+        w.sh.pinned[pin] = 1;
+        memcpy(w.sh.pinval + 3 * pin, u, sizeof(u));
+        if (dyn) check_step(&ctx, S, &w, what, step++);
+        else check_solve(&ctx, S, &w, what, step++);
+        nt = amps_mesh_degree(m, v); /* every tet of node v: v and no other node left in none */
+        CHECK(nt > 0 && nt <= 64, "%s: degree %ld", what, (long)nt);
+        for (k = 0; k < nt; k++) tets[k] = m->inc[m->inc_ptr[v] + k];
+        CHECK(amps_scene_remove(&ctx, S, nt, tets, AMPS_SINGULAR_REMOVE, &rr) == AMPS_OK, "%s: removal: %s", what,
+              ctx.msg);
+        CHECK(rr.norphan >= 1 && rr.norphan <= 64, "%s: %ld orphans", what, (long)rr.norphan);
+        for (k = 0; k < rr.norphan && k < 64; k++)
+            for (q = 0; q < 3; q++) uo[3 * k + q] = amps_scene_displacements(S)[3 * rr.orphans[k] + q];
+        for (k = 0; k < 3; k++) { /* the steps (solves) after the removal, then after a re-factorization */
+            if (k == 2) {
+                CHECK(amps_update_refactor(&ctx, amps_scene_engine(S)) == AMPS_OK, "%s: re-factorization: %s", what,
+                      ctx.msg);
+                amps_update_get_stats(amps_scene_engine(S), &st);
+                CHECK(st.nsys == 3, "%s: |S u C| %ld after the re-factorization (the pin's 3)", what, (long)st.nsys);
+            }
+            if (dyn) check_step(&ctx, S, &w, what, step++);
+            else check_solve(&ctx, S, &w, what, step++);
+        }
+        for (k = 0; k < rr.norphan && k < 64; k++)
+            for (q = 0; q < 3; q++) {
+                amps_int o = rr.orphans[k];
+                CHECK(amps_scene_displacements(S)[3 * o + q] == uo[3 * k + q] &&
+                              (!dyn || amps_scene_velocities(S)[3 * o + q] == 0.0),
+                      "%s: orphan %ld moved", what, (long)o);
+            }
+        amps_scene_free(&ctx, S);
+        shadow_free(&w.sh);
+    }
+}
+
 /* Fracture: after a step the tets over the threshold go. */
 static void test_fracture(void) {
     amps_ctx ctx;
@@ -568,6 +630,7 @@ int main(void) {
     test_args();
     test_physics();
     test_removal();
+    test_orphans();
     test_fracture();
     random_sequence("beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 120, 1, 1);
     random_sequence("brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 2, 1);
