@@ -444,8 +444,9 @@ typedef enum amps_formulation {
    Memory: at most two factorizations (and two augmentations) exist at a time; the old ones are
    freed at the swap, except the storage of a retired base's L (12 bytes per entry of L, plus up
    to a quarter), which the next re-factorization reuses (fresh pages cost a page fault each on
-   first touch) and amps_update_free frees. A failed re-factorization (not SPD, out of memory) is reported by
-   amps_update_refactor_wait / the stats and the engine goes on with the old factors.
+   first touch) and amps_update_free frees. A failed re-factorization (not SPD, out of memory)
+   is reported by amps_update_refactor_wait / the stats and the engine goes on with the old
+   factors.
    With AMPS_NO_THREADS there is no background thread: AUTO does nothing and start/refactor
    run synchronously. Custom allocators (AMPS_MALLOC) must then be thread-safe.
    Triggers (AUTO): the cost model after a full amps_update_solve (refactor_ratio), and after every
@@ -1274,7 +1275,8 @@ AMPS_API const double *amps_scene_velocities(const amps_scene *S);
    whose fixed and pinned nodes are none or all on one line (it could turn about that line), or a
    piece the engine finds singular (a hinge inside it under AMPS_SINGULAR_IGNORE), is
    AMPS_ERR_SINGULAR_UPDATE with the piece named, and the scene is as it was
-   (amps_mesh_unremove); in dynamics a free piece is legal. Errors of amps_mesh_remove (index, removed twice) change nothing. Allocates. */
+   (amps_mesh_unremove); in dynamics a free piece is legal. Errors of amps_mesh_remove (index,
+   removed twice) change nothing. Allocates. */
 AMPS_API amps_status amps_scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, const amps_int *tets,
                                        amps_singular_policy policy, amps_mesh_removal *report);
 /* Fracture: after each step, tets with max |principal stress| > sigma_max are removed (default
