@@ -1313,7 +1313,7 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    and bitwise independent of their count (dot products are summed per chunk of 256 nodes, then
    over the chunks in order). Memory from the first step: 36 doubles and 36 indices per tet
    (reference gradients, volume, R_e, Lame constants, element results; the block map and the
-   workspace of its rebuild), 33 doubles and 3 indices per node (and 2 doubles per 256 nodes),
+   workspace of its rebuild), 33 doubles and 4 indices per node (and 2 doubles per 256 nodes),
    9 doubles and 2 indices per block of A_R (one per pair of nodes sharing a tet), 6 doubles per
    equation; a rebuilt pattern allocates when it outgrows them. Stresses (amps_scene_stress and
    fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. The haptic path between steps
@@ -12799,6 +12799,7 @@ typedef struct amps__scene_dyn {
         amps_int *bp, *bj;                        /* row v: blocks bp[v] .. bp[v+1]-1, nodes bj ascending */
         double *bx;                               /* 9 per block, row-major */
         amps_int *be;                             /* per block: the first equation of its column node (< 0: none) */
+        amps_int *bd;                             /* per node: its diagonal block (-1: a node in no tet) */
         double *dinv;                             /* 9 per node: the inverse of its diagonal block */
         amps_int *map;           /* 16 per tet: map[16 t + 4 a + b] = block of tet node b in row of node a */
         amps_int *tet;           /* 4 per tet: the nodes the pattern was built for */
@@ -12917,6 +12918,7 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->dyn.crA.bx);
     amps__free(ctx, S->dyn.crA.be);
     amps__free(ctx, S->dyn.crA.dinv);
+    amps__free(ctx, S->dyn.crA.bd);
     amps__free(ctx, S->dyn.crA.map);
     amps__free(ctx, S->dyn.crA.tet);
     amps__free(ctx, S->dyn.crA.wrow);
@@ -15639,6 +15641,7 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
         size_t c = (size_t)(m->node_cap > nn ? m->node_cap : nn) + 1;
         if (amps__realloc(ctx, (void **)&S->dyn.crA.bp, c, sizeof(amps_int)) ||
             amps__realloc(ctx, (void **)&S->dyn.crA.dinv, 9 * c, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&S->dyn.crA.bd, c, sizeof(amps_int)) ||
             amps__realloc(ctx, (void **)&S->dyn.crA.wcnt, 2 * c, sizeof(amps_int)))
             goto oom;
         S->dyn.crA.cap_row = c;
@@ -15684,6 +15687,8 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
     }
     memcpy(S->dyn.crA.bp, cnt, sizeof(amps_int) * ((size_t)nn + 1));
     memcpy(S->dyn.crA.bj, tmp, sizeof(amps_int) * need);
+    for (v = 0; v < nn; v++)
+        S->dyn.crA.bd[v] = cnt[v] < cnt[v + 1] ? amps__cr_find(tmp, cnt[v], cnt[v + 1] - 1, v) : -1;
     for (t = 0; t < nt; t++) /* the block of node b in the row of node a, by bisection */
         for (a = 0; a < 4; a++) {
             amps_int row = m->tet[4 * t + a];
@@ -15713,15 +15718,17 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
     const amps__crasm *j = AMPS__CAST(const amps__crasm *, arg);
     amps_scene *S = j->S;
     const amps_mesh *m = S->m;
-    const amps_int *map = S->dyn.crA.map, *bp = S->dyn.crA.bp, *bj = S->dyn.crA.bj;
+    const amps_int *map = S->dyn.crA.map, *bp = S->dyn.crA.bp, *bj = S->dyn.crA.bj, *bd = S->dyn.crA.bd;
     amps_int lo, hi, v, t, q;
     double *bx = S->dyn.crA.bx, cK = S->dyn.cK;
     (void)slot;
     amps__cr_part(m, p0, p1, j->np, &lo, &hi);
     memset(bx + 9 * (size_t)bp[lo], 0, sizeof(double) * 9 * (size_t)(bp[hi] - bp[lo]));
     for (v = lo; v < hi; v++) { /* the mass on the diagonal block (none: a node in no tet) */
-        double *B = bx + 9 * (size_t)amps__cr_find(bj, bp[v], bp[v + 1] - 1, v);
-        if (bp[v] < bp[v + 1]) B[0] = B[4] = B[8] = S->dyn.cM * S->node.mass[v];
+        double *B;
+        if (bd[v] < 0) continue;
+        B = bx + 9 * (size_t)bd[v];
+        B[0] = B[4] = B[8] = S->dyn.cM * S->node.mass[v];
     }
     for (t = 0; t < m->ntet; t++) {
         const amps_int *tv = m->tet + 4 * t;
@@ -15759,8 +15766,8 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
     for (v = lo; v < hi; v++) { /* the inverses of the diagonal blocks: C^T / det */
         double C[9], *Di = S->dyn.crA.dinv + 9 * (size_t)v, det;
         int i, k;
-        if (bp[v] == bp[v + 1]) continue;
-        det = amps__cof3(bx + 9 * (size_t)amps__cr_find(bj, bp[v], bp[v + 1] - 1, v), C);
+        if (bd[v] < 0) continue;
+        det = amps__cof3(bx + 9 * (size_t)bd[v], C);
         det = det != 0.0 ? 1.0 / det : 0.0;
         AMPS__UNROLL
         for (i = 0; i < 3; i++)
