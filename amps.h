@@ -516,7 +516,7 @@ typedef struct amps_update_opts {
     double refine_tol;              /* accuracy of amps_update_solve (and the scene solve): the mixed backward
                                error omega = ||r_F|| / || |K^| |x| + |f^| ||_F, r = f^ - K^ x, of
                                every full solve (F: free indices) from one product with K^ (skipped
-                               where Step 6 cancels little: stats.cancel_ratio <= 4), and
+                               where Step 6 cancels little: stats.cancel_ratio <= 1), and
                                while omega > refine_tol and omega > 4 omega_d (omega_d: what a direct
                                solve with the base factor reaches on K-bar, measured once per base)
                                refinement steps with the same factors (each
@@ -527,6 +527,10 @@ typedef struct amps_update_opts {
                                eta = ||r_F|| / (||K^||_inf ||x_F|| + ||f^_F||) <= omega is still
                                above 64 refine_tol after them a synchronous
                                re-factorization (unless refactor is OFF) and the solve again.
+                               After a solve from zero that took a step, the next 16 full solves
+                               start from the last solution x0 (x = x0 + K^{-1} (f^ - K^ x0), one
+                               product with K^ more; stats.warm_solves): when consecutive solutions
+                               are close (time steps) they meet the tolerance without a step.
                                Default 2.2e-16 (1 eps: the level of a fresh direct solve);
                                0 = off (solves then cost no product with K^) */
     amps_int refactor_size;         /* AUTO: start after a commit that grows |S u C| past its size at the
@@ -589,9 +593,9 @@ typedef struct amps_update_stats {
     double backward_error;          /* normwise backward error eta of the last amps_update_solve (opts.refine_tol),
                                -1 when neither it nor the guard is on, or the check was skipped */
     amps_int refine_solves;         /* refinement steps (one forward and one backward solve each) so far */
+    amps_int warm_solves;           /* full solves started from the last solution (opts.refine_tol) so far */
     amps_int checks_skipped;        /* full solves whose product with K^ was skipped (cancellation ratio at
-                                       most 1, or within a recent check's calibration; no forward step,
-                                       guard off; backward_error -1 then) */
+                                       most 1, no forward step, guard off; backward_error -1 then) */
     double cancel_ratio;            /* Step 6's cancellation ratio mu of the last full solve (-1: none) */
     double base_cond;               /* kappa_1(K-bar) of the current base, estimated at its creation when
                                opts.refine_tol > 0 (amps_condest; it sets the forward refinement) */
@@ -6392,8 +6396,7 @@ struct amps_update {
         double omega_d;  /* the mixed backward error of a direct solve with the base factor (amps__direct_omega) */
         double cond;     /* kappa_1(K-bar) estimated at the creation of the base (amps_condest; 0: unknown) */
         amps_int cond_j; /* the column at which that estimate's iteration ended (-1: none) */
-        double cal_mu;   /* solves with mu <= cal_mu may skip the check (calibrated by the last check; 0: none) */
-        int cal_left;    /* skips the calibration still allows */
+        int warm_left;   /* full solves still to start from the last solution (amps__warm_solve) */
     } guard;
     struct {                   /* re-factorization */
         amps_update_opts opts; /* as created (for the engine of a new base) */
@@ -8544,10 +8547,7 @@ static amps_status amps__commit_finish(amps_ctx *ctx, amps_update *U, amps_int u
     U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
     U->sol.commit_unsolved = 1;
     U->stats.ncommit++;
-    if (structural) {
-        U->kver++;
-        U->guard.cal_left = 0; /* the next solve checks (amps__accuracy) */
-    }
+    if (structural) U->kver++;
     amps__bg_after_commit(ctx, U, structural || U->aug.size > u_old, may_swap);
     return AMPS_OK;
 fail:
@@ -9331,13 +9331,18 @@ static double amps__rhs_norm(const amps_update *U, double *tmp) {
 }
 
 /* Step times of a solve: those of the commit since the last solve (if any) plus its own. */
-static void amps__solve_stats_begin(amps_update *U) {
+static void amps__solve_times_begin(amps_update *U) {
     amps_int k;
     if (!U->sol.commit_unsolved)
         for (k = 0; k < AMPS_STEP_SOLVE; k++) U->stats.t_step[k] = 0;
     U->sol.commit_unsolved = 0;
     U->stats.t_step[AMPS_STEP_RHS] = 0;
     U->stats.t_step[AMPS_STEP_SOLVE] = 0;
+}
+
+/* ... and ct brought up to date (the full solve, the haptic and the watched ones). */
+static void amps__solve_stats_begin(amps_update *U) {
+    amps__solve_times_begin(U);
     {
         double t0 = amps_now();
         amps__update_ct(U);
@@ -9355,6 +9360,36 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
     for (k = 0; k < U->n; k++) U->guard.ct[k] *= U->base.inv_sqrt_d[k];
     amps__solve_core(U, U->guard.ct, rho, 1, 0, dx);
     for (k = 0; k < U->N; k++) U->sol.x[k] += dx[k];
+}
+
+/* A full solve started from the last solution: x = x0 + K^{-1} rho, rho = f^ - K^ x0 (free rows,
+   double-double), one refinement step from x0 (amps__refine_full). x0 is the last solve's x with
+   the prescribed values on C (the correction is then homogeneous there) and each index appended
+   since at its origin's value (0 without one). Step 6 rounds the correction by eps mu ||dx||
+   where a solve from zero rounds eps mu ||x||, so when consecutive solutions are close (a time
+   step, a local cut) x has a direct solve's backward error where a solve from zero would take a
+   refinement step; it costs one product with K^ more than that solve and ct is left for the next
+   call that needs it (amps__update_ct). */
+#ifndef AMPS__WARM_RUN
+#define AMPS__WARM_RUN 16 /* full solves started from the last solution after a refined one from zero */
+#endif
+static int amps__warm_ok(const amps_update *U) {
+    return U->guard.warm_left > 0 && U->sol.has_x && U->sol.x_dim <= U->N && U->refac.opts.refine_tol > 0;
+}
+
+static void amps__warm_solve(amps_update *U) {
+    double *x = U->sol.x, *rho = U->work.resid, *dx = U->work.resid + U->cap_N, rn;
+    amps_int a, k;
+    for (k = U->sol.x_dim; k < U->N; k++) {
+        amps_int o = k < U->refac.cap_origin ? U->refac.origin[k] : -1;
+        x[k] = o >= 0 && o < U->sol.x_dim ? x[o] : 0.0;
+    }
+    for (a = 0; a < U->aug.size; a++)
+        if (U->aug.kind[a] & AMPS__UCON) x[U->aug.idx[a]] = U->aug.g[a];
+    amps__backward_error(U, x, rho, &rn, 0, NULL);
+    amps__refine_full(U, rho, dx);
+    U->guard.warm_left--;
+    U->stats.warm_solves++;
 }
 
 /* The accuracy of a full solve into sol.x.
@@ -9416,15 +9451,10 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    AMPS__MU_SKIP = 1 takes no product with K^ (stats.checks_skipped; bench/refine_cost's bunny20k
    cut: mu 0.05-3.8 over the first 30 cut steps, where the check was 9-10% of the step's
    instructions).
-   Calibrated skips. Above AMPS__MU_SKIP a check measures the engine's own rounding: with
-   omega <= omega_d + s mu (a direct solve's floor plus Step 6's rounding, linear in mu), the
-   check at (mu_c, omega_c) bounds s <= omega_c / mu_c, so a later solve with
-   mu <= cal_mu = min(AMPS__CAL_GROW mu_c, omega_d mu_c / omega_c) has omega <= 2 omega_d, half
-   the trigger. Only an unrefined check with omega_c <= 2 omega_d calibrates, and after
-   AMPS__CAL_SKIPS such skips, or after a commit that changed K^ (a cut, a removal, a material:
-   not a pin), the next solve checks again (a fresh base starts uncalibrated). On bench/harness's bunny20k deformation (a pin
-   added each step, mu 3.6-11.6 while omega stays near omega_d) this leaves about one check in
-   AMPS__CAL_SKIPS + 1 solves.
+   A check above AMPS__MU_SKIP does not bound a later solve's omega at about the same mu: on
+   tests/test_stress.c's brick_nu_0.499 (long mode, pins moved between solves) a check at mu 4.19
+   found omega 0.82 omega_d, and a solve at mu 4.13-4.42 a few pins later had a residual 20-55x
+   CHOLMOD's (3 of 12 runs under load). So every solve above AMPS__MU_SKIP checks.
    Forward error. A backward error at a direct solve's level does not give its forward error:
    on beam 5x5x256 (kappa 8.7e9, tests/test_stress.c fwd_*) the augmented solve reaches omega
    0.7-1.4 eps (omega_d 0.5 eps, no step taken) and a residual 1.4-2.2x CHOLMOD's, yet its error
@@ -9443,22 +9473,10 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    cut, tests/test_stress.c with AMPS_STRESS_COUNT=1). */
 #define AMPS__DIRECT_RATIO 4.0
 #define AMPS__MU_SKIP 1.0
-#define AMPS__CAL_GROW 4.0
-#define AMPS__CAL_SKIPS 8
 #ifndef AMPS__FWD_KAPPA_EPS /* (overridable for bench/refine_cost only) */
 #define AMPS__FWD_KAPPA_EPS 2e-9
 #endif
-/* The calibrated skips' bound from a check at cancellation ratio mu with omega om (see above). */
-static void amps__calibrate(amps_update *U, double mu, double om) {
-    double od = U->guard.omega_d;
-    U->guard.cal_mu = 0;
-    U->guard.cal_left = 0;
-    if (mu <= 0 || od <= 0 || !(om <= 2 * od)) return;
-    U->guard.cal_mu = om > od / AMPS__CAL_GROW ? od * mu / om : AMPS__CAL_GROW * mu;
-    U->guard.cal_left = AMPS__CAL_SKIPS;
-}
-
-static int amps__accuracy(amps_update *U, int pass) {
+static int amps__accuracy(amps_update *U, int pass, int warm) {
     double *rho = U->work.resid, *dx = U->work.resid + U->cap_N, tol = U->refac.opts.refine_tol, om;
     double gtol = U->guard.tol, rn, den, eta, rel, eta0, rel0;
     amps_int it, k;
@@ -9466,24 +9484,21 @@ static int amps__accuracy(amps_update *U, int pass) {
        AMPS__FWD_KAPPA_EPS) takes one step */
     int fwd = tol > 0 && U->guard.cond * 2.220446049250313e-16 > AMPS__FWD_KAPPA_EPS;
     double mu = U->stats.cancel_ratio;
-    if (gtol <= 0 && !fwd && mu >= 0 &&
-        (mu <= AMPS__MU_SKIP || (U->guard.cal_left > 0 && mu <= U->guard.cal_mu))) {
-        /* Step 6 cancelled little, or no more than the last check found harmless: x has a direct
-           solve's rounding, no product with K^ */
-        if (mu > AMPS__MU_SKIP) U->guard.cal_left--;
+    if (gtol <= 0 && !fwd && mu >= 0 && mu <= AMPS__MU_SKIP) {
+        /* Step 6 cancelled little: x has a direct solve's rounding, no product with K^ */
         U->stats.backward_error = -1;
         U->stats.checks_skipped++;
         return 0;
     }
     den = gtol > 0 ? amps__rhs_norm(U, U->guard.scratch) : 0;
     eta = amps__backward_error(U, U->sol.x, rho, &rn, 0, &om);
-    amps__calibrate(U, mu, om);
     rel = den > 0 ? rn / den : rn;
     for (it = 0; it < 3; it++) {
         int want_g = gtol > 0 && rel > gtol, want_e = tol > 0 && om > tol && om > AMPS__DIRECT_RATIO * U->guard.omega_d;
         int want_f = fwd && it == 0;
         double om0 = om;
         if (!want_g && !want_e && !want_f) break;
+        if (it == 0 && want_e && !warm) U->guard.warm_left = AMPS__WARM_RUN; /* the next solves start from x */
         if (it == 0) amps__backward_error(U, U->sol.x, rho, &rn, 1, NULL);
         amps__refine_full(U, rho, dx);
         eta0 = eta;
@@ -9515,7 +9530,7 @@ static int amps__accuracy(amps_update *U, int pass) {
 AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xout) {
     amps_int a, k;
     amps_status s;
-    int pass = 0;
+    int pass = 0, warm;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve: NULL engine");
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
     if (!U->sol.x_stale && U->sol.has_x) {
@@ -9523,14 +9538,20 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
         return AMPS_OK;
     }
 again:
-    amps__solve_stats_begin(U);
     U->stats.cancel_ratio = -1;
-    amps__solve_core(U, U->force.ct, U->force.f, 0, 0, U->sol.x);
+    warm = pass == 0 && amps__warm_ok(U);
+    if (warm) {
+        amps__solve_times_begin(U);
+        amps__warm_solve(U);
+    } else {
+        amps__solve_stats_begin(U);
+        amps__solve_core(U, U->force.ct, U->force.f, 0, 0, U->sol.x);
+    }
     U->stats.guard_steps = 0;
     U->stats.guard_result = AMPS_GUARD_MET;
     U->stats.relres = -1;
     U->stats.backward_error = -1;
-    if ((U->guard.tol > 0 || U->refac.opts.refine_tol > 0) && amps__accuracy(U, pass) && pass == 0 &&
+    if ((U->guard.tol > 0 || U->refac.opts.refine_tol > 0) && amps__accuracy(U, pass, warm) && pass == 0 &&
         U->refac.opts.refactor != AMPS_REFACTOR_OFF && U->aug.size > 0) {
         /* the augmentation is the suspect: a fresh base, then the same solve again */
         pass = 1;

@@ -90,6 +90,7 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
                             int dyn) {
     amps_ctx ctx;
     amps_scene *S;
+    amps_update_stats st;
     tstate w;
     int op, v, step = 0, ncut = 0, nrem = 0, npin = 0;
     amps_int t;
@@ -180,8 +181,11 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
     }
     if (dyn) check_step(&ctx, S, &w, what, step++);
     else check_solve(&ctx, S, &w, what, step++);
-    printf("  %-22s steps %d, cuts %d, removals %d, pins %d, nodes %ld, worst error %.2e\n", what, step, ncut, nrem,
-           npin, (long)amps_scene_mesh(S)->nnode, worst_err);
+    amps_update_get_stats(amps_scene_engine(S), &st);
+    printf("  %-22s steps %d, cuts %d, removals %d, pins %d, nodes %ld, solves from the last %ld, refinement steps %ld, "
+           "worst error %.2e\n",
+           what, step, ncut, nrem, npin, (long)amps_scene_mesh(S)->nnode, (long)st.warm_solves, (long)st.refine_solves,
+           worst_err);
     amps_scene_free(&ctx, S);
     shadow_free(&w.sh);
 }
@@ -624,6 +628,65 @@ static void test_args(void) {
     shadow_free(&w.sh);
 }
 
+/* Solves started from the last solution (a refined solve from zero turns them on for the next
+   AMPS__WARM_RUN solves): the blunt dissection of the benchmark in small, a beam fixed at its
+   base with the nodes of two opposite faces near its top pinned and pulled apart at constant
+   speed, tets between them removed every few steps; every step against CHOLMOD, and some of
+   them taken from the last solution. */
+static void test_warm(void) {
+    amps_ctx ctx;
+    amps_scene *S;
+    amps_update_stats st;
+    tstate w;
+    const amps_mesh *m;
+    amps_int v, t, nspat = 0, spat[128];
+    double side[128];
+    int step, d;
+    amps_ctx_init(&ctx);
+    S = make_scene(&ctx, amps_mesh_beam(&ctx, 12), 0.5, &w);
+    m = amps_scene_mesh(S);
+    w.dyn = 1, w.dt = 0.02, w.alpha = 1.0, w.beta = 0.01;
+    w.g[2] = -9.81;
+    CHECK(amps_scene_set_material(&ctx, S, 1e5, 0.4) == AMPS_OK, "material: %s",
+          ctx.msg); /* stiff against the mass, as the cube of bench/dynamics */
+    CHECK(amps_scene_dynamics(&ctx, S, w.dt, w.alpha, w.beta) == AMPS_OK, "dynamics: %s", ctx.msg);
+    CHECK(amps_scene_gravity(&ctx, S, w.g) == AMPS_OK, "gravity: %s", ctx.msg);
+    for (v = 0; v < m->nnode && nspat < 128; v++) { /* the faces x = 0 and x = 4 above z = 8 */
+        const double *p = m->xyz + 3 * v;
+        if (p[2] > 8 && (p[0] == 0 || p[0] == 4)) side[nspat] = p[0] == 0 ? -1.0 : 1.0, spat[nspat++] = v;
+    }
+    for (step = 0; step < 60; step++) {
+        int k;
+        for (k = 0; k < nspat; k++) { /* pulled apart at 0.05 per unit time */
+            double u[3] = {0, 0, 0};
+            u[0] = side[k] * 0.05 * w.dt * (step + 1);
+            CHECK(amps_scene_pin(&ctx, S, spat[k], u) == AMPS_OK, "pin: %s", ctx.msg);
+            w.sh.pinned[spat[k]] = 1;
+            for (d = 0; d < 3; d++) w.sh.pinval[3 * spat[k] + d] = u[d];
+        }
+        if (step % 6 == 5) { /* a tet of the middle column between the faces */
+            for (k = 0; k < 20; k++) {
+                double c[3] = {0, 0, 0};
+                int a;
+                t = t_int((int)m->ntet);
+                if (m->removed && m->removed[t]) continue;
+                for (a = 0; a < 4; a++)
+                    for (d = 0; d < 3; d++) c[d] += 0.25 * m->xyz[3 * m->tet[4 * t + a] + d];
+                if (c[0] > 1.5 && c[0] < 2.5 && c[2] > 9) break;
+            }
+            if (k < 20)
+                CHECK(amps_scene_remove(&ctx, S, 1, &t, AMPS_SINGULAR_REMOVE, NULL) == AMPS_OK, "removal: %s", ctx.msg);
+        }
+        check_step(&ctx, S, &w, "pulled apart", step);
+    }
+    amps_update_get_stats(amps_scene_engine(S), &st);
+    printf("  pulled apart: %d steps, %ld from the last solution, %ld refinement steps, worst error %.2e\n", step,
+           (long)st.warm_solves, (long)st.refine_solves, worst_err);
+    CHECK(st.warm_solves > 0, "no solve started from the last solution (refinement steps %ld)", (long)st.refine_solves);
+    amps_scene_free(&ctx, S);
+    shadow_free(&w.sh);
+}
+
 int main(void) {
     amps_ctx ctx;
     amps_ctx_init(&ctx);
@@ -632,6 +695,7 @@ int main(void) {
     test_removal();
     test_orphans();
     test_fracture();
+    test_warm();
     random_sequence("beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 120, 1, 1);
     random_sequence("brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 2, 1);
     random_sequence("beam 5x5x6 seed 3", amps_mesh_beam(&ctx, 6), 0.5, 3.0, 150, 3, 1);

@@ -167,8 +167,15 @@ static double check_step(amps_ctx *ctx, amps_scene *S, const shadow *w, stats *s
     CHECK(!contract_on() || inf.res_disp <= rfac * inf.res_chol + BOUND_RES_FLOOR,
           "%s step %d: residual %.3e > %g x CHOLMOD's %.3e + %.1e", st->name, step, inf.res_disp, rfac, inf.res_chol,
           BOUND_RES_FLOOR);
-    if (inf.be_disp > bres || err > berr || (contract_on() && inf.res_disp > rfac * inf.res_chol + BOUND_RES_FLOOR))
+    if (inf.be_disp > bres || err > berr || (contract_on() && inf.res_disp > rfac * inf.res_chol + BOUND_RES_FLOOR)) {
+        amps_update_stats us;
+        amps_update_get_stats(amps_scene_engine(S), &us);
+        printf("    the engine: backward error %.2e, mu %.2f, refinement steps %ld (%ld so far), checks skipped %ld, "
+               "solves from the last solution %ld, re-factorizations %ld, |S u C| %ld\n",
+               us.backward_error, us.cancel_ratio, (long)us.guard_steps, (long)us.refine_solves,
+               (long)us.checks_skipped, (long)us.warm_solves, (long)us.nrefactor, (long)us.nsys);
         st->fails++;
+    }
     if (inf.be_disp > st->be) st->be = inf.be_disp;
     if (step <= st->steps / 4 && inf.be_disp > st->be_q1) st->be_q1 = inf.be_disp;
     if (step >= st->steps - st->steps / 4 && inf.be_disp > st->be_q4) st->be_q4 = inf.be_disp;
