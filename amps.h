@@ -6262,7 +6262,7 @@ AMPS_API amps_status amps_condest(amps_ctx *ctx, const amps_csc *K, amps_stype s
 #define AMPS__UCON 2u    /* index in C */
 #define AMPS__NB 32      /* dense panel width */
 #define AMPS__TB 64      /* diagonal block of the panel's triangular solve */
-#define AMPS__DMAX 48    /* most changed dense columns amps__lu_drop moves in one commit */
+#define AMPS__DMAX 160   /* most changed dense columns amps__lu_drop moves in one commit */
 #define AMPS__DMULT 8.0  /* largest multiplier amps__lu_drop accepts */
 #define AMPS__DLMAX 64.0 /* largest entry of L it may create */
 #define AMPS__VB 16      /* right-hand sides per chunk of Step 1 */
@@ -8494,14 +8494,21 @@ static amps_int amps__reorder_columns(amps_update *U, amps_int u_old) {
 }
 
 /* Step 5: the LU from column q0 on. The unchanged columns after q0 keep their factor when the
-   changed ones are few (amps__lu_drop); a growth of the new rows' multipliers refactors all. */
+   changed ones are few (amps__lu_drop); a growth of the new rows' multipliers refactors all.
+   The drop of d changed columns before nk kept ones costs about nk d (1.5 nk + u) flops (the
+   transforms applied to the kept columns and to L), refactoring them u_old (u_old^2 - q0^2) / 2;
+   the cheaper is taken (both then append the changed and the new columns). */
 static amps_status amps__lu_update(amps_update *U, amps_int q0, amps_int u_old, amps_int *bad) {
     const amps_marker *cm = &U->lu.changed;
-    amps_int nk = 0, q, nf = q0;
+    amps_int nk = 0, q, nf = q0, d;
     amps_status s;
+    double drop, refac;
     for (q = q0; q < u_old; q++)
         if (cm->mark[U->lu.col_order[q]] != cm->stamp) nk++;
-    if (nk >= 8 && u_old - q0 - nk <= AMPS__DMAX) {
+    d = u_old - q0 - nk;
+    drop = (double)nk * (double)d * (1.5 * (double)nk + (double)U->aug.size);
+    refac = 0.5 * (double)u_old * ((double)u_old * (double)u_old - (double)q0 * (double)q0);
+    if (nk >= 8 && d <= AMPS__DMAX && drop < refac) {
         U->stats.lu_drops++;
         nf = amps__lu_drop(U, q0, nk, u_old);
         if (nf < q0 + nk) U->stats.lu_drop_fails++;
@@ -9363,7 +9370,7 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
 }
 
 /* A full solve started from the last solution: x = x0 + K^{-1} rho, rho = f^ - K^ x0 (free rows,
-   double-double), one refinement step from x0 (amps__refine_full). x0 is the last solve's x with
+   in double, like the check), one refinement step from x0 (amps__refine_full). x0 is the last solve's x with
    the prescribed values on C (the correction is then homogeneous there) and each index appended
    since at its origin's value (0 without one). Step 6 rounds the correction by eps mu ||dx||
    where a solve from zero rounds eps mu ||x||, so when consecutive solutions are close (a time
