@@ -9347,14 +9347,17 @@ static void amps__solve_times_begin(amps_update *U) {
     U->stats.t_step[AMPS_STEP_SOLVE] = 0;
 }
 
-/* ... and ct brought up to date (the full solve, the haptic and the watched ones). */
+/* ct brought up to date (amps__update_ct), timed as Step 4. */
+static void amps__solve_ct(amps_update *U) {
+    double t0 = amps_now();
+    amps__update_ct(U);
+    U->stats.t_step[AMPS_STEP_RHS] += amps_now() - t0;
+}
+
+/* Both (the full solve from zero, the haptic and the watched ones). */
 static void amps__solve_stats_begin(amps_update *U) {
     amps__solve_times_begin(U);
-    {
-        double t0 = amps_now();
-        amps__update_ct(U);
-        U->stats.t_step[AMPS_STEP_RHS] += amps_now() - t0;
-    }
+    amps__solve_ct(U);
 }
 
 /* One refinement step with the same factors: x += K^{-1} rho through the augmented solve (a full
@@ -9376,7 +9379,8 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    where a solve from zero rounds eps mu ||x||, so when consecutive solutions are close (a time
    step, a local cut) x has a direct solve's backward error where a solve from zero would take a
    refinement step; it costs one product with K^ more than that solve and ct is left for the next
-   call that needs it (amps__update_ct). */
+   call that needs it (amps__update_ct). Returns 0 (x untouched past x0) when the residual is not
+   finite: the caller then solves from zero. */
 #ifndef AMPS__WARM_RUN
 #define AMPS__WARM_RUN 16 /* full solves started from the last solution after a refined one from zero */
 #endif
@@ -9384,7 +9388,7 @@ static int amps__warm_ok(const amps_update *U) {
     return U->guard.warm_left > 0 && U->sol.has_x && U->sol.x_dim <= U->N && U->refac.opts.refine_tol > 0;
 }
 
-static void amps__warm_solve(amps_update *U) {
+static int amps__warm_solve(amps_update *U) {
     double *x = U->sol.x, *rho = U->work.resid, *dx = U->work.resid + U->cap_N, rn;
     amps_int a, k;
     for (k = U->sol.x_dim; k < U->N; k++) {
@@ -9394,9 +9398,11 @@ static void amps__warm_solve(amps_update *U) {
     for (a = 0; a < U->aug.size; a++)
         if (U->aug.kind[a] & AMPS__UCON) x[U->aug.idx[a]] = U->aug.g[a];
     amps__backward_error(U, x, rho, &rn, 0, NULL);
-    amps__refine_full(U, rho, dx);
     U->guard.warm_left--;
+    if (!(rn < HUGE_VAL)) return 0;
+    amps__refine_full(U, rho, dx);
     U->stats.warm_solves++;
+    return 1;
 }
 
 /* The accuracy of a full solve into sol.x.
@@ -9546,12 +9552,10 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
     }
 again:
     U->stats.cancel_ratio = -1;
-    warm = pass == 0 && amps__warm_ok(U);
-    if (warm) {
-        amps__solve_times_begin(U);
-        amps__warm_solve(U);
-    } else {
-        amps__solve_stats_begin(U);
+    amps__solve_times_begin(U);
+    warm = pass == 0 && amps__warm_ok(U) && amps__warm_solve(U);
+    if (!warm) {
+        amps__solve_ct(U);
         amps__solve_core(U, U->force.ct, U->force.f, 0, 0, U->sol.x);
     }
     U->stats.guard_steps = 0;
