@@ -527,11 +527,12 @@ typedef struct amps_update_opts {
                                eta = ||r_F|| / (||K^||_inf ||x_F|| + ||f^_F||) <= omega is still
                                above 64 refine_tol after them a synchronous
                                re-factorization (unless refactor is OFF) and the solve again.
-                               After a solve from zero that took a step, the next 16 full solves
-                               whose forces changed on many rows (time steps) start from the last
-                               solution x0 (x = x0 + K^{-1} (f^ - K^ x0), one product with K^ more;
-                               stats.warm_solves): when consecutive solutions are close they meet
-                               the tolerance without a step.
+                               After a solve from zero that took a step (two in a row unless its
+                               forces changed on many rows, as in a time step), the next 16 full
+                               solves start from the last solution x0 (x = x0 + K^{-1} (f^ - K^ x0),
+                               one product with K^ more, and a forward solve more unless the forces
+                               changed on many rows; stats.warm_solves): when consecutive solutions
+                               are close they meet the tolerance without a step.
                                Default 2.2e-16 (1 eps: the level of a fresh direct solve);
                                0 = off (solves then cost no product with K^) */
     amps_int refactor_size;         /* AUTO: start after a commit that grows |S u C| past its size at the
@@ -9382,18 +9383,19 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
 }
 
 /* A full solve started from the last solution: x = x0 + K^{-1} rho, rho = f^ - K^ x0 (free rows,
-   in double, like the check), one refinement step from x0 (amps__refine_full). x0 is the last solve's x with
-   the prescribed values on C (the correction is then homogeneous there) and each index appended
-   since at its origin's value (0 without one). Step 6 rounds the correction by eps mu ||dx||
-   where a solve from zero rounds eps mu ||x||, so when consecutive solutions are close (a time
-   step, a local cut) x has a direct solve's backward error where a solve from zero would take a
-   refinement step. Where the forces changed on many rows (a time step's right-hand side) the solve
+   in double, like the check), one refinement step from x0 (amps__refine_full). x0 is the last
+   solve's x with the prescribed values on C (the correction is then homogeneous there) and each
+   index appended since at its origin's value (0 without one). Step 6 rounds the correction by
+   eps mu ||dx|| where a solve from zero rounds eps mu ||x||, so when consecutive solutions are
+   close (a time step, a local cut) x has a direct solve's backward error where a solve from zero
+   would take a refinement step. Where the forces changed on many rows (a time step's right-hand side) the solve
    from zero does a full forward solve too, and this one costs one product with K^ more (ct is
    left for the next call that needs it, amps__update_ct); one refined solve from zero starts a
    run. Otherwise (ct current, or updated on a few rows: cuts, pins, a haptic call before the
    step) it costs a forward solve more, and only two refined solves from zero in a row start one:
-   after one, bench/refactor's bunny20k steps after a fresh base took 19.7-24.4 ms against 17.0. Returns 0 (x untouched past x0) when the residual is not
-   finite: the caller then solves from zero. */
+   after one, bench/refactor's bunny20k steps after a fresh base took 19.7-24.4 ms against 17.0.
+   Returns 0 (x untouched past x0) when the residual is not finite: the caller then solves from
+   zero. */
 #ifndef AMPS__WARM_RUN
 #define AMPS__WARM_RUN 16 /* full solves started from the last solution after a refined one from zero */
 #endif
