@@ -6399,7 +6399,6 @@ struct amps_update {
         double cond;     /* kappa_1(K-bar) estimated at the creation of the base (amps_condest; 0: unknown) */
         amps_int cond_j; /* the column at which that estimate's iteration ended (-1: none) */
         int warm_left;   /* full solves still to start from the last solution (amps__warm_solve) */
-        int warm_cheap;  /* the current full solve's forces changed on many rows (amps__ct_full) */
         int cold_refined; /* the last checked solve from zero took a refinement step */
     } guard;
     struct {                   /* re-factorization */
@@ -9388,13 +9387,13 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    index appended since at its origin's value (0 without one). Step 6 rounds the correction by
    eps mu ||dx|| where a solve from zero rounds eps mu ||x||, so when consecutive solutions are
    close (a time step, a local cut) x has a direct solve's backward error where a solve from zero
-   would take a refinement step. Where the forces changed on many rows (a time step's right-hand side) the solve
-   from zero does a full forward solve too, and this one costs one product with K^ more (ct is
-   left for the next call that needs it, amps__update_ct); one refined solve from zero starts a
-   run. Otherwise (ct current, or updated on a few rows: cuts, pins, a haptic call before the
-   step) it costs a forward solve more, and only two refined solves from zero in a row start one:
-   after one, bench/refactor's bunny20k steps after a fresh base took 19.7-24.4 ms against 17.0.
-   Returns 0 (x untouched past x0) when the residual is not finite: the caller then solves from
+   would take a refinement step. Where the forces changed on many rows (a time step's right-hand
+   side) the solve from zero does a full forward solve too, and this one costs one product with
+   K^ more (ct is left for the next call that needs it, amps__update_ct); one refined solve from
+   zero starts a run (amps__accuracy's cheap). Otherwise (ct current, or updated on a few rows:
+   cuts, pins, a haptic call before the step) it costs a forward solve more, and only two refined
+   solves from zero in a row start one: after one, bench/refactor's bunny20k steps after a fresh
+   base took 19.7-24.4 ms against 17.0. Returns 0 (x untouched past x0) when the residual is not finite: the caller then solves from
    zero. */
 #ifndef AMPS__WARM_RUN
 #define AMPS__WARM_RUN 16 /* full solves started from the last solution after a refined one from zero */
@@ -9465,7 +9464,9 @@ static int amps__warm_solve(amps_update *U) {
    above 64 refine_tol, the augmentation itself has gone bad and the caller re-factors. With the
    guard on, the relative residual ||rho|| / ||f^_F - K^_FC g|| must also reach guard.tol. Sets
    stats.relres (guard on), backward_error, guard_steps, refine_solves and guard_result (pass 1:
-   after a re-factorization); returns 1 when a re-factorization is wanted.
+   after a re-factorization); returns 1 when a re-factorization is wanted. warm: x came from
+   amps__warm_solve; cheap: a solve from zero did a full forward solve (amps__ct_full); a refined
+   solve from zero starts a run of amps__warm_solve (see there).
    Skipping the check. The error above enters where Step 6 cancels: sv = D^{-1/2} ct - sum_a
    w_a D^{-1/2} W_a is rounded by ~eps (|D^{-1/2} ct| + sum_a |w_a| |D^{-1/2} W_a|), and the
    cancellation ratio mu = || sum_a |w_a| |D^{-1/2} W_a| ||_2 / ||sv||_2 (amps__cancel_ratio: the
@@ -9504,7 +9505,7 @@ static int amps__warm_solve(amps_update *U) {
 #ifndef AMPS__FWD_KAPPA_EPS /* (overridable for bench/refine_cost only) */
 #define AMPS__FWD_KAPPA_EPS 2e-9
 #endif
-static int amps__accuracy(amps_update *U, int pass, int warm) {
+static int amps__accuracy(amps_update *U, int pass, int warm, int cheap) {
     double *rho = U->work.resid, *dx = U->work.resid + U->cap_N, tol = U->refac.opts.refine_tol, om;
     double gtol = U->guard.tol, rn, den, eta, rel, eta0, rel0;
     amps_int it, k;
@@ -9529,7 +9530,7 @@ static int amps__accuracy(amps_update *U, int pass, int warm) {
         double om0 = om;
         if (!want_g && !want_e && !want_f) break;
         if (it == 0 && want_e && !warm) { /* the next solves start from x (amps__warm_solve) */
-            if (U->guard.warm_cheap || prev_refined) U->guard.warm_left = AMPS__WARM_RUN;
+            if (cheap || prev_refined) U->guard.warm_left = AMPS__WARM_RUN;
             U->guard.cold_refined = 1;
         }
         if (it == 0) amps__backward_error(U, U->sol.x, rho, &rn, 1, NULL);
@@ -9563,7 +9564,7 @@ static int amps__accuracy(amps_update *U, int pass, int warm) {
 AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xout) {
     amps_int a, k;
     amps_status s;
-    int pass = 0, warm;
+    int pass = 0, warm, cheap;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve: NULL engine");
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
     if (!U->sol.x_stale && U->sol.has_x) {
@@ -9573,7 +9574,7 @@ AMPS_API amps_status amps_update_solve(amps_ctx *ctx, amps_update *U, double *xo
 again:
     U->stats.cancel_ratio = -1;
     amps__solve_times_begin(U);
-    U->guard.warm_cheap = amps__ct_full(U);
+    cheap = amps__ct_full(U); /* a solve from zero does a full forward solve */
     warm = pass == 0 && amps__warm_ok(U) && amps__warm_solve(U);
     if (!warm) {
         amps__solve_ct(U);
@@ -9583,7 +9584,7 @@ again:
     U->stats.guard_result = AMPS_GUARD_MET;
     U->stats.relres = -1;
     U->stats.backward_error = -1;
-    if ((U->guard.tol > 0 || U->refac.opts.refine_tol > 0) && amps__accuracy(U, pass, warm) && pass == 0 &&
+    if ((U->guard.tol > 0 || U->refac.opts.refine_tol > 0) && amps__accuracy(U, pass, warm, cheap) && pass == 0 &&
         U->refac.opts.refactor != AMPS_REFACTOR_OFF && U->aug.size > 0) {
         /* the augmentation is the suspect: a fresh base, then the same solve again */
         pass = 1;
