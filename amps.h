@@ -9393,8 +9393,8 @@ static void amps__refine_full(amps_update *U, const double *rho, double *dx) {
    zero starts a run (amps__accuracy's cheap). Otherwise (ct current, or updated on a few rows:
    cuts, pins, a haptic call before the step) it costs a forward solve more, and only two refined
    solves from zero in a row start one: after one, bench/refactor's bunny20k steps after a fresh
-   base took 19.7-24.4 ms against 17.0. Returns 0 (x untouched past x0) when the residual is not finite: the caller then solves from
-   zero. */
+   base took 19.7-24.4 ms against 17.0. Returns 0 (x untouched past x0) when the residual is not
+   finite: the caller then solves from zero. */
 #ifndef AMPS__WARM_RUN
 #define AMPS__WARM_RUN 16 /* full solves started from the last solution after a refined one from zero */
 #endif
