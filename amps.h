@@ -1307,21 +1307,25 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    amps_scene_residual reports it), preconditioned by one of two: Rn A^-1 Rn^T (A^-1: the
    engine's exact solve with the current linear A, amps_update_solve_rhs, so cuts, removals and
    pins stay updates; Rn: per node the rotation nearest to the volume-weighted mean of its tets'
-   R_e, which makes it exact for a rigid rotation), or block Jacobi (the inverses of A_R's 3x3
-   diagonal blocks: far cheaper per iteration, and enough where the mass dominates A_R, as with
-   small dt). The step takes the one whose last iteration count times its cost per iteration
-   (bytes streamed: the factor's and A_R's entries, a model, so the choice is reproducible) is
-   smaller; block Jacobi is tried on the second step and every 32 steps, and left for the
-   engine's (from the current iterate) once it has cost 1.5 times the engine's last step.
-   amps_scene_step_info reports the iterations of each. A_R is assembled each step in
-   3x3 blocks by node (the pattern is rebuilt when a cut or a node separation changed the tets'
-   nodes); assembly, products and the PCG's vector updates are parallel on the engine's threads
-   and bitwise independent of their count (dot products are summed per chunk of 256 nodes, then
-   over the chunks in order). Memory from the first step: 36 doubles and 36 indices per tet
-   (reference gradients, volume, R_e, Lame constants, element results; the block map and the
-   workspace of its rebuild), 33 doubles and 4 indices per node (and 2 doubles per 256 nodes),
-   9 doubles and 2 indices per block of A_R (one per pair of nodes sharing a tet), 6 doubles per
-   equation; a rebuilt pattern allocates when it outgrows them. Stresses (amps_scene_stress and
+   R_e, which makes it exact for a rigid rotation), or symmetric Gauss-Seidel on A_R's 3x3
+   blocks (Eisenstat's form: two sweeps per iteration, which read the blocks once, as a product
+   does; far cheaper per iteration than the engine's, and enough where the mass dominates A_R, as
+   with small dt). The step takes the one whose last iteration count times its cost per
+   iteration (bytes streamed: the factor's and A_R's entries, a model, so the choice is
+   reproducible) is smaller; Gauss-Seidel is tried on the second step and every 32 steps, and
+   left for the engine's (from the current iterate) once it has cost 1.5 times the engine's last
+   step. amps_scene_step_info reports the iterations of each. A_R is assembled each step in 3x3
+   blocks by node (the pattern is rebuilt when a cut or a node separation changed the tets'
+   nodes), its rows stored in the sweeps' order: slabs of about 3,000 nodes across the model (1,
+   2, 4, ... at most 16), each slab's inner nodes by a colouring, then the slabs' interface. The
+   slabs of a sweep run in parallel; assembly, products and the PCG's vector updates are parallel
+   on the engine's threads; all are bitwise independent of the thread count (the order depends
+   on the mesh alone, and dot products are summed per chunk of 256 nodes or per slab, then in
+   order). Memory from the first step: 36 doubles and 36 indices per tet (reference gradients,
+   volume, R_e, Lame constants, element results; the block map and the workspace of its
+   rebuild), 60 doubles, 10 indices and 4 bytes per node (and 2 doubles per 256 nodes), 9
+   doubles and 2 indices per block of A_R (one per pair of nodes sharing a tet), a double and a
+   byte per equation; a rebuilt pattern allocates when it outgrows them. Stresses (amps_scene_stress and
    fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. The haptic path between steps
    (amps_scene_solve_reactions, amps_scene_haptic_build) is a model, not the next step: per
    pinned node r = r0 + Rn dr, r0 the last step's reaction (0 for a pin made since), dr the
@@ -1336,7 +1340,7 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
 AMPS_API amps_status amps_scene_corotational(amps_ctx *ctx, amps_scene *S, int on);
 /* PCG tolerance (0 < tol < 1, default 1e-10) and iteration cap (maxit >= 1, 0: default 200) of
    the corotational step: at most the work of maxit iterations with the engine's preconditioner
-   (a block Jacobi iteration counts as its cost ratio to one of those); a step that does not reach
+   (a Gauss-Seidel iteration counts as its cost ratio to one of those); a step that does not reach
    tol within it is still taken and amps_scene_step returns AMPS_WARN_INACCURATE.
    AMPS_ERR_VALUE otherwise. */
 AMPS_API amps_status amps_scene_corotational_tol(amps_ctx *ctx, amps_scene *S, double tol, amps_int maxit);
@@ -1349,7 +1353,7 @@ typedef struct amps_scene_step_stats {
     double t_rotation;         /* seconds: rotations, elastic forces, masses */
     double t_solve;            /* seconds: the PCG */
     amps_int iterations_total; /* PCG iterations of all steps */
-    amps_int iterations_jacobi; /* of the last step's iterations, those with the block Jacobi preconditioner */
+    amps_int iterations_gs;    /* of the last step's iterations, those with the Gauss-Seidel preconditioner */
 } amps_scene_step_stats;
 /* Fills st with the last step's statistics (zeros before the first step). AMPS_ERR_ARG for NULL. */
 AMPS_API amps_status amps_scene_step_info(const amps_scene *S, amps_scene_step_stats *st);
@@ -12799,6 +12803,13 @@ typedef struct amps__scene_batch {
 } amps__scene_batch;
 
 /* Dynamics, gravity and fracture (amps_scene_dynamics, amps_scene_gravity, amps_scene_fracture). */
+/* The corotational PCG's Gauss-Seidel sweeps run on at most AMPS__CR_PARTS slabs of about
+   AMPS__CR_SLAB nodes at once. */
+#define AMPS__CR_PARTS 16
+#ifndef AMPS__CR_SLAB
+#define AMPS__CR_SLAB 3000
+#endif
+
 typedef struct amps__scene_dyn {
     int on;                 /* implicit dynamics: system A = cM M + cK K */
     double dt, alpha, beta; /* time step, Rayleigh damping C = alpha M + beta K */
@@ -12839,7 +12850,8 @@ typedef struct amps__scene_dyn {
         double *wprev;                            /* 3 per node: w before the last step (the start extrapolates) */
         amps_int nprev;                           /* nodes 0..nprev-1 have wprev (0: none) */
         amps_int it[2]; /* iterations of the last step with each preconditioner (0: none yet) */
-        amps_int probe; /* steps since block Jacobi was last tried */
+        amps_int probe; /* steps since Gauss-Seidel was last tried */
+        double gsr;     /* Gauss-Seidel: |r^| / |r| at the last check (0: none yet) */
     } crP;
     struct {                /* the haptic path between corotational steps */
         double *g0, *r0;    /* 3 per node: pin targets and reactions of the last step */
@@ -12847,14 +12859,22 @@ typedef struct amps__scene_dyn {
         int used;           /* a haptic call was made: each step ends with the frames */
     } crH;
     amps_int cr_cap;                              /* node capacity of cr_gel, cr_react */
-    double *cr_vec;                               /* 6 per equation: b, x, r, z, p, q */
+    double *cr_vec;                               /* 27 per node: b, x, r, z, p, q, t, s, d in the PCG's order */
+    unsigned char *cr_cp;                         /* 3 per node: the PCG's held entries */
+    double *cr_eng;                               /* 1 per equation: the engine's preconditioner */
     double *cr_part;                              /* 2 per 256 nodes: the PCG's partial sums */
     struct {                                      /* A_R of the step in 3x3 blocks by node (amps__cr_assemble) */
-        amps_int *bp, *bj;                        /* row v: blocks bp[v] .. bp[v+1]-1, nodes bj ascending */
+        amps_int *bp, *bu, *bj;                   /* the row of node v (k = rank[v]): its blocks of earlier */
+                                                  /* nodes bp[k] .. bp[k+1]-1, then of v and later nodes */
+                                                  /* bu[k] .. bu[k+1]-1 (bu[0] = bp[nnode]); bj: the nodes */
         double *bx;                               /* 9 per block, row-major */
-        amps_int *be;                             /* per block: the first equation of its column node (< 0: none) */
+        amps_int *be;                             /* per block: 3 rank of its column node (the PCG's entry) */
         amps_int *bd;                             /* per node: its diagonal block (-1: a node in no tet) */
-        double *dinv;                             /* 9 per node: the inverse of its diagonal block */
+        amps_int *ord, *rank;                     /* the Gauss-Seidel order of the nodes, and its inverse */
+        amps_int *wgs;                            /* workspace of the order: 3 per node + 2 */
+        amps_int np, pp[AMPS__CR_PARTS + 2];      /* ord: np parts, part k at pp[k] .. pp[k+1]-1, then the */
+                                                  /* interface (pp[np] .. pp[np+1]-1) */
+        double *dinv;                             /* 9 per rank: the inverse of the node's diagonal block */
         amps_int *map;           /* 16 per tet: map[16 t + 4 a + b] = block of tet node b in row of node a */
         amps_int *tet;           /* 4 per tet: the nodes the pattern was built for */
         amps_int *wrow, *wcnt;   /* workspace of a rebuild: 16 per tet; 2 per node + 2 */
@@ -12862,7 +12882,7 @@ typedef struct amps__scene_dyn {
         size_t cap_row, cap_blk; /* capacities of bp (nodes + 1) and bj, bx */
     } crA;
     unsigned char *cr_con;                        /* 1 per equation: constrained in the engine */
-    amps_int cr_ncap;                             /* equation capacity of cr_vec, cr_con */
+    amps_int cr_ncap;                             /* equation capacity of cr_eng, cr_con */
     amps_scene_step_stats info;                   /* the last step (amps_scene_step_info) */
     amps_int *rm_list, *rm_flag, *rm_rename, *rm_queue; /* removal and fracture workspace, grown on demand: */
     unsigned char *rm_seen;                             /* tets, orphans flagged, node map, queue, marks */
@@ -12966,13 +12986,19 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->dyn.crH.r0);
     amps__free(ctx, S->dyn.crH.pin);
     amps__free(ctx, S->dyn.cr_vec);
+    amps__free(ctx, S->dyn.cr_cp);
+    amps__free(ctx, S->dyn.cr_eng);
     amps__free(ctx, S->dyn.cr_part);
     amps__free(ctx, S->dyn.crA.bp);
+    amps__free(ctx, S->dyn.crA.bu);
     amps__free(ctx, S->dyn.crA.bj);
     amps__free(ctx, S->dyn.crA.bx);
     amps__free(ctx, S->dyn.crA.be);
     amps__free(ctx, S->dyn.crA.dinv);
     amps__free(ctx, S->dyn.crA.bd);
+    amps__free(ctx, S->dyn.crA.ord);
+    amps__free(ctx, S->dyn.crA.rank);
+    amps__free(ctx, S->dyn.crA.wgs);
     amps__free(ctx, S->dyn.crA.map);
     amps__free(ctx, S->dyn.crA.tet);
     amps__free(ctx, S->dyn.crA.wrow);
@@ -15648,7 +15674,7 @@ static void amps__cr_pass(amps_scene *S, int mode) {
     j.S = S;
     j.mode = mode;
     j.frames = mode == 3 || (mode == 0 && !amps__cr_frames_valid(S) &&
-                             (S->dyn.info.iterations == 0 || S->dyn.info.iterations > S->dyn.info.iterations_jacobi));
+                             (S->dyn.info.iterations == 0 || S->dyn.info.iterations > S->dyn.info.iterations_gs));
     j.np = S->m->nnode > 2048 ? nt : 1;
     amps__par_for(&S->U->par, S->m->ntet > 2048 ? nt : 1, S->m->ntet, 256, amps__cr_tets, &j);
     if (mode != 2) amps__par_for(&S->U->par, (int)j.np, j.np, 1, amps__cr_nodes, &j);
@@ -15669,19 +15695,89 @@ static void amps__cr_frames(amps_scene *S) {
 /* ---- the assembled A_R: 3x3 blocks by node ---- */
 
 /* The position of node w among the sorted bj[lo..hi] (w present), by bisection. */
-static amps_int amps__cr_find(const amps_int *bj, amps_int lo, amps_int hi, amps_int w) {
+/* The position of node w in bj[lo .. hi] (ordered by rank; w is there), by bisection. */
+static amps_int amps__cr_find(const amps_int *bj, const amps_int *rank, amps_int lo, amps_int hi, amps_int w) {
     while (lo < hi) {
         amps_int mid = lo + (hi - lo) / 2;
-        if (bj[mid] < w) lo = mid + 1;
+        if (rank[bj[mid]] < rank[w]) lo = mid + 1;
         else hi = mid;
     }
     return lo;
 }
 
+/* The Gauss-Seidel order of the nodes (crA.ord, crA.rank, crA.np, crA.pp) for the rows bp, bj of
+   the pattern (nn nodes; part: nn of workspace). np slabs of equal node counts across the longest
+   axis of the reference box (np = 1, 2, 4, ... <= AMPS__CR_PARTS, about AMPS__CR_SLAB nodes a slab); the
+   nodes of a slab without a neighbour in another slab come first, slab by slab, then the others
+   (the interface). A slab then depends only on itself and the interface, so the slabs of a sweep
+   run in parallel. Within a slab and the interface the nodes go by a greedy colouring (no two
+   neighbours share a colour), then by index: consecutive rows of a sweep do not wait for each
+   other. The order depends on the mesh alone (the same bits on any number of threads). */
+static void amps__cr_order(amps_scene *S, const amps_int *bp, const amps_int *bj, amps_int nn, amps_int *part) {
+    enum { NB = 512 };
+    const double *xyz = S->m->xyz;
+    amps_int hist[NB], at[AMPS__CR_PARTS + 2], np = 1, v, q, k, n = 0, ncol = 0;
+    amps_int *ord = S->dyn.crA.ord, *pp = S->dyn.crA.pp, *col = S->dyn.crA.wgs, *stamp = col + nn, *cc = stamp + nn;
+    amps_int *bycol = S->dyn.crA.rank;
+    double lo[3], hi[3], w;
+    int ax = 0, d;
+    while (np < AMPS__CR_PARTS && 2 * np * AMPS__CR_SLAB <= nn) np *= 2;
+    for (d = 0; d < 3; d++) lo[d] = hi[d] = nn ? xyz[d] : 0.0;
+    for (v = 0; v < nn; v++)
+        for (d = 0; d < 3; d++) {
+            if (xyz[3 * v + d] < lo[d]) lo[d] = xyz[3 * v + d];
+            if (xyz[3 * v + d] > hi[d]) hi[d] = xyz[3 * v + d];
+        }
+    for (d = 1; d < 3; d++)
+        if (hi[d] - lo[d] > hi[ax] - lo[ax]) ax = d;
+    w = hi[ax] > lo[ax] ? (double)NB / (hi[ax] - lo[ax]) : 0.0;
+    /* slab of node v: its bin's place in the cumulative counts, so the slabs hold about nn / np */
+    for (k = 0; k < NB; k++) hist[k] = 0;
+    for (v = 0; v < nn; v++) {
+        amps_int b = (amps_int)((xyz[3 * v + ax] - lo[ax]) * w);
+        part[v] = b < 0 ? 0 : b >= NB ? NB - 1 : b;
+        hist[part[v]]++;
+    }
+    for (k = 0; k < NB; k++) { /* hist[k]: the slab of bin k (by the nodes before its middle) */
+        amps_int c = hist[k];
+        hist[k] = (amps_int)(((double)n + 0.5 * (double)c) * (double)np / (double)(nn ? nn : 1));
+        if (hist[k] >= np) hist[k] = np - 1;
+        n += c;
+    }
+    for (v = 0; v < nn; v++) part[v] = hist[part[v]];
+    for (v = 0; v < nn; v++) /* the interface (np): one end of every edge between two slabs */
+        for (q = bp[v]; q < bp[v + 1] && part[v] < np; q++)
+            if (part[bj[q]] != part[v] && part[bj[q]] < np) part[v] = np;
+    /* greedy colouring in index order: the smallest colour no earlier neighbour has */
+    for (v = 0; v < nn; v++) stamp[v] = -1;
+    for (v = 0; v < nn; v++) {
+        amps_int c = 0;
+        for (q = bp[v]; q < bp[v + 1]; q++)
+            if (bj[q] < v) stamp[col[bj[q]]] = v;
+        while (stamp[c] == v) c++;
+        col[v] = c;
+        if (c + 1 > ncol) ncol = c + 1;
+    }
+    /* by colour (a stable counting sort), then stably by slab */
+    for (k = 0; k <= ncol; k++) cc[k] = 0;
+    for (v = 0; v < nn; v++) cc[col[v] + 1]++;
+    for (k = 0; k < ncol; k++) cc[k + 1] += cc[k];
+    for (v = 0; v < nn; v++) bycol[cc[col[v]]++] = v;
+    for (k = 0; k <= np + 1; k++) at[k] = 0;
+    for (v = 0; v < nn; v++) at[part[v] + 1]++;
+    for (k = 0; k <= np; k++) at[k + 1] += at[k];
+    for (k = 0; k <= np + 1; k++) pp[k] = at[k];
+    for (k = 0; k < nn; k++) ord[at[part[bycol[k]]]++] = bycol[k];
+    for (k = 0; k < nn; k++) S->dyn.crA.rank[ord[k]] = k;
+    S->dyn.crA.np = np;
+}
+
 /* The block pattern of every tet, removed ones included (a removal then leaves it valid): row v
-   holds node w when a tet holds both (v itself included), ascending; crA.map locates each tet's
-   16 blocks. Rebuilt when a tet's nodes or the node count changed (cuts, node separation).
-   Allocates at the first call and when the nodes or the blocks outgrow their capacities. */
+   holds node w when a tet holds both (v itself included); the rows are stored in the Gauss-Seidel
+   order (amps__cr_order), each split into its blocks of earlier nodes and the rest (crA.bp,
+   crA.bu), both ordered by rank; crA.map locates each tet's 16 blocks. Rebuilt when a tet's
+   nodes or the node count changed (cuts, node separation). Allocates at the first call and when
+   the nodes or the blocks outgrow their capacities. */
 static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
     const amps_mesh *m = S->m;
     amps_int nn = m->nnode, nt = m->ntet, v, t, k, nb = 0, *cnt, *mark, *tmp;
@@ -15694,8 +15790,12 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
     if ((size_t)nn + 1 > S->dyn.crA.cap_row) { /* room for the nodes: bp and the counts */
         size_t c = (size_t)(m->node_cap > nn ? m->node_cap : nn) + 1;
         if (amps__realloc(ctx, (void **)&S->dyn.crA.bp, c, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&S->dyn.crA.bu, c, sizeof(amps_int)) ||
             amps__realloc(ctx, (void **)&S->dyn.crA.dinv, 9 * c, sizeof(double)) ||
             amps__realloc(ctx, (void **)&S->dyn.crA.bd, c, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&S->dyn.crA.ord, c, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&S->dyn.crA.rank, c, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&S->dyn.crA.wgs, 3 * c + 2, sizeof(amps_int)) ||
             amps__realloc(ctx, (void **)&S->dyn.crA.wcnt, 2 * c, sizeof(amps_int)))
             goto oom;
         S->dyn.crA.cap_row = c;
@@ -15716,20 +15816,28 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
             for (b = 0; b < 4; b++) tmp[cnt[m->tet[4 * t + a]]++] = m->tet[4 * t + b];
     for (v = nn; v > 0; v--) cnt[v] = cnt[v - 1]; /* back to the row starts */
     cnt[0] = 0;
-    /* unique and sorted per row, in place */
+    /* unique per row, in place */
     for (v = 0; v < nn; v++) mark[v] = -1;
     for (v = 0; v < nn; v++) {
-        amps_int p0 = cnt[v], p1 = cnt[v + 1], q, r, w, start = nb;
+        amps_int p0 = cnt[v], p1 = cnt[v + 1], q, w, start = nb;
         for (q = p0; q < p1; q++)
             if (mark[w = tmp[q]] != v) {
                 mark[w] = v;
-                for (r = nb; r > start && tmp[r - 1] > w; r--) tmp[r] = tmp[r - 1];
-                tmp[r] = w;
-                nb++;
+                tmp[nb++] = w;
             }
         cnt[v] = start;
     }
     cnt[nn] = nb;
+    /* the Gauss-Seidel order, and each row by it (insertion: rows are short) */
+    amps__cr_order(S, cnt, tmp, nn, mark);
+    for (v = 0; v < nn; v++) {
+        const amps_int *rank = S->dyn.crA.rank;
+        amps_int q, r, w;
+        for (q = cnt[v] + 1; q < cnt[v + 1]; q++) {
+            for (w = tmp[q], r = q; r > cnt[v] && rank[tmp[r - 1]] > rank[w]; r--) tmp[r] = tmp[r - 1];
+            tmp[r] = w;
+        }
+    }
     need = (size_t)nb;
     if (need > S->dyn.crA.cap_blk) {
         size_t c = need + need / 2 + 16;
@@ -15739,16 +15847,31 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
             goto oom;
         S->dyn.crA.cap_blk = c;
     }
-    memcpy(S->dyn.crA.bp, cnt, sizeof(amps_int) * ((size_t)nn + 1));
-    memcpy(S->dyn.crA.bj, tmp, sizeof(amps_int) * need);
-    for (v = 0; v < nn; v++)
-        S->dyn.crA.bd[v] = cnt[v] < cnt[v + 1] ? amps__cr_find(tmp, cnt[v], cnt[v + 1] - 1, v) : -1;
+    /* the rows in the order, their parts of earlier nodes first, then the rest: each sweep streams
+       its half alone */
+    for (nb = 0, a = 0; a < 2; a++)
+        for (k = 0; k < nn; k++) {
+            amps_int q, *start = a ? S->dyn.crA.bu : S->dyn.crA.bp;
+            v = S->dyn.crA.ord[k];
+            start[k] = nb;
+            for (q = cnt[v]; q < cnt[v + 1]; q++)
+                if ((S->dyn.crA.rank[tmp[q]] < k) == !a) S->dyn.crA.bj[nb++] = tmp[q];
+            if (k == nn - 1) start[nn] = nb;
+        }
+    if (!nn) S->dyn.crA.bp[0] = S->dyn.crA.bu[0] = 0;
+    for (v = 0; v < nn; v++) { /* the diagonal: first of the second part */
+        amps_int r = S->dyn.crA.rank[v];
+        S->dyn.crA.bd[v] = S->dyn.crA.bu[r] < S->dyn.crA.bu[r + 1] ? S->dyn.crA.bu[r] : -1;
+    }
     for (t = 0; t < nt; t++) /* the block of node b in the row of node a, by bisection */
         for (a = 0; a < 4; a++) {
-            amps_int row = m->tet[4 * t + a];
-            for (b = 0; b < 4; b++)
+            amps_int r = S->dyn.crA.rank[m->tet[4 * t + a]];
+            for (b = 0; b < 4; b++) {
+                amps_int w = m->tet[4 * t + b];
+                const amps_int *start = S->dyn.crA.rank[w] < r ? S->dyn.crA.bp : S->dyn.crA.bu;
                 S->dyn.crA.map[16 * t + 4 * a + b] =
-                        amps__cr_find(S->dyn.crA.bj, S->dyn.crA.bp[row], S->dyn.crA.bp[row + 1] - 1, m->tet[4 * t + b]);
+                        amps__cr_find(S->dyn.crA.bj, S->dyn.crA.rank, start[r], start[r + 1] - 1, w);
+            }
         }
     memcpy(S->dyn.crA.tet, m->tet, sizeof(amps_int) * 4 * (size_t)nt);
     S->dyn.crA.nnode = nn;
@@ -15772,12 +15895,20 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
     const amps__crasm *j = AMPS__CAST(const amps__crasm *, arg);
     amps_scene *S = j->S;
     const amps_mesh *m = S->m;
-    const amps_int *map = S->dyn.crA.map, *bp = S->dyn.crA.bp, *bj = S->dyn.crA.bj, *bd = S->dyn.crA.bd;
+    const amps_int *map = S->dyn.crA.map, *bp = S->dyn.crA.bp, *bu = S->dyn.crA.bu, *bj = S->dyn.crA.bj;
+    const amps_int *bd = S->dyn.crA.bd;
+    const amps_int *rank = S->dyn.crA.rank;
     amps_int lo, hi, v, t, q;
     double *bx = S->dyn.crA.bx, cK = S->dyn.cK;
     (void)slot;
     amps__cr_part(m, p0, p1, j->np, &lo, &hi);
-    memset(bx + 9 * (size_t)bp[lo], 0, sizeof(double) * 9 * (size_t)(bp[hi] - bp[lo]));
+    for (v = lo; v < hi; v++) {
+        amps_int r = rank[v];
+        memset(bx + 9 * (size_t)bp[r], 0, sizeof(double) * 9 * (size_t)(bp[r + 1] - bp[r]));
+        memset(bx + 9 * (size_t)bu[r], 0, sizeof(double) * 9 * (size_t)(bu[r + 1] - bu[r]));
+        for (q = bp[r]; q < bp[r + 1]; q++) S->dyn.crA.be[q] = 3 * rank[bj[q]]; /* the columns in the PCG's order */
+        for (q = bu[r]; q < bu[r + 1]; q++) S->dyn.crA.be[q] = 3 * rank[bj[q]];
+    }
     for (v = lo; v < hi; v++) { /* the mass on the diagonal block (none: a node in no tet) */
         double *B;
         if (bd[v] < 0) continue;
@@ -15816,9 +15947,8 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
             }
         }
     }
-    for (q = bp[lo]; q < bp[hi]; q++) S->dyn.crA.be[q] = S->node.dof[3 * bj[q]]; /* the products' columns */
     for (v = lo; v < hi; v++) { /* the inverses of the diagonal blocks: C^T / det */
-        double C[9], *Di = S->dyn.crA.dinv + 9 * (size_t)v, det;
+        double C[9], *Di = S->dyn.crA.dinv + 9 * (size_t)rank[v], det;
         int i, k;
         if (bd[v] < 0) continue;
         det = amps__cof3(bx + 9 * (size_t)bd[v], C);
@@ -15844,49 +15974,77 @@ static amps_status amps__cr_assemble(amps_ctx *ctx, amps_scene *S) {
    into cr_part, then over the chunks in order (the same bits for any number of threads). */
 #define AMPS__CR_CHUNK 256
 
-/* A sweep of the nodes with equations, a parallel loop:
-   op 0: y = A_R v (v read on the equations only) and the sum v . y;
-   op 1: p = z + beta p (0 on the constrained equations);
-   op 2: x += alpha p, r -= alpha q (if upd) and the sum r . r; with block Jacobi (bj) also
-         z = D^-1 r and a second sum r . z.
-   The sums run over the free equations, per chunk into cr_part. */
+/* The PCG runs in the order of the nodes (crA.ord): entry 3 k + i of its vectors is equation i
+   of node ord[k] (k its rank), so that the products and the sweeps stream the vectors with the
+   blocks; cr_cp flags the entries held fixed there (constrained in the engine, orphans, nodes
+   without equations), where the iterates keep their prescribed values (0 at the last two).
+
+   A sweep of the ranks, a parallel loop:
+   op 0: y = A_R v and the sum v . y;
+   op 1: p = z + beta p (0 on the held entries);
+   op 2: x += alpha p, r -= alpha q (if upd) and the sum r . r; with zd also z = D r (D: the
+         diagonal blocks; Gauss-Seidel's preconditioner, below) and a second sum r . z;
+   op 3: the sum of y . y over the free entries, y = (D + L) v (L: the blocks of earlier nodes;
+         Gauss-Seidel's residual r from r^ = v, below).
+   The sums run over the free entries, per chunk into cr_part. */
 typedef struct amps__crsweep {
     const amps_scene *S;
-    int op, upd, bj;
+    int op, upd, zd; /* the operation; x and r updated; z = D r */
     const double *v;
     double *y, *x, *r, *z, *p, *q;
     double alpha, beta;
 } amps__crsweep;
 
-/* v_v . y_v on the free equations of node v (first equation e). */
+/* x_k . y_k on the free entries of rank k (e = 3 k). */
 static double amps__cr_dot_node(const unsigned char *con, amps_int e, const double *x, const double *y) {
     return (con[e] ? 0.0 : x[e] * y[e]) + (con[e + 1] ? 0.0 : x[e + 1] * y[e + 1]) +
            (con[e + 2] ? 0.0 : x[e + 2] * y[e + 2]);
 }
 
-/* The product rows of node v (first equation e): y_v = sum_w B_vw x_w; returns x_v . y_v on its
-   free equations. */
-static double amps__cr_mul_node(const amps_scene *S, amps_int v, amps_int e, const double *x, double *y) {
+/* y_k = sum_w B_kw x_w for the row of rank k (both parts); returns x_k . y_k on its free entries. */
+static double amps__cr_mul_node(const amps_scene *S, amps_int k, const double *x, double *y) {
     const amps_int *be = S->dyn.crA.be;
-    amps_int q;
+    amps_int q, h, e = 3 * k;
     double y0 = 0, y1 = 0, y2 = 0;
-    for (q = S->dyn.crA.bp[v]; q < S->dyn.crA.bp[v + 1]; q++) {
-        const double *B = S->dyn.crA.bx + 9 * (size_t)q, *u = x + be[q];
-        if (be[q] < 0) continue;
-        y0 += B[0] * u[0] + B[1] * u[1] + B[2] * u[2];
-        y1 += B[3] * u[0] + B[4] * u[1] + B[5] * u[2];
-        y2 += B[6] * u[0] + B[7] * u[1] + B[8] * u[2];
+    for (h = 0; h < 2; h++) {
+        const amps_int *start = h ? S->dyn.crA.bu : S->dyn.crA.bp;
+        for (q = start[k]; q < start[k + 1]; q++) {
+            const double *B = S->dyn.crA.bx + 9 * (size_t)q, *u = x + be[q];
+            y0 += B[0] * u[0] + B[1] * u[1] + B[2] * u[2];
+            y1 += B[3] * u[0] + B[4] * u[1] + B[5] * u[2];
+            y2 += B[6] * u[0] + B[7] * u[1] + B[8] * u[2];
+        }
     }
     y[e] = y0;
     y[e + 1] = y1;
     y[e + 2] = y2;
-    return amps__cr_dot_node(S->dyn.cr_con, e, x, y);
+    return amps__cr_dot_node(S->dyn.cr_cp, e, x, y);
 }
 
-/* The update of node v's equations e..e+2 (op 2); d[0] += r . r, d[1] += r . z. */
-static void amps__cr_update_node(const amps__crsweep *j, amps_int v, amps_int e, double d[2]) {
-    const unsigned char *con = j->S->dyn.cr_con + e;
-    const double *Di = j->S->dyn.crA.dinv + 9 * (size_t)v;
+/* y_k = D_k v_k + sum over earlier w of B_kw v_w (row k in a tet); returns y_k . y_k on its free
+   entries. */
+static double amps__cr_lower_node(const amps_scene *S, amps_int k, const double *v) {
+    const amps_int *be = S->dyn.crA.be;
+    const unsigned char *con = S->dyn.cr_cp + 3 * k;
+    amps_int q = S->dyn.crA.bu[k];
+    const double *B = S->dyn.crA.bx + 9 * (size_t)q, *u = v + 3 * k;
+    double y0 = B[0] * u[0] + B[1] * u[1] + B[2] * u[2], y1 = B[3] * u[0] + B[4] * u[1] + B[5] * u[2];
+    double y2 = B[6] * u[0] + B[7] * u[1] + B[8] * u[2];
+    for (q = S->dyn.crA.bp[k]; q < S->dyn.crA.bp[k + 1]; q++) {
+        B = S->dyn.crA.bx + 9 * (size_t)q;
+        u = v + be[q];
+        y0 += B[0] * u[0] + B[1] * u[1] + B[2] * u[2];
+        y1 += B[3] * u[0] + B[4] * u[1] + B[5] * u[2];
+        y2 += B[6] * u[0] + B[7] * u[1] + B[8] * u[2];
+    }
+    return (con[0] ? 0.0 : y0 * y0) + (con[1] ? 0.0 : y1 * y1) + (con[2] ? 0.0 : y2 * y2);
+}
+
+/* The update of rank k's entries (op 2); d[0] += r . r, d[1] += r . z. */
+static void amps__cr_update_node(const amps__crsweep *j, amps_int k, double d[2]) {
+    amps_int e = 3 * k, bd = j->S->dyn.crA.bu[k];
+    const unsigned char *con = j->S->dyn.cr_cp + e;
+    const double *Di = j->S->dyn.crA.bx + 9 * (size_t)bd;
     double *r = j->r + e;
     int i;
     for (i = 0; i < 3; i++)
@@ -15896,7 +16054,7 @@ static void amps__cr_update_node(const amps__crsweep *j, amps_int v, amps_int e,
         }
     for (i = 0; i < 3; i++)
         if (!con[i]) d[0] += r[i] * r[i];
-    if (!j->bj) return;
+    if (!j->zd) return;
     for (i = 0; i < 3; i++) {
         double zi = con[i] ? 0.0 : Di[3 * i] * r[0] + Di[3 * i + 1] * r[1] + Di[3 * i + 2] * r[2];
         j->z[e + i] = zi;
@@ -15907,28 +16065,29 @@ static void amps__cr_update_node(const amps__crsweep *j, amps_int v, amps_int e,
 static void amps__cr_sweep_rows(amps_int b0, amps_int e0, int slot, void *arg) {
     const amps__crsweep *j = AMPS__CAST(const amps__crsweep *, arg);
     const amps_scene *S = j->S;
-    const unsigned char *con = S->dyn.cr_con;
+    const unsigned char *con = S->dyn.cr_cp;
     double *part = S->dyn.cr_part;
-    amps_int c, v;
+    amps_int c, k;
     (void)slot;
     for (c = b0; c < e0; c += AMPS__CR_CHUNK) {
         amps_int c1 = c + AMPS__CR_CHUNK < e0 ? c + AMPS__CR_CHUNK : e0;
         double d[2] = {0, 0};
-        for (v = c; v < c1; v++) {
-            amps_int e = S->node.dof[3 * v];
+        for (k = c; k < c1; k++) {
+            amps_int e = 3 * k;
             int i;
-            if (e < 0) continue;
-            if (j->op == 0) d[0] += amps__cr_mul_node(S, v, e, j->v, j->y);
+            if (j->op == 0) d[0] += amps__cr_mul_node(S, k, j->v, j->y);
             else if (j->op == 1)
                 for (i = 0; i < 3; i++) j->p[e + i] = con[e + i] ? 0.0 : j->z[e + i] + j->beta * j->p[e + i];
-            else amps__cr_update_node(j, v, e, d);
+            else if (S->dyn.crA.bu[k] == S->dyn.crA.bu[k + 1]) continue; /* in no tet: held */
+            else if (j->op == 2) amps__cr_update_node(j, k, d);
+            else d[0] += amps__cr_lower_node(S, k, j->v);
         }
         part[2 * (c / AMPS__CR_CHUNK)] = d[0];
         part[2 * (c / AMPS__CR_CHUNK) + 1] = d[1];
     }
 }
 
-/* Runs the sweep j over every node; returns its (first) sum, *rz (may be NULL) the second. */
+/* Runs the sweep j over every rank; returns its (first) sum, *rz (may be NULL) the second. */
 static double amps__cr_sweep(amps_scene *S, amps__crsweep *j, double *rz) {
     amps_int nn = S->m->nnode, c, nc = (nn + AMPS__CR_CHUNK - 1) / AMPS__CR_CHUNK;
     double d0 = 0, d1 = 0;
@@ -15943,7 +16102,16 @@ static double amps__cr_sweep(amps_scene *S, amps__crsweep *j, double *rz) {
     return d0;
 }
 
-/* y = A_R v on the equations; returns v . y on the free equations. */
+/* |(D + L) v|^2 on the free entries (op 3). */
+static double amps__cr_lower(amps_scene *S, const double *v) {
+    amps__crsweep j;
+    memset(&j, 0, sizeof(j));
+    j.op = 3;
+    j.v = v;
+    return amps__cr_sweep(S, &j, NULL);
+}
+
+/* y = A_R v; returns v . y on the free entries. */
 static double amps__cr_mul(amps_scene *S, const double *v, double *y) {
     amps__crsweep j;
     memset(&j, 0, sizeof(j));
@@ -15951,6 +16119,128 @@ static double amps__cr_mul(amps_scene *S, const double *v, double *y) {
     j.y = y;
     return amps__cr_sweep(S, &j, NULL);
 }
+
+/* ---- symmetric Gauss-Seidel (Eisenstat's form) ----
+   With A_R = L + D + L^T in the node order crA.ord (D: the 3x3 diagonal blocks, L: the blocks
+   of earlier nodes), the PCG with preconditioner (D + L) D^-1 (D + L)^T on A_R equals the PCG
+   with preconditioner D on A^ = (D + L)^-1 A_R (D + L)^-T, with residual r^ = (D + L)^-1 r and
+   x = x0 + (D + L)^-T d (both are CG on D^1/2 A^ D^1/2). Since A_R = (D + L) + (D + L)^T - D,
+       A^ p = t + (D + L)^-1 (p - D t),  t = (D + L)^-T p,
+   a backward and a forward sweep, each streaming its own half of the blocks (crA.bu, crA.bp).
+   On the held entries A_R's rows and columns are those of the identity (the vectors are 0 there):
+   crA.dinv holds the inverse of D with them so (amps__cr_held). */
+typedef struct amps__crgs {
+    const amps_scene *S;
+    int fwd;             /* 1: forward sweep, 0: backward */
+    const double *a, *t; /* right-hand side; the forward sweep's t (NULL: none) */
+    double *s, *q;       /* the result (may be a); with t, q = t + s */
+    double *p, beta;     /* backward: first p = z + beta p (p = a; NULL: none) */
+    const double *z;
+    double sum[AMPS__CR_PARTS + 1]; /* per part (the interface last): a . q (forward with t) */
+} amps__crgs;
+
+/* Rank k of sweep j; returns a_k . q_k (forward with t), else 0. With y = a_k - sum over
+   earlier w (forward) or later w (backward) of B_kw s_w, held entries of y set to 0:
+   forward: s_k = D_k^-1 y (without t); q_k = D_k^-1 y and s_k = q_k - t_k (with t: then
+            s_k = D_k^-1 (a_k - D_k t_k - ...), so q = t + s);
+   backward: s_k = D_k^-1 y, after a_k = p_k = z_k + beta p_k if j->p. */
+static double amps__cr_gs_node(const amps__crgs *j, amps_int k) {
+    const amps_scene *S = j->S;
+    const amps_int *be = S->dyn.crA.be;
+    const unsigned char *held = S->dyn.cr_cp + 3 * k;
+    const double *bx = S->dyn.crA.bx, *Di = S->dyn.crA.dinv + 9 * (size_t)k;
+    amps_int q, e = 3 * k, d = S->dyn.crA.bu[k], q0 = j->fwd ? S->dyn.crA.bp[k] : d + 1;
+    amps_int q1 = j->fwd ? S->dyn.crA.bp[k + 1] : S->dyn.crA.bu[k + 1];
+    double y0, y1, y2, *s = j->t ? j->q + e : j->s + e;
+    if (j->p) /* p = z + beta p, 0 where held */
+        for (q = e; q < e + 3; q++) j->p[q] = S->dyn.cr_cp[q] ? 0.0 : j->z[q] + j->beta * j->p[q];
+    if ((held[0] && held[1] && held[2]) || d == S->dyn.crA.bu[k + 1]) { /* held, or in no tet */
+        j->s[e] = j->s[e + 1] = j->s[e + 2] = 0.0;
+        if (j->t) j->q[e] = j->q[e + 1] = j->q[e + 2] = 0.0;
+        return 0.0;
+    }
+    y0 = j->a[e];
+    y1 = j->a[e + 1];
+    y2 = j->a[e + 2];
+    for (q = q0; q < q1; q++) { /* y -= B_kw s_w */
+        const double *B = bx + 9 * (size_t)q, *u = j->s + be[q];
+        y0 -= B[0] * u[0] + B[1] * u[1] + B[2] * u[2];
+        y1 -= B[3] * u[0] + B[4] * u[1] + B[5] * u[2];
+        y2 -= B[6] * u[0] + B[7] * u[1] + B[8] * u[2];
+    }
+    if (held[0] || held[1] || held[2]) { /* held in some entries: D^-1 is the inverse of D^ */
+        y0 = held[0] ? 0.0 : y0;
+        y1 = held[1] ? 0.0 : y1;
+        y2 = held[2] ? 0.0 : y2;
+    }
+    s[0] = Di[0] * y0 + Di[1] * y1 + Di[2] * y2;
+    s[1] = Di[3] * y0 + Di[4] * y1 + Di[5] * y2;
+    s[2] = Di[6] * y0 + Di[7] * y1 + Di[8] * y2;
+    if (!j->t) return 0.0;
+    for (q = 0; q < 3; q++) j->s[e + q] = s[q] - j->t[e + q];
+    return j->a[e] * s[0] + j->a[e + 1] * s[1] + j->a[e + 2] * s[2];
+}
+
+/* Sweep j over the ranks k0 .. k1-1 (forward ascending, backward descending) into sum[p]. */
+static void amps__cr_gs_range(amps__crgs *j, amps_int k0, amps_int k1, amps_int p) {
+    amps_int k;
+    double d = 0;
+    if (j->fwd)
+        for (k = k0; k < k1; k++) d += amps__cr_gs_node(j, k);
+    else
+        for (k = k1 - 1; k >= k0; k--) (void)amps__cr_gs_node(j, k);
+    j->sum[p] = d;
+}
+
+/* Parts [b0, e0) of sweep j (a parallel loop: the parts do not depend on each other). */
+static void amps__cr_gs_parts(amps_int b0, amps_int e0, int slot, void *arg) {
+    amps__crgs *j = AMPS__CAST(amps__crgs *, arg);
+    amps_int p;
+    (void)slot;
+    for (p = b0; p < e0; p++) amps__cr_gs_range(j, j->S->dyn.crA.pp[p], j->S->dyn.crA.pp[p + 1], p);
+}
+
+/* The sweep: forward (fwd) s = (D + L)^-1 (a - D t) and q = t + s, or backward s = (D + L)^-T a;
+   the parts in parallel, the interface after them (forward) or before them (backward). Returns
+   a . q on the free entries (forward with t), else 0. s may be a. */
+static double amps__cr_gs(amps_scene *S, int fwd, const double *a, const double *t, double *s, double *q) {
+    amps__crgs j;
+    amps_int np = S->dyn.crA.np, k;
+    double d = 0;
+    j.S = S;
+    j.fwd = fwd;
+    j.a = a;
+    j.t = t;
+    j.s = s;
+    j.q = q;
+    j.p = NULL;
+    j.z = NULL;
+    j.beta = 0.0;
+    if (!fwd) amps__cr_gs_range(&j, S->dyn.crA.pp[np], S->dyn.crA.pp[np + 1], np);
+    amps__par_for(&S->U->par, np > 1 ? S->U->nthr : 1, np, 1, amps__cr_gs_parts, &j);
+    if (fwd) amps__cr_gs_range(&j, S->dyn.crA.pp[np], S->dyn.crA.pp[np + 1], np);
+    for (k = 0; k <= np; k++) d += j.sum[k];
+    return d;
+}
+
+/* p = z + beta p (0 where held), then q = A^ p (the transformed operator above; t, s:
+   workspace); returns p . q on the free entries. */
+static double amps__cr_gs_mul(amps_scene *S, const double *z, double beta, double *p, double *t, double *s, double *q) {
+    amps__crgs j;
+    amps_int np = S->dyn.crA.np;
+    memset(&j, 0, sizeof(j));
+    j.S = S;
+    j.a = p;
+    j.s = t;
+    j.p = p;
+    j.z = z;
+    j.beta = beta;
+    amps__cr_gs_range(&j, S->dyn.crA.pp[np], S->dyn.crA.pp[np + 1], np);
+    amps__par_for(&S->U->par, np > 1 ? S->U->nthr : 1, np, 1, amps__cr_gs_parts, &j);
+    S->dyn.info.products++;
+    return amps__cr_gs(S, 1, p, t, s, q);
+}
+
 /* The corotational workspace: per tet (gradients and volumes at the first call), per node and
    per equation (N). */
 static amps_status amps__cr_room(amps_ctx *ctx, amps_scene *S, amps_int N) {
@@ -15983,7 +16273,9 @@ static amps_status amps__cr_room(amps_ctx *ctx, amps_scene *S, amps_int N) {
             amps__realloc(ctx, (void **)&D->crH.g0, 3 * c, sizeof(double)) ||
             amps__realloc(ctx, (void **)&D->crH.r0, 3 * c, sizeof(double)) ||
             amps__realloc(ctx, (void **)&D->crH.pin, c, 1) ||
-            amps__realloc(ctx, (void **)&D->cr_part, 2 * (c / AMPS__CR_CHUNK + 1), sizeof(double)))
+            amps__realloc(ctx, (void **)&D->cr_part, 2 * (c / AMPS__CR_CHUNK + 1), sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->cr_vec, 27 * c, sizeof(double)) ||
+            amps__realloc(ctx, (void **)&D->cr_cp, 3 * c, 1))
             return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory (corotational)");
         memset(D->crH.pin + D->cr_cap, 0, c - (size_t)D->cr_cap);
         memset(D->cr_react + 3 * (size_t)D->cr_cap, 0, sizeof(double) * 3 * (c - (size_t)D->cr_cap));
@@ -15991,36 +16283,62 @@ static amps_status amps__cr_room(amps_ctx *ctx, amps_scene *S, amps_int N) {
     }
     if (N > D->cr_ncap) {
         size_t c = (size_t)N + (size_t)N / 2 + 16;
-        if (amps__realloc(ctx, (void **)&D->cr_vec, 6 * c, sizeof(double)) ||
-            amps__realloc(ctx, (void **)&D->cr_con, c, 1))
+        if (amps__realloc(ctx, (void **)&D->cr_eng, c, sizeof(double)) || amps__realloc(ctx, (void **)&D->cr_con, c, 1))
             return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory (corotational)");
         D->cr_ncap = (amps_int)c;
     }
     return AMPS_OK;
 }
 
-/* sum over the free equations of x_e y_e (in equation order). */
-static double amps__cr_dot(const amps_scene *S, amps_int N, const double *x, const double *y) {
+/* sum over the free entries (PCG order, n of them) of x_i y_i, in order. */
+static double amps__cr_dot(const amps_scene *S, amps_int n, const double *x, const double *y) {
     double s = 0;
-    amps_int e;
-    for (e = 0; e < N; e++)
-        if (!S->dyn.cr_con[e]) s += x[e] * y[e];
+    amps_int i;
+    for (i = 0; i < n; i++)
+        if (!S->dyn.cr_cp[i]) s += x[i] * y[i];
     return s;
 }
 
+/* The PCG's held entries (cr_cp) from the engine's constrained equations (cr_con): entry 3 k + d
+   of node ord[k] is held when its equation is constrained or the node has none. A node held in
+   some entries only gets the inverse of its diagonal block with identity rows and columns there
+   (after the assembly). */
+static void amps__cr_held(amps_scene *S) {
+    amps_int v, e, k;
+    int d, i, nh;
+    for (v = 0; v < S->m->nnode; v++) {
+        unsigned char *h = S->dyn.cr_cp + 3 * (k = S->dyn.crA.rank[v]);
+        for (nh = 0, d = 0; d < 3; d++) nh += h[d] = (e = S->node.dof[3 * v + d]) < 0 || S->dyn.cr_con[e];
+        if (nh > 0 && nh < 3 && S->dyn.crA.bu[k] < S->dyn.crA.bu[k + 1]) {
+            double B[9], C[9], det, *Di = S->dyn.crA.dinv + 9 * (size_t)k;
+            memcpy(B, S->dyn.crA.bx + 9 * (size_t)S->dyn.crA.bu[k], sizeof(B));
+            for (d = 0; d < 3; d++)
+                for (i = 0; i < 3; i++)
+                    if (h[d] || h[i]) B[3 * d + i] = d == i;
+            det = amps__cof3(B, C);
+            det = det != 0.0 ? 1.0 / det : 0.0;
+            for (d = 0; d < 3; d++)
+                for (i = 0; i < 3; i++) Di[3 * d + i] = C[3 * i + d] * det;
+        }
+    }
+}
+
 /* The right-hand side b = M w + dt (f + M g_grav - g) (mode 0 pass first) and the start x: w on
-   the free equations, (g_P - u_P) / dt at the pins, 0 at the orphans. */
-static void amps__cr_rhs(amps_scene *S, amps_int N, double *b, double *x) {
+   the free entries, (g_P - u_P) / dt at the pins, 0 at the orphans and nodes without equations
+   (PCG order). */
+static void amps__cr_rhs(amps_scene *S, double *b, double *x) {
     const amps__scene_dyn *D = &S->dyn;
-    amps_int v, e;
+    amps_int v;
     int d;
-    for (e = 0; e < N; e++) b[e] = x[e] = 0.0;
     for (v = 0; v < S->m->nnode; v++)
         for (d = 0; d < 3; d++) {
-            amps_int k = 3 * v + d;
-            if ((e = S->node.dof[k]) < 0) continue;
-            b[e] = S->node.mass[v] * D->vel[k] + D->dt * (S->node.force[k] + S->node.mass[v] * D->g[d] - D->cr_gel[k]);
-            x[e] = D->orphan[v]        ? 0.0
+            amps_int k = 3 * v + d, i = 3 * D->crA.rank[v] + d;
+            if (S->node.dof[k] < 0) {
+                b[i] = x[i] = 0.0;
+                continue;
+            }
+            b[i] = S->node.mass[v] * D->vel[k] + D->dt * (S->node.force[k] + S->node.mass[v] * D->g[d] - D->cr_gel[k]);
+            x[i] = D->orphan[v]        ? 0.0
                    : S->node.pinned[v] ? (S->node.pin_value[k] - S->node.disp[k]) / D->dt
                    : v < D->crP.nprev  ? 2.0 * D->vel[k] - D->crP.wprev[k]
                                        : D->vel[k];
@@ -16056,24 +16374,35 @@ static void amps__cr_rotate(const amps_scene *S, const double *x, double *y, int
 }
 
 /* z = M^-1 r with the engine's preconditioner: Rn A^-1 Rn^T, the engine's exact solve with the
-   current linear A in the frame of the node rotations (block Jacobi's z comes with the update
-   sweep, amps__cr_update_node). */
-static amps_status amps__cr_prec(amps_ctx *ctx, amps_scene *S, const double *r, double *z) {
+   current linear A in the frame of the node rotations (r, z in the PCG's order, taken to the
+   engine's N equations in cr_eng and back; the cheap one's z comes with the update sweep,
+   amps__cr_update_node). */
+static amps_status amps__cr_prec(amps_ctx *ctx, amps_scene *S, amps_int N, const double *r, double *z) {
+    double *w = S->dyn.cr_eng;
+    amps_int v, e;
     amps_status s;
+    int d;
     amps__cr_frames(S);
-    amps__cr_rotate(S, r, z, 1);
-    if ((s = amps_update_solve_rhs(ctx, S->U, z, z)) != AMPS_OK) return s;
-    amps__cr_rotate(S, z, z, 0);
+    for (e = 0; e < N; e++) w[e] = 0.0;
+    for (v = 0; v < S->m->nnode; v++)
+        for (d = 0; d < 3; d++)
+            if ((e = S->node.dof[3 * v + d]) >= 0) w[e] = r[3 * S->dyn.crA.rank[v] + d];
+    amps__cr_rotate(S, w, w, 1);
+    if ((s = amps_update_solve_rhs(ctx, S->U, w, w)) != AMPS_OK) return s;
+    amps__cr_rotate(S, w, w, 0);
+    for (v = 0; v < S->m->nnode; v++)
+        for (d = 0; d < 3; d++) z[3 * S->dyn.crA.rank[v] + d] = (e = S->node.dof[3 * v + d]) >= 0 ? w[e] : 0.0;
     return AMPS_OK;
 }
 
 /* The cost of a PCG iteration with preconditioner kind, in bytes streamed (a model; the same on
-   every machine, so the choice is reproducible): the product with A_R (76 per block), the
-   vector updates (48 per equation), and the engine's forward and backward solves (24 per entry
-   of L) and dense system (16 per entry) or the diagonal blocks (72 per node). */
-static double amps__cr_cost(const amps_scene *S, amps_int N, int kind) {
-    double c = 76.0 * (double)S->dyn.crA.bp[S->dyn.crA.nnode] + 48.0 * (double)N;
-    if (kind == 1) return c + 72.0 * (double)S->m->nnode;
+   every machine, so the choice is reproducible): the product with A_R or the two sweeps (76 per
+   block) and the vector updates (48 per entry), and the engine's forward and backward solves (24
+   per entry of L) and dense system (16 per entry) (kind 0), or Gauss-Seidel's diagonal blocks
+   and their inverses (144 per node) and three vectors more (24 per entry) (kind 1). */
+static double amps__cr_cost(const amps_scene *S, amps_int n, int kind) {
+    double c = 76.0 * (double)S->dyn.crA.bu[S->dyn.crA.nnode] + 48.0 * (double)n;
+    if (kind == 1) return c + 144.0 * (double)S->m->nnode + 24.0 * (double)n;
     {
         const amps_factor *F = amps_update_factor(S->U);
         double u = (double)S->U->aug.size;
@@ -16081,93 +16410,140 @@ static double amps__cr_cost(const amps_scene *S, amps_int N, int kind) {
     }
 }
 
-/* PCG on the reduced A_R w_F = (b - A_R w_C)_F from x (x_C: the prescribed values), in place;
-   *bn receives ||(b - A_R w_C)_F||, *relres the final relative residual, q (the fifth vector of
-   cr_vec) A_R x. The preconditioner (amps__cr_prec) is the one whose last iterations times its
-   cost per iteration (amps__cr_cost) is smaller; block Jacobi is tried on the second step and
-   every 32 steps after a step without it, and abandoned for the engine's (a restart from the
-   current x) after 1.5 times the cost of the engine's last step. maxit caps the cost at maxit
-   iterations with the engine's preconditioner (a block Jacobi iteration counts cj / ce of one).
-   Returns the iterations of both, or a negative status. */
-static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const double *b, double *x, double *bn,
-                             double *relres) {
+/* The PCG iterations from r (the residual of x, PCG order) while the budget lasts, with the
+   engine's preconditioner (kind 0) while |r| > goal, or symmetric Gauss-Seidel (kind 1): r
+   becomes r^ = (D + L)^-1 r, the iterations run on A^ and a correction d, and x += (D + L)^-T d at
+   the end. They stop when |(D + L) r^| (the recurrence's |r|, a sweep of L) is at most 0.9 goal,
+   taken once |r^| is at most goal gsr (gsr: the ratio |r^| / |r| at the last check, in crP).
+   *it, *kit count the iterations of each kind, *done is set when they reached the goal; returns
+   the last |r| (|r^|), or a negative status. */
+typedef struct amps__crpcg {
+    int kind;
+    double goal, ce, cj, budget;
+    amps_int cap;
+} amps__crpcg;
+
+static double amps__cr_iterate(amps_ctx *ctx, amps_scene *S, amps_int N, const amps__crpcg *P, double *x, double rn,
+                               amps_int *it, amps_int *kit, int *done) {
     amps__scene_dyn *D = &S->dyn;
-    double *r = D->cr_vec + 2 * (size_t)D->cr_ncap, *z = r + D->cr_ncap, *p = z + D->cr_ncap, *q = p + D->cr_ncap;
-    double tol = D->corot_tol > 0 ? D->corot_tol : 1e-10, rz = 0, rzn = 0, rn, alpha, beta, ce, cj, budget;
-    amps_int maxit = D->corot_maxit > 0 ? D->corot_maxit : 200, it = 0, e, cap = 0, kit = 0;
-    int restart, kind = 0, zok;
+    size_t ns = 3 * (size_t)D->cr_cap;
+    double *r = D->cr_vec + 2 * ns, *z = r + ns, *p = z + ns, *q = p + ns, *t = q + ns, *sv = t + ns, *dx = sv + ns;
+    double rz = 0, rzn = 0, goal = P->goal, rn0 = rn;
+    amps_int n = 3 * S->m->nnode, e;
     amps__crsweep sw;
     amps_status s;
     memset(&sw, 0, sizeof(sw));
-    sw.x = x;
+    sw.x = P->kind ? dx : x;
     sw.r = r;
     sw.z = z;
     sw.p = p;
     sw.q = q;
-    for (e = 0; e < N; e++) p[e] = D->cr_con[e] ? x[e] : 0.0;
-    amps__cr_mul(S, p, q);
-    for (e = 0; e < N; e++) r[e] = D->cr_con[e] ? 0.0 : b[e] - q[e];
-    *bn = sqrt(amps__cr_dot(S, N, r, r));
-    if (*bn == 0) {
-        for (e = 0; e < N; e++)
-            if (!D->cr_con[e]) x[e] = 0.0;
-        amps__cr_mul(S, x, q);
-        *relres = 0;
-        return 0;
+    sw.zd = P->kind;
+    if (P->kind) { /* r^ = (D + L)^-1 r, z = D r^, d = 0 */
+        (void)amps__cr_gs(S, 1, r, NULL, r, NULL);
+        for (e = 0; e < n; e++) dx[e] = 0.0;
+        sw.op = 2;
+        rn = sqrt(amps__cr_sweep(S, &sw, &rzn));
+        if (!(D->crP.gsr > 0)) D->crP.gsr = rn0 > 0 ? rn / rn0 : 1.0;
     }
-    /* the preconditioner: the cheaper by the last iterations, block Jacobi tried now and then */
-    ce = amps__cr_cost(S, N, 0);
-    cj = amps__cr_cost(S, N, 1);
-    budget = (double)maxit * ce;
-    if (D->crP.it[0] > 0) {
-        cap = (amps_int)(1.5 * (double)D->crP.it[0] * ce / cj) + 1;
-        if (cap > (amps_int)(budget / cj)) cap = (amps_int)(budget / cj);
-        if (D->crP.it[1] == 0 || D->crP.probe >= 32 || (double)D->crP.it[1] * cj < (double)D->crP.it[0] * ce) kind = 1;
-    }
-    D->crP.probe = kind ? 0 : D->crP.probe + 1;
-    for (restart = 0; restart < 4; restart++) {
-        /* r = b - A_R x on the free equations (the true residual) */
-        amps__cr_mul(S, x, q);
-        for (e = 0; e < N; e++) r[e] = D->cr_con[e] ? 0.0 : b[e] - q[e];
-        rn = sqrt(amps__cr_dot(S, N, r, r));
-        *relres = rn / *bn;
-        if (*relres <= tol || (!kind && (double)it * ce + (double)kit * cj >= budget)) break;
-        for (zok = 0; rn > tol * *bn && (kind ? kit < cap : (double)it * ce + (double)kit * cj < budget);
-             it += !kind, kit += kind) {
-            double rz1, pq;
-            if (!kind) { /* z = M^-1 r by the engine; block Jacobi's came with the last update */
-                if ((s = amps__cr_prec(ctx, S, r, z)) != AMPS_OK) return s;
-                rz1 = amps__cr_dot(S, N, r, z);
-            } else if (!zok) {
-                sw.op = 2;
-                sw.upd = 0;
-                sw.bj = 1;
-                (void)amps__cr_sweep(S, &sw, &rz1);
-            } else rz1 = rzn;
-            beta = rz != 0 ? rz1 / rz : 0.0;
-            rz = rz1;
+    for (*done = 0;; *it += !P->kind, *kit += P->kind) {
+        double rz1, pq, beta, alpha;
+        if (!P->kind ? rn <= goal : rn <= goal * D->crP.gsr && sqrt(amps__cr_lower(S, r)) <= 0.9 * goal) {
+            *done = 1;
+            break;
+        }
+        if (P->kind ? *kit >= P->cap : (double)*it * P->ce + (double)*kit * P->cj >= P->budget) break;
+        if (!P->kind) { /* z = M^-1 r by the engine; Gauss-Seidel's z = D r^ came with the update */
+            if ((s = amps__cr_prec(ctx, S, N, r, z)) != AMPS_OK) return s;
+            rz1 = amps__cr_dot(S, n, r, z);
+        } else rz1 = rzn;
+        beta = rz != 0 ? rz1 / rz : 0.0;
+        rz = rz1;
+        if (P->kind) pq = amps__cr_gs_mul(S, z, beta, p, t, sv, q); /* p = z + beta p with the sweeps */
+        else {
             sw.op = 1; /* p = z + beta p */
             sw.beta = beta;
             (void)amps__cr_sweep(S, &sw, NULL);
             pq = amps__cr_mul(S, p, q);
-            if (!(pq > 0)) break; /* not positive definite on this direction (rounding): stop */
-            alpha = rz / pq;
-            sw.op = 2; /* x += alpha p, r -= alpha q, and z = D^-1 r for block Jacobi */
-            sw.upd = 1;
-            sw.bj = kind;
-            sw.alpha = alpha;
-            rn = sqrt(amps__cr_sweep(S, &sw, &rzn));
-            zok = kind;
         }
-        if (kind && rn > tol * *bn) { /* block Jacobi too slow: on with the engine's, from x */
-            D->crP.it[1] = kit + (amps_int)((double)D->crP.it[0] * ce / cj); /* its estimate: above the cap */
-            kind = 0;
-        }
-        rz = 0; /* a restart begins with the steepest descent direction */
+        if (!(pq > 0)) break; /* not positive definite on this direction (rounding): stop */
+        alpha = rz / pq;
+        sw.op = 2; /* x += alpha p, r -= alpha q, and z = D r for Gauss-Seidel */
+        sw.upd = 1;
+        sw.alpha = alpha;
+        rn = sqrt(amps__cr_sweep(S, &sw, &rzn));
     }
-    if (kind) D->crP.it[1] = kit > 0 ? kit : 1;
+    if (P->kind) { /* x += (D + L)^-T d */
+        (void)amps__cr_gs(S, 0, dx, NULL, t, NULL);
+        for (e = 0; e < n; e++)
+            if (!D->cr_cp[e]) x[e] += t[e];
+    }
+    return rn;
+}
+
+/* PCG on the reduced A_R w_F = (b - A_R w_C)_F from x (x_C: the prescribed values), in place,
+   in the PCG's order (N: the engine's equations); *bn receives ||(b - A_R w_C)_F||, *relres the
+   final relative residual, q (the sixth vector of cr_vec) A_R x. The preconditioner is the
+   engine's (amps__cr_prec) or symmetric Gauss-Seidel (amps__cr_iterate), whichever's last
+   iterations times its cost per iteration (amps__cr_cost) is smaller; Gauss-Seidel is tried on
+   the second step and every 32 steps after a step without it, and abandoned for the engine's (a
+   restart from the current x) after 1.5 times the cost of the engine's last step. maxit caps
+   the cost at maxit iterations with the engine's preconditioner (a Gauss-Seidel iteration counts
+   cj / ce of one). Each run of iterations ends with a check of the true residual; at most 4
+   runs. Returns the iterations of both, or a negative status. */
+static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const double *b, double *x, double *bn,
+                             double *relres) {
+    amps__scene_dyn *D = &S->dyn;
+    size_t ns = 3 * (size_t)D->cr_cap;
+    double *r = D->cr_vec + 2 * ns, *p = r + 2 * ns, *q = p + ns;
+    double tol = D->corot_tol > 0 ? D->corot_tol : 1e-10, rn, hn = -1;
+    amps_int maxit = D->corot_maxit > 0 ? D->corot_maxit : 200, it = 0, e, kit = 0, n = 3 * S->m->nnode;
+    int run, done;
+    amps__crpcg P;
+    memset(&P, 0, sizeof(P));
+    for (e = 0; e < n; e++) p[e] = D->cr_cp[e] ? x[e] : 0.0;
+    amps__cr_mul(S, p, q);
+    for (e = 0; e < n; e++) r[e] = D->cr_cp[e] ? 0.0 : b[e] - q[e];
+    *bn = sqrt(amps__cr_dot(S, n, r, r));
+    if (*bn == 0) {
+        for (e = 0; e < n; e++)
+            if (!D->cr_cp[e]) x[e] = 0.0;
+        amps__cr_mul(S, x, q);
+        *relres = 0;
+        return 0;
+    }
+    /* the preconditioner: the cheaper by the last iterations, Gauss-Seidel tried now and then */
+    P.ce = amps__cr_cost(S, n, 0);
+    P.cj = amps__cr_cost(S, n, 1);
+    P.budget = (double)maxit * P.ce;
+    if (D->crP.it[0] > 0) {
+        P.cap = (amps_int)(1.5 * (double)D->crP.it[0] * P.ce / P.cj) + 1;
+        if (P.cap > (amps_int)(P.budget / P.cj)) P.cap = (amps_int)(P.budget / P.cj);
+        if (D->crP.it[1] == 0 || D->crP.probe >= 32 || (double)D->crP.it[1] * P.cj < (double)D->crP.it[0] * P.ce)
+            P.kind = 1;
+    }
+    D->crP.probe = P.kind ? 0 : D->crP.probe + 1;
+    for (run = 0;; run++) {
+        /* r = b - A_R x on the free entries (the true residual) */
+        amps__cr_mul(S, x, q);
+        for (e = 0; e < n; e++) r[e] = D->cr_cp[e] ? 0.0 : b[e] - q[e];
+        rn = sqrt(amps__cr_dot(S, n, r, r));
+        *relres = rn / *bn;
+        if (hn >= 0 && rn > 0) D->crP.gsr = hn / rn; /* |r^| / |r| after Gauss-Seidel iterations */
+        if (*relres <= tol || run == 4 || (!P.kind && (double)it * P.ce + (double)kit * P.cj >= P.budget)) break;
+        P.goal = tol * *bn;
+        hn = amps__cr_iterate(ctx, S, N, &P, x, rn, &it, &kit, &done);
+        if (hn < 0) return (amps_int)hn;
+        if (!P.kind) hn = -1;
+        else if (!done) {
+            /* Gauss-Seidel too slow: on with the engine's, from x; its estimate is above the cap */
+            D->crP.it[1] = kit + (amps_int)((double)D->crP.it[0] * P.ce / P.cj);
+            P.kind = 0;
+        }
+    }
+    if (P.kind) D->crP.it[1] = kit > 0 ? kit : 1;
     else D->crP.it[0] = it > 0 ? it : 1;
-    D->info.iterations_jacobi = kit;
+    D->info.iterations_gs = kit;
     return it + kit;
 }
 
@@ -16184,8 +16560,8 @@ static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
     N = amps_update_dim(S->U);
     if ((s = amps__cr_room(ctx, S, N)) != AMPS_OK) return s;
     b = D->cr_vec;
-    x = b + D->cr_ncap;
-    q = b + 5 * (size_t)D->cr_ncap;
+    x = b + 3 * (size_t)D->cr_cap;
+    q = b + 15 * (size_t)D->cr_cap;
     for (e = 0; e < N; e++) D->cr_con[e] = 0;
     for (a = 0; a < S->U->aug.size; a++)
         if (S->U->aug.kind[a] & AMPS__UCON) D->cr_con[S->U->aug.idx[a]] = 1;
@@ -16195,7 +16571,8 @@ static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
     D->info.products = 0;
     amps__cr_pass(S, 0);
     if ((s = amps__cr_assemble(ctx, S)) != AMPS_OK) return s;
-    amps__cr_rhs(S, N, b, x);
+    amps__cr_held(S);
+    amps__cr_rhs(S, b, x);
     D->info.t_rotation = amps_now() - t0;
     t0 = amps_now();
     it = amps__cr_pcg(ctx, S, N, b, x, &bn, &relres);
@@ -16205,13 +16582,13 @@ static amps_status amps__scene_corot_step(amps_ctx *ctx, amps_scene *S) {
     for (v = 0; v < S->m->nnode; v++) {
         D->crH.pin[v] = S->node.pinned[v] && !D->orphan[v];
         for (d = 0; d < 3; d++) {
-            amps_int k = 3 * v + d;
+            amps_int k = 3 * v + d, i = 3 * D->crA.rank[v] + d;
             e = S->node.dof[k];
-            D->cr_react[k] = (e >= 0 && D->crH.pin[v]) ? (q[e] - b[e]) / D->dt : 0.0;
+            D->cr_react[k] = (e >= 0 && D->crH.pin[v]) ? (q[i] - b[i]) / D->dt : 0.0;
             D->crH.r0[k] = D->cr_react[k];
             D->crH.g0[k] = S->node.pin_value[k];
             D->crP.wprev[k] = D->vel[k];
-            D->vel[k] = e >= 0 ? x[e] : 0.0;
+            D->vel[k] = e >= 0 ? x[i] : 0.0;
             S->node.disp[k] += D->dt * D->vel[k];
         }
     }

@@ -2,7 +2,7 @@
    Corotational FEM, Appendix A-B) per step, side by side on one scenario:
      amps     amps.h's corotational step (PCG on the assembled A_R preconditioned by the engine's
               exact solve with the current linear A in the frame of the node rotations, or by
-              block Jacobi where the cost model finds it cheaper; never re-factors), and between
+              symmetric Gauss-Seidel where the cost model finds it cheaper; never re-factors), and between
               steps BENCH_HAPTIC (default 20) haptic calls (amps_scene_solve_reactions) with the
               pins moved by that fraction of a step's travel each
      cholmod  CHOLMOD re-factorization of the step's A_R (cholmod_analyze once per pattern,
@@ -481,9 +481,9 @@ int main(int argc, char **argv) {
         t_solve[k] = getenv("BENCH_CPU") ? t_amps[k] : st.t_rotation + st.t_solve;
         if (st.relres > rr_max) rr_max = st.relres;
         if (getenv("BENCH_TRACE"))
-            fprintf(stderr, "trace %d: total %.2f rot %.2f solve %.2f it %d jac %d prod %d\n", k, 1e3 * t_amps[k],
-                    1e3 * st.t_rotation, 1e3 * st.t_solve, (int)st.iterations, (int)st.iterations_jacobi,
-                    (int)st.products);
+            fprintf(stderr, "trace %d: total %.2f rot %.2f solve %.2f it %d gs %d prod %d relres %.1e\n", k,
+                    1e3 * t_amps[k], 1e3 * st.t_rotation, 1e3 * st.t_solve, (int)st.iterations, (int)st.iterations_gs,
+                    (int)st.products, st.relres);
         if (sc.npin > 0) { /* the reactions of the pins (spatulas, grasper) */
             double r[3], sum = 0;
             amps_int j;

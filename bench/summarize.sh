@@ -617,7 +617,7 @@ cat <<'EOF'
 Per step of the corotational model (paper "GPU-accelerated surgery simulation for opening a brain
 fissure", Corotational FEM, Appendix A-B): amps.h's step (`amps_scene_corotational`: PCG on A_R,
 assembled each step, to relative residual 1e-10, preconditioned by the engine's exact solve with
-the current linear A in the frame of the node rotations or by block Jacobi, whichever the cost
+the current linear A in the frame of the node rotations or by symmetric Gauss-Seidel, whichever the cost
 model finds cheaper; its time without the fracture removals), CHOLMOD
 re-factorization of the same A_R (`cholmod_analyze` once per pattern, `cholmod_factorize` and one
 solve per sampled step; the assembly of A_R apart), Jacobi-PCG on the assembled A_R at
