@@ -15859,6 +15859,7 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
             if (k == nn - 1) start[nn] = nb;
         }
     if (!nn) S->dyn.crA.bp[0] = S->dyn.crA.bu[0] = 0;
+    for (k = 0; k < nb; k++) S->dyn.crA.be[k] = 3 * S->dyn.crA.rank[S->dyn.crA.bj[k]]; /* the PCG's columns */
     for (v = 0; v < nn; v++) { /* the diagonal: first of the second part */
         amps_int r = S->dyn.crA.rank[v];
         S->dyn.crA.bd[v] = S->dyn.crA.bu[r] < S->dyn.crA.bu[r + 1] ? S->dyn.crA.bu[r] : -1;
@@ -15895,10 +15896,10 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
     const amps__crasm *j = AMPS__CAST(const amps__crasm *, arg);
     amps_scene *S = j->S;
     const amps_mesh *m = S->m;
-    const amps_int *map = S->dyn.crA.map, *bp = S->dyn.crA.bp, *bu = S->dyn.crA.bu, *bj = S->dyn.crA.bj;
+    const amps_int *map = S->dyn.crA.map, *bp = S->dyn.crA.bp, *bu = S->dyn.crA.bu;
     const amps_int *bd = S->dyn.crA.bd;
     const amps_int *rank = S->dyn.crA.rank;
-    amps_int lo, hi, v, t, q;
+    amps_int lo, hi, v, t;
     double *bx = S->dyn.crA.bx, cK = S->dyn.cK;
     (void)slot;
     amps__cr_part(m, p0, p1, j->np, &lo, &hi);
@@ -15906,8 +15907,6 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
         amps_int r = rank[v];
         memset(bx + 9 * (size_t)bp[r], 0, sizeof(double) * 9 * (size_t)(bp[r + 1] - bp[r]));
         memset(bx + 9 * (size_t)bu[r], 0, sizeof(double) * 9 * (size_t)(bu[r + 1] - bu[r]));
-        for (q = bp[r]; q < bp[r + 1]; q++) S->dyn.crA.be[q] = 3 * rank[bj[q]]; /* the columns in the PCG's order */
-        for (q = bu[r]; q < bu[r + 1]; q++) S->dyn.crA.be[q] = 3 * rank[bj[q]];
     }
     for (v = lo; v < hi; v++) { /* the mass on the diagonal block (none: a node in no tet) */
         double *B;
