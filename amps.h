@@ -1325,8 +1325,8 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    volume, R_e, Lame constants, element results; the block map and the workspace of its
    rebuild), 60 doubles, 10 indices and 4 bytes per node (and 2 doubles per 256 nodes), 9
    doubles and 2 indices per block of A_R (one per pair of nodes sharing a tet), a double and a
-   byte per equation; a rebuilt pattern allocates when it outgrows them. Stresses (amps_scene_stress and
-   fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. The haptic path between steps
+   byte per equation; a rebuilt pattern allocates when it outgrows them. Stresses
+   (amps_scene_stress and fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. The haptic path between steps
    (amps_scene_solve_reactions, amps_scene_haptic_build) is a model, not the next step: per
    pinned node r = r0 + Rn dr, r0 the last step's reaction (0 for a pin made since), dr the
    reaction of the engine's linear A to the pin moves since the step (g - g0, g0 the target at
@@ -12802,7 +12802,6 @@ typedef struct amps__scene_batch {
     amps_int *moved;
 } amps__scene_batch;
 
-/* Dynamics, gravity and fracture (amps_scene_dynamics, amps_scene_gravity, amps_scene_fracture). */
 /* The corotational PCG's Gauss-Seidel sweeps run on at most AMPS__CR_PARTS slabs of about
    AMPS__CR_SLAB nodes at once. */
 #define AMPS__CR_PARTS 16
@@ -12810,6 +12809,7 @@ typedef struct amps__scene_batch {
 #define AMPS__CR_SLAB 3000
 #endif
 
+/* Dynamics, gravity and fracture (amps_scene_dynamics, amps_scene_gravity, amps_scene_fracture). */
 typedef struct amps__scene_dyn {
     int on;                 /* implicit dynamics: system A = cM M + cK K */
     double dt, alpha, beta; /* time step, Rayleigh damping C = alpha M + beta K */
@@ -15694,7 +15694,6 @@ static void amps__cr_frames(amps_scene *S) {
 
 /* ---- the assembled A_R: 3x3 blocks by node ---- */
 
-/* The position of node w among the sorted bj[lo..hi] (w present), by bisection. */
 /* The position of node w in bj[lo .. hi] (ordered by rank; w is there), by bisection. */
 static amps_int amps__cr_find(const amps_int *bj, const amps_int *rank, amps_int lo, amps_int hi, amps_int w) {
     while (lo < hi) {
@@ -15707,9 +15706,9 @@ static amps_int amps__cr_find(const amps_int *bj, const amps_int *rank, amps_int
 
 /* The Gauss-Seidel order of the nodes (crA.ord, crA.rank, crA.np, crA.pp) for the rows bp, bj of
    the pattern (nn nodes; part: nn of workspace). np slabs of equal node counts across the longest
-   axis of the reference box (np = 1, 2, 4, ... <= AMPS__CR_PARTS, about AMPS__CR_SLAB nodes a slab); the
-   nodes of a slab without a neighbour in another slab come first, slab by slab, then the others
-   (the interface). A slab then depends only on itself and the interface, so the slabs of a sweep
+   axis of the reference box (np = 1, 2, 4, ... <= AMPS__CR_PARTS, about AMPS__CR_SLAB nodes a
+   slab); the nodes of a slab without a neighbour in another slab come first, slab by slab, then
+   the others (the interface). A slab then depends only on itself and the interface, so the slabs of a sweep
    run in parallel. Within a slab and the interface the nodes go by a greedy colouring (no two
    neighbours share a colour), then by index: consecutive rows of a sweep do not wait for each
    other. The order depends on the mesh alone (the same bits on any number of threads). */
