@@ -1323,7 +1323,7 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    on the mesh alone, and dot products are summed per chunk of 256 nodes or per slab, then in
    order). Memory from the first step: 36 doubles and 36 indices per tet (reference gradients,
    volume, R_e, Lame constants, element results; the block map and the workspace of its
-   rebuild), 60 doubles, 10 indices and 4 bytes per node (and 2 doubles per 256 nodes), 9
+   rebuild), 60 doubles, 9 indices and 4 bytes per node (and 2 doubles per 256 nodes), 9
    doubles and 2 indices per block of A_R (one per pair of nodes sharing a tet), a double and a
    byte per equation; a rebuilt pattern allocates when it outgrows them. Stresses
    (amps_scene_stress and fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. The haptic path between steps
@@ -8772,8 +8772,8 @@ AMPS_API amps_status amps_update_commit_end(amps_ctx *ctx, amps_update *U) {
 
 /* The next amps__update_ct is a full forward solve (the forces changed on many rows). */
 static int amps__ct_full(const amps_update *U) {
-    return (U->force.n_changed > 0 || U->force.changed_all) &&
-           (U->force.changed_all || U->force.n_increments >= 1024 || U->force.n_changed > U->n / 8);
+    return U->force.changed_all ||
+           (U->force.n_changed > 0 && (U->force.n_increments >= 1024 || U->force.n_changed > U->n / 8));
 }
 
 /* Brings ct = D^{-1/2} L^{-1} P^T f up to date: the changed base forces go through one sparse
@@ -12866,10 +12866,10 @@ typedef struct amps__scene_dyn {
     struct {                                      /* A_R of the step in 3x3 blocks by node (amps__cr_assemble) */
         amps_int *bp, *bu, *bj;                   /* the row of node v (k = rank[v]): its blocks of earlier */
                                                   /* nodes bp[k] .. bp[k+1]-1, then of v and later nodes */
-                                                  /* bu[k] .. bu[k+1]-1 (bu[0] = bp[nnode]); bj: the nodes */
+                                                  /* bu[k] .. bu[k+1]-1, the diagonal block first (bu[0] = */
+                                                  /* bp[nnode]; empty: a node in no tet); bj: the nodes */
         double *bx;                               /* 9 per block, row-major */
         amps_int *be;                             /* per block: 3 rank of its column node (the PCG's entry) */
-        amps_int *bd;                             /* per node: its diagonal block (-1: a node in no tet) */
         amps_int *ord, *rank;                     /* the Gauss-Seidel order of the nodes, and its inverse */
         amps_int *wgs;                            /* workspace of the order: 3 per node + 2 */
         amps_int np, pp[AMPS__CR_PARTS + 2];      /* ord: np parts, part k at pp[k] .. pp[k+1]-1, then the */
@@ -12995,7 +12995,6 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->dyn.crA.bx);
     amps__free(ctx, S->dyn.crA.be);
     amps__free(ctx, S->dyn.crA.dinv);
-    amps__free(ctx, S->dyn.crA.bd);
     amps__free(ctx, S->dyn.crA.ord);
     amps__free(ctx, S->dyn.crA.rank);
     amps__free(ctx, S->dyn.crA.wgs);
@@ -15791,7 +15790,6 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
         if (amps__realloc(ctx, (void **)&S->dyn.crA.bp, c, sizeof(amps_int)) ||
             amps__realloc(ctx, (void **)&S->dyn.crA.bu, c, sizeof(amps_int)) ||
             amps__realloc(ctx, (void **)&S->dyn.crA.dinv, 9 * c, sizeof(double)) ||
-            amps__realloc(ctx, (void **)&S->dyn.crA.bd, c, sizeof(amps_int)) ||
             amps__realloc(ctx, (void **)&S->dyn.crA.ord, c, sizeof(amps_int)) ||
             amps__realloc(ctx, (void **)&S->dyn.crA.rank, c, sizeof(amps_int)) ||
             amps__realloc(ctx, (void **)&S->dyn.crA.wgs, 3 * c + 2, sizeof(amps_int)) ||
@@ -15859,10 +15857,6 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
         }
     if (!nn) S->dyn.crA.bp[0] = S->dyn.crA.bu[0] = 0;
     for (k = 0; k < nb; k++) S->dyn.crA.be[k] = 3 * S->dyn.crA.rank[S->dyn.crA.bj[k]]; /* the PCG's columns */
-    for (v = 0; v < nn; v++) { /* the diagonal: first of the second part */
-        amps_int r = S->dyn.crA.rank[v];
-        S->dyn.crA.bd[v] = S->dyn.crA.bu[r] < S->dyn.crA.bu[r + 1] ? S->dyn.crA.bu[r] : -1;
-    }
     for (t = 0; t < nt; t++) /* the block of node b in the row of node a, by bisection */
         for (a = 0; a < 4; a++) {
             amps_int r = S->dyn.crA.rank[m->tet[4 * t + a]];
@@ -15896,22 +15890,17 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
     amps_scene *S = j->S;
     const amps_mesh *m = S->m;
     const amps_int *map = S->dyn.crA.map, *bp = S->dyn.crA.bp, *bu = S->dyn.crA.bu;
-    const amps_int *bd = S->dyn.crA.bd;
     const amps_int *rank = S->dyn.crA.rank;
     amps_int lo, hi, v, t;
     double *bx = S->dyn.crA.bx, cK = S->dyn.cK;
     (void)slot;
     amps__cr_part(m, p0, p1, j->np, &lo, &hi);
-    for (v = lo; v < hi; v++) {
+    for (v = lo; v < hi; v++) { /* the rows cleared, the mass on the diagonal block (first of bu) */
         amps_int r = rank[v];
+        double *B = bx + 9 * (size_t)bu[r];
         memset(bx + 9 * (size_t)bp[r], 0, sizeof(double) * 9 * (size_t)(bp[r + 1] - bp[r]));
-        memset(bx + 9 * (size_t)bu[r], 0, sizeof(double) * 9 * (size_t)(bu[r + 1] - bu[r]));
-    }
-    for (v = lo; v < hi; v++) { /* the mass on the diagonal block (none: a node in no tet) */
-        double *B;
-        if (bd[v] < 0) continue;
-        B = bx + 9 * (size_t)bd[v];
-        B[0] = B[4] = B[8] = S->dyn.cM * S->node.mass[v];
+        memset(B, 0, sizeof(double) * 9 * (size_t)(bu[r + 1] - bu[r]));
+        if (bu[r] < bu[r + 1]) B[0] = B[4] = B[8] = S->dyn.cM * S->node.mass[v];
     }
     for (t = 0; t < m->ntet; t++) {
         const amps_int *tv = m->tet + 4 * t;
@@ -15946,10 +15935,11 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
         }
     }
     for (v = lo; v < hi; v++) { /* the inverses of the diagonal blocks: C^T / det */
-        double C[9], *Di = S->dyn.crA.dinv + 9 * (size_t)rank[v], det;
+        amps_int r = rank[v];
+        double C[9], *Di = S->dyn.crA.dinv + 9 * (size_t)r, det;
         int i, k;
-        if (bd[v] < 0) continue;
-        det = amps__cof3(bx + 9 * (size_t)bd[v], C);
+        if (bu[r] == bu[r + 1]) continue; /* a node in no tet */
+        det = amps__cof3(bx + 9 * (size_t)bu[r], C);
         det = det != 0.0 ? 1.0 / det : 0.0;
         AMPS__UNROLL
         for (i = 0; i < 3; i++)
@@ -16198,34 +16188,36 @@ static void amps__cr_gs_parts(amps_int b0, amps_int e0, int slot, void *arg) {
     for (p = b0; p < e0; p++) amps__cr_gs_range(j, j->S->dyn.crA.pp[p], j->S->dyn.crA.pp[p + 1], p);
 }
 
-/* The sweep: forward (fwd) s = (D + L)^-1 (a - D t) and q = t + s, or backward s = (D + L)^-T a;
-   the parts in parallel, the interface after them (forward) or before them (backward). Returns
-   a . q on the free entries (forward with t), else 0. s may be a. */
-static double amps__cr_gs(amps_scene *S, int fwd, const double *a, const double *t, double *s, double *q) {
-    amps__crgs j;
+/* Runs sweep j (S, fwd, a, t, s, q, p, z, beta set): the parts in parallel, the interface after
+   them (forward) or before them (backward); returns the sum of j->sum. */
+static double amps__cr_gs_run(amps_scene *S, amps__crgs *j) {
     amps_int np = S->dyn.crA.np, k;
     double d = 0;
+    if (!j->fwd) amps__cr_gs_range(j, S->dyn.crA.pp[np], S->dyn.crA.pp[np + 1], np);
+    amps__par_for(&S->U->par, np > 1 ? S->U->nthr : 1, np, 1, amps__cr_gs_parts, j);
+    if (j->fwd) amps__cr_gs_range(j, S->dyn.crA.pp[np], S->dyn.crA.pp[np + 1], np);
+    for (k = 0; k <= np; k++) d += j->sum[k];
+    return d;
+}
+
+/* The sweep: forward (fwd) s = (D + L)^-1 (a - D t) and q = t + s, or backward s = (D + L)^-T a.
+   Returns a . q on the free entries (forward with t), else 0. s may be a. */
+static double amps__cr_gs(amps_scene *S, int fwd, const double *a, const double *t, double *s, double *q) {
+    amps__crgs j;
+    memset(&j, 0, sizeof(j));
     j.S = S;
     j.fwd = fwd;
     j.a = a;
     j.t = t;
     j.s = s;
     j.q = q;
-    j.p = NULL;
-    j.z = NULL;
-    j.beta = 0.0;
-    if (!fwd) amps__cr_gs_range(&j, S->dyn.crA.pp[np], S->dyn.crA.pp[np + 1], np);
-    amps__par_for(&S->U->par, np > 1 ? S->U->nthr : 1, np, 1, amps__cr_gs_parts, &j);
-    if (fwd) amps__cr_gs_range(&j, S->dyn.crA.pp[np], S->dyn.crA.pp[np + 1], np);
-    for (k = 0; k <= np; k++) d += j.sum[k];
-    return d;
+    return amps__cr_gs_run(S, &j);
 }
 
-/* p = z + beta p (0 where held), then q = A^ p (the transformed operator above; t, s:
-   workspace); returns p . q on the free entries. */
+/* p = z + beta p (0 where held) with the backward sweep, then q = A^ p (the transformed operator
+   above; t, s: workspace); returns p . q on the free entries. */
 static double amps__cr_gs_mul(amps_scene *S, const double *z, double beta, double *p, double *t, double *s, double *q) {
     amps__crgs j;
-    amps_int np = S->dyn.crA.np;
     memset(&j, 0, sizeof(j));
     j.S = S;
     j.a = p;
@@ -16233,8 +16225,7 @@ static double amps__cr_gs_mul(amps_scene *S, const double *z, double beta, doubl
     j.p = p;
     j.z = z;
     j.beta = beta;
-    amps__cr_gs_range(&j, S->dyn.crA.pp[np], S->dyn.crA.pp[np + 1], np);
-    amps__par_for(&S->U->par, np > 1 ? S->U->nthr : 1, np, 1, amps__cr_gs_parts, &j);
+    (void)amps__cr_gs_run(S, &j);
     S->dyn.info.products++;
     return amps__cr_gs(S, 1, p, t, s, q);
 }
