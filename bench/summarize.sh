@@ -618,7 +618,8 @@ Per step of the corotational model (paper "GPU-accelerated surgery simulation fo
 fissure", Corotational FEM, Appendix A-B): amps.h's step (`amps_scene_corotational`: PCG on A_R,
 assembled each step, to relative residual 1e-10, preconditioned by the engine's exact solve with
 the current linear A in the frame of the node rotations or by symmetric Gauss-Seidel, whichever the cost
-model finds cheaper; its time without the fracture removals), CHOLMOD
+model finds cheaper; `amps_corot_step` is the whole `amps_scene_step`, stresses and fracture
+removals included, `amps_corot_solve_part` its rotations, assembly and PCG alone), CHOLMOD
 re-factorization of the same A_R (`cholmod_analyze` once per pattern, `cholmod_factorize` and one
 solve per sampled step; the assembly of A_R apart), Jacobi-PCG on the assembled A_R at
 1e-6/1e-8/1e-10 from the same start, and one linear dynamics step of the same scenario (no

@@ -872,11 +872,13 @@ static void test_solve_rhs(void) {
 
 /* The step on 1, 2 and 3 threads gives the same bits (with the deterministic re-factorization
    policy): a beam large enough for the parallel passes (rotations, the assembly of A_R, its
-   products), its end turned by pins through an arc, gravity, and a cut in the middle (a rebuilt
-   pattern of A_R). */
+   products, the fracture criterion), its end turned by pins through an arc, gravity, a cut in the
+   middle (a rebuilt pattern of A_R), then fracture at 0.9 of the largest principal stress (the
+   live tets lie under it after the step). */
 static void test_threads_bitwise(void) {
-    double *ref = NULL;
+    double *ref = NULL, smax = 0;
     size_t nref = 0;
+    amps_int nrem = 0, over = 0;
     int nt;
     for (nt = 1; nt <= 3; nt++) {
         amps_ctx ctx;
@@ -912,21 +914,43 @@ static void test_threads_bitwise(void) {
                 }
             if (step == 3)
                 CHECK(amps_scene_cut(&ctx, S, 2 + 5 * (2 + 5 * 50), p, n, &vc) == AMPS_OK, "threads: cut: %s", ctx.msg);
+            if (step == 6) { /* fracture at 0.9 of the largest corotational principal stress */
+                double *pr = (double *)malloc(sizeof(double) * 3 * (size_t)m->ntet);
+                amps_int t;
+                CHECK(amps_scene_stress(&ctx, S, NULL, NULL, pr) == AMPS_OK, "threads: stress: %s", ctx.msg);
+                for (t = 0, smax = 0; t < 3 * m->ntet; t++) smax = fmax(smax, 0.9 * fabs(pr[t]));
+                CHECK(amps_scene_fracture(&ctx, S, smax) == AMPS_OK, "threads: fracture: %s", ctx.msg);
+                free(pr);
+            }
             CHECK(amps_scene_step(&ctx, S, 1) == AMPS_OK, "threads: step: %s", ctx.msg);
+            if (step == 6) { /* the live tets lie under the threshold in the state the step ended in */
+                amps_int t;
+                for (t = 0, over = 0; t < m->ntet; t++) {
+                    double sg[6], p3[3];
+                    if (m->removed && m->removed[t]) continue;
+                    amps__cr_sigma(S, t, S->dyn.cr_G + 12 * t, NULL, sg);
+                    amps_sym3_eig(sg, p3);
+                    over += fabs(p3[0]) > smax || fabs(p3[2]) > smax;
+                }
+                CHECK(m->nremoved > 0 && over == 0, "threads: fracture removed %ld, left %ld over the threshold",
+                      (long)m->nremoved, (long)over);
+            }
         }
         if (nt == 1) {
             nref = 3 * (size_t)m->nnode;
+            nrem = m->nremoved;
             ref = (double *)malloc(sizeof(double) * 2 * nref);
             memcpy(ref, amps_scene_displacements(S), sizeof(double) * nref);
             memcpy(ref + nref, amps_scene_velocities(S), sizeof(double) * nref);
         } else {
-            CHECK(3 * (size_t)m->nnode == nref && !memcmp(ref, amps_scene_displacements(S), sizeof(double) * nref) &&
+            CHECK(3 * (size_t)m->nnode == nref && m->nremoved == nrem &&
+                          !memcmp(ref, amps_scene_displacements(S), sizeof(double) * nref) &&
                           !memcmp(ref + nref, amps_scene_velocities(S), sizeof(double) * nref),
-                  "threads: %d threads differ from 1 in the bits of u or w", nt);
+                  "threads: %d threads differ from 1 in the bits of u or w, or in the fracture", nt);
         }
         amps_scene_free(&ctx, S);
     }
-    printf("  1, 2 and 3 threads: the same bits\n");
+    printf("  1, 2 and 3 threads: the same bits (%ld tets fractured)\n", (long)nrem);
     free(ref);
 }
 
@@ -1036,6 +1060,56 @@ static void test_haptic(void) {
     free(rs2);
     free(rm);
     free(gp);
+}
+
+/* The node frames of the haptic path (amps__cr_pin_frames: per pinned node, from its incidence
+   list) equal those of the node pass (amps__cr_pass mode 3) bit for bit, for the pins of the
+   step and for a node pinned after it; the sheared model's frames differ from node to node. */
+static void test_pin_frames(void) {
+    amps_ctx ctx;
+    amps_scene *S;
+    const amps_mesh *m;
+    amps_int v, nn, extra = -1, npin = 0;
+    double *Rh, spread = 0, em = 0;
+    int d;
+    amps_ctx_init(&ctx);
+    S = amps_scene_create(&ctx, amps_mesh_grid(&ctx, 3, 3, 6, 1, 1, 0.4), NULL);
+    CHECK(S != NULL, "pin frames: scene: %s", ctx.msg);
+    if (!S) return;
+    m = amps_scene_mesh(S);
+    nn = m->nnode;
+    amps_scene_set_material(&ctx, S, 10.0, 0.35);
+    amps_scene_dynamics(&ctx, S, 0.1, 0.1, 0.01);
+    amps_scene_corotational(&ctx, S, 1);
+    for (v = 0; v < nn; v++) /* bottom held, top pushed sideways: a shear with rotations */
+        if (m->xyz[3 * v + 2] < 0.1 || m->xyz[3 * v + 2] > 1.9) {
+            int top = m->xyz[3 * v + 2] > 1.9;
+            double g[3] = {top ? 0.8 : 0.0, 0, top ? -0.3 : 0.0};
+            amps_scene_pin(&ctx, S, v, g);
+        } else if (extra < 0 && m->xyz[3 * v + 2] > 1.5) extra = v;
+    CHECK(amps_scene_step(&ctx, S, 4) == AMPS_OK, "pin frames: steps: %s", ctx.msg);
+    CHECK(amps_scene_solve_reactions(&ctx, S) == AMPS_OK, "pin frames: haptic call: %s", ctx.msg);
+    CHECK(amps_scene_pin(&ctx, S, extra, amps_scene_displacements(S) + 3 * extra) == AMPS_OK, "pin frames: pin: %s",
+          ctx.msg);
+    CHECK(amps_scene_solve_reactions(&ctx, S) == AMPS_OK, "pin frames: haptic call: %s", ctx.msg);
+    Rh = (double *)malloc(sizeof(double) * 9 * (size_t)nn);
+    memcpy(Rh, S->dyn.cr_Rn, sizeof(double) * 9 * (size_t)nn);
+    amps__cr_pass(S, 3);
+    for (v = 0; v < nn; v++) {
+        if (!S->node.pinned[v]) continue;
+        npin++;
+        for (d = 0; d < 9; d++) {
+            em = fmax(em, fabs(Rh[9 * v + d] - S->dyn.cr_Rn[9 * v + d]));
+            spread = fmax(spread, fabs(S->dyn.cr_Rn[9 * v + d] - S->dyn.cr_Rn[9 * extra + d]));
+        }
+    }
+    CHECK(npin > 0 && S->node.pinned[extra], "pin frames: %ld pins", (long)npin);
+    CHECK(em == 0.0, "pin frames: the haptic path's frames differ from the node pass's by %.2e", em);
+    CHECK(spread > 1e-3, "pin frames: the frames do not vary (%.2e): the test shows nothing", spread);
+    printf("  node frames of the haptic path: %ld pinned nodes, equal to the node pass's (frames vary by %.2f)\n",
+           (long)npin, spread);
+    free(Rh);
+    amps_scene_free(&ctx, S);
 }
 
 /* A node in no tet (a stray point of the file) in the middle of the numbering: its row of A_R is
@@ -1148,6 +1222,7 @@ int main(void) {
     test_identity_is_linear();
     test_rigid_motion();
     test_haptic();
+    test_pin_frames();
     test_bent_bar();
     test_inverted();
     test_bad_input();
