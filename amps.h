@@ -1952,7 +1952,8 @@ static void amps__par_task(amps_int begin, amps_int end, int worker, void *task_
    nw threads; worker w is participant (slot) w of a loop, the caller the last one (nt - 1).
    Posting a loop: the caller publishes the job and a new generation under the mutex (waking
    sleeping workers), claims chunks like everyone else, then closes the job (job = NULL) and
-   waits until no worker is inside it. A worker enters a job only under the mutex, while it is
+   waits until no worker is inside it (spinning AMPS__POOL_SPIN pauses on users, then on idle:
+   a sleep and a wake-up per loop cost more than the short loops of a step). A worker enters a job only under the mutex, while it is
    open, and counts itself in users; one that wakes after the close finds no job and sleeps
    again. So the caller waits for chunks begun, never for a worker that has not started: beside
    busy processes a loop costs about its serial time, or less. A worker spins AMPS__POOL_SPIN
@@ -1972,7 +1973,8 @@ struct amps__pool {
     pthread_cond_t idle;  /* the caller: users fell to 0 */
     long gen;             /* loops posted (written under m, atomically: spinning workers read it) */
     amps__job *job;       /* the open job (NULL: none); under m */
-    int users, sleepers;  /* workers inside job; waiting on wake; under m */
+    int users, sleepers;  /* workers inside job (written under m, atomically: the caller spins on it); waiting
+                             on wake (under m) */
     int closing, stop;    /* the caller waits on idle; the workers exit; under m */
     int busy;             /* a caller owns the pool (atomic exchange) */
     int nw;               /* worker threads */
@@ -2005,12 +2007,13 @@ static void *amps__pool_main(void *varg) {
         if (P->stop) break;
         seen = P->gen;
         j = P->job && a->id < P->job->nt - 1 ? P->job : NULL; /* slots below the caller's only */
-        if (j) P->users++;
+        if (j) __atomic_store_n(&P->users, P->users + 1, __ATOMIC_RELAXED);
         pthread_mutex_unlock(&P->m);
         if (!j) continue;
         amps__par_claim(j, a->id);
         pthread_mutex_lock(&P->m);
-        if (--P->users == 0 && P->closing) pthread_cond_signal(&P->idle);
+        __atomic_store_n(&P->users, P->users - 1, __ATOMIC_RELEASE); /* the chunks' writes before it */
+        if (P->users == 0 && P->closing) pthread_cond_signal(&P->idle);
         pthread_mutex_unlock(&P->m);
     }
     pthread_mutex_unlock(&P->m);
@@ -2063,7 +2066,7 @@ fail_m:
 /* Runs j on P's workers and the calling thread (slot nt - 1); 0 if another loop holds P (the
    caller then runs j serially). */
 static int amps__pool_run(amps__pool *P, amps__job *j, int nt) {
-    int wake;
+    int wake, k;
     if (__atomic_exchange_n(&P->busy, 1, __ATOMIC_ACQUIRE)) return 0;
     if (nt > P->nw + 1) nt = P->nw + 1;
     j->nt = nt;
@@ -2076,6 +2079,10 @@ static int amps__pool_run(amps__pool *P, amps__job *j, int nt) {
     amps__par_claim(j, nt - 1);
     pthread_mutex_lock(&P->m);
     P->job = NULL; /* closed: a worker that wakes from now on finds nothing */
+    pthread_mutex_unlock(&P->m);
+    /* the workers inside finish their chunks: spin as they do before sleeping, then wait */
+    for (k = 0; k < AMPS__POOL_SPIN && __atomic_load_n(&P->users, __ATOMIC_ACQUIRE) > 0; k++) amps__cpu_pause();
+    pthread_mutex_lock(&P->m);
     P->closing = 1;
     while (P->users > 0) pthread_cond_wait(&P->idle, &P->m);
     P->closing = 0;
