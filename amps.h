@@ -1953,11 +1953,12 @@ static void amps__par_task(amps_int begin, amps_int end, int worker, void *task_
    Posting a loop: the caller publishes the job and a new generation under the mutex (waking
    sleeping workers), claims chunks like everyone else, then closes the job (job = NULL) and
    waits until no worker is inside it (spinning AMPS__POOL_SPIN pauses on users, then on idle:
-   a sleep and a wake-up per loop cost more than the short loops of a step). A worker enters a job only under the mutex, while it is
-   open, and counts itself in users; one that wakes after the close finds no job and sleeps
-   again. So the caller waits for chunks begun, never for a worker that has not started: beside
-   busy processes a loop costs about its serial time, or less. A worker spins AMPS__POOL_SPIN
-   pauses on the generation before it sleeps (loops follow each other closely in a step). */
+   a sleep and a wake-up per loop cost more than the short loops of a step). A worker enters a
+   job only under the mutex, while it is open, and counts itself in users; one that wakes after
+   the close finds no job and sleeps again. So the caller waits for chunks begun, never for a
+   worker that has not started: beside busy processes a loop costs about its serial time, or
+   less. A worker spins AMPS__POOL_SPIN pauses on the generation before it sleeps (loops follow
+   each other closely in a step). */
 #ifndef AMPS__POOL_SPIN
 #define AMPS__POOL_SPIN 2000
 #endif
@@ -1973,8 +1974,8 @@ struct amps__pool {
     pthread_cond_t idle;  /* the caller: users fell to 0 */
     long gen;             /* loops posted (written under m, atomically: spinning workers read it) */
     amps__job *job;       /* the open job (NULL: none); under m */
-    int users, sleepers;  /* workers inside job (written under m, atomically: the caller spins on it); waiting
-                             on wake (under m) */
+    int users;            /* workers inside job (written under m, atomically: the caller spins on it) */
+    int sleepers;         /* workers waiting on wake; under m */
     int closing, stop;    /* the caller waits on idle; the workers exit; under m */
     int busy;             /* a caller owns the pool (atomic exchange) */
     int nw;               /* worker threads */
