@@ -1326,8 +1326,9 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    rebuild), 60 doubles, a long, 9 indices and 4 bytes per node (and 2 doubles per 256 nodes), 9
    doubles and 2 indices per block of A_R (one per pair of nodes sharing a tet), a double and a
    byte per equation; a rebuilt pattern allocates when it outgrows them. Stresses
-   (amps_scene_stress and fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. The haptic path between steps
-   (amps_scene_solve_reactions, amps_scene_haptic_build) is a model, not the next step: per
+   (amps_scene_stress and fracture) are those of eps = sym(R^T F - I), F = D_s D_m^-1. The
+   haptic path between steps (amps_scene_solve_reactions, amps_scene_haptic_build) is a model,
+   not the next step: per
    pinned node r = r0 + Rn dr, r0 the last step's reaction (0 for a pin made since), dr the
    reaction of the engine's linear A to the pin moves since the step (g - g0, g0 the target at
    the step, or the node's displacement for a new pin) taken into the node frames Rn of the
@@ -15343,6 +15344,12 @@ static void amps__cr_pin_frames(amps_scene *S);
 static void amps__cr_pass(amps_scene *S, int mode);
 static void amps__cr_sigma(const amps_scene *S, amps_int t, const double *G, const double *Rt, double sigma[6]);
 
+/* Threads for a scene pass over n items: the engine's, 1 for n <= 2048 or inside a two-phase
+   commit's run (it may hold the workers). */
+static int amps__scene_nthr(const amps_scene *S, amps_int n) {
+    return n > 2048 && !S->batch.committing ? S->U->nthr : 1;
+}
+
 /* flag[t] for the tets t in [b, e): 1 when t is live and the largest magnitude of its principal
    stresses (amps__cr_sigma with the rotations in cr_R when corotational, amps_tet_stress
    otherwise) exceeds the threshold of its region, else 0. */
@@ -15392,7 +15399,7 @@ static amps_status amps__scene_fracture_step(amps_ctx *ctx, amps_scene *S) {
     amps_mesh_removal r;
     amps_status s = AMPS_OK;
     amps__fracjob j;
-    int any = S->dyn.sigma_max > 0, nt = S->batch.committing ? 1 : S->U->nthr;
+    int any = S->dyn.sigma_max > 0;
     S->dyn.nfractured = 0;
     for (t = 0; t < S->dyn.nfreg && !any; t++) any = S->dyn.freg_sigma[t] > 0;
     if (!any) return AMPS_OK; /* no threshold anywhere: no stress pass */
@@ -15406,7 +15413,7 @@ static amps_status amps__scene_fracture_step(amps_ctx *ctx, amps_scene *S) {
     }
     j.S = S;
     j.flag = list;
-    amps__par_for(&S->U->par, m->ntet > 2048 ? nt : 1, m->ntet, 256, amps__scene_frac_tets, &j);
+    amps__par_for(&S->U->par, amps__scene_nthr(S, m->ntet), m->ntet, 256, amps__scene_frac_tets, &j);
     for (t = 0; t < m->ntet; t++) /* in place: n <= t */
         if (list[t]) list[n++] = t;
     if (n > 0 && (s = amps__scene_remove(ctx, S, n, list, AMPS_SINGULAR_REMOVE, &r)) == AMPS_OK) {
@@ -15735,13 +15742,12 @@ static void amps__cr_nodes(amps_int p0, amps_int p1, int slot, void *arg) {
    of this state. R is then that of the current u (cr_rvalid) until the step moves it. */
 static void amps__cr_pass(amps_scene *S, int mode) {
     amps__crjob j;
-    int nt = S->batch.committing ? 1 : S->U->nthr; /* a two-phase commit's run may hold the workers */
     j.S = S;
     j.mode = mode;
     j.frames = mode == 3 || (mode == 0 && !amps__cr_frames_valid(S) &&
                              (S->dyn.info.iterations == 0 || S->dyn.info.iterations > S->dyn.info.iterations_gs));
-    j.np = S->m->nnode > 2048 ? nt : 1;
-    amps__par_for(&S->U->par, S->m->ntet > 2048 ? nt : 1, S->m->ntet, 256, amps__cr_tets, &j);
+    j.np = amps__scene_nthr(S, S->m->nnode);
+    amps__par_for(&S->U->par, amps__scene_nthr(S, S->m->ntet), S->m->ntet, 256, amps__cr_tets, &j);
     if (mode != 2) amps__par_for(&S->U->par, (int)j.np, j.np, 1, amps__cr_nodes, &j);
     S->dyn.cr_rvalid = 1;
     if (j.frames) S->dyn.cr_rnall = amps__cr_serial(S);
@@ -15784,10 +15790,11 @@ static amps_int amps__cr_find(const amps_int *bj, const amps_int *rank, amps_int
    the pattern (nn nodes; part: nn of workspace). np slabs of equal node counts across the longest
    axis of the reference box (np = 1, 2, 4, ... <= AMPS__CR_PARTS, about AMPS__CR_SLAB nodes a
    slab); the nodes of a slab without a neighbour in another slab come first, slab by slab, then
-   the others (the interface). A slab then depends only on itself and the interface, so the slabs of a sweep
-   run in parallel. Within a slab and the interface the nodes go by a greedy colouring (no two
-   neighbours share a colour), then by index: consecutive rows of a sweep do not wait for each
-   other. The order depends on the mesh alone (the same bits on any number of threads). */
+   the others (the interface). A slab then depends only on itself and the interface, so the
+   slabs of a sweep run in parallel. Within a slab and the interface the nodes go by a greedy
+   colouring (no two neighbours share a colour), then by index: consecutive rows of a sweep do
+   not wait for each other. The order depends on the mesh alone (the same bits on any number of
+   threads). */
 static void amps__cr_order(amps_scene *S, const amps_int *bp, const amps_int *bj, amps_int nn, amps_int *part) {
     enum { NB = 512 };
     const double *xyz = S->m->xyz;
@@ -16030,7 +16037,7 @@ static amps_status amps__cr_assemble(amps_ctx *ctx, amps_scene *S) {
     amps__crasm j;
     if (s != AMPS_OK) return s;
     j.S = S;
-    j.np = S->m->nnode > 2048 ? S->U->nthr : 1;
+    j.np = amps__scene_nthr(S, S->m->nnode);
     amps__par_for(&S->U->par, (int)j.np, j.np, 1, amps__cr_rows, &j);
     return AMPS_OK;
 }
@@ -16157,7 +16164,7 @@ static double amps__cr_sweep(amps_scene *S, amps__crsweep *j, double *rz) {
     amps_int nn = S->m->nnode, c, nc = (nn + AMPS__CR_CHUNK - 1) / AMPS__CR_CHUNK;
     double d0 = 0, d1 = 0;
     j->S = S;
-    amps__par_for(&S->U->par, nn > 2048 ? S->U->nthr : 1, nn, AMPS__CR_CHUNK, amps__cr_sweep_rows, j);
+    amps__par_for(&S->U->par, amps__scene_nthr(S, nn), nn, AMPS__CR_CHUNK, amps__cr_sweep_rows, j);
     if (j->op == 0) S->dyn.info.products++;
     for (c = 0; c < nc; c++) {
         d0 += S->dyn.cr_part[2 * c];
