@@ -6278,8 +6278,10 @@ AMPS_API amps_status amps_condest(amps_ctx *ctx, const amps_csc *K, amps_stype s
 #define AMPS__UCON 2u    /* index in C */
 #define AMPS__NB 32      /* dense panel width */
 #define AMPS__TB 64      /* diagonal block of the panel's triangular solve */
-#define AMPS__DMAX 160   /* most changed dense columns amps__lu_drop moves in one commit */
-#define AMPS__DMULT 8.0  /* largest multiplier amps__lu_drop accepts */
+#define AMPS__GKC 256    /* k block of the dense product amps__gemm_sub */
+#define AMPS__GPACK (8 * AMPS__GKC) /* its packed rows per thread */
+#define AMPS__DMAX 160              /* most changed dense columns amps__lu_drop moves in one commit */
+#define AMPS__DMULT 8.0             /* largest multiplier amps__lu_drop accepts */
 #define AMPS__DLMAX 64.0 /* largest entry of L it may create */
 #define AMPS__VB 16      /* right-hand sides per chunk of Step 1 */
 
@@ -6368,7 +6370,8 @@ struct amps_update {
         amps_int *row_perm;            /* P: factor row -> U position */
         amps_int *col_order, *col_pos; /* Q: factor column -> U position, and inverse */
         amps_marker changed;           /* aug.cap: columns the commit changes */
-        double *panel;                 /* max(nbuf, 4) * aug.cap column buffers */
+        double *panel;                 /* max(nbuf, 4) * max(aug.cap, AMPS__GPACK): column buffers, and
+                                          the packed rows of amps__gemm_sub */
         double *transforms;            /* 3 AMPS__DMAX aug.cap: row transforms of amps__lu_drop */
     } lu;
     struct { /* state before the commit, for its rollback */
@@ -6513,7 +6516,9 @@ static amps_status amps__grow_u(amps_ctx *ctx, amps_update *U, amps_int cap) {
         amps__realloc(ctx, (void **)&U->lu.col_order, c, sizeof(amps_int)) ||
         amps__realloc(ctx, (void **)&U->lu.col_pos, c, sizeof(amps_int)) ||
         amps__realloc(ctx, (void **)&U->delta.n_add, c, sizeof(amps_int)) ||
-        amps__realloc(ctx, (void **)&U->lu.panel, c * (size_t)(U->nbuf > 4 ? U->nbuf : 4), sizeof(double)) ||
+        amps__realloc(ctx, (void **)&U->lu.panel,
+                      (c > (size_t)AMPS__GPACK ? c : (size_t)AMPS__GPACK) * (size_t)(U->nbuf > 4 ? U->nbuf : 4),
+                      sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->lu.transforms, c * (size_t)(3 * AMPS__DMAX), sizeof(double)) ||
         amps__realloc(ctx, (void **)&U->journal.rows, c, sizeof(amps__djour)) ||
         amps__realloc(ctx, (void **)&U->sol.react, c, sizeof(double)) ||
@@ -7738,6 +7743,60 @@ static AMPS__TARGET_AVX2 void amps__gemm_tile_avx2(amps_int r0, amps_int r1, amp
     }
     amps__gemm_rest(c, r0, r1, w, k0, k1, A, lda, B, ldb, C, ldc);
 }
+
+/* Ap(0:8, 0:k1-k0) = A(r0:r1, k0:k1) (r1 - r0 <= 8) row-packed, the rows past r1 zero: the k loop
+   of amps__gemm_tile8_avx2 then reads one contiguous line per k instead of one per column of A. */
+static AMPS__TARGET_AVX2 void amps__gemm_pack8(amps_int r0, amps_int r1, amps_int k0, amps_int k1, const double *A,
+                                               size_t lda, double *Ap) {
+    amps_int k, i;
+    for (k = k0; k < k1; k++, Ap += 8) {
+        const double *a = A + (size_t)k * lda + (size_t)r0;
+        if (r1 - r0 == 8) {
+            _mm256_storeu_pd(Ap, _mm256_loadu_pd(a));
+            _mm256_storeu_pd(Ap + 4, _mm256_loadu_pd(a + 4));
+        } else
+            for (i = 0; i < 8; i++) Ap[i] = i < r1 - r0 ? a[i] : 0.0;
+    }
+}
+
+/* C(r0:r1, 0:w4) -= A(r0:r1, k0:k1) B(k0:k1, 0:w4), w4 = w - w % 4, r1 - r0 <= 8, from Ap of
+   amps__gemm_pack8: each sum over k the chain of fused multiply-adds of amps__gemm_tile_avx2, so
+   the bits are its bits (a zero row of Ap is computed and not stored). */
+static AMPS__TARGET_AVX2 void amps__gemm_tile8_avx2(amps_int r0, amps_int r1, amps_int w, amps_int k0, amps_int k1,
+                                                    const double *Ap, const double *B, size_t ldb, double *C,
+                                                    size_t ldc) {
+    amps_int c, k, kn = k1 - k0;
+    int t;
+    for (c = 0; c + 4 <= w; c += 4) {
+        const double *b[4], *a = Ap;
+        __m256d s0[4], s1[4];
+        for (t = 0; t < 4; t++) {
+            b[t] = B + (size_t)(c + t) * ldb + (size_t)k0;
+            s0[t] = s1[t] = _mm256_setzero_pd();
+        }
+        for (k = 0; k < kn; k++, a += 8) {
+            __m256d a0 = _mm256_loadu_pd(a), a1 = _mm256_loadu_pd(a + 4);
+            for (t = 0; t < 4; t++) {
+                __m256d v = _mm256_broadcast_sd(b[t] + k);
+                s0[t] = _mm256_fmadd_pd(a0, v, s0[t]);
+                s1[t] = _mm256_fmadd_pd(a1, v, s1[t]);
+            }
+        }
+        for (t = 0; t < 4; t++) {
+            double *cc = C + (size_t)(c + t) * ldc + (size_t)r0;
+            if (r1 - r0 == 8) {
+                _mm256_storeu_pd(cc, _mm256_sub_pd(_mm256_loadu_pd(cc), s0[t]));
+                _mm256_storeu_pd(cc + 4, _mm256_sub_pd(_mm256_loadu_pd(cc + 4), s1[t]));
+            } else {
+                double sv[8];
+                amps_int i;
+                _mm256_storeu_pd(sv, s0[t]);
+                _mm256_storeu_pd(sv + 4, s1[t]);
+                for (i = 0; i < r1 - r0; i++) cc[i] -= sv[i];
+            }
+        }
+    }
+}
 #endif
 static void amps__gemm_tile(amps_int r0, amps_int r1, amps_int w, amps_int k0, amps_int k1, const double *A, size_t lda,
                             const double *B, size_t ldb, double *C, size_t ldc) {
@@ -7841,11 +7900,13 @@ static void amps__dot4(const double *a, size_t lda, amps_int nr, const double *b
 }
 
 /* C(0:m, 0:w) -= A(0:m, 0:kk) B(0:kk, 0:w), column major; one parallel region over row blocks
-   of 128, each swept in k blocks of 256 (the block of A stays in cache for all of C's columns). */
+   of 128, each swept in k blocks of AMPS__GKC (the block of A stays in cache for all of C's
+   columns). With AVX2 each 8 rows of a block are first packed (amps__gemm_pack8) into the slot's
+   AMPS__GPACK doubles of pack; the bits are those of amps__gemm_tile either way. */
 typedef struct amps__gmjob {
     amps_int m, w, kk;
     const double *A, *B;
-    double *C;
+    double *C, *pack;
     size_t lda, ldb, ldc;
 } amps__gmjob;
 
@@ -7853,19 +7914,35 @@ typedef struct amps__gmjob {
 static void amps__gm_rows(amps_int b, amps_int e, int slot, void *arg) {
     amps__gmjob *j = AMPS__CAST(amps__gmjob *, arg);
     amps_int rb;
-    (void)slot;
     for (rb = b; rb < e; rb++) {
         amps_int r0 = rb * 128, r1 = r0 + 128 < j->m ? r0 + 128 : j->m, k0;
-        for (k0 = 0; k0 < j->kk; k0 += 256)
-            amps__gemm_tile(r0, r1, j->w, k0, k0 + 256 < j->kk ? k0 + 256 : j->kk, j->A, j->lda, j->B, j->ldb, j->C,
-                            j->ldc);
+        for (k0 = 0; k0 < j->kk; k0 += AMPS__GKC) {
+            amps_int k1 = k0 + AMPS__GKC < j->kk ? k0 + AMPS__GKC : j->kk;
+#ifdef AMPS__AVX2
+            if (j->pack && j->w >= 4 && amps__cpu_avx2()) {
+                double *Ap = j->pack + (size_t)slot * AMPS__GPACK;
+                amps_int t;
+                for (t = r0; t < r1; t += 8) {
+                    amps_int t1 = t + 8 < r1 ? t + 8 : r1;
+                    amps__gemm_pack8(t, t1, k0, k1, j->A, j->lda, Ap);
+                    amps__gemm_tile8_avx2(t, t1, j->w, k0, k1, Ap, j->B, j->ldb, j->C, j->ldc);
+                }
+                amps__gemm_rest(j->w - j->w % 4, r0, r1, j->w, k0, k1, j->A, j->lda, j->B, j->ldb, j->C, j->ldc);
+                continue;
+            }
+#endif
+            amps__gemm_tile(r0, r1, j->w, k0, k1, j->A, j->lda, j->B, j->ldb, j->C, j->ldc);
+        }
     }
+    (void)slot;
 }
 
+/* pack: NULL, or AMPS__GPACK doubles for each of the nthr slots. */
 static void amps__gemm_sub(amps_int m, amps_int w, amps_int kk, const double *A, size_t lda, const double *B,
-                           size_t ldb, double *C, size_t ldc, const amps__par *par, int nthr) {
+                           size_t ldb, double *C, size_t ldc, double *pack, const amps__par *par, int nthr) {
     amps__gmjob j;
     if (m <= 0 || w <= 0 || kk <= 0) return;
+    j.pack = pack;
     j.m = m;
     j.w = w;
     j.kk = kk;
@@ -7964,9 +8041,9 @@ static void amps__lu_panel_apply(amps_update *U, amps_int qp, amps_int w) {
             amps__gemm_tile(i1, k1, w, ib, i1, LU, ld, P, ld, P, ld);
         }
         amps__gemm_sub(qp - k1, w, k1 - kb, LU + (size_t)kb * ld + (size_t)k1, ld, P + (size_t)kb, ld, P + (size_t)k1,
-                       ld, &U->par, U->nthr);
+                       ld, U->lu.panel, &U->par, U->nthr);
     }
-    amps__gemm_sub(u - qp, w, qp, LU + (size_t)qp, ld, P, ld, P + (size_t)qp, ld, &U->par, U->nthr);
+    amps__gemm_sub(u - qp, w, qp, LU + (size_t)qp, ld, P, ld, P + (size_t)qp, ld, U->lu.panel, &U->par, U->nthr);
 }
 
 /* Factors the panel qp..qp+w-1 with partial pivoting (swaps act on whole rows 0..qp+w-1);
