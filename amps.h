@@ -688,11 +688,13 @@ AMPS_API amps_status amps_update_watch(amps_ctx *ctx, amps_update *U, amps_int m
    values also land in amps_update_solution, whose other entries are then stale). The backward
    solve reads L only on closure_L(watched) and, for the local refinement, on the closure of
    the unconstrained rows of S u C and their neighbours (none while S u C holds only
-   constrained rows, such as pins: no refinement then). Updates the reactions too. Allocates nothing. Neither the default
-   refinement (opts.refine_tol) nor the guard: a product with K^ would cost more than this
-   solve, so x is the augmented solve's with the local refinement (opts.refine), whose backward
-   error on a badly conditioned K^ can exceed a fresh direct solve's (measured up to 0.02 eps
-   sqrt(cond(K^)), bench/RESULTS.md section 6b); amps_update_solve gives x at that level.
+   constrained rows, such as pins: no refinement then). Updates the reactions too. Allocates
+   nothing. After an amps_update_solve with no change since, x is current and nothing is solved
+   (the watched values are the full solve's). Neither the default refinement (opts.refine_tol)
+   nor the guard: a product with K^ would cost more than this solve, so x is the augmented
+   solve's with the local refinement (opts.refine), whose backward error on a badly conditioned
+   K^ can exceed a fresh direct solve's (measured up to 0.02 eps sqrt(cond(K^)),
+   bench/RESULTS.md section 6b); amps_update_solve gives x at that level.
    AMPS_ERR_INDEX (a watched index no longer exists) comes before the commit; a failed commit:
    see amps_update_commit. */
 AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, double *xw);
@@ -9853,7 +9855,7 @@ AMPS_API amps_status amps_update_solve_watched(amps_ctx *ctx, amps_update *U, do
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_solve_watched: NULL engine");
     if ((s = amps__watch_valid(ctx, U, "amps_update_solve_watched")) != AMPS_OK) return s;
     if ((s = amps_update_commit(ctx, U)) != AMPS_OK) return s;
-    if (U->sol.watched_stale || !U->sol.has_x) {
+    if (!U->sol.has_x || (U->sol.watched_stale && U->sol.x_stale)) { /* a current full x holds them */
         amps__solve_stats_begin(U);
         amps__solve_core(U, U->force.ct, U->force.f, 0, 1, U->sol.x);
         amps__small_reactions(U, U->dense.rhs, U->dense.y, U->dense.w);

@@ -35,6 +35,21 @@ static void compare(amps_ctx *ctx, amps_scene *S, const shadow *w, const char *w
         if (res > worst_res) worst_res = res;
     }
     if (err > worst_err) worst_err = err;
+    { /* a watched solve after a full one (the watch set given again) leaves the full x: the next
+         full solve returns the same bits */
+        double *u1 = (double *)malloc(sizeof(double) * 3 * m->nnode);
+        amps_int *wl = (amps_int *)malloc(sizeof(amps_int) * (w->nwatch + 1));
+        for (k = 0; k < w->nwatch; k++) wl[k] = w->watch[k];
+        memcpy(u1, amps_scene_displacements(S), sizeof(double) * 3 * m->nnode);
+        CHECK(amps_scene_watch(ctx, S, w->nwatch, wl) == AMPS_OK, "%s: watch again: %s", what, ctx->msg);
+        CHECK(amps_scene_solve_watched(ctx, S) == AMPS_OK, "%s step %d: watched solve after a full one: %s", what,
+              step, ctx->msg);
+        CHECK(amps_scene_solve(ctx, S) == AMPS_OK, "%s step %d: solve again: %s", what, step, ctx->msg);
+        CHECK(memcmp(u1, amps_scene_displacements(S), sizeof(double) * 3 * m->nnode) == 0,
+              "%s step %d: a full solve after a watched one changed the full solve's values", what, step);
+        free(u1);
+        free(wl);
+    }
     { /* deformed positions = reference + displacement, all nodes and a subset */
         double *pos = (double *)malloc(sizeof(double) * 3 * m->nnode), q[3];
         amps_int last = m->nnode - 1;
