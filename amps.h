@@ -1222,9 +1222,13 @@ AMPS_API amps_status amps_scene_commit_end(amps_ctx *ctx, amps_scene *S);
    copy[k] (the new node, or -1) and status[k] (AMPS_OK: cut; AMPS_WARN_NOOP: the plane leaves
    one side of the node empty; AMPS_ERR_SINGULAR_UPDATE: refused by the mechanism test) for
    k < min(n, cap) (arrays caller-owned, cap entries each), n the number touched, ncut the nodes
-   cut. Errors: AMPS_ERR_ARG (npts < 2, NULL, a segment of zero length or parallel to the blade),
+   cut. A commit that is singular (a piece the per-node test missed is left loose) is undone and
+   the cuts are made again one commit each, the cuts that leave a piece loose refused
+   (AMPS_ERR_SINGULAR_UPDATE in status); inside an open batch the caller's commit decides.
+   Errors: AMPS_ERR_ARG (npts < 2, NULL, a segment of zero length or parallel to the blade),
    AMPS_ERR_VALUE (not finite, radius < 0), the commit's (the stroke undone, as amps_scene_commit)
-   and AMPS_ERR_OOM / AMPS_ERR_CAPACITY. Allocates O(nnode) scratch. */
+   and AMPS_ERR_OOM / AMPS_ERR_CAPACITY (in the one-commit-each pass the cuts made before it
+   stay). Allocates O(nnode) scratch. */
 typedef struct amps_scene_stroke_result {
     amps_int cap;          /* entries of the arrays (set by the caller) */
     amps_int *node, *copy; /* caller-owned, cap entries each (may be NULL when cap is 0) */
@@ -14912,6 +14916,27 @@ static amps_status amps__stroke_nodes(amps_ctx *ctx, amps_scene *S, amps_int npt
     return AMPS_OK;
 }
 
+/* The cuts of a stroke's nodes L[0..nc-1] in order (in the open batch, or each committed alone),
+   reported in out; *ncut the nodes cut. Stops at an error other than a no-op or a refusal. */
+static amps_status amps__stroke_cuts(amps_ctx *ctx, amps_scene *S, const amps__stroke_node *L, amps_int nc,
+                                     const double *pts, const double *nrm, amps_scene_stroke_result *out,
+                                     amps_int *ncut) {
+    amps_int i;
+    *ncut = 0;
+    for (i = 0; i < nc; i++) {
+        amps_int vc = -1, sg = L[i].seg;
+        amps_status c = amps_scene_cut(ctx, S, L[i].v, pts + 3 * sg, nrm + 3 * sg, &vc);
+        if (c != AMPS_OK && c != AMPS_WARN_NOOP && c != AMPS_ERR_SINGULAR_UPDATE) return c;
+        if (c == AMPS_OK) ++*ncut;
+        if (out && i < out->cap) {
+            if (out->node) out->node[i] = L[i].v;
+            if (out->copy) out->copy[i] = vc;
+            if (out->status) out->status[i] = c;
+        }
+    }
+    return AMPS_OK;
+}
+
 AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int npts, const double *pts,
                                        const double blade[3], double radius, amps_scene_stroke_result *out) {
     amps__stroke_node *L = NULL;
@@ -14934,22 +14959,14 @@ AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int np
         if ((s = amps_scene_begin_batch(ctx, S)) != AMPS_OK) goto done;
         opened = 1;
     }
-    for (i = 0; i < nc; i++) {
-        amps_int vc = -1, sg = L[i].seg;
-        amps_status c = amps_scene_cut(ctx, S, L[i].v, pts + 3 * sg, nrm + 3 * sg, &vc);
-        if (c != AMPS_OK && c != AMPS_WARN_NOOP && c != AMPS_ERR_SINGULAR_UPDATE) {
-            if (opened && S->batch.open) amps__scene_batch_undo(S);
-            s = c;
-            goto done;
-        }
-        if (c == AMPS_OK) ncut++;
-        if (out && i < out->cap) {
-            if (out->node) out->node[i] = L[i].v;
-            if (out->copy) out->copy[i] = vc;
-            if (out->status) out->status[i] = c;
-        }
+    s = amps__stroke_cuts(ctx, S, L, nc, pts, nrm, out, &ncut);
+    if (s != AMPS_OK && opened && S->batch.open) amps__scene_batch_undo(S);
+    if (s == AMPS_OK && opened && (s = amps_scene_commit(ctx, S)) == AMPS_ERR_SINGULAR_UPDATE) {
+        /* the batch was undone: the cuts again, each committed alone, the ones that leave a piece
+           loose refused */
+        amps__log(ctx, AMPS_OK, "amps_scene_stroke: the stroke's commit is singular; its cuts one commit each");
+        s = amps__stroke_cuts(ctx, S, L, nc, pts, nrm, out, &ncut);
     }
-    if (opened) s = amps_scene_commit(ctx, S);
     if (out && s == AMPS_OK) {
         out->n = nc;
         out->ncut = ncut;

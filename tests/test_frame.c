@@ -147,6 +147,78 @@ static void test_stroke(void) {
     shadow_free(&wb);
 }
 
+static void log_fallback(void *user, amps_status s, const char *msg) {
+    (void)s;
+    if (strstr(msg, "one commit each")) *(int *)user = 1;
+}
+
+/* A stroke on a brick fixed at its base whose one commit is singular (a corner piece the
+   per-node test does not see is cut loose): its cuts are made again one commit each, the ones
+   that leave a piece loose refused; the same as cutting the nodes one by one, and CHOLMOD's. */
+static void test_stroke_loose(void) {
+    amps_ctx ctx;
+    amps_scene *S[2];
+    shadow w;
+    double pts[6] = {0.9136962890625, 0.78021240234375, 1.514923095703125, 1.110107421875, 0.39134521484374996,
+                     1.852581787109375},
+           blade[3] = {-0.0635528564453125, 0.005157470703125, 0.4960479736328125}, f[3] = {0.1, 0.2, -0.3};
+    amps_int node[64], copy[64], i, v;
+    amps_status st[64];
+    amps_scene_stroke_result r;
+    int k, fell = 0, refused = 0;
+    amps_ctx_init(&ctx);
+    memset(&w, 0, sizeof(w));
+    for (k = 0; k < 2; k++) {
+        amps_mesh *m = amps_mesh_brick(&ctx, 3);
+        if (k == 0) {
+            w.fixed0 = (unsigned char *)calloc(m->nnode, 1);
+            for (v = 0; v < m->nnode; v++) w.fixed0[v] = m->xyz[3 * v + 2] < 0.01;
+            shadow_grow(&w, (int)m->nnode);
+            memcpy(w.force + 3 * (m->nnode - 1), f, sizeof(f));
+        }
+        S[k] = amps_scene_create(&ctx, m, NULL);
+        CHECK(S[k] != NULL, "create: %s", ctx.msg);
+        amps_scene_set_material(&ctx, S[k], 1000.0, 0.3);
+        amps_scene_fix_where(&ctx, S[k], 2, AMPS_LT, 0.01, NULL);
+        CHECK(amps_scene_force(&ctx, S[k], m->nnode - 1, f) == AMPS_OK, "force: %s", ctx.msg);
+        CHECK(amps_scene_prepare(&ctx, S[k]) == AMPS_OK, "prepare: %s", ctx.msg);
+    }
+    memset(&r, 0, sizeof(r));
+    r.cap = 64;
+    r.node = node;
+    r.copy = copy;
+    r.status = st;
+    ctx.log = log_fallback;
+    ctx.log_user = &fell;
+    CHECK(amps_scene_stroke(&ctx, S[0], 2, pts, blade, 0.43419189453125001, &r) == AMPS_OK, "loose stroke: %s",
+          ctx.msg);
+    ctx.log = NULL;
+    CHECK(fell, "the stroke's one commit was not singular (the test lost its case)");
+    for (i = 0; i < r.n && i < 64; i++) { /* the same cuts on S[1], each committed alone */
+        amps_int vc = -1;
+        double nrm[3] = {(pts[4] - pts[1]) * blade[2] - (pts[5] - pts[2]) * blade[1],
+                         (pts[5] - pts[2]) * blade[0] - (pts[3] - pts[0]) * blade[2],
+                         (pts[3] - pts[0]) * blade[1] - (pts[4] - pts[1]) * blade[0]};
+        amps_status s = amps_scene_cut(&ctx, S[1], node[i], pts, nrm, &vc);
+        CHECK(s == st[i] && vc == copy[i], "loose stroke: node %ld: stroke %d/%ld, one by one %d/%ld", (long)node[i],
+              (int)st[i], (long)copy[i], (int)s, (long)vc);
+        refused += st[i] == AMPS_ERR_SINGULAR_UPDATE;
+        if (s == AMPS_OK) shadow_grow(&w, (int)vc + 1);
+    }
+    CHECK(refused > 0 && r.ncut > 0, "loose stroke: %d refused, %ld cut", refused, (long)r.ncut);
+    CHECK(amps_scene_solve(&ctx, S[0]) == AMPS_OK && amps_scene_solve(&ctx, S[1]) == AMPS_OK, "loose stroke: solve: %s",
+          ctx.msg);
+    CHECK(t_reldiff(3 * (int)amps_scene_mesh(S[0])->nnode, amps_scene_displacements(S[0]),
+                    amps_scene_displacements(S[1])) <= 1e-12,
+          "loose stroke vs one by one");
+    CHECK(ref_err(&ctx, S[0], &w) <= 1e-10, "loose stroke vs CHOLMOD %.3e", ref_err(&ctx, S[0], &w));
+    printf("  stroke with a singular commit: %ld nodes touched, %ld cut, %d refused\n", (long)r.n, (long)r.ncut,
+           refused);
+    amps_scene_free(&ctx, S[0]);
+    amps_scene_free(&ctx, S[1]);
+    shadow_free(&w);
+}
+
 /* Random changes, in batches of 1-6 on A and one by one on B. */
 static void test_batches(unsigned long long seed) {
     amps_ctx ctx;
@@ -470,6 +542,7 @@ static void test_two_phase(void) {
 
 int main(void) {
     test_stroke();
+    test_stroke_loose();
     test_batches(21);
     test_batches(22);
     test_batch_undo();

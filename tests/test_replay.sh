@@ -38,6 +38,8 @@ badaxis|mesh beam 4\nfix w lt 0.5\n|2|bad axis
 pinfixed|mesh beam 4\nfix z lt 0.5\npin 0 0 0 0\n|3|fixed
 missing|mesh nosuchfile.node\n|1|
 badmat|mesh beam 4\nmaterial -1 0.3\n|2|material
+bigidx|mesh beam 4\nfix z lt 0.5\nforce 4294967299 0 1 0\n|3|usage: force
+bigstep|mesh beam 4\nfix z lt 0.5\ndynamics 0.01 0 0\nstep 99999999999999999999\n|4|usage: step
 args|mesh beam 4\ncut 3 0 0 0\n|2|usage
 unspd|mesh beam 4\nsolve\n|2|solve
 stepstatic|mesh beam 4\nfix z lt 0.5\nstep\n|3|needs dynamics

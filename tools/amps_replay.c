@@ -24,7 +24,8 @@
                               it, one commit; prints the nodes cut, the no-ops and the refusals
      batch                    open a batch: cuts, strokes, pins, releases only record ...
      commit                   ... until commit applies them at once (amps_scene_commit; a solve
-                              commits an open batch too)
+                              commits an open batch too); a commit that leaves a piece loose
+                              is undone and reported, and the scenario goes on
      solve
      residual on|off
      dump <file.csv>          node,ux,uy,uz of every node (values of the last solve)
@@ -57,6 +58,7 @@
 #include <string.h>
 #include <ctype.h>
 #include <math.h>
+#include <errno.h>
 #ifndef AMPS_REPLAY_NO_MAIN
 #define JOBS_IMPLEMENTATION
 #include "../examples/jobs.h"
@@ -95,10 +97,13 @@ static int parse_num(const char *s, double *v) {
     return *end == '\0' && end != s && (*v - *v == 0.0);
 }
 
+/* A non-negative index or count that amps_int holds (else 0: a bad number, out of range). */
 static int parse_node(const char *s, amps_int *v) {
     char *end;
-    long x = strtol(s, &end, 10);
-    if (*end != '\0' || end == s || x < 0) return 0;
+    long x;
+    errno = 0;
+    x = strtol(s, &end, 10);
+    if (*end != '\0' || end == s || x < 0 || errno == ERANGE || x != (long)(amps_int)x) return 0;
     *v = (amps_int)x;
     return 1;
 }
@@ -297,7 +302,7 @@ static int run_selection_line(replay *R, int nt, char **t) {
 static int cmd_stroke(replay *R, int nt, char **t, double t0) {
     double x[13];
     amps_scene_stroke_result r;
-    amps_status st[64];
+    amps_status st[64], s;
     int k, np = (nt - 5) / 3, noop = 0, refused = 0;
     if ((nt != 11 && nt != 14))
         return fail(R, "%s", "usage: stroke <radius> <bx> <by> <bz> <x0> <y0> <z0> <x1> <y1> <z1> [<x2> <y2> <z2>]");
@@ -306,7 +311,9 @@ static int cmd_stroke(replay *R, int nt, char **t, double t0) {
     memset(&r, 0, sizeof(r));
     r.cap = 64;
     r.status = st;
-    if (amps_scene_stroke(&R->ctx, R->S, np, x + 4, x + 1, x[0], &r) != AMPS_OK) return lib_fail(R, "stroke");
+    s = amps_scene_stroke(&R->ctx, R->S, np, x + 4, x + 1, x[0], &r);
+    if (s == AMPS_ERR_SINGULAR_UPDATE) printf("%s:%d: stroke undone: %s\n", R->file, R->line, R->ctx.msg);
+    else if (s != AMPS_OK) return lib_fail(R, "stroke");
     for (k = 0; k < r.n && k < r.cap; k++) {
         noop += st[k] == AMPS_WARN_NOOP;
         refused += st[k] == AMPS_ERR_SINGULAR_UPDATE;
@@ -322,8 +329,12 @@ static int cmd_stroke(replay *R, int nt, char **t, double t0) {
 /* batch | commit */
 static int cmd_batch(replay *R, int nt, char **t, double t0) {
     int begin = !strcmp(t[0], "batch");
+    amps_status s;
     if (nt != 1) return fail(R, "usage: %s", t[0]);
-    if (begin ? amps_scene_begin_batch(&R->ctx, R->S) : amps_scene_commit(&R->ctx, R->S)) return lib_fail(R, t[0]);
+    s = begin ? amps_scene_begin_batch(&R->ctx, R->S) : amps_scene_commit(&R->ctx, R->S);
+    if (s == AMPS_ERR_SINGULAR_UPDATE && !begin) /* the batch is undone; the scenario goes on */
+        printf("%s:%d: commit undone: %s\n", R->file, R->line, R->ctx.msg);
+    else if (s != AMPS_OK) return lib_fail(R, t[0]);
     if (!begin) snprintf(R->last_cmd, sizeof(R->last_cmd), "commit");
     R->step_time += amps_now() - t0;
     return 0;
