@@ -1375,13 +1375,17 @@ AMPS_API amps_status amps_scene_step_info(const amps_scene *S, amps_scene_step_s
    TetGen .node/.ele: index base = first point number in .node (0 or 1), point numbers
      consecutive; node attributes and boundary markers ignored; 4 or 10 nodes per tet (first 4
      used); region = the first tet attribute (an integer, as tetgen -A writes it).
-   Gmsh .msh ASCII 2.x and 4.1: tetrahedra are element type 4; surface, line and point elements
-     are skipped; hexahedra, prisms and pyramids (any order) are an error, AMPS_ERR_MESH with
-     their counts and the line of the first; node tags may be any distinct integers. Binary
-     files are rejected. Region: 2.x the first (physical) tag; 4.1 the first physical tag of the
-     element's volume entity ($Entities).
-   MEDIT .mesh (ASCII): Dimension 3, Vertices, Tetrahedra; other keywords are skipped. Region:
-     the reference number of each tetrahedron.
+   Gmsh .msh ASCII 2.x and 4.1: tetrahedra are element type 4 (types 11, 29, 30, 31, of higher
+     order, are read as linear tets on their 4 corners: the other nodes belong to no tet);
+     surface, line and point elements are skipped; hexahedra, prisms and pyramids (any order)
+     are an error, AMPS_ERR_MESH with their counts and the line of the first; node tags may be
+     any distinct integers. Binary files are rejected. Region: 2.x the first (physical) tag; 4.1
+     the first physical tag of the element's volume entity ($Entities). A tet given twice (2.x
+     writes an element once per physical group holding its volume) is read once, in the place
+     and with the region of its first line (logged).
+   MEDIT .mesh (ASCII): Dimension 3, Vertices, Tetrahedra; Hexahedra, Prisms, Pyramids and the
+     higher-order volume keywords are an error (AMPS_ERR_MESH); other keywords are skipped.
+     Region: the reference number of each tetrahedron.
    A tet without a region attribute gets region 0.
    amps_mesh_read picks the reader by extension: .node (and the .ele of the same name), .ele
    (and the .node), .msh, .mesh. The *_mem variants parse a buffer of len bytes (no NUL needed);
@@ -17202,6 +17206,61 @@ static amps_status amps__tb_push(amps_ctx *ctx, amps__tetbuf *b, const amps__tet
     return AMPS_OK;
 }
 
+/* A tet's sorted nodes and its position in the buffer, for amps__tb_dedup. */
+typedef struct amps__tkey {
+    amps_int v[4], k;
+} amps__tkey;
+
+static int amps__tkey_cmp(const void *a, const void *b) {
+    const amps__tkey *x = (const amps__tkey *)a, *y = (const amps__tkey *)b;
+    int i;
+    for (i = 0; i < 4; i++)
+        if (x->v[i] != y->v[i]) return x->v[i] < y->v[i] ? -1 : 1;
+    return x->k < y->k ? -1 : x->k > y->k;
+}
+
+/* Removes every tet whose node set an earlier one has (file order kept, the first's region);
+   *ndup the number removed. */
+static amps_status amps__tb_dedup(amps_ctx *ctx, amps__tetbuf *b, amps_int *ndup) {
+    amps__tkey *key;
+    unsigned char *gone;
+    amps_int k, j, n = 0;
+    *ndup = 0;
+    if (b->n < 2) return AMPS_OK;
+    key = AMPS__CAST(amps__tkey *, amps__malloc(ctx, (size_t)b->n, sizeof(amps__tkey)));
+    gone = AMPS__CAST(unsigned char *, amps__calloc(ctx, (size_t)b->n, 1));
+    if (!key || !gone) {
+        amps__free(ctx, key);
+        amps__free(ctx, gone);
+        return amps__err(ctx, AMPS_ERR_OOM, "mesh reader: out of memory");
+    }
+    for (k = 0; k < b->n; k++) {
+        amps_int i, t, *v = key[k].v;
+        memcpy(v, b->tet + 4 * (size_t)k, sizeof(key[k].v));
+        for (i = 1; i < 4; i++) /* insertion sort of 4 */
+            for (j = i; j > 0 && v[j - 1] > v[j]; j--) {
+                t = v[j];
+                v[j] = v[j - 1];
+                v[j - 1] = t;
+            }
+        key[k].k = k;
+    }
+    qsort(key, (size_t)b->n, sizeof(amps__tkey), amps__tkey_cmp);
+    for (k = 1; k < b->n; k++)
+        if (!memcmp(key[k].v, key[k - 1].v, sizeof(key[k].v))) gone[key[k].k] = 1; /* not the first */
+    for (k = 0; k < b->n; k++) {
+        if (gone[k]) continue;
+        for (j = 0; j < 4; j++) b->tet[4 * (size_t)n + j] = b->tet[4 * (size_t)k + j];
+        b->region[n] = b->region[k];
+        b->line[n++] = b->line[k];
+    }
+    *ndup = b->n - n;
+    b->n = n;
+    amps__free(ctx, key);
+    amps__free(ctx, gone);
+    return AMPS_OK;
+}
+
 static void amps__tb_free(amps_ctx *ctx, amps__tetbuf *b) {
     amps__free(ctx, b->tet);
     amps__free(ctx, b->line);
@@ -17611,7 +17670,13 @@ static amps_status amps__gmsh_nodes(amps__gmsh *G) {
     return s ? s : amps__gmsh_tagmap(G);
 }
 
-/* The 4 node tags of a tetrahedron, on the current line, as file positions into r->v; then r
+/* Gmsh element types of tetrahedra: 4 (linear), 11 (10 nodes), 29, 30, 31 (20, 35, 56 nodes),
+   their first 4 nodes the corners. */
+static int amps__gmsh_is_tet(long long type) {
+    return type == 4 || type == 11 || type == 29 || type == 30 || type == 31;
+}
+
+/* The 4 node tags of a tetrahedron (its corners), on the current line, as file positions into r->v; then r
    joins R.tb. */
 static amps_status amps__gmsh_tet(amps__gmsh *G, amps__tetrec *r) {
     int i;
@@ -17634,11 +17699,11 @@ static amps_status amps__gmsh_elems2(amps__gmsh *G, long long total) {
         if (!s) s = amps__lx_int(L, 0, &c, "tag count");
         if (!s && c < 0) s = amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "negative tag count %lld", c);
         r.region = 0;
-        for (i = 0; !s && type == 4 && i < c; i++) {
+        for (i = 0; !s && amps__gmsh_is_tet(type) && i < c; i++) {
             s = amps__lx_int(L, 0, &a, "element tag");
             if (!s && i == 0) s = amps__lx_region(L, a, &r.region); /* the physical tag */
         }
-        if (!s && type == 4) s = amps__gmsh_tet(G, &r);
+        if (!s && amps__gmsh_is_tet(type)) s = amps__gmsh_tet(G, &r);
         if (!s) amps__gmsh_volume(G, type, r.line, 1);
         if (!s) amps__lx_eol(L);
     }
@@ -17659,7 +17724,7 @@ static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long to
         for (i = 0; h.dim == 3 && i < G->nvol; i++)
             if (G->vol_tag[i] == h.tag) r.region = G->vol_phys[i];
         for (i = 0; !s && i < h.n; i++) {
-            if (h.kind == 4) {
+            if (amps__gmsh_is_tet(h.kind)) {
                 s = amps__lx_int(L, 1, &a, "element tag");
                 r.line = L->tline;
                 if (!s) s = amps__gmsh_tet(G, &r);
@@ -17744,6 +17809,7 @@ AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size
     amps__lex *L = &G.R.L;
     amps_status s = AMPS_OK;
     amps_mesh *m;
+    amps_int ndup = 0;
     memset(&G, 0, sizeof(G));
     amps__rd_init(&G.R, ctx, buf, len, name ? name : "<msh>", 0);
     while (!s && amps__lx_tok(L, 1)) s = amps__gmsh_section(&G);
@@ -17751,12 +17817,18 @@ AMPS_API amps_mesh *amps_mesh_read_gmsh_mem(amps_ctx *ctx, const char *buf, size
     if (!s && !G.have_nodes) s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no $Nodes section");
     if (!s && (G.nother[0] || G.nother[1] || G.nother[2]))
         s = amps__lx_err(L, G.vol_line, AMPS_ERR_MESH,
-                         "%lld hexahedr%s, %lld prism%s, %lld pyramid%s: amps reads tetrahedra only (type 4); "
+                         "%lld hexahedr%s, %lld prism%s, %lld pyramid%s: amps reads tetrahedra only; "
                          "mesh with tetrahedra only",
                          G.nother[0], G.nother[0] == 1 ? "on" : "a", G.nother[1], G.nother[1] == 1 ? "" : "s",
                          G.nother[2], G.nother[2] == 1 ? "" : "s");
     if (!s && G.R.tb.n == 0)
-        s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE, "no tetrahedra (element type 4) in the file");
+        s = amps__lx_err(L, amps__lx_here(L), AMPS_ERR_PARSE,
+                         "no tetrahedra (element type 4, 11, 29, 30 or 31) in the file");
+    if (!s && (s = amps__tb_dedup(ctx, &G.R.tb, &ndup)) == AMPS_OK && ndup > 0)
+        amps__log(ctx, AMPS_OK,
+                  "%s: %ld tetrahedra repeated (a volume in several physical groups): each read once, "
+                  "its region the first group's",
+                  L->name, (long)ndup);
     m = amps__rd_end(&G.R, s);
     amps__free(ctx, G.tags);
     amps__free(ctx, G.vol_tag);
@@ -17833,6 +17905,23 @@ static amps_status amps__medit_tets(amps__rd *R, int *seen) {
     return s;
 }
 
+/* The current keyword names volume elements other than linear tets (Hexahedra, Prisms,
+   Pyramids, and any of their or the tets' higher-order variants such as TetrahedraP2). */
+static int amps__medit_volume(const amps__lex *L) {
+    static const char *kind[] = {"Hexahedra", "Prisms", "Pyramids", "Tetrahedra"};
+    size_t k, i, n;
+    for (k = 0; k < 4; k++) {
+        n = strlen(kind[k]);
+        if (L->tlen < n) continue;
+        for (i = 0; i < n; i++) {
+            int a = (unsigned char)L->tok[i], b = (unsigned char)kind[k][i];
+            if ((a | 32) != (b | 32)) break;
+        }
+        if (i == n) return 1; /* Tetrahedra itself is matched before */
+    }
+    return 0;
+}
+
 AMPS_API amps_mesh *amps_mesh_read_medit_mem(amps_ctx *ctx, const char *buf, size_t len, const char *name) {
     amps__rd R;
     amps__lex *L = &R.L;
@@ -17851,6 +17940,17 @@ AMPS_API amps_mesh *amps_mesh_read_medit_mem(amps_ctx *ctx, const char *buf, siz
             s = amps__medit_vertices(&R);
         } else if (amps__lx_is(L, "Tetrahedra", 1)) {
             s = amps__medit_tets(&R, &have_tets);
+        } else if (amps__medit_volume(L)) { /* other volume elements: not dropped silently */
+            long long line = L->tline, cnt = 0;
+            char kw[32];
+            size_t kl = L->tlen < sizeof(kw) - 1 ? L->tlen : sizeof(kw) - 1;
+            memcpy(kw, L->tok, kl);
+            kw[kl] = '\0';
+            s = amps__lx_int(L, 1, &cnt, "element count");
+            if (!s)
+                s = amps__lx_err(L, line, AMPS_ERR_MESH,
+                                 "%lld %s: amps reads linear tetrahedra only (Tetrahedra); mesh with them only", cnt,
+                                 kw);
         } else if (!amps__lx_numeric(L)) {
             amps__medit_skip(L); /* other keyword */
         } else {

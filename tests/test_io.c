@@ -453,7 +453,7 @@ static void test_messages(void) {
             {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n", "", AMPS_ERR_PARSE, "g.msh:3: no $Nodes section"},
             {T_GMSH,
              "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 2 2 0 1 1 2 3\n$EndElements\n",
-             "", AMPS_ERR_PARSE, "g.msh:14: no tetrahedra (element type 4) in the file"},
+             "", AMPS_ERR_PARSE, "g.msh:14: no tetrahedra (element type 4, 11, 29, 30 or 31) in the file"},
             {T_GMSH, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$ThisSectionNameIsFarTooLongToKeep\n", "", AMPS_ERR_PARSE,
              "g.msh:4: expected a section header like $Nodes, found '$ThisSectionNameIsFarToo...'"},
             {T_MEDIT, "Dimension 2\n", "", AMPS_ERR_PARSE, "m.mesh:1: dimension must be 3, found 2"},
@@ -464,6 +464,10 @@ static void test_messages(void) {
             {T_MEDIT, "Vertices\n1\n0 0 0 0\nTetrahedra\n1\n1 1 1 2 0\n", "", AMPS_ERR_PARSE,
              "m.mesh:6: vertex index 2 out of range [1, 1]"},
             {T_MEDIT, "Vertices\n1\n0 0 0 0\n7\n", "", AMPS_ERR_PARSE, "m.mesh:4: expected a keyword, found '7'"},
+            {T_MEDIT, "Vertices\n1\n0 0 0 0\nHexahedra\n1\n1 1 1 1 1 1 1 1 0\n", "", AMPS_ERR_MESH,
+             "m.mesh:4: 1 Hexahedra: amps reads linear tetrahedra only (Tetrahedra); mesh with them only"},
+            {T_MEDIT, "Vertices\n1\n0 0 0 0\nTetrahedraP2\n2\n", "", AMPS_ERR_MESH,
+             "m.mesh:4: 2 TetrahedraP2: amps reads linear tetrahedra only (Tetrahedra); mesh with them only"},
             {T_MEDIT, "MeshVersionFormatted 2\nEnd\n", "", AMPS_ERR_PARSE, "m.mesh:2: no Vertices section"},
             {T_MEDIT, "Vertices\n1\n0 0 0 0\nCorners 1 1\nEnd\n", "", AMPS_ERR_PARSE,
              "m.mesh:5: no Tetrahedra in the file"},
@@ -863,6 +867,21 @@ static void test_region_readers(void) {
     amps_mesh_free(&ctx, m);
     m = t_medit(&ctx, M_MIXED);
     CHECK(t_regions_are(m, 1, 7, 7), "medit references");
+    amps_mesh_free(&ctx, m);
+    /* gmsh 2.2 writes an element once per physical group of its volume: read once, the first
+       group's region, the file order of the first lines kept */
+    m = t_gmsh(&ctx, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n5\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 1 1 1\n"
+                     "$EndNodes\n$Elements\n4\n1 4 2 5 1 1 2 3 4\n2 4 2 6 1 2 1 3 4\n3 4 2 6 2 2 3 4 5\n"
+                     "4 4 2 7 1 4 3 2 1\n$EndElements\n");
+    CHECK(m && m->ntet == 2 && m->region[0] == 5 && m->region[1] == 6 && m->tet[4] == 1 && m->tet[7] == 4,
+          "gmsh 2.2 repeated tets: %s", ctx.msg);
+    amps_mesh_free(&ctx, m);
+    /* higher-order tets (type 11) by their corners; the edge nodes belong to no tet */
+    m = t_gmsh(&ctx, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n10\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n"
+                     "5 .5 0 0\n6 .5 .5 0\n7 0 .5 0\n8 0 0 .5\n9 0 .5 .5\n10 .5 0 .5\n$EndNodes\n$Elements\n1\n"
+                     "1 11 2 3 1 1 2 3 4 5 6 7 8 9 10\n$EndElements\n");
+    CHECK(m && m->nnode == 10 && m->ntet == 1 && m->region[0] == 3 && m->tet[0] == 0 && m->tet[3] == 3,
+          "gmsh 2.2 10-node tet: %s", ctx.msg);
     amps_mesh_free(&ctx, m);
     /* as tetgen -A writes it: one attribute column, integer valued */
     m = t_tetgen(&ctx, "6 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 1 1 1\n5 0.5 0.5 -1\n",
