@@ -58,6 +58,13 @@ CASES
 # the dynamic examples dump displacements and velocities
 head -1 "$tmp/cantilever_drop_state.csv" 2>/dev/null | grep -q '^node,ux,uy,uz,vx,vy,vz$' && ok || bad "dynamic dump header"
 grep -q 'tore' "$tmp/tissue_tear.out" && ok || bad "tissue_tear: no tet torn by fracture"
+# --refactor count: the tearing example's dump has the same bits on 1 and 2 threads
+for t in 1 2; do
+  mkdir -p "$tmp/det$t"
+  (cd "$tmp/det$t" && "$OLDPWD/$R" -q --refactor count --threads $t "$OLDPWD/examples/tissue_tear.scn") > /dev/null 2>&1 || bad "tissue_tear --refactor count --threads $t"
+done
+cmp -s "$tmp/det1/tissue_tear_state.csv" "$tmp/det2/tissue_tear_state.csv" && ok || bad "tissue_tear: --refactor count differs between 1 and 2 threads"
+"$R" --refactor sometimes "$tmp/ok.scn" > /dev/null 2>&1; [ $? = 2 ] && ok || bad "unknown --refactor policy accepted"
 # comments and blank lines anywhere; release of an unpinned node does nothing
 printf 'mesh beam 4 # comment\n\n# whole-line comment\nfix z lt 0.5\nrelease 60\nforce 99 0 0 1 # tip\nsolve\n' > "$tmp/ok.scn"
 "$R" "$tmp/ok.scn" > "$tmp/ok.out" 2>&1 && ok || bad "comments: $(cat "$tmp/ok.out")"

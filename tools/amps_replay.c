@@ -2,7 +2,11 @@
    amps.h and prints one line per solve and a summary.
 
    usage: amps_replay [-q] [--residual] [--threads N] [--openmp] [--jobs N] [--order auto|amd|nd|metis|natural]
-                      [--dual] [--xs-from-dense] [--surface FILE] scenario
+                      [--refactor auto|count|off] [--dual] [--xs-from-dense] [--surface FILE] scenario
+   --refactor picks the background re-factorization's policy: auto (the default; its swaps
+   depend on the clock, so runs agree to rounding, not bits), count (at points fixed by the
+   count of structural commits: identical runs give identical bits, on any thread count and back
+   end) or off.
    --jobs N runs amps.h's parallel loops on N worker threads of examples/jobs.h (the host task
    system of amps_ctx: enqueue_task/finish_task; the calling thread helps) instead of amps' own
    workers; --openmp runs them in OpenMP regions (AMPS_BACKEND_OPENMP).
@@ -694,6 +698,16 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[a], "--jobs") && a + 1 < argc) njobs = atoi(argv[++a]);
         else if (!strcmp(argv[a], "--openmp")) R.ctx.backend = AMPS_BACKEND_OPENMP;
         else if (!strcmp(argv[a], "--surface") && a + 1 < argc) surface = argv[++a];
+        else if (!strcmp(argv[a], "--refactor") && a + 1 < argc) {
+            const char *o = argv[++a];
+            if (!strcmp(o, "auto")) R.opts.update.refactor = AMPS_REFACTOR_AUTO;
+            else if (!strcmp(o, "count")) R.opts.update.refactor = AMPS_REFACTOR_COUNT;
+            else if (!strcmp(o, "off")) R.opts.update.refactor = AMPS_REFACTOR_OFF;
+            else {
+                fprintf(stderr, "amps_replay: unknown re-factorization policy '%s'\n", o);
+                return 2;
+            }
+        }
         else if (!strcmp(argv[a], "--order") && a + 1 < argc) {
             const char *o = argv[++a];
             if (!strcmp(o, "amd")) R.opts.order.method = AMPS_ORDER_AMD;
@@ -712,7 +726,7 @@ int main(int argc, char **argv) {
     }
     if (!path) {
         fprintf(stderr,
-                "usage: amps_replay [-q] [--residual] [--threads N] [--openmp] [--jobs N] [--order auto|amd|nd|metis|natural] [--dual] [--xs-from-dense] [--surface FILE] scenario\n");
+                "usage: amps_replay [-q] [--residual] [--threads N] [--openmp] [--jobs N] [--order auto|amd|nd|metis|natural] [--refactor auto|count|off] [--dual] [--xs-from-dense] [--surface FILE] scenario\n");
         return 2;
     }
 #ifdef _OPENMP
