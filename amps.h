@@ -7778,20 +7778,33 @@ static AMPS__TARGET_AVX2 void amps__gemm_tile8_avx2(amps_int r0, amps_int r1, am
     amps_int c, k, kn = k1 - k0;
     int t;
     for (c = 0; c + 4 <= w; c += 4) {
-        const double *b[4], *a = Ap;
+        const double *b0 = B + (size_t)c * ldb + (size_t)k0, *b1 = b0 + ldb, *b2 = b1 + ldb, *b3 = b2 + ldb, *a = Ap;
+        /* named accumulators: with arrays gcc -O2 kept them in memory */
+        __m256d z = _mm256_setzero_pd(), s00 = z, s01 = z, s10 = z, s11 = z, s20 = z, s21 = z, s30 = z, s31 = z;
         __m256d s0[4], s1[4];
-        for (t = 0; t < 4; t++) {
-            b[t] = B + (size_t)(c + t) * ldb + (size_t)k0;
-            s0[t] = s1[t] = _mm256_setzero_pd();
-        }
         for (k = 0; k < kn; k++, a += 8) {
-            __m256d a0 = _mm256_loadu_pd(a), a1 = _mm256_loadu_pd(a + 4);
-            for (t = 0; t < 4; t++) {
-                __m256d v = _mm256_broadcast_sd(b[t] + k);
-                s0[t] = _mm256_fmadd_pd(a0, v, s0[t]);
-                s1[t] = _mm256_fmadd_pd(a1, v, s1[t]);
-            }
+            __m256d a0 = _mm256_loadu_pd(a), a1 = _mm256_loadu_pd(a + 4), v;
+            v = _mm256_broadcast_sd(b0 + k);
+            s00 = _mm256_fmadd_pd(a0, v, s00);
+            s01 = _mm256_fmadd_pd(a1, v, s01);
+            v = _mm256_broadcast_sd(b1 + k);
+            s10 = _mm256_fmadd_pd(a0, v, s10);
+            s11 = _mm256_fmadd_pd(a1, v, s11);
+            v = _mm256_broadcast_sd(b2 + k);
+            s20 = _mm256_fmadd_pd(a0, v, s20);
+            s21 = _mm256_fmadd_pd(a1, v, s21);
+            v = _mm256_broadcast_sd(b3 + k);
+            s30 = _mm256_fmadd_pd(a0, v, s30);
+            s31 = _mm256_fmadd_pd(a1, v, s31);
         }
+        s0[0] = s00;
+        s1[0] = s01;
+        s0[1] = s10;
+        s1[1] = s11;
+        s0[2] = s20;
+        s1[2] = s21;
+        s0[3] = s30;
+        s1[3] = s31;
         for (t = 0; t < 4; t++) {
             double *cc = C + (size_t)(c + t) * ldc + (size_t)r0;
             if (r1 - r0 == 8) {
