@@ -1202,9 +1202,11 @@ AMPS_API amps_status amps_scene_begin_batch(amps_ctx *ctx, amps_scene *S);
 AMPS_API amps_status amps_scene_commit(amps_ctx *ctx, amps_scene *S);
 /* amps_scene_commit in two phases (amps_update_commit_begin/run/end): begin and end under the
    caller's lock, run outside it (Steps 1-2, the expensive part). Meanwhile the haptic thread may
-   move pins (amps_scene_pin of a pinned node), set forces and solve (amps_scene_solve_reactions
-   never waits for the job nor swaps a re-factorization in); cuts, new pins, releases and batches
-   fail with AMPS_ERR_STATE. A failed begin or end undoes the batch (as amps_scene_commit).
+   move pins (amps_scene_pin of a node pinned before the batch), set forces and, in statics,
+   solve (amps_scene_solve_reactions never waits for the job nor swaps a re-factorization in);
+   cuts, new pins, releases, batches, gravity, amps_scene_dynamics, steps and the haptic step of
+   a dynamic scene (its K u needs the committed matrix: use the haptic model there) fail with
+   AMPS_ERR_STATE. A failed begin or end undoes the batch (as amps_scene_commit).
    Costs: begin O(recorded changes + the new indices' root paths), plus a swap if one is ready;
    run Steps 1-2 (O(closure of the new indices) + O(|S u C| x new)); end Steps 3 and 5
    (O(|S u C|^2 x changed columns)); the haptic step O(|S u C|^2). */
@@ -13779,6 +13781,7 @@ static void amps__cut_local_K(amps_scene *S, amps_int v, amps_int vc, amps_int n
 
 static void amps__scene_batch_cut(amps_scene *S, amps_int v, amps_int vc, amps_int nmoved);
 static void amps__scene_batch_undo(amps_scene *S);
+static void amps__scene_batch_abort(amps_scene *S);
 
 /* A cut of the factored model: the mesh cut, the mechanism test, new equations for the copy,
    the change of K^ on the moved tets' equations, one commit (in a batch: recorded). On failure
@@ -13839,6 +13842,11 @@ undo:
 
 static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int nmoved);
 
+/* The refusal of a call that must wait for the end of a two-phase commit. */
+static amps_status amps__scene_committing(amps_ctx *ctx, const char *fn) {
+    return amps__err(ctx, AMPS_ERR_STATE, "%s: a two-phase commit is in progress", fn);
+}
+
 AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3], const double nrm[3],
                                     amps_int *new_node) {
     amps_int vc = -1;
@@ -13846,12 +13854,15 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
     int watched;
     if (new_node) *new_node = -1;
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_cut")) != AMPS_OK) return s;
-    if (S->batch.committing) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_cut: a two-phase commit is in progress");
+    if (S->batch.committing) return amps__scene_committing(ctx, "amps_scene_cut");
     if (S->prepared && !S->batch.open && (s = amps_update_commit(ctx, S->U)) != AMPS_OK)
         return s; /* earlier changes first */
-    if ((s = amps__scene_cut_room(ctx, S, v, &watched)) != AMPS_OK) return s;
-    if (S->batch.open && (s = amps__scene_batch_room(ctx, S, amps_mesh_degree(S->m, v))) != AMPS_OK) return s;
-    if ((s = amps__scene_dyn_room(ctx, S, S->m->nnode + 1)) != AMPS_OK) return s;
+    if ((s = amps__scene_cut_room(ctx, S, v, &watched)) != AMPS_OK ||
+        (S->batch.open && (s = amps__scene_batch_room(ctx, S, amps_mesh_degree(S->m, v))) != AMPS_OK) ||
+        (s = amps__scene_dyn_room(ctx, S, S->m->nnode + 1)) != AMPS_OK) {
+        if (S->batch.open) amps__scene_batch_abort(S); /* as documented for a batch's cut */
+        return s;
+    }
     s = S->prepared ? amps__scene_cut_update(ctx, S, v, p, nrm, &vc) : amps__scene_cut_topology(ctx, S, v, p, nrm, &vc);
     if (s != AMPS_OK) return s;
     amps__scene_cut_recorded(ctx, S, v, vc);
@@ -13952,6 +13963,7 @@ static void amps__cr_haptic_rotate(const amps_scene *S, amps_haptic *h);
 AMPS_API amps_status amps_scene_solve_reactions(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_solve_reactions: NULL scene");
+    if (S->batch.committing && S->dyn.on) return amps__scene_committing(ctx, "amps_scene_solve_reactions (dynamics)");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s;
     if (S->dyn.corot) return amps__scene_corot_haptic(ctx, S);
@@ -14760,6 +14772,13 @@ static void amps__scene_batch_undo(amps_scene *S) {
     B->n = B->nmoved = 0;
 }
 
+/* A failed batch: the engine's pending changes discarded (the batch began with none), then the
+   scene's undone. */
+static void amps__scene_batch_abort(amps_scene *S) {
+    amps_update_discard(S->U);
+    amps__scene_batch_undo(S);
+}
+
 AMPS_API amps_status amps_scene_begin_batch(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_begin_batch: NULL scene");
@@ -14977,7 +14996,7 @@ AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int np
         opened = 1;
     }
     s = amps__stroke_cuts(ctx, S, L, nc, pts, nrm, out, &ncut);
-    if (s != AMPS_OK && opened && S->batch.open) amps__scene_batch_undo(S);
+    if (s != AMPS_OK && opened && S->batch.open) amps__scene_batch_abort(S);
     if (s == AMPS_OK && opened && (s = amps_scene_commit(ctx, S)) == AMPS_ERR_SINGULAR_UPDATE) {
         /* the batch was undone: the cuts again, each committed alone, the ones that leave a piece
            loose refused */
@@ -15218,6 +15237,7 @@ AMPS_API amps_status amps_scene_gravity(amps_ctx *ctx, amps_scene *S, const doub
     amps_status s;
     int d;
     if (!S || !g) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_gravity: NULL argument");
+    if (S->batch.committing) return amps__scene_committing(ctx, "amps_scene_gravity");
     for (d = 0; d < 3; d++)
         if (!amps__isfinite(g[d])) return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_gravity: non-finite gravity");
     for (d = 0; d < 3; d++) S->dyn.g[d] = g[d];
@@ -15229,6 +15249,7 @@ AMPS_API amps_status amps_scene_gravity(amps_ctx *ctx, amps_scene *S, const doub
 AMPS_API amps_status amps_scene_dynamics(amps_ctx *ctx, amps_scene *S, double dt, double alpha, double beta) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_dynamics: NULL scene");
+    if (S->batch.committing) return amps__scene_committing(ctx, "amps_scene_dynamics");
     if (!amps__isfinite(dt) || !(dt > 0) || !amps__isfinite(alpha) || !(alpha >= 0) || !amps__isfinite(beta) ||
         !(beta >= 0))
         return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_dynamics: need dt > 0, alpha >= 0, beta >= 0 (finite)");
@@ -15540,6 +15561,7 @@ AMPS_API amps_status amps_scene_step(amps_ctx *ctx, amps_scene *S, amps_int nste
     amps_int k, v;
     amps_status s = AMPS_OK, w = AMPS_OK;
     if (!S || nsteps < 0) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_step: NULL scene or negative step count");
+    if (S->batch.committing) return amps__scene_committing(ctx, "amps_scene_step");
     if (!S->dyn.on)
         return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_step: the scene is static (call amps_scene_dynamics first)");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
@@ -15994,9 +16016,10 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
             goto oom;
         S->dyn.crA.cap_row = c;
     }
-    if (!S->dyn.crA.map && (amps__realloc(ctx, (void **)&S->dyn.crA.map, 16 * (size_t)nt + 1, sizeof(amps_int)) ||
-                            amps__realloc(ctx, (void **)&S->dyn.crA.tet, 4 * (size_t)nt + 1, sizeof(amps_int)) ||
-                            amps__realloc(ctx, (void **)&S->dyn.crA.wrow, 16 * (size_t)nt + 1, sizeof(amps_int))))
+    if (!S->dyn.crA.wrow && /* the last of the three: a failed first call is retried in full */
+        (amps__realloc(ctx, (void **)&S->dyn.crA.map, 16 * (size_t)nt + 1, sizeof(amps_int)) ||
+         amps__realloc(ctx, (void **)&S->dyn.crA.tet, 4 * (size_t)nt + 1, sizeof(amps_int)) ||
+         amps__realloc(ctx, (void **)&S->dyn.crA.wrow, 16 * (size_t)nt + 1, sizeof(amps_int))))
         goto oom;
     /* rows with repeats: 4 entries per tet and node of it, by a counting pass */
     cnt = S->dyn.crA.wcnt;

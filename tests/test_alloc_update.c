@@ -250,9 +250,10 @@ static void test_engine(void) {
 
 /* ---------------------------------- scene ---------------------------------- */
 
-#define SOPS 14
+#define SOPS 16
 static amps_status scene_op(amps_ctx *c, amps_scene *S, int j) {
-    double f[3] = {0.5, -1, 2}, u[3] = {0.01, 0, -0.01}, u2[3] = {0, 0.02, 0}, p[3], nrm[3] = {0.3, 1, 0.2};
+    double f[3] = {0.5, -1, 2}, u[3] = {0.01, 0, -0.01}, u2[3] = {0, 0.02, 0}, p[3], nrm[3] = {0.3, 1, 0.2},
+           pts[6] = {0.5, -0.1, 1.2, 0.5, 1.1, 1.2}, blade[3] = {0, 0, 1};
     amps_int vc;
     const amps_mesh *m = amps_scene_mesh(S);
     switch (j) {
@@ -262,7 +263,7 @@ static amps_status scene_op(amps_ctx *c, amps_scene *S, int j) {
     case 6:
     case 10:
     case 13: return amps_scene_solve(c, S);
-    case 3: memcpy(p, m->xyz + 3 * 22, sizeof(p)); return amps_scene_cut(c, S, 22, p, nrm, &vc);
+    case 3: return amps_scene_stroke(c, S, 2, pts, blade, 0.3, NULL); /* a batch of 3 cuts, the first of the run */
     case 4: return amps_scene_pin(c, S, 30, u2);
     case 5: return amps_scene_pin(c, S, 31, u);
     case 7: return amps_scene_release(c, S, 30);
@@ -273,6 +274,8 @@ static amps_status scene_op(amps_ctx *c, amps_scene *S, int j) {
         return amps_scene_cut(c, S, 31, p, nrm, &vc);
     case 11: return amps_scene_force(c, S, 44, u2);
     case 12: return amps_scene_release(c, S, 31);
+    case 14: memcpy(p, m->xyz + 3 * 22, sizeof(p)); return amps_scene_cut(c, S, 22, p, nrm, &vc);
+    case 15: return amps_scene_solve(c, S);
     }
     return AMPS_OK;
 }
@@ -411,6 +414,137 @@ static void test_scene(void) {
     for (t = 0; t <= SOPS; t++) free(ub[t]);
 }
 
+/* A stroke (one batch of 3 cuts) on a scene with default capacities, its k-th allocation
+   failing: the scene is as before it, and the stroke made again gives the fault-free result. */
+static amps_scene *stroke_scene(amps_ctx *c) {
+    amps_mesh *m;
+    amps_scene *S;
+    amps_int v;
+    double f[3] = {0.3, 0.1, -0.2};
+    amps_ctx_init(c);
+    c->alloc_user = &t_al;
+    c->nthreads = 1;
+    m = amps_mesh_brick(c, 2);
+    S = amps_scene_create(c, m, NULL);
+    amps_scene_set_material(c, S, 1000, 0.3);
+    amps_scene_fix_where(c, S, 2, AMPS_LT, 0.01, NULL);
+    CHECK(amps_scene_prepare(c, S) == AMPS_OK, "stroke scene: prepare: %s", c->msg);
+    for (v = 0; v < amps_scene_mesh(S)->nnode; v++)
+        if (amps_scene_mesh(S)->xyz[3 * v + 2] > 1.99) amps_scene_force(c, S, v, f);
+    return S;
+}
+
+static void test_stroke_oom(void) {
+    double pts[6] = {0.5, -0.1, 1.2, 0.5, 1.1, 1.2}, blade[3] = {0, 0, 1}, *ref, *u;
+    amps_ctx c;
+    amps_scene *S = stroke_scene(&c);
+    amps_int n, nn;
+    long k, points = 0;
+    CHECK(amps_scene_stroke(&c, S, 2, pts, blade, 0.3, NULL) == AMPS_OK && amps_scene_solve(&c, S) == AMPS_OK,
+          "stroke, fault-free: %s", c.msg);
+    n = 3 * amps_scene_mesh(S)->nnode;
+    ref = (double *)malloc(sizeof(double) * (size_t)n);
+    u = (double *)malloc(sizeof(double) * (size_t)n);
+    memcpy(ref, amps_scene_displacements(S), sizeof(double) * (size_t)n);
+    amps_scene_free(&c, S);
+    t_al.live = 0;
+    for (k = 0; k < 2000; k++) {
+        amps_status s;
+        S = stroke_scene(&c);
+        nn = amps_scene_mesh(S)->nnode;
+        arm(k);
+        s = amps_scene_stroke(&c, S, 2, pts, blade, 0.3, NULL);
+        disarm();
+        if (s == AMPS_OK) {
+            amps_scene_free(&c, S);
+            t_al.live = 0;
+            break;
+        }
+        points++;
+        CHECK(s == AMPS_ERR_OOM && amps_scene_mesh(S)->nnode == nn, "stroke fail at %ld: status %d, %ld nodes", k,
+              (int)s, (long)amps_scene_mesh(S)->nnode);
+        CHECK(amps_scene_stroke(&c, S, 2, pts, blade, 0.3, NULL) == AMPS_OK && amps_scene_solve(&c, S) == AMPS_OK &&
+                      3 * amps_scene_mesh(S)->nnode == n,
+              "stroke fail at %ld: again: %s", k, c.msg);
+        if (3 * amps_scene_mesh(S)->nnode == n) {
+            memcpy(u, amps_scene_displacements(S), sizeof(double) * (size_t)n);
+            CHECK(t_reldiff((int)n, u, ref) <= 1e-10, "stroke fail at %ld: again differs %.2e", k,
+                  t_reldiff((int)n, u, ref));
+        }
+        amps_scene_free(&c, S);
+        CHECK(t_al.live == 0, "stroke fail at %ld: %ld live", k, t_al.live);
+        t_al.live = 0;
+    }
+    printf("  stroke: %ld allocation points\n", points);
+    /* the second cut of a batch failing: the batch is undone (the first cut too) */
+    for (k = 0, points = 0; k < 2000; k++) {
+        amps_status s;
+        double p[3], nrm[3] = {0.3, 1, 0.2};
+        amps_int vc;
+        S = stroke_scene(&c);
+        nn = amps_scene_mesh(S)->nnode;
+        memcpy(p, amps_scene_mesh(S)->xyz + 3 * 22, sizeof(p));
+        CHECK(amps_scene_begin_batch(&c, S) == AMPS_OK && amps_scene_cut(&c, S, 22, p, nrm, &vc) == AMPS_OK,
+              "batch: first cut: %s", c.msg);
+        memcpy(p, amps_scene_mesh(S)->xyz + 3 * 13, sizeof(p));
+        arm(k);
+        s = amps_scene_cut(&c, S, 13, p, nrm, &vc);
+        disarm();
+        if (s != AMPS_ERR_OOM) {
+            CHECK(s == AMPS_OK, "batch: second cut: %s", c.msg);
+            amps_scene_free(&c, S);
+            t_al.live = 0;
+            break;
+        }
+        points++;
+        CHECK(s == AMPS_ERR_OOM && amps_scene_mesh(S)->nnode == nn && amps_scene_commit(&c, S) == AMPS_OK &&
+                      amps_scene_solve(&c, S) == AMPS_OK,
+              "batch cut fail at %ld: status %d, %ld nodes (%ld before the batch): %s", k, (int)s,
+              (long)amps_scene_mesh(S)->nnode, (long)nn, c.msg);
+        CHECK(amps_scene_stroke(&c, S, 2, pts, blade, 0.3, NULL) == AMPS_OK && amps_scene_solve(&c, S) == AMPS_OK &&
+                      3 * amps_scene_mesh(S)->nnode == n &&
+                      t_reldiff((int)n, amps_scene_displacements(S), ref) <= 1e-10,
+              "batch cut fail at %ld: the stroke after it differs", k);
+        amps_scene_free(&c, S);
+        CHECK(t_al.live == 0, "batch cut fail at %ld: %ld live", k, t_al.live);
+        t_al.live = 0;
+    }
+    printf("  the second cut of a batch: %ld allocation points\n", points);
+    /* the first corotational step failing, then made again */
+    for (k = -1, points = 0; k < 2000; k++) {
+        amps_status s;
+        S = stroke_scene(&c);
+        CHECK(amps_scene_dynamics(&c, S, 0.05, 0.1, 0.02) == AMPS_OK && amps_scene_corotational(&c, S, 1) == AMPS_OK,
+              "corotational scene: %s", c.msg);
+        arm(k);
+        s = amps_scene_step(&c, S, 1);
+        disarm();
+        if (k >= 0 && s == AMPS_OK) {
+            amps_scene_free(&c, S);
+            t_al.live = 0;
+            break;
+        }
+        if (k >= 0) {
+            points++;
+            CHECK(s == AMPS_ERR_OOM, "corotational step fail at %ld: status %d", k, (int)s);
+            s = amps_scene_step(&c, S, 1);
+        }
+        CHECK(s == AMPS_OK && amps_scene_step(&c, S, 1) == AMPS_OK, "corotational step fail at %ld: again: %s", k,
+              c.msg);
+        nn = 3 * amps_scene_mesh(S)->nnode;
+        if (k < 0) memcpy(u, amps_scene_displacements(S), sizeof(double) * (size_t)nn);
+        else
+            CHECK(t_reldiff((int)nn, amps_scene_displacements(S), u) <= 1e-12,
+                  "corotational step fail at %ld: differs %.2e", k, t_reldiff((int)nn, amps_scene_displacements(S), u));
+        amps_scene_free(&c, S);
+        CHECK(t_al.live == 0, "corotational step fail at %ld: %ld live", k, t_al.live);
+        t_al.live = 0;
+    }
+    printf("  the first corotational step: %ld allocation points\n", points);
+    free(ref);
+    free(u);
+}
+
 /* ---------------------------------- readers ---------------------------------- */
 
 static void test_readers(void) {
@@ -474,6 +608,7 @@ int main(void) {
     CHECK(base_F && amps_factorize(&c, base_F, base_K) == AMPS_OK, "base factor");
     test_engine();
     test_scene();
+    test_stroke_oom();
     test_readers();
     printf("  allocation failures injected: %ld\n", points);
     amps_factor_free(&c, base_F);

@@ -219,6 +219,44 @@ static void test_stroke_loose(void) {
     shadow_free(&w);
 }
 
+/* A dynamic scene during a two-phase commit: steps, its haptic step, gravity and a new
+   amps_scene_dynamics are refused and change nothing; after the end the steps equal a scene
+   committed in one phase. */
+static void test_two_phase_dynamics(void) {
+    amps_ctx ctx;
+    amps_scene *S[2];
+    shadow w[2];
+    double g[3] = {0, 0, -1}, p[3];
+    amps_int vc;
+    int k;
+    amps_ctx_init(&ctx);
+    for (k = 0; k < 2; k++) {
+        S[k] = beam_scene(&ctx, 6, w + k, NULL);
+        CHECK(amps_scene_dynamics(&ctx, S[k], 0.05, 0.1, 0.02) == AMPS_OK && amps_scene_step(&ctx, S[k], 2) == AMPS_OK,
+              "dynamics: %s", ctx.msg);
+        memcpy(p, amps_scene_mesh(S[k])->xyz + 3 * 87, sizeof(p));
+        CHECK(amps_scene_begin_batch(&ctx, S[k]) == AMPS_OK && amps_scene_cut(&ctx, S[k], 87, p, g, &vc) == AMPS_OK,
+              "batch: %s", ctx.msg);
+    }
+    CHECK(amps_scene_commit(&ctx, S[1]) == AMPS_OK, "one-phase commit: %s", ctx.msg);
+    CHECK(amps_scene_commit_begin(&ctx, S[0]) == AMPS_OK, "commit_begin: %s", ctx.msg);
+    CHECK(amps_scene_step(&ctx, S[0], 1) == AMPS_ERR_STATE, "a step during a two-phase commit");
+    CHECK(amps_scene_solve_reactions(&ctx, S[0]) == AMPS_ERR_STATE, "a dynamic haptic step during a two-phase commit");
+    CHECK(amps_scene_gravity(&ctx, S[0], g) == AMPS_ERR_STATE, "gravity during a two-phase commit");
+    CHECK(amps_scene_dynamics(&ctx, S[0], 0.1, 0.1, 0.02) == AMPS_ERR_STATE, "dynamics during a two-phase commit");
+    amps_scene_commit_run(S[0]);
+    CHECK(amps_scene_commit_end(&ctx, S[0]) == AMPS_OK, "commit_end: %s", ctx.msg);
+    for (k = 0; k < 2; k++) CHECK(amps_scene_step(&ctx, S[k], 3) == AMPS_OK, "steps after the commit: %s", ctx.msg);
+    CHECK(amps_scene_mesh(S[0])->nnode == amps_scene_mesh(S[1])->nnode &&
+                  t_reldiff(3 * (int)amps_scene_mesh(S[0])->nnode, amps_scene_displacements(S[0]),
+                            amps_scene_displacements(S[1])) <= 1e-13,
+          "two-phase commit in dynamics differs from one phase");
+    for (k = 0; k < 2; k++) {
+        amps_scene_free(&ctx, S[k]);
+        shadow_free(w + k);
+    }
+}
+
 /* Random changes, in batches of 1-6 on A and one by one on B. */
 static void test_batches(unsigned long long seed) {
     amps_ctx ctx;
@@ -549,5 +587,6 @@ int main(void) {
     test_count();
     test_haptic_no_swap();
     test_two_phase();
+    test_two_phase_dynamics();
     return amps_t_end("test_frame");
 }
