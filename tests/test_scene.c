@@ -42,8 +42,8 @@ static void compare(amps_ctx *ctx, amps_scene *S, const shadow *w, const char *w
         for (k = 0; k < w->nwatch; k++) wl[k] = w->watch[k];
         memcpy(u1, amps_scene_displacements(S), sizeof(double) * 3 * m->nnode);
         CHECK(amps_scene_watch(ctx, S, w->nwatch, wl) == AMPS_OK, "%s: watch again: %s", what, ctx->msg);
-        CHECK(amps_scene_solve_watched(ctx, S) == AMPS_OK, "%s step %d: watched solve after a full one: %s", what,
-              step, ctx->msg);
+        CHECK(amps_scene_solve_watched(ctx, S) == AMPS_OK, "%s step %d: watched solve after a full one: %s", what, step,
+              ctx->msg);
         CHECK(amps_scene_solve(ctx, S) == AMPS_OK, "%s step %d: solve again: %s", what, step, ctx->msg);
         CHECK(memcmp(u1, amps_scene_displacements(S), sizeof(double) * 3 * m->nnode) == 0,
               "%s step %d: a full solve after a watched one changed the full solve's values", what, step);

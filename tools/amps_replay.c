@@ -707,8 +707,7 @@ int main(int argc, char **argv) {
                 fprintf(stderr, "amps_replay: unknown re-factorization policy '%s'\n", o);
                 return 2;
             }
-        }
-        else if (!strcmp(argv[a], "--order") && a + 1 < argc) {
+        } else if (!strcmp(argv[a], "--order") && a + 1 < argc) {
             const char *o = argv[++a];
             if (!strcmp(o, "amd")) R.opts.order.method = AMPS_ORDER_AMD;
             else if (!strcmp(o, "nd")) R.opts.order.method = AMPS_ORDER_ND;
