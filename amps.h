@@ -7884,6 +7884,20 @@ static void amps__gemm_tile(amps_int r0, amps_int r1, amps_int w, amps_int k0, a
     amps__gemm_rest(c, r0, r1, w, k0, k1, A, lda, B, ldb, C, ldc);
 }
 
+/* y(0:n) -= a x(0:n) (y and x do not overlap), four entries at a time in SSE2: the bits of the
+   scalar loop. */
+static void amps__axpy_sub(double *y, const double *x, double a, amps_int n) {
+    amps_int i = 0;
+#ifdef AMPS__SSE2
+    const __m128d av = _mm_set1_pd(a);
+    for (; i + 4 <= n; i += 4) {
+        _mm_storeu_pd(y + i, _mm_sub_pd(_mm_loadu_pd(y + i), _mm_mul_pd(_mm_loadu_pd(x + i), av)));
+        _mm_storeu_pd(y + i + 2, _mm_sub_pd(_mm_loadu_pd(y + i + 2), _mm_mul_pd(_mm_loadu_pd(x + i + 2), av)));
+    }
+#endif
+    for (; i < n; i++) y[i] -= x[i] * a;
+}
+
 /* s[i] = a_i(0:n)^T b(0:n) for the nr <= 4 vectors a_i = a + i lda: b is read once for all. */
 static void amps__dot4(const double *a, size_t lda, amps_int nr, const double *b, amps_int n, double *s) {
     const double *a0 = a, *a1 = nr > 1 ? a + lda : a, *a2 = nr > 2 ? a + 2 * lda : a, *a3 = nr > 3 ? a + 3 * lda : a;
@@ -8104,7 +8118,7 @@ static amps_status amps__lu_panel_factor(amps_update *U, amps_int qp, amps_int w
         for (cc = qq + 1; cc < qp + w; cc++) {
             double *cl = LU + (size_t)cc * ld, x = cl[qq];
             if (x == 0.0) continue;
-            for (r = qq + 1; r < u; r++) cl[r] -= col[r] * x;
+            amps__axpy_sub(cl + qq + 1, col + qq + 1, x, u - qq - 1);
         }
     }
     return AMPS_OK;
@@ -8289,14 +8303,14 @@ static void amps__lu_solve(const amps_update *U, const double *b, double *z, dou
         const double *l = U->lu.LU + (size_t)q * ld;
         double x = t[q];
         if (x != 0.0)
-            for (r = q + 1; r < u; r++) t[r] -= l[r] * x;
+            amps__axpy_sub(t + q + 1, l + q + 1, x, u - q - 1);
     }
     for (q = u - 1; q >= 0; q--) {
         const double *col = U->lu.LU + (size_t)q * ld;
         double x = t[q] / col[q];
         t[q] = x;
         if (x != 0.0)
-            for (r = 0; r < q; r++) t[r] -= col[r] * x;
+            amps__axpy_sub(t, col, x, q);
     }
     for (q = 0; q < u; q++) z[U->lu.col_order[q]] = t[q];
 }
@@ -8988,7 +9002,7 @@ static void amps__dense_step_g(amps_update *U, const double *r, const double *gv
             for (k = 0; k < u; k++)
                 if (d[k] != 0.0) {
                     const double *gk = U->lu.G + (size_t)k * ld;
-                    for (a = 0; a < u; a++) b[a] -= gk[a] * d[k];
+                    amps__axpy_sub(b, gk, d[k], u);
                 }
         }
         amps__lu_solve(U, b, z, U->dense.tmp);
