@@ -7696,61 +7696,101 @@ typedef double amps__vd __attribute__((vector_size(16)));
 #else
 #define AMPS__VL 1
 #endif
+/* y(0:n) -= a x(0:n) (y and x do not overlap), four entries at a time in SSE2: the bits of the
+   scalar loop. */
+static void amps__axpy_sub(double *y, const double *x, double a, amps_int n) {
+    amps_int i = 0;
+#ifdef AMPS__SSE2
+    const __m128d av = _mm_set1_pd(a);
+    for (; i + 4 <= n; i += 4) {
+        _mm_storeu_pd(y + i, _mm_sub_pd(_mm_loadu_pd(y + i), _mm_mul_pd(_mm_loadu_pd(x + i), av)));
+        _mm_storeu_pd(y + i + 2, _mm_sub_pd(_mm_loadu_pd(y + i + 2), _mm_mul_pd(_mm_loadu_pd(x + i + 2), av)));
+    }
+#endif
+    for (; i < n; i++) y[i] -= x[i] * a;
+}
+
 /* The columns c0..w-1 of amps__gemm_tile (fewer than 4), one product at a time. */
 static void amps__gemm_rest(amps_int c0, amps_int r0, amps_int r1, amps_int w, amps_int k0, amps_int k1,
                             const double *A, size_t lda, const double *B, size_t ldb, double *C, size_t ldc) {
-    amps_int c, k, r;
+    amps_int c, k;
     for (c = c0; c < w; c++) {
         const double *b = B + (size_t)c * ldb;
         double *cc = C + (size_t)c * ldc;
         for (k = k0; k < k1; k++) {
             const double *a = A + (size_t)k * lda;
             double bv = b[k];
-            if (bv != 0.0)
-                for (r = r0; r < r1; r++) cc[r] -= a[r] * bv;
+            if (bv != 0.0) amps__axpy_sub(cc + r0, a + r0, bv, r1 - r0);
         }
     }
 }
 #ifdef AMPS__AVX2
+/* C(0:nr, 0:4) -= sum_k A(0:8, k) B(k, 0:4) (nr <= 8; column k of A at a + k as, column t of B
+   at b + t ldb, of C at c + t ldc): per entry a chain of fused multiply-adds from 0 over k, the
+   accumulators in registers (named: with arrays gcc -O2 kept them in memory). */
+static AMPS__TARGET_AVX2 void amps__gemm_k8(const double *a, size_t as, amps_int kn, const double *b, size_t ldb,
+                                            double *c, size_t ldc, amps_int nr) {
+    const double *b0 = b, *b1 = b0 + ldb, *b2 = b1 + ldb, *b3 = b2 + ldb;
+    __m256d z = _mm256_setzero_pd(), s00 = z, s01 = z, s10 = z, s11 = z, s20 = z, s21 = z, s30 = z, s31 = z;
+    __m256d s0[4], s1[4];
+    amps_int k, i;
+    int t;
+    for (k = 0; k < kn; k++, a += as) {
+        __m256d a0 = _mm256_loadu_pd(a), a1 = _mm256_loadu_pd(a + 4), v;
+        v = _mm256_broadcast_sd(b0 + k);
+        s00 = _mm256_fmadd_pd(a0, v, s00);
+        s01 = _mm256_fmadd_pd(a1, v, s01);
+        v = _mm256_broadcast_sd(b1 + k);
+        s10 = _mm256_fmadd_pd(a0, v, s10);
+        s11 = _mm256_fmadd_pd(a1, v, s11);
+        v = _mm256_broadcast_sd(b2 + k);
+        s20 = _mm256_fmadd_pd(a0, v, s20);
+        s21 = _mm256_fmadd_pd(a1, v, s21);
+        v = _mm256_broadcast_sd(b3 + k);
+        s30 = _mm256_fmadd_pd(a0, v, s30);
+        s31 = _mm256_fmadd_pd(a1, v, s31);
+    }
+    s0[0] = s00;
+    s1[0] = s01;
+    s0[1] = s10;
+    s1[1] = s11;
+    s0[2] = s20;
+    s1[2] = s21;
+    s0[3] = s30;
+    s1[3] = s31;
+    for (t = 0; t < 4; t++, c += ldc) {
+        if (nr == 8) {
+            _mm256_storeu_pd(c, _mm256_sub_pd(_mm256_loadu_pd(c), s0[t]));
+            _mm256_storeu_pd(c + 4, _mm256_sub_pd(_mm256_loadu_pd(c + 4), s1[t]));
+        } else {
+            double sv[8];
+            _mm256_storeu_pd(sv, s0[t]);
+            _mm256_storeu_pd(sv + 4, s1[t]);
+            for (i = 0; i < nr; i++) c[i] -= sv[i];
+        }
+    }
+}
+
 /* amps__gemm_tile in AVX2 + FMA: each sum over k is a chain of fused multiply-adds from 0 (8 rows
-   at a time in two vectors, the others one at a time, the same bits for a row either way). */
+   at a time by amps__gemm_k8, the others one at a time, the same bits for a row either way). */
 static AMPS__TARGET_AVX2 void amps__gemm_tile_avx2(amps_int r0, amps_int r1, amps_int w, amps_int k0, amps_int k1,
                                                    const double *A, size_t lda, const double *B, size_t ldb,
                                                    double *C, size_t ldc) {
     amps_int c, r, k;
     for (c = 0; c + 4 <= w; c += 4) {
-        const double *b[4];
-        double *cc[4];
+        const double *b = B + (size_t)c * ldb;
+        double *cc = C + (size_t)c * ldc;
         int t;
-        for (t = 0; t < 4; t++) {
-            b[t] = B + (size_t)(c + t) * ldb;
-            cc[t] = C + (size_t)(c + t) * ldc;
-        }
-        for (r = r0; r + 8 <= r1; r += 8) {
-            __m256d s0[4], s1[4];
-            const double *a = A + (size_t)k0 * lda + (size_t)r;
-            for (t = 0; t < 4; t++) s0[t] = s1[t] = _mm256_setzero_pd();
-            for (k = k0; k < k1; k++, a += lda) {
-                __m256d a0 = _mm256_loadu_pd(a), a1 = _mm256_loadu_pd(a + 4);
-                for (t = 0; t < 4; t++) {
-                    __m256d v = _mm256_broadcast_sd(b[t] + k);
-                    s0[t] = _mm256_fmadd_pd(a0, v, s0[t]);
-                    s1[t] = _mm256_fmadd_pd(a1, v, s1[t]);
-                }
-            }
-            for (t = 0; t < 4; t++) {
-                _mm256_storeu_pd(cc[t] + r, _mm256_sub_pd(_mm256_loadu_pd(cc[t] + r), s0[t]));
-                _mm256_storeu_pd(cc[t] + r + 4, _mm256_sub_pd(_mm256_loadu_pd(cc[t] + r + 4), s1[t]));
-            }
-        }
+        for (r = r0; r + 8 <= r1; r += 8)
+            amps__gemm_k8(A + (size_t)k0 * lda + (size_t)r, lda, k1 - k0, b + k0, ldb, cc + r, ldc, 8);
         for (; r < r1; r++) {
             __m128d s[4];
             for (t = 0; t < 4; t++) s[t] = _mm_setzero_pd();
             for (k = k0; k < k1; k++) {
                 __m128d av = _mm_load_sd(A + (size_t)k * lda + (size_t)r);
-                for (t = 0; t < 4; t++) s[t] = _mm_fmadd_sd(av, _mm_load_sd(b[t] + k), s[t]);
+                for (t = 0; t < 4; t++) s[t] = _mm_fmadd_sd(av, _mm_load_sd(b + (size_t)t * ldb + k), s[t]);
             }
-            for (t = 0; t < 4; t++) cc[t][r] -= _mm_cvtsd_f64(s[t]);
+            for (t = 0; t < 4; t++) cc[(size_t)t * ldc + r] -= _mm_cvtsd_f64(s[t]);
         }
     }
     amps__gemm_rest(c, r0, r1, w, k0, k1, A, lda, B, ldb, C, ldc);
@@ -7772,55 +7812,15 @@ static AMPS__TARGET_AVX2 void amps__gemm_pack8(amps_int r0, amps_int r1, amps_in
 }
 
 /* C(r0:r1, 0:w4) -= A(r0:r1, k0:k1) B(k0:k1, 0:w4), w4 = w - w % 4, r1 - r0 <= 8, from Ap of
-   amps__gemm_pack8: each sum over k the chain of fused multiply-adds of amps__gemm_tile_avx2, so
-   the bits are its bits (a zero row of Ap is computed and not stored). */
+   amps__gemm_pack8 (a zero row of Ap is computed and not stored): the bits of
+   amps__gemm_tile_avx2. */
 static AMPS__TARGET_AVX2 void amps__gemm_tile8_avx2(amps_int r0, amps_int r1, amps_int w, amps_int k0, amps_int k1,
                                                     const double *Ap, const double *B, size_t ldb, double *C,
                                                     size_t ldc) {
-    amps_int c, k, kn = k1 - k0;
-    int t;
-    for (c = 0; c + 4 <= w; c += 4) {
-        const double *b0 = B + (size_t)c * ldb + (size_t)k0, *b1 = b0 + ldb, *b2 = b1 + ldb, *b3 = b2 + ldb, *a = Ap;
-        /* named accumulators: with arrays gcc -O2 kept them in memory */
-        __m256d z = _mm256_setzero_pd(), s00 = z, s01 = z, s10 = z, s11 = z, s20 = z, s21 = z, s30 = z, s31 = z;
-        __m256d s0[4], s1[4];
-        for (k = 0; k < kn; k++, a += 8) {
-            __m256d a0 = _mm256_loadu_pd(a), a1 = _mm256_loadu_pd(a + 4), v;
-            v = _mm256_broadcast_sd(b0 + k);
-            s00 = _mm256_fmadd_pd(a0, v, s00);
-            s01 = _mm256_fmadd_pd(a1, v, s01);
-            v = _mm256_broadcast_sd(b1 + k);
-            s10 = _mm256_fmadd_pd(a0, v, s10);
-            s11 = _mm256_fmadd_pd(a1, v, s11);
-            v = _mm256_broadcast_sd(b2 + k);
-            s20 = _mm256_fmadd_pd(a0, v, s20);
-            s21 = _mm256_fmadd_pd(a1, v, s21);
-            v = _mm256_broadcast_sd(b3 + k);
-            s30 = _mm256_fmadd_pd(a0, v, s30);
-            s31 = _mm256_fmadd_pd(a1, v, s31);
-        }
-        s0[0] = s00;
-        s1[0] = s01;
-        s0[1] = s10;
-        s1[1] = s11;
-        s0[2] = s20;
-        s1[2] = s21;
-        s0[3] = s30;
-        s1[3] = s31;
-        for (t = 0; t < 4; t++) {
-            double *cc = C + (size_t)(c + t) * ldc + (size_t)r0;
-            if (r1 - r0 == 8) {
-                _mm256_storeu_pd(cc, _mm256_sub_pd(_mm256_loadu_pd(cc), s0[t]));
-                _mm256_storeu_pd(cc + 4, _mm256_sub_pd(_mm256_loadu_pd(cc + 4), s1[t]));
-            } else {
-                double sv[8];
-                amps_int i;
-                _mm256_storeu_pd(sv, s0[t]);
-                _mm256_storeu_pd(sv + 4, s1[t]);
-                for (i = 0; i < r1 - r0; i++) cc[i] -= sv[i];
-            }
-        }
-    }
+    amps_int c;
+    for (c = 0; c + 4 <= w; c += 4)
+        amps__gemm_k8(Ap, 8, k1 - k0, B + (size_t)c * ldb + (size_t)k0, ldb, C + (size_t)c * ldc + (size_t)r0, ldc,
+                      r1 - r0);
 }
 #endif
 static void amps__gemm_tile(amps_int r0, amps_int r1, amps_int w, amps_int k0, amps_int k1, const double *A, size_t lda,
@@ -7882,20 +7882,6 @@ static void amps__gemm_tile(amps_int r0, amps_int r1, amps_int w, amps_int k0, a
         }
     }
     amps__gemm_rest(c, r0, r1, w, k0, k1, A, lda, B, ldb, C, ldc);
-}
-
-/* y(0:n) -= a x(0:n) (y and x do not overlap), four entries at a time in SSE2: the bits of the
-   scalar loop. */
-static void amps__axpy_sub(double *y, const double *x, double a, amps_int n) {
-    amps_int i = 0;
-#ifdef AMPS__SSE2
-    const __m128d av = _mm_set1_pd(a);
-    for (; i + 4 <= n; i += 4) {
-        _mm_storeu_pd(y + i, _mm_sub_pd(_mm_loadu_pd(y + i), _mm_mul_pd(_mm_loadu_pd(x + i), av)));
-        _mm_storeu_pd(y + i + 2, _mm_sub_pd(_mm_loadu_pd(y + i + 2), _mm_mul_pd(_mm_loadu_pd(x + i + 2), av)));
-    }
-#endif
-    for (; i < n; i++) y[i] -= x[i] * a;
 }
 
 /* s[i] = a_i(0:n)^T b(0:n) for the nr <= 4 vectors a_i = a + i lda: b is read once for all. */
