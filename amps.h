@@ -13361,15 +13361,17 @@ static amps_status amps__scene_workspace(amps_ctx *ctx, amps_scene *S) {
         return AMPS_ERR_OOM;
     for (t = 0; t < nt; t++) S->mech.tet_piece[t] = -1;
     for (k = 0; k < 3; k++) {
-        lo[k] = S->m->xyz[k];
-        hi[k] = lo[k];
+        lo[k] = HUGE_VAL;
+        hi[k] = -HUGE_VAL;
     }
-    for (v = 0; v < S->m->nnode; v++)
-        for (k = 0; k < 3; k++) {
+    for (t = 0; t < 4 * nt; t++) /* the nodes of the tets (a node in none does not size the model) */
+        for (v = S->m->tet[t], k = 0; k < 3 && v >= 0; k++) {
             double x = S->m->xyz[3 * v + k];
             if (x < lo[k]) lo[k] = x;
             if (x > hi[k]) hi[k] = x;
         }
+    if (nt == 0)
+        for (k = 0; k < 3; k++) lo[k] = hi[k] = 0.0;
     S->mech.scale = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
                          (hi[2] - lo[2]) * (hi[2] - lo[2]));
     return AMPS_OK;
@@ -17458,8 +17460,11 @@ static amps_status amps__tetgen_tet(amps__lex *L, long long nper, long long nat,
     r->region = 0;
     for (q = 0; !s && q < nper; q++) s = amps__lx_index(L, 0, "node index", base, np, q < 4 ? r->v + q : &extra);
     if (!s && nat > 0) s = amps__lx_num(L, 0, &at, "region attribute");
-    if (!s && nat > 0 && (at != floor(at) || fabs(at) > (double)AMPS__IMAX))
+    if (!s && nat > 0 && at != floor(at))
         s = amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "region attribute %g is not an integer", at);
+    if (!s && nat > 0 && fabs(at) > (double)AMPS__IMAX)
+        s = amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "region attribute %.0f does not fit the index type (%ld at most)",
+                         at, (long)AMPS__IMAX);
     if (!s) r->region = (amps_int)at;
     if (!s) amps__lx_eol(L); /* other attributes */
     return s;

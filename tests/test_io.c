@@ -896,6 +896,9 @@ static void test_region_readers(void) {
     amps_mesh_free(&ctx, m);
     m = t_tetgen(&ctx, T_NODE4, "1 4 1\n0 0 1 2 3 1.5\n");
     t_expect(&ctx, m, AMPS_ERR_PARSE, "t.ele:2: region attribute 1.5 is not an integer", "fractional attribute");
+    m = t_tetgen(&ctx, T_NODE4, "1 4 1\n0 0 1 2 3 3000000000\n");
+    t_expect(&ctx, m, AMPS_ERR_PARSE, "t.ele:2: region attribute 3000000000 does not fit the index type",
+             "attribute beyond the index type");
     m = t_tetgen(&ctx, T_NODE4, "1 4 1\n0 0 1 2 3\n");
     t_expect(&ctx, m, AMPS_ERR_PARSE, "t.ele:2:", "missing attribute");
 }

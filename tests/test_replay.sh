@@ -46,6 +46,7 @@ stepstatic|mesh beam 4\nfix z lt 0.5\nstep\n|3|needs dynamics
 solvedyn|mesh beam 4\nfix z lt 0.5\ndynamics 0.1 0 0\nsolve\n|4|dynamic
 dynlate|mesh beam 4\nfix z lt 0.5\nsolve\ndynamics 0.1 0 0\n|4|only before
 regionunknown|mesh beam 4\nregion 5 1 0.3\n|2|no tetrahedron
+regionneg|mesh beam 4\nregion -5 1 0.3\n|2|no tetrahedron has region -5
 densityneg|mesh beam 4\ndensity -1\n|2|density
 removetwice|mesh beam 4\nfix z lt 0.5\ndynamics 0.1 0 0\nremove 3\nremove 3\n|5|already removed
 removerange|mesh beam 4\nremove 100000\n|2|out of range

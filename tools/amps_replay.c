@@ -101,13 +101,21 @@ static int parse_num(const char *s, double *v) {
     return *end == '\0' && end != s && (*v - *v == 0.0);
 }
 
-/* A non-negative index or count that amps_int holds (else 0: a bad number, out of range). */
-static int parse_node(const char *s, amps_int *v) {
+/* An integer that amps_int holds (else 0: a bad number, out of range). */
+static int parse_int(const char *s, amps_int *v) {
     char *end;
     long x;
     errno = 0;
     x = strtol(s, &end, 10);
-    if (*end != '\0' || end == s || x < 0 || errno == ERANGE || x != (long)(amps_int)x) return 0;
+    if (*end != '\0' || end == s || errno == ERANGE || x != (long)(amps_int)x) return 0;
+    *v = (amps_int)x;
+    return 1;
+}
+
+/* A non-negative index or count that amps_int holds (else 0). */
+static int parse_node(const char *s, amps_int *v) {
+    amps_int x;
+    if (!parse_int(s, &x) || x < 0) return 0;
     *v = (amps_int)x;
     return 1;
 }
@@ -306,22 +314,25 @@ static int run_selection_line(replay *R, int nt, char **t) {
 static int cmd_stroke(replay *R, int nt, char **t, double t0) {
     double x[13];
     amps_scene_stroke_result r;
-    amps_status st[64], s;
+    amps_status *st, s;
     int k, np = (nt - 5) / 3, noop = 0, refused = 0;
     if ((nt != 11 && nt != 14))
         return fail(R, "%s", "usage: stroke <radius> <bx> <by> <bz> <x0> <y0> <z0> <x1> <y1> <z1> [<x2> <y2> <z2>]");
     for (k = 1; k < nt; k++)
         if (!parse_num(t[k], &x[k - 1])) return fail(R, "bad number '%s'", t[k]);
     memset(&r, 0, sizeof(r));
-    r.cap = 64;
+    r.cap = amps_scene_mesh(R->S)->nnode; /* the nodes touched are at most the nodes */
+    st = (amps_status *)malloc(sizeof(amps_status) * (size_t)(r.cap > 0 ? r.cap : 1));
+    if (!st) return fail(R, "%s", "out of memory");
     r.status = st;
     s = amps_scene_stroke(&R->ctx, R->S, np, x + 4, x + 1, x[0], &r);
-    if (s == AMPS_ERR_SINGULAR_UPDATE) printf("%s:%d: stroke undone: %s\n", R->file, R->line, R->ctx.msg);
-    else if (s != AMPS_OK) return lib_fail(R, "stroke");
-    for (k = 0; k < r.n && k < r.cap; k++) {
+    for (k = 0; s == AMPS_OK && k < r.n && k < r.cap; k++) {
         noop += st[k] == AMPS_WARN_NOOP;
         refused += st[k] == AMPS_ERR_SINGULAR_UPDATE;
     }
+    free(st);
+    if (s == AMPS_ERR_SINGULAR_UPDATE) printf("%s:%d: stroke undone: %s\n", R->file, R->line, R->ctx.msg);
+    else if (s != AMPS_OK) return lib_fail(R, "stroke");
     if (!R->quiet)
         printf("%s:%d: stroke: %ld nodes touched, %ld cut, %d no-ops, %d refused\n", R->file, R->line, (long)r.n,
                (long)r.ncut, noop, refused);
@@ -524,7 +535,7 @@ static int cmd_material_dyn(replay *R, int nt, char **t) {
         if (R->solved) return fail(R, "%s", "density is allowed only before the first solve or step");
         return amps_scene_set_density(&R->ctx, R->S, x[0]) ? lib_fail(R, "density") : 0;
     }
-    if ((nt != 4 && nt != 5) || !parse_node(t[1], &id)) return fail(R, "%s", "usage: region <id> <E> <nu> [<rho>]");
+    if ((nt != 4 && nt != 5) || !parse_int(t[1], &id)) return fail(R, "%s", "usage: region <id> <E> <nu> [<rho>]");
     x[2] = 0;
     for (k = 2; k < nt; k++)
         if (!parse_num(t[k], &x[k - 2])) return fail(R, "bad number '%s'", t[k]);
