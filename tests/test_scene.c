@@ -241,8 +241,9 @@ static int grid_collinear(int n, const int (*p)[3]) {
    (serpentine order). The top block then hangs on the uncut nodes of that layer and on its
    pins (npin of the top nodes, pinned at 0), so a cut must be refused exactly when those
    points are on one line (a hinge, a ball joint, nothing); a refused cut leaves the scene as it
-   was, an accepted one a system with a small residual. */
-static void test_mechanism(int npin, const int *pins) {
+   was, an accepted one a system with a small residual. With stray, the mesh also has a node in
+   no tet far away (1e11), which must not change the test's line tolerance. */
+static void test_mechanism(int npin, const int *pins, int stray) {
     amps_ctx ctx;
     amps_mesh *m;
     amps_scene *S;
@@ -250,12 +251,24 @@ static void test_mechanism(int npin, const int *pins) {
     int uncut[16], k, i, nref = 0, nacc = 0, nn;
     amps_ctx_init(&ctx);
     m = amps_mesh_grid(&ctx, 4, 4, 5, 1.0, 1.0, 1.0);
+    if (stray) {
+        double *xyz = (double *)malloc(sizeof(double) * 3 * (m->nnode + 1));
+        amps_mesh *m2;
+        memcpy(xyz, m->xyz, sizeof(double) * 3 * m->nnode);
+        xyz[3 * m->nnode] = 1e11;
+        xyz[3 * m->nnode + 1] = xyz[3 * m->nnode + 2] = 0;
+        m2 = amps_mesh_create(&ctx, m->nnode + 1, xyz, m->ntet, m->tet);
+        CHECK(m2 != NULL, "mechanism: mesh with a stray node: %s", ctx.msg);
+        amps_mesh_free(&ctx, m);
+        free(xyz);
+        m = m2;
+    }
     S = amps_scene_create(&ctx, m, NULL);
     amps_scene_fix_where(&ctx, S, 2, AMPS_LT, 0.5, NULL);
     amps_scene_force(&ctx, S, 4 * 4 * 4 + 5, f);
     for (k = 0; k < npin; k++) amps_scene_pin(&ctx, S, pins[k], zero);
     CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "mechanism: first solve: %s", ctx.msg);
-    u0 = (double *)malloc(sizeof(double) * 3 * (80 + 16));
+    u0 = (double *)malloc(sizeof(double) * 3 * (81 + 16));
     for (k = 0; k < 16; k++) uncut[k] = 1;
     for (k = 0; k < 16; k++) {
         int row = k / 4, col = row % 2 ? 3 - k % 4 : k % 4, v = col + 4 * (row + 4 * 2), npt = 0, expect;
@@ -304,7 +317,8 @@ static void test_mechanism(int npin, const int *pins) {
                   "mechanism (%d pins): cut %d: residual %.2e", npin, k, res);
         }
     }
-    printf("  mechanism, %d pins on the top: %d cuts accepted, %d refused\n", npin, nacc, nref);
+    printf("  mechanism, %d pins on the top%s: %d cuts accepted, %d refused\n", npin, stray ? ", a stray node" : "",
+           nacc, nref);
     free(u0);
     amps_scene_free(&ctx, S);
 }
@@ -341,10 +355,11 @@ int main(void) {
     {
         static const int pins1[1] = {4 * 16 + 5}, pins2[2] = {4 * 16 + 0, 4 * 16 + 15},
                          pins3[3] = {4 * 16 + 0, 4 * 16 + 3, 4 * 16 + 12};
-        test_mechanism(0, NULL);
-        test_mechanism(1, pins1);
-        test_mechanism(2, pins2);
-        test_mechanism(3, pins3);
+        test_mechanism(0, NULL, 0);
+        test_mechanism(1, pins1, 0);
+        test_mechanism(2, pins2, 0);
+        test_mechanism(3, pins3, 0);
+        test_mechanism(2, pins2, 1);
     }
     random_scene(amps_mesh_beam(&ctx, 8), 2, 0.5, 120, 11, 0, "beam 5x5x8");
     random_scene(amps_mesh_brick(&ctx, 3), 2, 1e-9, 120, 12, 0, "brick R=3");
