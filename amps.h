@@ -1350,9 +1350,12 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
 AMPS_API amps_status amps_scene_corotational(amps_ctx *ctx, amps_scene *S, int on);
 /* PCG tolerance (0 < tol < 1, default 1e-10) and iteration cap (maxit >= 1, 0: default 200) of
    the corotational step: at most the work of maxit iterations with the engine's preconditioner
-   (a Gauss-Seidel iteration counts as its cost ratio to one of those); a step that does not reach
-   tol within it is still taken and amps_scene_step returns AMPS_WARN_INACCURATE.
-   AMPS_ERR_VALUE otherwise. */
+   (a Gauss-Seidel iteration counts as its cost ratio to one of those). A step that does not
+   reach tol within it (slivers, rotations far from the engine's frames) factors its own A_R
+   (amps_analyze, amps_factorize: it allocates, and costs about a factorization) and goes on with
+   it as the preconditioner, which it stays for the next steps until it stalls in turn or the
+   free entries change; a step still above tol is taken and amps_scene_step returns
+   AMPS_WARN_INACCURATE. AMPS_ERR_VALUE otherwise. */
 AMPS_API amps_status amps_scene_corotational_tol(amps_ctx *ctx, amps_scene *S, double tol, amps_int maxit);
 /* What the last step did. */
 typedef struct amps_scene_step_stats {
@@ -1364,6 +1367,7 @@ typedef struct amps_scene_step_stats {
     double t_solve;            /* seconds: the PCG */
     amps_int iterations_total; /* PCG iterations of all steps */
     amps_int iterations_gs;    /* of the last step's iterations, those with the Gauss-Seidel preconditioner */
+    amps_int factored;         /* steps whose PCG stalled and factored A_R (see amps_scene_corotational_tol) */
 } amps_scene_step_stats;
 /* Fills st with the last step's statistics (zeros before the first step). AMPS_ERR_ARG for NULL. */
 AMPS_API amps_status amps_scene_step_info(const amps_scene *S, amps_scene_step_stats *st);
@@ -13003,6 +13007,14 @@ typedef struct amps__scene_dyn {
         amps_int probe; /* steps since Gauss-Seidel was last tried */
         double gsr;     /* Gauss-Seidel: |r^| / |r| at the last check (0: none yet) */
     } crP;
+    struct {                /* A_R factored at a step whose PCG stalled (amps__cr_own): the preconditioner
+                               in place of the engine's while the free entries keep their pattern */
+        amps_factor *F;     /* NULL: none */
+        amps_int n, nf;     /* PCG entries, free ones (F's order) */
+        amps_int *idx;      /* n: the free entry's index in F (-1: held) */
+        unsigned char *cp;  /* n: cr_cp when F was made */
+        double *w, *work;   /* nf each */
+    } crF;
     struct {                /* the haptic path between corotational steps */
         double *g0, *r0;    /* 3 per node: pin targets and reactions of the last step */
         unsigned char *pin; /* per node: pinned at the last step */
@@ -13083,6 +13095,8 @@ AMPS_API void amps_scene_opts_default(amps_scene_opts *o) {
     o->update.grow = 1;
 }
 
+static void amps__cr_own_free(amps_ctx *ctx, amps_scene *S);
+
 AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     if (!S) return;
     amps_update_free(ctx, S->U);
@@ -13149,6 +13163,7 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->dyn.crA.ord);
     amps__free(ctx, S->dyn.crA.rank);
     amps__free(ctx, S->dyn.crA.wgs);
+    amps__cr_own_free(ctx, S);
     amps__free(ctx, S->dyn.crA.map);
     amps__free(ctx, S->dyn.crA.tet);
     amps__free(ctx, S->dyn.crA.wrow);
@@ -16037,6 +16052,7 @@ static amps_status amps__cr_pattern(amps_ctx *ctx, amps_scene *S) {
     if (S->dyn.crA.nnode == nn && S->dyn.crA.ntet == nt &&
         !memcmp(S->dyn.crA.tet, m->tet, sizeof(amps_int) * 4 * (size_t)nt))
         return AMPS_OK;
+    amps__cr_own_free(ctx, S); /* its entries follow the ranks of this pattern */
     S->dyn.crA.nnode = 0;
     if ((size_t)nn + 1 > S->dyn.crA.cap_row) { /* room for the nodes: bp and the counts */
         size_t c = (size_t)(m->node_cap > nn ? m->node_cap : nn) + 1;
@@ -16618,6 +16634,107 @@ static void amps__cr_rotate(const amps_scene *S, const double *x, double *y, int
     }
 }
 
+/* The componentwise backward error max_i |r_i| / (|A_R| |x| + |b|)_i over the free rows of the
+   PCG's x with residual r: near the unit roundoff no preconditioner does better. */
+static double amps__cr_eta(const amps_scene *S, const double *r, const double *x, const double *b) {
+    const amps__scene_dyn *D = &S->dyn;
+    const amps_int *be = D->crA.be;
+    double om = 0;
+    amps_int k, q, e;
+    int h, i;
+    for (k = 0; k < D->crA.nnode; k++)
+        for (i = 0; i < 3; i++) {
+            double den;
+            e = 3 * k + i;
+            if (D->cr_cp[e]) continue;
+            den = fabs(b[e]);
+            for (h = 0; h < 2; h++)
+                for (q = (h ? D->crA.bu : D->crA.bp)[k]; q < (h ? D->crA.bu : D->crA.bp)[k + 1]; q++) {
+                    const double *B = D->crA.bx + 9 * (size_t)q + 3 * i, *u = x + be[q];
+                    den += fabs(B[0] * u[0]) + fabs(B[1] * u[1]) + fabs(B[2] * u[2]);
+                }
+            if (den > 0 && fabs(r[e]) > om * den) om = fabs(r[e]) / den;
+        }
+    return om;
+}
+
+/* Drops the factor of amps__cr_own. */
+static void amps__cr_own_free(amps_ctx *ctx, amps_scene *S) {
+    amps_factor_free(ctx, S->dyn.crF.F);
+    amps__free(ctx, S->dyn.crF.idx);
+    amps__free(ctx, S->dyn.crF.cp);
+    amps__free(ctx, S->dyn.crF.w);
+    amps__free(ctx, S->dyn.crF.work);
+    memset(&S->dyn.crF, 0, sizeof(S->dyn.crF));
+}
+
+/* The fallback of a PCG that stalls (slivers, large rotations): A_R of this step on its free
+   entries (the PCG's order; the upper triangle, from the blocks of amps__cr_assemble) analyzed
+   and factored by amps_analyze and amps_factorize. Allocates (the factor and its pattern); a
+   factor of an earlier step is dropped. AMPS_ERR_NOT_SPD / AMPS_ERR_OOM leave none. */
+static amps_status amps__cr_own(amps_ctx *ctx, amps_scene *S) {
+    amps__scene_dyn *D = &S->dyn;
+    const unsigned char *cp = D->cr_cp;
+    amps_int n = 3 * S->m->nnode, nf = 0, nz = 0, e, k, q, *ti = NULL, *tj = NULL;
+    double *tx = NULL;
+    amps_csc *K = NULL;
+    amps_status s = AMPS_OK;
+    size_t cap = 9 * (size_t)D->crA.bu[D->crA.nnode];
+    int h, i, j;
+    amps__cr_own_free(ctx, S);
+    D->crF.idx = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int)));
+    D->crF.cp = AMPS__CAST(unsigned char *, amps__malloc(ctx, (size_t)n + 1, 1));
+    ti = AMPS__CAST(amps_int *, amps__malloc(ctx, cap + 1, sizeof(amps_int)));
+    tj = AMPS__CAST(amps_int *, amps__malloc(ctx, cap + 1, sizeof(amps_int)));
+    tx = AMPS__CAST(double *, amps__malloc(ctx, cap + 1, sizeof(double)));
+    if (!D->crF.idx || !D->crF.cp || !ti || !tj || !tx) {
+        s = amps__err(ctx, AMPS_ERR_OOM, "amps_scene_step: out of memory factoring A_R");
+        goto done;
+    }
+    for (e = 0; e < n; e++) D->crF.idx[e] = cp[e] ? -1 : nf++;
+    memcpy(D->crF.cp, cp, (size_t)n);
+    for (k = 0; k < D->crA.nnode; k++) /* the blocks of row k: entries (3k + i, be + j), i <= j in F */
+        for (h = 0; h < 2; h++)
+            for (q = (h ? D->crA.bu : D->crA.bp)[k]; q < (h ? D->crA.bu : D->crA.bp)[k + 1]; q++)
+                for (i = 0; i < 3; i++)
+                    for (j = 0; j < 3; j++) {
+                        amps_int a = D->crF.idx[3 * k + i], b = D->crF.idx[D->crA.be[q] + j];
+                        if (a < 0 || b < 0 || a > b) continue;
+                        ti[nz] = a;
+                        tj[nz] = b;
+                        tx[nz++] = D->crA.bx[9 * (size_t)q + 3 * i + j];
+                    }
+    D->crF.n = n;
+    D->crF.nf = nf;
+    D->crF.w = AMPS__CAST(double *, amps__malloc(ctx, (size_t)nf + 1, sizeof(double)));
+    D->crF.work = AMPS__CAST(double *, amps__malloc(ctx, (size_t)nf + 1, sizeof(double)));
+    if (!D->crF.w || !D->crF.work || !(K = amps_csc_from_triplets(ctx, nf, nz, ti, tj, tx, AMPS_UPPER)) ||
+        !(D->crF.F = amps_analyze(ctx, K, AMPS_UPPER, NULL)) || (s = amps_factorize(ctx, D->crF.F, K)) != AMPS_OK) {
+        s = ctx && ctx->status < 0 ? ctx->status : AMPS_ERR_OOM;
+        goto done;
+    }
+done:
+    amps_csc_free(ctx, K);
+    amps__free(ctx, ti);
+    amps__free(ctx, tj);
+    amps__free(ctx, tx);
+    if (s != AMPS_OK) amps__cr_own_free(ctx, S);
+    return s;
+}
+
+/* z = A_R'^-1 r on the free entries (z held: 0) with the factor of amps__cr_own. */
+static amps_status amps__cr_own_solve(amps_ctx *ctx, amps_scene *S, const double *r, double *z) {
+    const amps_int *idx = S->dyn.crF.idx;
+    double *w = S->dyn.crF.w;
+    amps_int e, n = S->dyn.crF.n;
+    amps_status s;
+    for (e = 0; e < n; e++)
+        if (idx[e] >= 0) w[idx[e]] = r[e];
+    if ((s = amps_solve(ctx, S->dyn.crF.F, w, w, S->dyn.crF.work)) != AMPS_OK) return s;
+    for (e = 0; e < n; e++) z[e] = idx[e] >= 0 ? w[idx[e]] : 0.0;
+    return AMPS_OK;
+}
+
 /* z = M^-1 r with the engine's preconditioner: Rn A^-1 Rn^T, the engine's exact solve with the
    current linear A in the frame of the node rotations (r, z in the PCG's order, taken to the
    engine's N equations in cr_eng and back; the cheap one's z comes with the update sweep,
@@ -16627,6 +16744,7 @@ static amps_status amps__cr_prec(amps_ctx *ctx, amps_scene *S, amps_int N, const
     amps_int v, e;
     amps_status s;
     int d;
+    if (S->dyn.crF.F) return amps__cr_own_solve(ctx, S, r, z);
     amps__cr_frames(S);
     for (e = 0; e < N; e++) w[e] = 0.0;
     for (v = 0; v < S->m->nnode; v++)
@@ -16743,9 +16861,10 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
     double *r = D->cr_vec + 2 * ns, *p = r + 2 * ns, *q = p + ns;
     double tol = D->corot_tol > 0 ? D->corot_tol : 1e-10, rn, hn = -1;
     amps_int maxit = D->corot_maxit > 0 ? D->corot_maxit : 200, it = 0, e, kit = 0, n = 3 * S->m->nnode;
-    int run, done;
+    int run, done, own = 0;
     amps__crpcg P;
     memset(&P, 0, sizeof(P));
+    if (D->crF.F && (D->crF.n != n || memcmp(D->crF.cp, D->cr_cp, (size_t)n))) amps__cr_own_free(ctx, S);
     for (e = 0; e < n; e++) p[e] = D->cr_cp[e] ? x[e] : 0.0;
     amps__cr_mul(S, p, q);
     for (e = 0; e < n; e++) r[e] = D->cr_cp[e] ? 0.0 : b[e] - q[e];
@@ -16768,6 +16887,7 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
             P.kind = 1;
     }
     D->crP.probe = P.kind ? 0 : D->crP.probe + 1;
+again:
     for (run = 0;; run++) {
         /* r = b - A_R x on the free entries (the true residual) */
         amps__cr_mul(S, x, q);
@@ -16785,6 +16905,16 @@ static amps_int amps__cr_pcg(amps_ctx *ctx, amps_scene *S, amps_int N, const dou
             D->crP.it[1] = kit + (amps_int)((double)D->crP.it[0] * P.ce / P.cj);
             P.kind = 0;
         }
+    }
+    if (*relres > tol && !own && amps__cr_eta(S, r, x, b) > 1e-13 && amps__cr_own(ctx, S) == AMPS_OK) {
+        /* stalled: on from x with A_R of this step factored (the preconditioner of the next steps
+           too, until it stalls in turn) */
+        own = 1;
+        P.kind = 0;
+        P.budget = (double)it * P.ce + (double)kit * P.cj + (double)maxit * P.ce;
+        hn = -1;
+        D->info.factored++;
+        goto again;
     }
     if (P.kind) D->crP.it[1] = kit > 0 ? kit : 1;
     else D->crP.it[0] = it > 0 ? it : 1;
