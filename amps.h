@@ -321,6 +321,7 @@ typedef struct amps_factor {
     double *D;              /* n pivots */
     amps_int height;        /* nodes on the longest leaf-to-root path of the elimination tree */
     int is_numeric;         /* 1 after a successful amps_factorize */
+    amps_int failed;        /* the column (original numbering) whose pivot the last amps_factorize refused, -1 */
     void *priv;             /* implementation data (pattern maps, workspace) */
 } amps_factor;
 
@@ -5121,6 +5122,7 @@ static amps_factor *amps__analyze_reuse(amps_ctx *ctx, const amps_csc *A, amps_s
     if (amps_csc_check(ctx, A, stype) != AMPS_OK) return NULL;
     F = AMPS__CAST(amps_factor *, amps__calloc(ctx, 1, sizeof(amps_factor)));
     if (!F) return NULL;
+    F->failed = -1;
     memset(&T, 0, sizeof(T));
     T.sp = sp;
     st = amps__analyze_alloc(ctx, A, stype, F, &T);
@@ -5176,6 +5178,7 @@ static amps_factor *amps__factor_clone_symbolic(amps_ctx *ctx, const amps_factor
     }
     G->n = F->n;
     G->height = F->height;
+    G->failed = -1;
     G->priv = Q;
     G->perm = AMPS__CAST(amps_int *, amps__dup(ctx, F->perm, n, sizeof(amps_int)));
     G->iperm = AMPS__CAST(amps_int *, amps__dup(ctx, F->iperm, n, sizeof(amps_int)));
@@ -5553,6 +5556,7 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
                                  (long long)k, (long long)A->i[p]);
     }
     F->is_numeric = 0;
+    F->failed = -1;
     P->avx2 = amps__cpu_avx2();
     nsub = P->nsub;
     for (g = 0; g < P->ng; g++) P->head[g] = -1;
@@ -5579,6 +5583,7 @@ AMPS_API amps_status amps_factorize(amps_ctx *ctx, amps_factor *F, const amps_cs
             bad = amps__fgroup(F, P, Ax, J, P->iwork, -1);
         }
     }
+    F->failed = bad >= 0 ? F->perm[bad] : -1;
     if (bad >= 0) {
         amps_int p;
         double acc = 0;
@@ -13334,10 +13339,14 @@ static amps_status amps__scene_factor(amps_ctx *ctx, amps_scene *S, amps_int n) 
     if (!S->F) return AMPS_ERR_OOM;
     if (amps_factorize(ctx, S->F, S->K) != AMPS_OK) {
         char msg[256];
+        amps_int bad = -1, e;
         memcpy(msg, ctx ? ctx->msg : "", ctx ? sizeof(msg) : 1);
+        for (e = 0; e < 3 * S->m->nnode && bad < 0 && S->F->failed >= 0; e++)
+            if (S->node.dof[e] == S->F->failed) bad = e / 3;
         return amps__err(ctx, AMPS_ERR_NOT_SPD,
-                         "amps_scene_prepare: the stiffness matrix is singular (is the model held? fix some nodes): %s",
-                         msg);
+                         "amps_scene_prepare: the stiffness matrix is singular at node %ld (is the piece holding it "
+                         "held? fix some of its nodes): %s",
+                         (long)bad, msg);
     }
     if (uo.refactor_order.block == 0) uo.refactor_order.block = 3; /* re-factorizations order node triples */
     S->U = amps_update_create(ctx, S->K, AMPS_UPPER, S->F, &uo);
