@@ -1254,7 +1254,8 @@ AMPS_API amps_status amps_scene_set_density(amps_ctx *ctx, amps_scene *S, double
    id), AMPS_ERR_VALUE (material, rho < 0 or not finite), a failed commit; the scene unchanged. */
 AMPS_API amps_status amps_scene_set_region(amps_ctx *ctx, amps_scene *S, amps_int id, double E, double nu, double rho);
 /* Material of tet t at any time (after the factorization: an update of its nodes' rows, as
-   amps_scene_set_region; amps_scene_set_material likewise updates every tet). AMPS_ERR_INDEX. */
+   amps_scene_set_region; amps_scene_set_material likewise updates every tet). A removed tet keeps
+   the material given (it has no effect). AMPS_ERR_INDEX. */
 AMPS_API amps_status amps_scene_set_tet_material(amps_ctx *ctx, amps_scene *S, amps_int t, double E, double nu);
 /* Gravity: body force f_v += m_v g on every node (default 0), statics and dynamics, any time.
    In statics after the factorization it sets the force of every equation (O(nnode)); the loads
@@ -16731,6 +16732,19 @@ done:
     return s;
 }
 
+/* amps__cr_own with ctx's status and message kept when it fails (the step goes on without it). */
+static int amps__cr_own_try(amps_ctx *ctx, amps_scene *S) {
+    amps_status st = ctx ? ctx->status : AMPS_OK;
+    char msg[sizeof(((amps_ctx *)0)->msg)];
+    if (ctx) memcpy(msg, ctx->msg, sizeof(msg));
+    if (amps__cr_own(ctx, S) == AMPS_OK) return 1;
+    if (ctx) {
+        ctx->status = st;
+        memcpy(ctx->msg, msg, sizeof(msg));
+    }
+    return 0;
+}
+
 /* z = A_R'^-1 r on the free entries (z held: 0) with the factor of amps__cr_own. */
 static amps_status amps__cr_own_solve(amps_ctx *ctx, amps_scene *S, const double *r, double *z) {
     const amps_int *idx = S->dyn.crF.idx;
@@ -16915,7 +16929,7 @@ again:
             P.kind = 0;
         }
     }
-    if (*relres > tol && !own && amps__cr_eta(S, r, x, b) > 1e-13 && amps__cr_own(ctx, S) == AMPS_OK) {
+    if (*relres > tol && !own && amps__cr_eta(S, r, x, b) > 1e-13 && amps__cr_own_try(ctx, S)) {
         /* stalled: on from x with A_R of this step factored (the preconditioner of the next steps
            too, until it stalls in turn) */
         own = 1;
