@@ -1049,7 +1049,8 @@ AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v
    nodes on one line (a hinge, a ball joint) and not held off it by fixed or pinned nodes, returns
    AMPS_ERR_SINGULAR_UPDATE and the scene is as it was: a face-connected piece is tested by
    exploring the pieces around v, at a cost of about the tets of the pieces the cut separates.
-   (Chains of pieces that are loose only together are left to the engine's pivot test.) */
+   (Chains of pieces that are loose only together are left to the engine's pivot test.) Before
+   the model is factored a cut changes the topology only, as for amps_scene_remove. */
 AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3], const double nrm[3],
                                     amps_int *new_node);
 /* Solves for the displacements of every node. AMPS_WARN_INACCURATE (the accuracy guard's
@@ -1291,8 +1292,10 @@ AMPS_API const double *amps_scene_velocities(const amps_scene *S);
    whose fixed and pinned nodes are none or all on one line (it could turn about that line), or a
    piece the engine finds singular (a hinge inside it under AMPS_SINGULAR_IGNORE), is
    AMPS_ERR_SINGULAR_UPDATE with the piece named, and the scene is as it was
-   (amps_mesh_unremove); in dynamics a free piece is legal. Errors of amps_mesh_remove (index,
-   removed twice) change nothing. Allocates. */
+   (amps_mesh_unremove); in dynamics a free piece is legal. Before the model is factored
+   (amps_scene_prepare, the first solve or step) a removal changes the topology only, as fixing
+   may still follow: there a loose piece is found by the factorization (AMPS_ERR_NOT_SPD naming
+   a node of it). Errors of amps_mesh_remove (index, removed twice) change nothing. Allocates. */
 AMPS_API amps_status amps_scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, const amps_int *tets,
                                        amps_singular_policy policy, amps_mesh_removal *report);
 /* Fracture: after each step, tets with max |principal stress| > sigma_max are removed (default
@@ -16165,6 +16168,35 @@ typedef struct amps__crasm {
     amps_int np;
 } amps__crasm;
 
+/* X = la h_a h_b^T + mu h_b h_a^T + mu (g_a . g_b) I (X^T the same with a and b swapped): B += X,
+   Bt += X^T, each when not NULL (every X computed the same way, so the bits do not depend on which
+   part adds it, and A_R is symmetric to the bit). */
+AMPS__KERNEL void amps__cr_block(const double *h, const double *G, double la, double mu, int a, int b, double *B,
+                                 double *Bt) {
+    double X[9], gg = mu * (G[3 * a] * G[3 * b] + G[3 * a + 1] * G[3 * b + 1] + G[3 * a + 2] * G[3 * b + 2]);
+    int i, k;
+    AMPS__UNROLL
+    for (i = 0; i < 3; i++)
+        for (k = 0; k < 3; k++) X[3 * i + k] = la * h[3 * a + i] * h[3 * b + k] + mu * h[3 * b + i] * h[3 * a + k];
+    if (a == b) { /* symmetric to the bit: the lower triangle from the upper */
+        X[3] = X[1];
+        X[6] = X[2];
+        X[7] = X[5];
+    }
+    X[0] += gg;
+    X[4] += gg;
+    X[8] += gg;
+    if (B) {
+        AMPS__UNROLL
+        for (i = 0; i < 9; i++) B[i] += X[i];
+    }
+    if (Bt) {
+        AMPS__UNROLL
+        for (i = 0; i < 3; i++)
+            for (k = 0; k < 3; k++) Bt[3 * i + k] += X[3 * k + i];
+    }
+}
+
 static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
     const amps__crasm *j = AMPS__CAST(const amps__crasm *, arg);
     amps_scene *S = j->S;
@@ -16186,7 +16218,7 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
         const amps_int *tv = m->tet + 4 * t;
         const double *G, *R, *lm;
         double h[12], la, mu;
-        int a, b, i, k;
+        int a, b, i, in[4];
         if (!amps__cr_touches(tv, lo, hi) || (m->removed && m->removed[t])) continue;
         G = S->dyn.cr_G + 12 * t;
         R = S->dyn.cr_R + 9 * t;
@@ -16197,22 +16229,13 @@ static void amps__cr_rows(amps_int p0, amps_int p1, int slot, void *arg) {
         for (b = 0; b < 4; b++)
             for (i = 0; i < 3; i++)
                 h[3 * b + i] = R[3 * i] * G[3 * b] + R[3 * i + 1] * G[3 * b + 1] + R[3 * i + 2] * G[3 * b + 2];
+        for (a = 0; a < 4; a++) in[a] = tv[a] >= lo && tv[a] < hi && S->node.dof[3 * tv[a]] >= 0;
         AMPS__UNROLL
-        for (a = 0; a < 4; a++) {
-            if (tv[a] < lo || tv[a] >= hi || S->node.dof[3 * tv[a]] < 0) continue;
-            AMPS__UNROLL
-            for (b = 0; b < 4; b++) {
-                double *B = bx + 9 * (size_t)map[16 * t + 4 * a + b];
-                double gg = mu * (G[3 * a] * G[3 * b] + G[3 * a + 1] * G[3 * b + 1] + G[3 * a + 2] * G[3 * b + 2]);
-                AMPS__UNROLL
-                for (i = 0; i < 3; i++)
-                    for (k = 0; k < 3; k++)
-                        B[3 * i + k] += la * h[3 * a + i] * h[3 * b + k] + mu * h[3 * b + i] * h[3 * a + k];
-                B[0] += gg;
-                B[4] += gg;
-                B[8] += gg;
-            }
-        }
+        for (a = 0; a < 4; a++)
+            for (b = a; b < 4; b++) /* X for a <= b (X^T is the block of (b, a)) */
+                if (in[a] || in[b])
+                    amps__cr_block(h, G, la, mu, a, b, in[a] ? bx + 9 * (size_t)map[16 * t + 4 * a + b] : NULL,
+                                   in[b] && b != a ? bx + 9 * (size_t)map[16 * t + 4 * b + a] : NULL);
     }
     for (v = lo; v < hi; v++) { /* the inverses of the diagonal blocks: C^T / det */
         amps_int r = rank[v];
@@ -16269,14 +16292,22 @@ static double amps__cr_dot_node(const unsigned char *con, amps_int e, const doub
            (con[e + 2] ? 0.0 : x[e + 2] * y[e + 2]);
 }
 
+/* The blocks q of the row of rank k in part h (0: of earlier nodes; 1: the diagonal block and
+   later nodes): returns the first, *qe one past the last. */
+static amps_int amps__cr_span(const amps_scene *S, int h, amps_int k, amps_int *qe) {
+    const amps_int *start = h ? S->dyn.crA.bu : S->dyn.crA.bp;
+    *qe = start[k + 1];
+    return start[k];
+}
+
 /* y_k = sum_w B_kw x_w for the row of rank k (both parts); returns x_k . y_k on its free entries. */
 static double amps__cr_mul_node(const amps_scene *S, amps_int k, const double *x, double *y) {
     const amps_int *be = S->dyn.crA.be;
     amps_int q, h, e = 3 * k;
     double y0 = 0, y1 = 0, y2 = 0;
     for (h = 0; h < 2; h++) {
-        const amps_int *start = h ? S->dyn.crA.bu : S->dyn.crA.bp;
-        for (q = start[k]; q < start[k + 1]; q++) {
+        amps_int qe;
+        for (q = amps__cr_span(S, h, k, &qe); q < qe; q++) {
             const double *B = S->dyn.crA.bx + 9 * (size_t)q, *u = x + be[q];
             y0 += B[0] * u[0] + B[1] * u[1] + B[2] * u[2];
             y1 += B[3] * u[0] + B[4] * u[1] + B[5] * u[2];
@@ -16650,7 +16681,7 @@ static double amps__cr_eta(const amps_scene *S, const double *r, const double *x
     const amps__scene_dyn *D = &S->dyn;
     const amps_int *be = D->crA.be;
     double om = 0;
-    amps_int k, q, e;
+    amps_int k, q, qe, e;
     int h, i;
     for (k = 0; k < D->crA.nnode; k++)
         for (i = 0; i < 3; i++) {
@@ -16659,7 +16690,7 @@ static double amps__cr_eta(const amps_scene *S, const double *r, const double *x
             if (D->cr_cp[e]) continue;
             den = fabs(b[e]);
             for (h = 0; h < 2; h++)
-                for (q = (h ? D->crA.bu : D->crA.bp)[k]; q < (h ? D->crA.bu : D->crA.bp)[k + 1]; q++) {
+                for (q = amps__cr_span(S, h, k, &qe); q < qe; q++) {
                     const double *B = D->crA.bx + 9 * (size_t)q + 3 * i, *u = x + be[q];
                     den += fabs(B[0] * u[0]) + fabs(B[1] * u[1]) + fabs(B[2] * u[2]);
                 }
@@ -16685,7 +16716,7 @@ static void amps__cr_own_free(amps_ctx *ctx, amps_scene *S) {
 static amps_status amps__cr_own(amps_ctx *ctx, amps_scene *S) {
     amps__scene_dyn *D = &S->dyn;
     const unsigned char *cp = D->cr_cp;
-    amps_int n = 3 * S->m->nnode, nf = 0, nz = 0, e, k, q, *ti = NULL, *tj = NULL;
+    amps_int n = 3 * S->m->nnode, nf = 0, nz = 0, e, k, q, qe, *ti = NULL, *tj = NULL;
     double *tx = NULL;
     amps_csc *K = NULL;
     amps_status s = AMPS_OK;
@@ -16705,7 +16736,7 @@ static amps_status amps__cr_own(amps_ctx *ctx, amps_scene *S) {
     memcpy(D->crF.cp, cp, (size_t)n);
     for (k = 0; k < D->crA.nnode; k++) /* the blocks of row k: entries (3k + i, be + j), i <= j in F */
         for (h = 0; h < 2; h++)
-            for (q = (h ? D->crA.bu : D->crA.bp)[k]; q < (h ? D->crA.bu : D->crA.bp)[k + 1]; q++)
+            for (q = amps__cr_span(S, h, k, &qe); q < qe; q++)
                 for (i = 0; i < 3; i++)
                     for (j = 0; j < 3; j++) {
                         amps_int a = D->crF.idx[3 * k + i], b = D->crF.idx[D->crA.be[q] + j];

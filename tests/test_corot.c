@@ -1168,6 +1168,35 @@ static void test_stray_node(void) {
     free(tet);
 }
 
+/* A_R of the last step is symmetric to the bit: every block (v, w) of a row of v is the
+   transpose of the block (w, v) of the row of w (each tet's pair computed once), v and w not
+   held (a held node's row has its mass block only). */
+static void check_symmetric(const amps_scene *S) {
+    const amps__scene_dyn *D = &S->dyn;
+    amps_int k, q, p, qe, pe, bad = 0, nblk = 0;
+    int h, g, i;
+    for (k = 0; k < D->crA.nnode; k++)
+        for (h = 0; h < 2; h++)
+            for (q = amps__cr_span(S, h, k, &qe); q < qe; q++) {
+                amps_int w = D->crA.be[q] / 3, found = -1;
+                if (S->node.dof[3 * D->crA.ord[k]] < 0 || S->node.dof[3 * D->crA.ord[w]] < 0) continue;
+                for (g = 0; g < 2 && found < 0; g++)
+                    for (p = amps__cr_span(S, g, w, &pe); p < pe; p++)
+                        if (D->crA.be[p] == 3 * k) found = p;
+                nblk++;
+                if (found < 0) {
+                    bad++;
+                    continue;
+                }
+                for (i = 0; i < 9; i++)
+                    if (D->crA.bx[9 * (size_t)q + i] != D->crA.bx[9 * (size_t)found + 3 * (i % 3) + i / 3]) {
+                        bad++;
+                        break;
+                    }
+            }
+    CHECK(nblk > 0 && bad == 0, "A_R: %ld of %ld blocks not the transpose of their mirror", (long)bad, (long)nblk);
+}
+
 /* The Gauss-Seidel PCG with a node held in one of its equations only (the scene holds whole
    nodes; the engine's own constraints need not): after a step, equation 0 of a free node is
    flagged constrained and the step's A_R is solved for b = A_R y (y random, held entries kept):
@@ -1193,6 +1222,7 @@ static void test_gs_partial(void) {
     N = amps_update_dim(S->U);
     n = 3 * S->m->nnode;
     CHECK(D->crA.np > 1, "partial: one slab only (%ld)", (long)D->crA.np);
+    check_symmetric(S);
     for (v = 0; v < S->m->nnode && held < 0; v++) /* a free node with its row of blocks */
         if (S->node.dof[3 * v] >= 0 && !D->cr_con[S->node.dof[3 * v]] && !S->node.pinned[v] && v > 20) held = v;
     D->cr_con[S->node.dof[3 * held]] = 1;

@@ -85,6 +85,16 @@ fixlate|mesh beam 4\nfix z lt 0.5\nsolve\nfixnodes 3\n|4|already factored
 boxinv|mesh beam 4\nfixbox 1 0 0 0 1 1\n|2|lo\[0\]
 spherenan|mesh beam 4\nfixsphere 0 0 0 nan\n|2|bad number
 hapticarg|mesh beam 4\nhaptic 0\n|2|usage
+fracneg|mesh beam 4\nfix z lt 0.5\ndynamics 0.01 0 0\nfracture -5\n|4|sigma_max must be > 0
 CASES
+# --frames: a VTU per step and the .pvd of them (times k dt); a remove line of 100 tets (no limit
+# of arguments below the line length)
+printf 'mesh beam 12\nfix z lt 0.5\ndynamics 0.02 0 0\ngravity 0 0 -1\nstep 3\nremove %s\nstep 2\n' "$(seq -s ' ' 200 299)" > "$tmp/fr.scn"
+if (cd "$tmp" && "$OLDPWD/$R" --frames fr/f fr.scn) > "$tmp/fr.out" 2>&1; then bad "frames into a missing folder succeeded"; else ok; fi
+mkdir -p "$tmp/fr"
+if (cd "$tmp" && "$OLDPWD/$R" --frames fr/f fr.scn) > "$tmp/fr.out" 2>&1; then ok; else bad "frames: $(cat "$tmp/fr.out")"; fi
+[ "$(ls "$tmp"/fr/f_*.vtu 2>/dev/null | wc -l)" = 5 ] && [ "$(grep -c '<DataSet timestep=' "$tmp/fr/f.pvd")" = 5 ] &&
+  grep -q 'timestep="0.10000000000000001" group="" part="0" file="f_00005.vtu"' "$tmp/fr/f.pvd" && ok || bad "frames: $(ls "$tmp/fr"; cat "$tmp/fr/f.pvd")"
+n=$(sed -n 's/^remove: \([0-9]*\) tetrahedra.*/\1/p' "$tmp/fr.out"); [ "${n:-0}" -ge 100 ] && ok || bad "remove of 100 tets: $(cat "$tmp/fr.out")"
 echo "test_replay: $pass passed, $fail failed"
 [ $fail -eq 0 ]

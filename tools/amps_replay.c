@@ -2,7 +2,8 @@
    amps.h and prints one line per solve and a summary.
 
    usage: amps_replay [-q] [--residual] [--threads N] [--openmp] [--jobs N] [--order auto|amd|nd|metis|natural]
-                      [--refactor auto|count|off] [--dual] [--xs-from-dense] [--surface FILE] scenario
+                      [--refactor auto|count|off] [--dual] [--xs-from-dense] [--surface FILE]
+                      [--frames PREFIX] scenario
    --refactor picks the background re-factorization's policy: auto (the default; its swaps
    depend on the clock, so runs agree to rounding, not bits), count (at points fixed by the
    count of structural commits: identical runs give identical bits, on any thread count and back
@@ -12,6 +13,9 @@
    workers; --openmp runs them in OpenMP regions (AMPS_BACKEND_OPENMP).
    --surface FILE writes the deformed boundary triangles (cut faces included) at the end, one
    block of 4 lines "x y z |u|" per triangle, for gnuplot's "with polygons".
+   --frames PREFIX writes PREFIX_NNNNN.vtu after every solve or time step (frame NNNNN from 1) and
+   at the end PREFIX.pvd, the ParaView time series of the frames (time k dt in dynamics, the
+   solve's number k in statics; the .vtu names relative to the .pvd's folder).
 
    Scenario lines (# starts a comment anywhere; node indices 0-based in the mesh's order):
      mesh <file> | mesh beam <h> | mesh brick <R>   (.node with its .ele, .msh or .mesh; paths
@@ -34,7 +38,7 @@
      residual on|off
      dump <file.csv>          node,ux,uy,uz of every node (values of the last solve)
      write <file.vtu>         mesh, displacement and stresses for ParaView
-     fixnodes <v> [<v> ...]   fix the listed nodes (up to 63 a line; before the first solve)
+     fixnodes <v> [<v> ...]   fix the listed nodes (before the first solve)
      fixbox x0 y0 z0 x1 y1 z1 fix the nodes in the box [x0, x1] x [y0, y1] x [z0, z1]
      fixsphere x y z r        fix the nodes within distance r of (x, y, z)
      watch <v> [<v> ...]      the watched nodes (replaces the set; copies of cut nodes join it)
@@ -68,7 +72,7 @@
 #include "../examples/jobs.h"
 #endif
 
-#define MAXTOK 64
+#define MAXTOK 32768 /* tokens of a line: a line holds at most 65535 characters */
 
 typedef struct replay {
     amps_ctx ctx;
@@ -85,6 +89,11 @@ typedef struct replay {
     int have_material;
     int dynamic; /* 'dynamics' given */
     int sandbox; /* fuzzing: no file access (mesh files, dump, write), small meshes only */
+    const char *frames; /* --frames PREFIX: a VTU per solve or step and the .pvd of them */
+    int nframes;
+    double *frame_t, dt; /* the frames' times; the time step (dynamics) */
+    char **tok;   /* MAXTOK: the tokens of the line */
+    amps_int *ids; /* MAXTOK: the node or tet list of a line */
 } replay;
 
 
@@ -226,7 +235,7 @@ static int parse_nodes(replay *R, int nt, char **t, amps_int *v) {
 
 /* fixnodes <v> [<v> ...] | watch <v> [<v> ...] */
 static int cmd_nodelist(replay *R, int nt, char **t) {
-    amps_int v[MAXTOK];
+    amps_int *v = R->ids;
     int fix = !strcmp(t[0], "fixnodes");
     if (nt < 2) return fail(R, "usage: %s <node> [<node> ...]", t[0]);
     if (!parse_nodes(R, nt, t, v)) return 1;
@@ -356,6 +365,48 @@ static int cmd_batch(replay *R, int nt, char **t, double t0) {
 }
 /* After a solve or a step that started at t0: the factorization (first time), the residual,
    the timing and the step line. */
+static int write_vtu(replay *R, const char *path);
+
+/* --frames PREFIX: PREFIX_NNNNN.vtu of this solve or step (frame NNNNN, from 1; time k dt in
+   dynamics, the solve's number k in statics). */
+static int write_frame(replay *R) {
+    char path[4200];
+    double *t2;
+    if (!R->frames || R->sandbox) return 0;
+    if (!(t2 = (double *)realloc(R->frame_t, sizeof(double) * (size_t)(R->nframes + 1))))
+        return fail(R, "%s", "out of memory");
+    R->frame_t = t2;
+    R->frame_t[R->nframes] = R->dynamic ? (R->nframes + 1) * R->dt : R->nframes + 1;
+    snprintf(path, sizeof(path), "%s_%05d.vtu", R->frames, R->nframes + 1);
+    if (write_vtu(R, path)) return 1;
+    R->nframes++;
+    return 0;
+}
+
+/* --frames PREFIX: PREFIX.pvd, the time series of the frames written (at the end of a run, also
+   of one that failed). */
+static int write_pvd(replay *R) {
+    const char *base = R->frames ? strrchr(R->frames, '/') : NULL;
+    char path[4200], **names;
+    int k, rc = 0;
+    if (!R->frames || R->sandbox) return 0;
+    base = base ? base + 1 : R->frames;
+    if (!(names = (char **)calloc((size_t)R->nframes + 1, sizeof(char *)))) return fail(R, "%s", "out of memory");
+    for (k = 0; k < R->nframes && !rc; k++) {
+        size_t n = strlen(base) + 16;
+        if (!(names[k] = (char *)malloc(n))) rc = fail(R, "%s", "out of memory");
+        else snprintf(names[k], n, "%s_%05d.vtu", base, k + 1);
+    }
+    snprintf(path, sizeof(path), "%s.pvd", R->frames);
+    if (!rc && amps_pvd_write(&R->ctx, path, R->nframes, (const char *const *)names, R->frame_t)) {
+        fprintf(stderr, "%s: %s\n", path, R->ctx.msg);
+        rc = 1;
+    }
+    for (k = 0; k < R->nframes; k++) free(names[k]);
+    free(names);
+    return rc;
+}
+
 static int report_solve(replay *R, double t0) {
     double res = -1, dt;
     amps_update_stats st;
@@ -384,7 +435,7 @@ static int report_solve(replay *R, double t0) {
     }
     R->step_time = 0;
     R->last_cmd[0] = 0;
-    return 0;
+    return write_frame(R);
 }
 
 static int run_dynamics_line(replay *R, int nt, char **t);
@@ -492,23 +543,25 @@ static int run_line(replay *R, int nt, char **t) {
         return 0;
     }
     if (!strcmp(c, "write")) {
-        const amps_mesh *m = amps_scene_mesh(R->S);
-        double *vm, *pr;
-        amps_status s;
         if (nt != 2) return fail(R, "%s", "usage: write <file.vtu>");
         if (R->sandbox) return 0;
-        vm = (double *)malloc(sizeof(double) * (m->ntet + 1));
-        pr = (double *)malloc(sizeof(double) * 3 * (m->ntet + 1));
-        s = amps_scene_stress(&R->ctx, R->S, NULL, vm, pr);
-        if (s == AMPS_OK) s = amps_mesh_write_vtu(&R->ctx, t[1], m, amps_scene_displacements(R->S), vm, pr);
-        free(vm);
-        free(pr);
-        if (s != AMPS_OK) return lib_fail(R, "write");
+        if (write_vtu(R, t[1])) return 1;
         if (!R->quiet) printf("write: %s\n", t[1]);
         return 0;
     }
     if ((k = run_dynamics_line(R, nt, t)) >= 0) return k;
     return fail(R, "unknown command '%s'", c);
+}
+
+/* The mesh with the displacements, von Mises and principal stresses of the last solve or step. */
+static int write_vtu(replay *R, const char *path) {
+    const amps_mesh *m = amps_scene_mesh(R->S);
+    double *vm = (double *)malloc(sizeof(double) * (m->ntet + 1)), *pr = (double *)malloc(sizeof(double) * 3 * (m->ntet + 1));
+    amps_status s = vm && pr ? amps_scene_stress(&R->ctx, R->S, NULL, vm, pr) : AMPS_ERR_OOM;
+    if (s == AMPS_OK) s = amps_mesh_write_vtu(&R->ctx, path, m, amps_scene_displacements(R->S), vm, pr);
+    free(vm);
+    free(pr);
+    return s == AMPS_ERR_OOM && !vm ? fail(R, "%s", "out of memory") : s != AMPS_OK ? lib_fail(R, "write") : 0;
 }
 
 /* dump in dynamics: node,ux,uy,uz,vx,vy,vz (f open for writing; closed here). */
@@ -550,6 +603,7 @@ static int cmd_dynamics(replay *R, int nt, char **t) {
     if (!strcmp(t[0], "fracture")) {
         if (nt != 2 || (strcmp(t[1], "off") && !parse_num(t[1], &x[0])))
             return fail(R, "%s", "usage: fracture <sigma_max> | off");
+        if (strcmp(t[1], "off") && !(x[0] > 0)) return fail(R, "%s", "fracture: sigma_max must be > 0 (or off)");
         return amps_scene_fracture(&R->ctx, R->S, strcmp(t[1], "off") ? x[0] : 0.0) ? lib_fail(R, "fracture") : 0;
     }
     if (nt != 4)
@@ -561,6 +615,7 @@ static int cmd_dynamics(replay *R, int nt, char **t) {
     if (R->solved) return fail(R, "%s", "dynamics is allowed only before the first solve or step");
     if (amps_scene_dynamics(&R->ctx, R->S, x[0], x[1], x[2])) return lib_fail(R, "dynamics");
     R->dynamic = 1;
+    R->dt = x[0];
     return 0;
 }
 
@@ -595,7 +650,7 @@ static int cmd_step(replay *R, int nt, char **t) {
 
 /* remove <tet> [<tet> ...]: a removal that would leave a loose piece is undone (reported). */
 static int cmd_remove(replay *R, int nt, char **t) {
-    amps_int tets[MAXTOK];
+    amps_int *tets = R->ids;
     amps_mesh_removal rep;
     amps_status s;
     int k;
@@ -644,8 +699,11 @@ static int replay_run_buffer(replay *R, const char *text, size_t len) {
     char buf[65536];
     size_t pos = 0;
     int rc = 0;
+    if (!R->tok) R->tok = (char **)malloc(sizeof(char *) * MAXTOK);
+    if (!R->ids) R->ids = (amps_int *)malloc(sizeof(amps_int) * MAXTOK);
+    if (!R->tok || !R->ids) return fail(R, "%s", "out of memory");
     while (pos < len) {
-        char *tok[MAXTOK], *p = buf, *hash;
+        char **tok = R->tok, *p = buf, *hash;
         size_t e = pos, n;
         int nt = 0;
         while (e < len && text[e] != '\n') e++;
@@ -684,7 +742,13 @@ static void replay_init(replay *R) {
 
 static void replay_free(replay *R) {
     free(R->times);
+    free(R->tok);
+    free(R->ids);
+    free(R->frame_t);
+    R->frame_t = NULL;
     amps_scene_free(&R->ctx, R->S);
+    R->tok = NULL;
+    R->ids = NULL;
     R->times = NULL;
     R->S = NULL;
 }
@@ -709,6 +773,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[a], "--jobs") && a + 1 < argc) njobs = atoi(argv[++a]);
         else if (!strcmp(argv[a], "--openmp")) R.ctx.backend = AMPS_BACKEND_OPENMP;
         else if (!strcmp(argv[a], "--surface") && a + 1 < argc) surface = argv[++a];
+        else if (!strcmp(argv[a], "--frames") && a + 1 < argc) R.frames = argv[++a];
         else if (!strcmp(argv[a], "--refactor") && a + 1 < argc) {
             const char *o = argv[++a];
             if (!strcmp(o, "auto")) R.opts.update.refactor = AMPS_REFACTOR_AUTO;
@@ -736,7 +801,7 @@ int main(int argc, char **argv) {
     }
     if (!path) {
         fprintf(stderr,
-                "usage: amps_replay [-q] [--residual] [--threads N] [--openmp] [--jobs N] [--order auto|amd|nd|metis|natural] [--refactor auto|count|off] [--dual] [--xs-from-dense] [--surface FILE] scenario\n");
+                "usage: amps_replay [-q] [--residual] [--threads N] [--openmp] [--jobs N] [--order auto|amd|nd|metis|natural] [--refactor auto|count|off] [--dual] [--xs-from-dense] [--surface FILE] [--frames PREFIX] scenario\n");
         return 2;
     }
 #ifdef _OPENMP
@@ -788,6 +853,7 @@ int main(int argc, char **argv) {
     }
     rc = replay_run_buffer(&R, text, len);
     free(text);
+    if (write_pvd(&R)) rc = 1;
     if (rc == 0) {
         if (R.ntimes > 0) {
             double med, worst;
