@@ -1289,8 +1289,10 @@ AMPS_API const double *amps_scene_velocities(const amps_scene *S);
    origin's u and w). Orphans (nodes left in no tet) are held: statics at their displacement,
    dynamics at w = 0, by rows of their own in A (not constraints, so the next re-factorization
    takes them out of the dense system). In statics a removal that leaves a node-connected piece
-   whose fixed and pinned nodes are none or all on one line (it could turn about that line), or a
-   piece the engine finds singular (a hinge inside it under AMPS_SINGULAR_IGNORE), is
+   whose fixed and pinned nodes are none or all on one line (it could turn about that line), a
+   face-connected piece joined to the rest only at nodes of one line (a hinge) and not held off
+   it (the test of amps_scene_cut, from the tets of the removed tets' nodes), or a piece the
+   engine finds singular (chains of pieces loose only together), is
    AMPS_ERR_SINGULAR_UPDATE with the piece named, and the scene is as it was
    (amps_mesh_unremove); in dynamics a free piece is legal. Before the model is factored
    (amps_scene_prepare, the first solve or step) a removal changes the topology only, as fixing
@@ -12899,13 +12901,14 @@ typedef struct amps__scene_cutws {
     double *val;
 } amps__scene_cutws;
 
-/* Workspace of the mechanism test of a cut (amps__cut_mechanism). */
+/* Workspace of the mechanism test of a cut or a removal (amps__mechanism). */
 typedef struct amps__scene_mech {
     amps_int *tet_piece;    /* per tet: label of the piece exploring it, -1 between tests */
     amps_int *tet_next;     /* per tet: next tet in its piece's queue */
     amps_int *visited;      /* the tets labelled in this test */
     amps_marker node_seen;  /* per node: visited in the current joint scan */
-    amps_int *piece_parent; /* per piece (max_degree + 1): union-find parent */
+    amps_int npiece;        /* capacity of the per-piece arrays (max_degree + 1, grown by removals) */
+    amps_int *piece_parent; /* per piece: union-find parent */
     amps_int *queue_head, *queue_tail;
     amps_int *active; /* 1 while the piece is still growing */
     double scale;     /* the model's extent (tolerance of the line test) */
@@ -13383,6 +13386,7 @@ static amps_status amps__scene_workspace(amps_ctx *ctx, amps_scene *S) {
     S->mech.queue_head = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
     S->mech.queue_tail = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
     S->mech.active = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)ng, sizeof(amps_int)));
+    S->mech.npiece = ng;
     if (!S->cut.moved || !S->cut.local_dof || !S->cut.local_K || !S->cut.row || !S->cut.col || !S->cut.val ||
         !S->mech.tet_piece || !S->mech.tet_next || !S->mech.visited || !S->mech.piece_parent || !S->mech.queue_head ||
         !S->mech.queue_tail || !S->mech.active)
@@ -13654,18 +13658,18 @@ static int amps__piece_loose(amps_scene *S, amps_int g, amps_int nvis, amps_int 
     return JX.state != 3 || JR.state != 3;
 }
 
-/* After cutting v into v and vc: explores the face-connected pieces that hold the tets of v
-   and vc together, one tet per piece per round, merging pieces that meet, until one piece is
-   left unfinished (the rest of the model). Cost: about (number of pieces) x (tets of the pieces
-   that finish), so a cut that separates nothing stops as soon as the pieces around v meet.
-   Returns 1 if a finished piece is loose (amps__piece_loose); *ntet, *nj, *jn describe it. */
-static int amps__cut_mechanism(amps_scene *S, amps_int v, amps_int vc, amps_int *ntet, amps_int *nj, amps_int *jn) {
+/* After a cut (of v into v and vc) or a removal: explores the face-connected pieces that hold
+   the tets of nodes[0..nn-1] together, one tet per piece per round, merging pieces that meet,
+   until one piece is left unfinished (the rest of the model). Cost: about (number of pieces) x
+   (tets of the pieces that finish), so a change that separates nothing stops as soon as the
+   pieces around it meet. The tets of the nodes must number at most mech.npiece. Returns 1 if a
+   finished piece is loose (amps__piece_loose); *ntet, *nj, *jn describe it. */
+static int amps__mechanism(amps_scene *S, const amps_int *nodes, amps_int nn, amps_int *ntet, amps_int *nj,
+                           amps_int *jn) {
     const amps_mesh *m = S->m;
-    amps_int ng = 0, nact, nvis = 0, k, g, loose = 0;
-    const amps_int nodes[2] = {v, vc};
-    int w;
-    for (w = 0; w < 2; w++)
-        for (k = 0; k < m->inc_len[nodes[w]] && ng <= S->cut.max_degree; k++) {
+    amps_int ng = 0, nact, nvis = 0, k, g, loose = 0, w;
+    for (w = 0; w < nn; w++)
+        for (k = 0; k < m->inc_len[nodes[w]] && ng < S->mech.npiece; k++) {
             amps_int t = m->inc[m->inc_ptr[nodes[w]] + k];
             if (S->mech.tet_piece[t] >= 0) continue;
             S->mech.piece_parent[ng] = ng;
@@ -13766,8 +13770,10 @@ static amps_status amps__scene_cut_topology(amps_ctx *ctx, amps_scene *S, amps_i
 /* The mechanism test of the cut of v into v and vc: AMPS_ERR_SINGULAR_UPDATE with the loose piece
    described, or AMPS_OK. */
 static amps_status amps__scene_cut_held(amps_ctx *ctx, amps_scene *S, amps_int v, amps_int vc) {
-    amps_int nt = 0, nj = 0, jn = -1;
-    if (!amps__cut_mechanism(S, v, vc, &nt, &nj, &jn)) return AMPS_OK;
+    amps_int nt = 0, nj = 0, jn = -1, nodes[2];
+    nodes[0] = v;
+    nodes[1] = vc;
+    if (!amps__mechanism(S, nodes, 2, &nt, &nj, &jn)) return AMPS_OK;
     if (nj == 0)
         return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
                          "amps_scene_cut: the cut at node %ld detaches a piece of %ld tets held by nothing; "
@@ -15340,6 +15346,42 @@ static amps_status amps__scene_rm_ws(amps_ctx *ctx, void **p, size_t *cap, size_
     return AMPS_OK;
 }
 
+/* The face-connected pieces around the nodes of removal r (amps__mechanism: a piece joined to the
+   rest at nodes of one line only, a hinge, and not held off it, is AMPS_ERR_SINGULAR_UPDATE). */
+static amps_status amps__scene_removal_pieces(amps_ctx *ctx, amps_scene *S, const amps_mesh_removal *r) {
+    const amps_mesh *m = S->m;
+    amps_int k, nn = 0, seeds = 0, nt = 0, nj = 0, jn = -1, *nodes = S->dyn.rm_queue;
+    unsigned char *seen = S->dyn.rm_seen;
+    memset(seen, 0, (size_t)m->nnode + 1);
+    for (k = 0; k < 4 * r->ntet + r->nsep; k++) {
+        amps_int v = k < 4 * r->ntet ? m->tet[4 * r->tets[k / 4] + k % 4] : r->sep_copy[k - 4 * r->ntet];
+        if (seen[v] || m->inc_len[v] == 0) continue;
+        seen[v] = 1;
+        nodes[nn++] = v;
+        seeds += m->inc_len[v];
+    }
+    if (seeds >= S->mech.npiece) { /* the per-piece arrays for every seed tet */
+        size_t n = (size_t)seeds + 1;
+        if (amps__realloc(ctx, (void **)&S->mech.piece_parent, n, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&S->mech.queue_head, n, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&S->mech.queue_tail, n, sizeof(amps_int)) ||
+            amps__realloc(ctx, (void **)&S->mech.active, n, sizeof(amps_int)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_remove: out of memory");
+        S->mech.npiece = seeds + 1;
+    }
+    if (!amps__mechanism(S, nodes, nn, &nt, &nj, &jn)) return AMPS_OK;
+    if (nj == 0)
+        return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
+                         "amps_scene_remove: the removal leaves a piece of %ld tets held by nothing; the removal was "
+                         "undone",
+                         (long)nt);
+    return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
+                     "amps_scene_remove: the removal leaves a piece of %ld tets joined to the rest at %ld node%s on "
+                     "one line (node %ld) and not held otherwise: it could turn about that line; the removal was "
+                     "undone",
+                     (long)nt, (long)nj, nj == 1 ? "" : "s", (long)jn);
+}
+
 /* The tets of a removal: statics requires every node-connected piece around them to be held by
    fixed or pinned nodes not all on one line (AMPS_ERR_SINGULAR_UPDATE naming the first loose
    piece). A piece held at points of one line turns about it at zero energy, whatever its inside;
@@ -15402,18 +15444,42 @@ static amps_status amps__scene_removal_held(amps_ctx *ctx, amps_scene *S, const 
                           "was undone",
                           (long)(ntet / 4 > 0 ? ntet / 4 : 1), (long)seed, (long)ncon, ncon == 1 ? "" : "s", (long)con);
     }
+    return s ? s : amps__scene_removal_pieces(ctx, S, r);
+}
+
+/* The change of K^ by the removal r: for each tet t removed or moved to a copy (once, though
+   two of its nodes may have been separated), Ae(t) on its nodes now if it is live, minus Ae(t) on
+   the nodes it had before (rename: each copy of r to the node it was made from, through copies
+   of copies). */
+static amps_status amps__scene_removal_trips(amps_ctx *ctx, amps_scene *S, const amps_mesh_removal *r,
+                                             amps_int *rename, amps__trips *T) {
+    amps_int k, n = r->ntet + r->sep_ptr[r->nsep];
+    amps_int *ts = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int)));
+    amps_status s = AMPS_OK;
+    if (!ts) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_remove: out of memory");
+    for (k = 0; k < S->m->nnode; k++) rename[k] = k;
+    for (k = 0; k < r->nsep; k++) rename[r->sep_copy[k]] = rename[r->sep_node[k]];
+    memcpy(ts, r->tets, sizeof(amps_int) * (size_t)r->ntet);
+    memcpy(ts + r->ntet, r->sep_tets, sizeof(amps_int) * (size_t)r->sep_ptr[r->nsep]);
+    qsort(ts, (size_t)n, sizeof(amps_int), amps__int_cmp);
+    for (k = 0; k < n && !s; k++) {
+        if (k > 0 && ts[k] == ts[k - 1]) continue;
+        if (!S->m->removed[ts[k]]) s = amps__trips_tet(ctx, S, T, ts[k], 1.0, NULL);
+        if (!s) s = amps__trips_tet(ctx, S, T, ts[k], -1.0, rename);
+    }
+    amps__free(ctx, ts);
     return s;
 }
 
 /* The engine side of the removal r (the mesh already changed): new equations for the separated
-   copies, minus Ae of the removed tets, Ae of the moved tets on their copies minus Ae on the
-   originals, orphans held (amps__scene_orphan), gravity loads of the nodes whose mass changed;
-   one commit. *nflag receives the orphans flagged (undo: amps__scene_removal_undo). */
+   copies, the change of K^ (amps__scene_removal_trips), orphans held (amps__scene_orphan),
+   gravity loads of the nodes whose mass changed; one commit. *nflag receives the orphans
+   flagged (undo: amps__scene_removal_undo). */
 static amps_status amps__scene_removal_update(amps_ctx *ctx, amps_scene *S, const amps_mesh_removal *r,
                                               amps_int *rename, amps_int *flagged, amps_int *nflag) {
     const amps_mesh *m = S->m;
     amps__trips T = {NULL, 0, 0};
-    amps_int k, j, first;
+    amps_int k, first;
     amps_status s = AMPS_OK;
     int d;
     *nflag = 0;
@@ -15423,11 +15489,7 @@ static amps_status amps__scene_removal_update(amps_ctx *ctx, amps_scene *S, cons
         if ((s = amps_update_add_dofs(ctx, S->U, 3, &first)) == AMPS_OK)
             for (d = 0; d < 3; d++) S->node.dof[3 * c + d] = first + d;
     }
-    for (k = 0; k < r->ntet && !s; k++) s = amps__trips_tet(ctx, S, &T, r->tets[k], -1.0, NULL);
-    for (k = 0; k < r->nsep && !s; k++)
-        for (j = r->sep_ptr[k]; j < r->sep_ptr[k + 1] && !s; j++)
-            if ((s = amps__trips_tet(ctx, S, &T, r->sep_tets[j], 1.0, NULL)) == AMPS_OK)
-                s = amps__trips_tet(ctx, S, &T, r->sep_tets[j], -1.0, rename);
+    if (!s) s = amps__scene_removal_trips(ctx, S, r, rename, &T);
     if (!s) s = amps__trips_add(ctx, S, &T);
     else amps__free(ctx, T.e);
     for (k = 0; k < 4 * r->ntet && !s; k++) { /* orphans: held by their own rows (amps__scene_orphan) */
@@ -15503,11 +15565,7 @@ static amps_status amps__scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, 
     for (k = 0; !s && !S->prepared && k < 4 * out->ntet; k++) /* before the factorization: topology only */
         if (S->m->inc_len[S->m->tet[4 * out->tets[k / 4] + k % 4]] == 0)
             S->node.pinned[S->m->tet[4 * out->tets[k / 4] + k % 4]] = 0;
-    if (!s && S->prepared) {
-        for (k = 0; k < S->m->nnode; k++) rename[k] = k;
-        for (k = 0; k < out->nsep; k++) rename[out->sep_copy[k]] = out->sep_node[k];
-        s = amps__scene_removal_update(ctx, S, out, rename, flagged, &nflag);
-    }
+    if (!s && S->prepared) s = amps__scene_removal_update(ctx, S, out, rename, flagged, &nflag);
     if (s) { /* the scene as it was */
         for (k = 0; k < nflag; k++) {
             S->node.pinned[flagged[k]] = (unsigned char)(S->dyn.orphan[flagged[k]] == 2);

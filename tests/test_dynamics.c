@@ -92,7 +92,7 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
     amps_scene *S;
     amps_update_stats st;
     tstate w;
-    int op, v, step = 0, ncut = 0, nrem = 0, npin = 0;
+    int op, v, step = 0, ncut = 0, nrem = 0, npin = 0, nsep = 0;
     amps_int t;
     double gz[3] = {0, 0, -0.02};
     memset(&w, 0, sizeof(w));
@@ -144,10 +144,12 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
             tt[0] = live_tet(mm);
             tt[1] = live_tet(mm);
             if (tt[0] < 0) continue;
-            if (amps_scene_remove(&ctx, S, tt[1] >= 0 && tt[1] != tt[0] ? 2 : 1, tt, AMPS_SINGULAR_REMOVE, &rr) ==
-                AMPS_OK) {
+            amps_singular_policy pol = dyn && t_int(2) ? AMPS_SINGULAR_SEPARATE : AMPS_SINGULAR_REMOVE;
+            if (amps_scene_remove(&ctx, S, tt[1] >= 0 && tt[1] != tt[0] ? 2 : 1, tt, pol, &rr) == AMPS_OK) {
                 int q, k;
                 nrem++;
+                nsep += rr.nsep;
+                for (k = 0; k < rr.nsep; k++) shadow_grow(&w.sh, (int)rr.sep_copy[k] + 1);
                 for (k = 0; k < rr.ntet; k++) /* orphans (also of the tets the avoidance removed) are released */
                     for (q = 0; q < 4; q++) {
                         amps_int x = mm->tet[4 * rr.tets[k] + q];
@@ -182,12 +184,57 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
     if (dyn) check_step(&ctx, S, &w, what, step++);
     else check_solve(&ctx, S, &w, what, step++);
     amps_update_get_stats(amps_scene_engine(S), &st);
-    printf("  %-22s steps %d, cuts %d, removals %d, pins %d, nodes %ld, solves from the last %ld, refinement steps %ld, "
-           "worst error %.2e\n",
-           what, step, ncut, nrem, npin, (long)amps_scene_mesh(S)->nnode, (long)st.warm_solves, (long)st.refine_solves,
+    printf("  %-22s steps %d, cuts %d, removals %d (separations %d), pins %d, nodes %ld, solves from the last %ld, "
+           "refinement steps %ld, worst error %.2e\n",
+           what, step, ncut, nrem, nsep, npin, (long)amps_scene_mesh(S)->nnode, (long)st.warm_solves, (long)st.refine_solves,
            worst_err);
     amps_scene_free(&ctx, S);
     shadow_free(&w.sh);
+}
+
+static amps_scene *make_scene(amps_ctx *ctx, amps_mesh *m, double zfix, tstate *w);
+
+/* Statics removals on a 5x4x4 grid fixed at its base and loaded at its top, each solve against
+   CHOLMOD: (a) with AMPS_SINGULAR_IGNORE, removals that would leave tet 166 joined to the rest
+   only at nodes 43 and 69 (a hinge) are refused and change nothing; (b) with
+   AMPS_SINGULAR_SEPARATE, a removal whose two separations move one tet (255) counts its element
+   matrix once. */
+static void test_removal_statics(void) {
+    static const amps_int hinge[4] = {160, 167, 157, 163}, sep[4] = {252, 253, 254, 256};
+    int c;
+    for (c = 0; c < 2; c++) {
+        amps_ctx ctx;
+        tstate w;
+        amps_mesh_removal rr;
+        amps_scene *S;
+        amps_int k, refused = 0, v;
+        amps_ctx_init(&ctx);
+        S = make_scene(&ctx, amps_mesh_grid(&ctx, c ? 7 : 5, c ? 5 : 4, 4, 1, 1, 1), 0.5, &w);
+        for (v = 0; v < S->m->nnode; v++)
+            if (S->m->xyz[3 * v + 2] > 3 - 1e-9) {
+                double f[3] = {0.1, 0.2, -0.3};
+                amps_scene_force(&ctx, S, (int)v, f);
+                memcpy(w.sh.force + 3 * v, f, sizeof(f));
+            }
+        check_solve(&ctx, S, &w, c ? "separate" : "hinge", 0);
+        if (c == 0)
+            for (k = 0; k < 4; k++) {
+                amps_status st = amps_scene_remove(&ctx, S, 1, hinge + k, AMPS_SINGULAR_IGNORE, &rr);
+                refused += st == AMPS_ERR_SINGULAR_UPDATE;
+                CHECK(st == AMPS_OK || (st == AMPS_ERR_SINGULAR_UPDATE && strstr(ctx.msg, "one line")),
+                      "hinge: removal of tet %ld: %s", (long)hinge[k], ctx.msg);
+                check_solve(&ctx, S, &w, "hinge", (int)k + 1);
+            }
+        else {
+            CHECK(amps_scene_remove(&ctx, S, 4, sep, AMPS_SINGULAR_SEPARATE, &rr) == AMPS_OK && rr.nsep == 2,
+                  "separate: %s (%ld separations)", ctx.msg, (long)rr.nsep);
+            shadow_grow(&w.sh, (int)S->m->nnode);
+            check_solve(&ctx, S, &w, "separate", 1);
+        }
+        CHECK(c || refused >= 1, "hinge: no removal refused");
+        amps_scene_free(&ctx, S);
+        shadow_free(&w.sh);
+    }
 }
 
 /* A scene over mesh m fixed below z = zfix (tstate filled alike). */
@@ -693,6 +740,7 @@ int main(void) {
     test_args();
     test_physics();
     test_removal();
+    test_removal_statics();
     test_orphans();
     test_fracture();
     test_warm();
