@@ -1198,17 +1198,18 @@ AMPS_API amps_int amps_scene_nodes_near_segment(amps_ctx *ctx, const amps_scene 
    test missed is loose; AMPS_ERR_CAPACITY, AMPS_ERR_OOM) every cut, pin and release of the batch
    is undone (forces stay, as in the engine) and the scene is as at amps_scene_begin_batch. A cut
    in a batch that fails for lack of memory also undoes the batch. Outside a batch amps_scene_commit
-   commits what the scene recorded (moved pins, forces). Cost: one engine commit (see
-   amps_update_commit) for the whole batch instead of one per change. */
+   commits what the scene recorded (moved pins, forces). Removals and material changes are not
+   recorded: they fail with AMPS_ERR_STATE while a batch is open or committing. Cost: one engine
+   commit (see amps_update_commit) for the whole batch instead of one per change. */
 AMPS_API amps_status amps_scene_begin_batch(amps_ctx *ctx, amps_scene *S);
 AMPS_API amps_status amps_scene_commit(amps_ctx *ctx, amps_scene *S);
 /* amps_scene_commit in two phases (amps_update_commit_begin/run/end): begin and end under the
    caller's lock, run outside it (Steps 1-2, the expensive part). Meanwhile the haptic thread may
    move pins (amps_scene_pin of a node pinned before the batch), set forces and, in statics,
-   solve (amps_scene_solve_reactions never waits for the job nor swaps a re-factorization in);
-   cuts, new pins, releases, batches, gravity, amps_scene_dynamics, steps and the haptic step of
-   a dynamic scene (its K u needs the committed matrix: use the haptic model there) fail with
-   AMPS_ERR_STATE. A failed begin or end undoes the batch (as amps_scene_commit).
+   solve (the state before the batch: amps_scene_solve_reactions never waits for the job nor
+   swaps a re-factorization in); cuts, new pins, releases, batches, amps_scene_commit, removals,
+   material changes, gravity, amps_scene_dynamics, steps and the haptic step of a dynamic scene
+   (its K u needs the committed matrix: use the haptic model there) fail with AMPS_ERR_STATE. A failed begin or end undoes the batch (as amps_scene_commit).
    Costs: begin O(recorded changes + the new indices' root paths), plus a swap if one is ready;
    run Steps 1-2 (O(closure of the new indices) + O(|S u C| x new)); end Steps 3 and 5
    (O(|S u C|^2 x changed columns)); the haptic step O(|S u C|^2). */
@@ -6473,7 +6474,8 @@ struct amps_update {
     amps__parbo bo;
     amps__pool *pool; /* the engine's workers (par.pool; NULL: none), kept across re-factorizations */
     struct {                   /* the two-phase commit (amps_update_commit_begin) */
-        int state;             /* 0 none, 1 begun, 2 run */
+        int state;             /* 0 none, 1 begun (written by the caller's thread only) */
+        int ran;               /* the run phase done (written by the thread that runs it) */
         amps_int u_old, nlist; /* |U| before it; the new base positions (list) */
         struct amps_update *J; /* the copy of the engine the run phase works on */
         amps__pdelta *delta;   /* its matrix changes and appended DOFs */
@@ -8848,6 +8850,7 @@ AMPS_API amps_status amps_update_commit_begin(amps_ctx *ctx, amps_update *U) {
         if (k == U->pending.n_con) {
             if ((s = amps__commit(ctx, U, 1)) != AMPS_OK) return s;
             U->cjob.state = 1;
+            U->cjob.ran = 0;
             U->cjob.nlist = -1;
             return AMPS_OK;
         }
@@ -8879,13 +8882,14 @@ AMPS_API amps_status amps_update_commit_begin(amps_ctx *ctx, amps_update *U) {
     U->cjob.vused_old = vused_old;
     U->cjob.nlist = nl;
     U->cjob.state = 1;
+    U->cjob.ran = 0;
     return AMPS_OK;
 }
 
 AMPS_API void amps_update_commit_run(amps_update *U) {
     amps_update *J;
     double t0, t1;
-    if (!U || U->cjob.state != 1) return;
+    if (!U || U->cjob.state != 1 || U->cjob.ran) return;
     if (U->cjob.nlist >= 0) {
         J = U->cjob.J;
         t0 = amps_now();
@@ -8895,7 +8899,7 @@ AMPS_API void amps_update_commit_run(amps_update *U) {
         U->cjob.t_wcols = t1 - t0;
         U->cjob.t_gram = amps_now() - t1;
     }
-    U->cjob.state = 2;
+    U->cjob.ran = 1; /* not state: the caller's thread reads that concurrently */
 }
 
 AMPS_API amps_status amps_update_commit_end(amps_ctx *ctx, amps_update *U) {
@@ -8903,7 +8907,7 @@ AMPS_API amps_status amps_update_commit_end(amps_ctx *ctx, amps_update *U) {
     amps_status s;
     if (!U) return amps__err(ctx, AMPS_ERR_ARG, "amps_update_commit_end: NULL engine");
     if (!U->cjob.state) return amps__err(ctx, AMPS_ERR_STATE, "amps_update_commit_end: no commit begun");
-    if (U->cjob.state == 1) amps_update_commit_run(U);
+    if (!U->cjob.ran) amps_update_commit_run(U);
     U->cjob.state = 0;
     if (U->cjob.nlist < 0) return AMPS_OK;
     u_old = U->cjob.u_old;
@@ -14463,6 +14467,24 @@ static void amps__scene_cut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v, a
     amps__scene_faces_changed(ctx, S, inc, deg);
 }
 
+/* The change record of the undoing of the cut of v into v and vc (vc gone): vc leaves the new
+   nodes, the faces around v are brought up to date. */
+static void amps__scene_uncut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v, amps_int vc) {
+    amps__scene_render *R = &S->rd;
+    amps_int k, deg;
+    const amps_int *inc;
+    if (!R->on || R->lost) return;
+    amps__render_begin(R);
+    for (k = R->nnew - 1; k >= 0; k--)
+        if (R->new_nodes[k] == vc) {
+            memmove(R->new_nodes + k, R->new_nodes + k + 1, sizeof(amps_int) * (size_t)(R->nnew - k - 1));
+            R->nnew--;
+            break;
+        }
+    inc = amps_mesh_incident(S->m, v, &deg);
+    amps__scene_faces_changed(ctx, S, inc, deg);
+}
+
 /* Every triangle from scratch, with new ids (all added). */
 static amps_status amps__render_rebuild(amps_ctx *ctx, amps_scene *S) {
     amps__scene_render *R = &S->rd;
@@ -14540,7 +14562,7 @@ AMPS_API amps_status amps_scene_node_dofs(amps_ctx *ctx, const amps_scene *S, am
     if (!S->prepared)
         return amps__err(ctx, AMPS_ERR_STATE,
                          "amps_scene_node_dofs: no equations before the factorization (call amps_scene_prepare)");
-    for (d = 0; d < 3; d++) dof[d] = S->node.dof[3 * v + d];
+    for (d = 0; d < 3; d++) dof[d] = S->m->inc_len[v] > 0 ? S->node.dof[3 * v + d] : -1; /* orphans: rows held apart */
     return AMPS_OK;
 }
 
@@ -14834,6 +14856,7 @@ static void amps__scene_batch_undo(amps_scene *S) {
             (void)amps_mesh_uncut(&c2, S->m, op->v, op->vc, B->moved + op->moved_at, op->nmoved);
             amps__scene_mass_node(S, op->v);
             amps__scene_mass_node(S, op->vc);
+            amps__scene_uncut_recorded(&c2, S, op->v, op->vc);
         }
     }
     B->open = 0;
@@ -14863,6 +14886,7 @@ AMPS_API amps_status amps_scene_commit(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     amps_int nops;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_commit: NULL scene");
+    if (S->batch.committing) return amps__scene_committing(ctx, "amps_scene_commit");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     nops = S->batch.n;
     s = amps_update_commit(ctx, S->U);
@@ -15539,12 +15563,21 @@ static void amps__scene_removal_copies(amps_scene *S, const amps_mesh_removal *r
     }
 }
 
+/* The refusal of a change that batches do not record (a removal, a material) while a batch is
+   open or a two-phase commit runs: the batch's undo could not take it back. */
+static amps_status amps__scene_unbatched(amps_ctx *ctx, amps_scene *S, const char *fn) {
+    if (S->batch.committing) return amps__err(ctx, AMPS_ERR_STATE, "%s: a two-phase commit is in progress", fn);
+    if (S->batch.open) return amps__err(ctx, AMPS_ERR_STATE, "%s: a batch is open (commit it first)", fn);
+    return AMPS_OK;
+}
+
 /* Removal with the report in *out (see amps_scene_remove). */
 static amps_status amps__scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, const amps_int *tets,
                                       amps_singular_policy policy, amps_mesh_removal *out) {
     amps_int k, nflag = 0, nn0 = S->m->nnode, *rename = NULL, *flagged = NULL;
     amps_status s;
     amps_ctx c2;
+    if ((s = amps__scene_unbatched(ctx, S, "amps_scene_remove")) != AMPS_OK) return s;
     if (S->prepared && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
     if ((s = amps__scene_dyn_room(ctx, S, nn0)) != AMPS_OK) return s;
     if ((s = amps_mesh_remove(ctx, S->m, n, tets, policy, out)) != AMPS_OK) return s;
@@ -15685,6 +15718,7 @@ AMPS_API amps_status amps_scene_step(amps_ctx *ctx, amps_scene *S, amps_int nste
     if (!S->dyn.on)
         return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_step: the scene is static (call amps_scene_dynamics first)");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if (S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s; /* as the solves */
     for (k = 0; k < nsteps; k++) {
         const double *x;
         int d;
@@ -15758,6 +15792,7 @@ static amps_status amps__scene_retet(amps_ctx *ctx, amps_scene *S, amps_int n, c
     amps_status s;
     if ((s = amps__check_material(ctx, fn, E, nu)) != AMPS_OK) return s;
     if (!amps__isfinite(rho)) return amps__err(ctx, AMPS_ERR_VALUE, "%s: non-finite density", fn);
+    if ((s = amps__scene_unbatched(ctx, S, fn)) != AMPS_OK) return s;
     if (rho > 0 && !m->rho && (s = amps_mesh_set_density(ctx, m, 1.0)) != AMPS_OK) return s;
     if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
     old = AMPS__CAST(double *, amps__malloc(ctx, 3 * (size_t)n + 1, sizeof(double)));

@@ -550,8 +550,14 @@ static void test_orphans(void) {
         CHECK(amps_scene_remove(&ctx, S, nt, tets, AMPS_SINGULAR_REMOVE, &rr) == AMPS_OK, "%s: removal: %s", what,
               ctx.msg);
         CHECK(rr.norphan >= 1 && rr.norphan <= 64, "%s: %ld orphans", what, (long)rr.norphan);
-        for (k = 0; k < rr.norphan && k < 64; k++)
+        for (k = 0; k < rr.norphan && k < 64; k++) {
+            amps_int dof[3] = {0, 0, 0};
+            CHECK(amps_scene_node_dofs(&ctx, S, rr.orphans[k], dof) == AMPS_OK && dof[0] == -1 && dof[1] == -1 &&
+                          dof[2] == -1,
+                  "%s: orphan %ld has equations %ld %ld %ld", what, (long)rr.orphans[k], (long)dof[0], (long)dof[1],
+                  (long)dof[2]);
             for (q = 0; q < 3; q++) uo[3 * k + q] = amps_scene_displacements(S)[3 * rr.orphans[k] + q];
+        }
         for (k = 0; k < 3; k++) { /* the steps (solves) after the removal, then after a re-factorization */
             if (k == 2) {
                 CHECK(amps_update_refactor(&ctx, amps_scene_engine(S)) == AMPS_OK, "%s: re-factorization: %s", what,

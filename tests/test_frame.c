@@ -227,7 +227,7 @@ static void test_two_phase_dynamics(void) {
     amps_scene *S[2];
     shadow w[2];
     double g[3] = {0, 0, -1}, p[3];
-    amps_int vc;
+    amps_int vc, tet;
     int k;
     amps_ctx_init(&ctx);
     for (k = 0; k < 2; k++) {
@@ -244,9 +244,28 @@ static void test_two_phase_dynamics(void) {
     CHECK(amps_scene_solve_reactions(&ctx, S[0]) == AMPS_ERR_STATE, "a dynamic haptic step during a two-phase commit");
     CHECK(amps_scene_gravity(&ctx, S[0], g) == AMPS_ERR_STATE, "gravity during a two-phase commit");
     CHECK(amps_scene_dynamics(&ctx, S[0], 0.1, 0.1, 0.02) == AMPS_ERR_STATE, "dynamics during a two-phase commit");
+    CHECK(amps_scene_commit(&ctx, S[0]) == AMPS_ERR_STATE, "amps_scene_commit during a two-phase commit");
+    tet = 5;
+    CHECK(amps_scene_remove(&ctx, S[0], 1, &tet, AMPS_SINGULAR_REMOVE, NULL) == AMPS_ERR_STATE &&
+                  amps_scene_set_tet_material(&ctx, S[0], tet, 2.0, 0.3) == AMPS_ERR_STATE,
+          "a removal or a material change during a two-phase commit");
     amps_scene_commit_run(S[0]);
     CHECK(amps_scene_commit_end(&ctx, S[0]) == AMPS_OK, "commit_end: %s", ctx.msg);
+    /* a removal or a material in an open batch is refused (the batch could not undo it); a step
+       commits an open batch first, as the solves do */
+    memcpy(p, amps_scene_mesh(S[0])->xyz + 3 * 60, sizeof(p));
+    for (k = 0; k < 2; k++) {
+        CHECK(amps_scene_begin_batch(&ctx, S[k]) == AMPS_OK && amps_scene_cut(&ctx, S[k], 60, p, g, &vc) == AMPS_OK,
+              "second batch: %s", ctx.msg);
+        CHECK(amps_scene_remove(&ctx, S[k], 1, &tet, AMPS_SINGULAR_REMOVE, NULL) == AMPS_ERR_STATE &&
+                      amps_scene_set_tet_material(&ctx, S[k], tet, 2.0, 0.3) == AMPS_ERR_STATE &&
+                      amps_scene_set_region(&ctx, S[k], 0, 2.0, 0.3, 1.0) == AMPS_ERR_STATE,
+              "a removal or a material change in an open batch");
+    }
+    CHECK(amps_scene_commit(&ctx, S[1]) == AMPS_OK, "second one-phase commit: %s", ctx.msg);
     for (k = 0; k < 2; k++) CHECK(amps_scene_step(&ctx, S[k], 3) == AMPS_OK, "steps after the commit: %s", ctx.msg);
+    CHECK(amps_scene_begin_batch(&ctx, S[0]) == AMPS_OK, "a batch after the step: %s", ctx.msg);
+    CHECK(amps_scene_commit(&ctx, S[0]) == AMPS_OK, "an empty batch: %s", ctx.msg);
     CHECK(amps_scene_mesh(S[0])->nnode == amps_scene_mesh(S[1])->nnode &&
                   t_reldiff(3 * (int)amps_scene_mesh(S[0])->nnode, amps_scene_displacements(S[0]),
                             amps_scene_displacements(S[1])) <= 1e-13,
@@ -338,6 +357,7 @@ static void test_batch_undo(void) {
     double nrm[3] = {0, 0, 1}, u[3] = {0.01, 0, 0}, u0[36];
     int k, nn;
     amps_status s;
+    amps_scene_changes ch;
     amps_ctx_init(&ctx);
     S = amps_scene_create(&ctx, amps_mesh_grid(&ctx, 2, 2, 3, 1.0, 1.0, 1.0), NULL);
     amps_scene_fix_where(&ctx, S, 2, AMPS_LT, 0.5, NULL);
@@ -345,6 +365,7 @@ static void test_batch_undo(void) {
     CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "undo: solve: %s", ctx.msg);
     memcpy(u0, amps_scene_displacements(S), sizeof(u0));
     nn = (int)amps_scene_mesh(S)->nnode;
+    CHECK(amps_scene_take_changes(&ctx, S, &ch) == AMPS_OK, "undo: take: %s", ctx.msg); /* the record on */
     CHECK(amps_scene_begin_batch(&ctx, S) == AMPS_OK, "undo: begin: %s", ctx.msg);
     for (k = 0; k < 4; k++) {
         double p[3];
@@ -358,6 +379,26 @@ static void test_batch_undo(void) {
     CHECK(s == AMPS_ERR_SINGULAR_UPDATE, "undo: commit of a loose piece: %d (%s)", (int)s, ctx.msg);
     CHECK(amps_scene_mesh(S)->nnode == nn, "undo: node count not restored");
     CHECK(amps_mesh_check(&ctx, amps_scene_mesh(S)) == AMPS_OK, "undo: mesh invariants: %s", ctx.msg);
+    { /* the change record of the undone batch: no new node, the boundary of the restored mesh */
+        const amps_int *tri, *face;
+        amps_int nid, live = 0, bad = 0, nb, *sf, i;
+        CHECK(amps_scene_take_changes(&ctx, S, &ch) == AMPS_OK && ch.nnew == 0, "undo: take: %s, %ld new nodes",
+              ctx.msg, (long)ch.nnew);
+        nid = amps_scene_boundary(S, &tri, &face);
+        nb = amps_mesh_boundary(&ctx, amps_scene_mesh(S), NULL, NULL);
+        sf = (amps_int *)malloc(sizeof(amps_int) * (size_t)(3 * nb + nb + 1));
+        amps_mesh_boundary(&ctx, amps_scene_mesh(S), sf, sf + 3 * nb);
+        for (i = 0; i < nid; i++) {
+            amps_int j;
+            if (face[i] < 0) continue;
+            live++;
+            for (j = 0; j < nb && sf[3 * nb + j] != face[i]; j++) {}
+            bad += j == nb || memcmp(sf + 3 * j, tri + 3 * i, 3 * sizeof(amps_int)) != 0;
+        }
+        CHECK(live == nb && bad == 0, "undo: boundary %ld triangles (%ld not from scratch), %ld from scratch",
+              (long)live, (long)bad, (long)nb);
+        free(sf);
+    }
     {
         double r[3];
         CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "undo: solve after undo: %s", ctx.msg);
