@@ -14945,7 +14945,7 @@ static double amps__seg_dist2(const double *x, const double *a, const double *b,
     }
     if (dd > 0) tt = wd <= 0 ? 0 : wd >= dd ? 1 : wd / dd;
     for (k = 0; k < 3; k++) {
-        double e = w[k] - tt * d[k];
+        double e = tt == 1 ? x[k] - b[k] : w[k] - tt * d[k]; /* an end exactly: equal at a shared corner */
         r += e * e;
     }
     if (t) *t = tt;

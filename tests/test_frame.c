@@ -619,7 +619,22 @@ static void test_two_phase(void) {
     shadow_free(&wb);
 }
 
+/* The distance to a polyline's corner is the same bits through both segments (the stroke takes
+   the first of equal ones). */
+static void test_corner_tie(void) {
+    double a[3] = {0.1, 0.7, 0.3}, c[3] = {1.3, 0.9, 0.45}, e[3] = {1.2, 2.2, 0.2}, x[3], t0, t1;
+    int k, bad = 0;
+    t_seed(77);
+    for (k = 0; k < 20000; k++) {
+        int d;
+        for (d = 0; d < 3; d++) x[d] = c[d] + (t_unif() - 0.5) * 3.0;
+        if (amps__seg_dist2(x, a, c, &t0) != amps__seg_dist2(x, c, e, &t1) && t0 == 1 && t1 == 0) bad++;
+    }
+    CHECK(bad == 0, "corner: %d points nearest the corner at different distances through its segments", bad);
+}
+
 int main(void) {
+    test_corner_tie();
     test_stroke();
     test_stroke_loose();
     test_batches(21);
