@@ -1041,7 +1041,10 @@ AMPS_API amps_status amps_scene_prepare(amps_ctx *ctx, amps_scene *S);
 AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, const double f[3]);
 /* Holds node v at displacement u (again to move it); AMPS_ERR_ARG for a fixed node. */
 AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, const double u[3]);
-/* Releases a pin; does nothing for a node that is not pinned. */
+/* Releases a pin; does nothing for a node that is not pinned. In statics a release that leaves
+   the node-connected piece of v held by nothing, or only by constrained nodes on one line, is
+   AMPS_ERR_SINGULAR_UPDATE with the piece named, and the pin stays (cost: the piece explored until
+   three constrained nodes off one line); in a batch the commit's pivot test decides. */
 AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v);
 /* Cut at node v with the plane (p, nrm) (semantics of amps_mesh_cut). The copy v' starts free
    (no pin, no force) with v's displacement, and is fixed if v is. AMPS_WARN_NOOP if the plane
@@ -13536,6 +13539,32 @@ AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, co
     return AMPS_OK;
 }
 
+static amps_status amps__scene_held_ws(amps_ctx *ctx, amps_scene *S);
+static int amps__scene_piece_held(amps_scene *S, amps_int seed, amps_int *ntet, amps_int *ncon, amps_int *con);
+
+/* Statics: the piece of node v held without v's pin (amps__scene_piece_held), or
+   AMPS_ERR_SINGULAR_UPDATE naming it. */
+static amps_status amps__scene_release_held(amps_ctx *ctx, amps_scene *S, amps_int v) {
+    amps_int ntet, ncon, con;
+    int held;
+    amps_status s;
+    if (S->dyn.on || S->m->inc_len[v] == 0) return AMPS_OK;
+    if ((s = amps__scene_held_ws(ctx, S)) != AMPS_OK) return s;
+    S->node.pinned[v] = 0;
+    held = amps__scene_piece_held(S, v, &ntet, &ncon, &con);
+    S->node.pinned[v] = 1;
+    if (held) return AMPS_OK;
+    if (ncon == 0)
+        return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
+                         "amps_scene_release: releasing node %ld leaves its piece of %ld tets held by nothing; the pin "
+                         "stays",
+                         (long)v, (long)ntet);
+    return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
+                     "amps_scene_release: releasing node %ld leaves its piece of %ld tets held only at %ld constrained "
+                     "node%s on one line (node %ld): it could turn about that line; the pin stays",
+                     (long)v, (long)ntet, (long)ncon, ncon == 1 ? "" : "s", (long)con);
+}
+
 AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v) {
     amps_int k, idx[3];
     amps_status s;
@@ -13545,6 +13574,7 @@ AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v
         S->node.pinned[v] = 0;
         return AMPS_OK;
     }
+    if (!S->batch.open && (s = amps__scene_release_held(ctx, S, v)) != AMPS_OK) return s;
     for (k = 0; k < 3; k++) idx[k] = S->node.dof[3 * v + k];
     if (S->batch.open && (s = amps__scene_batch_room(ctx, S, 0)) != AMPS_OK) return s;
     if ((s = amps_update_release(ctx, S->U, 3, idx)) != AMPS_OK) return s;
@@ -15406,67 +15436,81 @@ static amps_status amps__scene_removal_pieces(amps_ctx *ctx, amps_scene *S, cons
                      (long)nt, (long)nj, nj == 1 ? "" : "s", (long)jn);
 }
 
-/* The tets of a removal: statics requires every node-connected piece around them to be held by
-   fixed or pinned nodes not all on one line (AMPS_ERR_SINGULAR_UPDATE naming the first loose
-   piece). A piece held at points of one line turns about it at zero energy, whatever its inside;
-   with singularity avoidance (REMOVE, SEPARATE) a node-connected piece is face-connected, so rigid,
-   and the test is exact. Cost: the tets of the pieces explored (a piece stops at its third
-   constrained node off the line of the first two, or where it meets a piece found held: seen 1;
-   seen 2: the piece being explored). */
+/* The workspace of amps__scene_piece_held for the current nodes, every node unseen. */
+static amps_status amps__scene_held_ws(amps_ctx *ctx, amps_scene *S) {
+    size_t nn = (size_t)S->m->nnode + 1;
+    amps_status s = amps__scene_rm_ws(ctx, (void **)&S->dyn.rm_seen, &S->dyn.rm_seen_cap, nn, 1);
+    if (!s) s = amps__scene_rm_ws(ctx, (void **)&S->dyn.rm_queue, &S->dyn.rm_queue_cap, nn, sizeof(amps_int));
+    if (!s) memset(S->dyn.rm_seen, 0, nn);
+    return s;
+}
+
+/* Statics: is the node-connected piece of seed (unseen, in a tet) held by fixed or pinned nodes
+   not all on one line? A piece held at points of one line turns about it at zero energy,
+   whatever its inside. The piece is explored until its third constrained node off the line of
+   the first two, or until it meets a piece found held (rm_seen 1; 2: the piece being explored);
+   a held piece's explored nodes are marked 1. Returns 1 if held, else 0 with *ntet (tets, at
+   least 1), *ncon and *con (its constrained nodes: their number and the last) describing it. */
+static int amps__scene_piece_held(amps_scene *S, amps_int seed, amps_int *ntet, amps_int *ncon, amps_int *con) {
+    const amps_mesh *m = S->m;
+    amps_int head = 0, tail = 0, i, q, *queue = S->dyn.rm_queue, nt = 0;
+    unsigned char *seen = S->dyn.rm_seen;
+    amps__line L;
+    int joined = 0;
+    *ncon = 0;
+    *con = -1;
+    seen[seed] = 2;
+    L.state = 0;
+    L.tol = 1e-9 * S->mech.scale;
+    queue[tail++] = seed;
+    while (head < tail && L.state != 3 && !joined) {
+        amps_int v = queue[head++], j;
+        if (S->node.fixed[v] || (S->node.pinned[v] && !S->dyn.orphan[v])) {
+            amps__line_add(&L, m->xyz + 3 * v);
+            (*ncon)++;
+            *con = v;
+        }
+        nt += m->inc_len[v];
+        for (j = 0; j < m->inc_len[v]; j++)
+            for (q = 0; q < 4; q++) {
+                amps_int w = m->tet[4 * m->inc[m->inc_ptr[v] + j] + q];
+                if (seen[w] == 1) joined = 1;
+                else if (!seen[w]) {
+                    seen[w] = 2;
+                    queue[tail++] = w;
+                }
+            }
+    }
+    *ntet = nt / 4 > 0 ? nt / 4 : 1;
+    if (L.state != 3 && !joined) return 0;
+    for (i = 0; i < tail; i++) seen[queue[i]] = 1;
+    return 1;
+}
+
+/* The tets of a removal: statics requires every node-connected piece around them to be held
+   (amps__scene_piece_held; AMPS_ERR_SINGULAR_UPDATE naming the first loose piece), then the
+   face-connected pieces around them to be no hinges (amps__scene_removal_pieces). With
+   singularity avoidance (REMOVE, SEPARATE) a node-connected piece is face-connected. Cost: the
+   tets of the pieces explored. */
 static amps_status amps__scene_removal_held(amps_ctx *ctx, amps_scene *S, const amps_mesh_removal *r) {
     const amps_mesh *m = S->m;
-    amps_int nn = m->nnode, k, q, head, tail, *queue;
-    unsigned char *seen;
-    amps_status s = amps__scene_rm_ws(ctx, (void **)&S->dyn.rm_seen, &S->dyn.rm_seen_cap, (size_t)nn + 1, 1);
-    if (!s)
-        s = amps__scene_rm_ws(ctx, (void **)&S->dyn.rm_queue, &S->dyn.rm_queue_cap, (size_t)nn + 1, sizeof(amps_int));
-    if (s) return s;
-    seen = S->dyn.rm_seen;
-    queue = S->dyn.rm_queue;
-    memset(seen, 0, (size_t)nn + 1);
+    amps_int k;
+    amps_status s = amps__scene_held_ws(ctx, S);
     for (k = 0; !s && k < 4 * r->ntet; k++) {
-        amps_int seed = m->tet[4 * r->tets[k / 4] + k % 4], ntet = 0, ncon = 0, con = -1, i;
-        amps__line L;
-        int joined = 0;
-        if (seen[seed] || m->inc_len[seed] == 0) continue;
-        seen[seed] = 2;
-        L.state = 0;
-        L.tol = 1e-9 * S->mech.scale;
-        head = tail = 0;
-        queue[tail++] = seed;
-        while (head < tail && L.state != 3 && !joined) {
-            amps_int v = queue[head++], j;
-            if (S->node.fixed[v] || (S->node.pinned[v] && !S->dyn.orphan[v])) {
-                amps__line_add(&L, m->xyz + 3 * v);
-                ncon++;
-                con = v;
-            }
-            ntet += m->inc_len[v];
-            for (j = 0; j < m->inc_len[v]; j++)
-                for (q = 0; q < 4; q++) {
-                    amps_int w = m->tet[4 * m->inc[m->inc_ptr[v] + j] + q];
-                    if (seen[w] == 1) joined = 1;
-                    else if (!seen[w]) {
-                        seen[w] = 2;
-                        queue[tail++] = w;
-                    }
-                }
-        }
-        if (L.state == 3 || joined) {
-            for (i = 0; i < tail; i++) seen[queue[i]] = 1;
+        amps_int seed = m->tet[4 * r->tets[k / 4] + k % 4], ntet, ncon, con;
+        if (S->dyn.rm_seen[seed] || m->inc_len[seed] == 0 || amps__scene_piece_held(S, seed, &ntet, &ncon, &con))
             continue;
-        }
         if (ncon == 0)
             s = amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
                           "amps_scene_remove: the removal leaves a piece of %ld tets (node %ld) held by nothing; "
                           "the removal was undone",
-                          (long)(ntet / 4 > 0 ? ntet / 4 : 1), (long)seed);
+                          (long)ntet, (long)seed);
         else
             s = amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
                           "amps_scene_remove: the removal leaves a piece of %ld tets (node %ld) held only at %ld "
                           "constrained node%s on one line (node %ld): it could turn about that line; the removal "
                           "was undone",
-                          (long)(ntet / 4 > 0 ? ntet / 4 : 1), (long)seed, (long)ncon, ncon == 1 ? "" : "s", (long)con);
+                          (long)ntet, (long)seed, (long)ncon, ncon == 1 ? "" : "s", (long)con);
     }
     return s ? s : amps__scene_removal_pieces(ctx, S, r);
 }

@@ -232,6 +232,42 @@ static void test_removal_statics(void) {
             check_solve(&ctx, S, &w, "separate", 1);
         }
         CHECK(c || refused >= 1, "hinge: no removal refused");
+        if (c == 0) { /* a top piece held by three pins only (the layer below it removed): releasing
+                         one leaves two, on one line */
+            amps_scene *P;
+            tstate wp;
+            amps_int pins[3] = {-1, -1, -1}, q, t, nl = 0, layer[256];
+            double z[3] = {0, 0, 0};
+            const amps_mesh *pm;
+            P = make_scene(&ctx, amps_mesh_grid(&ctx, 3, 3, 4, 1, 1, 1), 0.5, &wp);
+            pm = amps_scene_mesh(P);
+            for (q = 0; q < pm->nnode; q++) { /* corners of the top: (0,0), (2,0), (0,2) */
+                const double *x = pm->xyz + 3 * q;
+                if (x[2] < 2.5) continue;
+                if (x[0] < 0.1 && x[1] < 0.1) pins[0] = q;
+                if (x[0] > 1.9 && x[1] < 0.1) pins[1] = q;
+                if (x[0] < 0.1 && x[1] > 1.9) pins[2] = q;
+            }
+            for (q = 0; q < 3; q++) {
+                CHECK(pins[q] >= 0 && amps_scene_pin(&ctx, P, pins[q], z) == AMPS_OK, "release: pin: %s", ctx.msg);
+                if (pins[q] >= 0) wp.sh.pinned[pins[q]] = 1;
+            }
+            check_solve(&ctx, P, &wp, "release", 0);
+            for (t = 0; t < pm->ntet && nl < 256; t++) {
+                double zc = 0;
+                for (q = 0; q < 4; q++) zc += 0.25 * pm->xyz[3 * pm->tet[4 * t + q] + 2];
+                if (zc > 1.0 && zc < 2.0) layer[nl++] = t;
+            }
+            CHECK(amps_scene_remove(&ctx, P, nl, layer, AMPS_SINGULAR_IGNORE, NULL) == AMPS_OK, "release: layer: %s",
+                  ctx.msg);
+            check_solve(&ctx, P, &wp, "release", 1);
+            CHECK(amps_scene_release(&ctx, P, pins[1]) == AMPS_ERR_SINGULAR_UPDATE && strstr(ctx.msg, "one line") &&
+                          amps_scene_is_pinned(P, pins[1]),
+                  "release: a release leaving two pins was not refused: %s", ctx.msg);
+            check_solve(&ctx, P, &wp, "release", 2);
+            amps_scene_free(&ctx, P);
+            shadow_free(&wp.sh);
+        }
         amps_scene_free(&ctx, S);
         shadow_free(&w.sh);
     }
