@@ -1212,7 +1212,8 @@ AMPS_API amps_status amps_scene_commit(amps_ctx *ctx, amps_scene *S);
    solve (the state before the batch: amps_scene_solve_reactions never waits for the job nor
    swaps a re-factorization in); cuts, new pins, releases, batches, amps_scene_commit, removals,
    material changes, gravity, amps_scene_dynamics, steps and the haptic step of a dynamic scene
-   (its K u needs the committed matrix: use the haptic model there) fail with AMPS_ERR_STATE. A failed begin or end undoes the batch (as amps_scene_commit).
+   (its K u needs the committed matrix: use the haptic model there) fail with AMPS_ERR_STATE. A
+   failed begin or end undoes the batch (as amps_scene_commit).
    Costs: begin O(recorded changes + the new indices' root paths), plus a swap if one is ready;
    run Steps 1-2 (O(closure of the new indices) + O(|S u C| x new)); end Steps 3 and 5
    (O(|S u C|^2 x changed columns)); the haptic step O(|S u C|^2). */
