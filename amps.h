@@ -15520,8 +15520,8 @@ static amps_status amps__scene_removal_held(amps_ctx *ctx, amps_scene *S, const 
    two of its nodes may have been separated), Ae(t) on its nodes now if it is live, minus Ae(t) on
    the nodes it had before (rename: each copy of r to the node it was made from, through copies
    of copies). */
-static amps_status amps__scene_removal_trips(amps_ctx *ctx, amps_scene *S, const amps_mesh_removal *r,
-                                             amps_int *rename, amps__trips *T) {
+static amps_status amps__scene_removal_trips(amps_ctx *ctx, amps_scene *S, const amps_mesh_removal *r, amps_int *rename,
+                                             amps__trips *T) {
     amps_int k, n = r->ntet + r->sep_ptr[r->nsep];
     amps_int *ts = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int)));
     amps_status s = AMPS_OK;

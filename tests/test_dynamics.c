@@ -186,8 +186,8 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
     amps_update_get_stats(amps_scene_engine(S), &st);
     printf("  %-22s steps %d, cuts %d, removals %d (separations %d), pins %d, nodes %ld, solves from the last %ld, "
            "refinement steps %ld, worst error %.2e\n",
-           what, step, ncut, nrem, nsep, npin, (long)amps_scene_mesh(S)->nnode, (long)st.warm_solves, (long)st.refine_solves,
-           worst_err);
+           what, step, ncut, nrem, nsep, npin, (long)amps_scene_mesh(S)->nnode, (long)st.warm_solves,
+           (long)st.refine_solves, worst_err);
     amps_scene_free(&ctx, S);
     shadow_free(&w.sh);
 }

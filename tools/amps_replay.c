@@ -92,8 +92,8 @@ typedef struct replay {
     const char *frames; /* --frames PREFIX: a VTU per solve or step and the .pvd of them */
     int nframes;
     double *frame_t, dt; /* the frames' times; the time step (dynamics) */
-    char **tok;   /* MAXTOK: the tokens of the line */
-    amps_int *ids; /* MAXTOK: the node or tet list of a line */
+    char **tok;          /* MAXTOK: the tokens of the line */
+    amps_int *ids;       /* MAXTOK: the node or tet list of a line */
 } replay;
 
 
@@ -556,7 +556,8 @@ static int run_line(replay *R, int nt, char **t) {
 /* The mesh with the displacements, von Mises and principal stresses of the last solve or step. */
 static int write_vtu(replay *R, const char *path) {
     const amps_mesh *m = amps_scene_mesh(R->S);
-    double *vm = (double *)malloc(sizeof(double) * (m->ntet + 1)), *pr = (double *)malloc(sizeof(double) * 3 * (m->ntet + 1));
+    double *vm = (double *)malloc(sizeof(double) * (m->ntet + 1)),
+           *pr = (double *)malloc(sizeof(double) * 3 * (m->ntet + 1));
     amps_status s = vm && pr ? amps_scene_stress(&R->ctx, R->S, NULL, vm, pr) : AMPS_ERR_OOM;
     if (s == AMPS_OK) s = amps_mesh_write_vtu(&R->ctx, path, m, amps_scene_displacements(R->S), vm, pr);
     free(vm);
