@@ -15466,7 +15466,7 @@ static int amps__scene_piece_held(amps_scene *S, amps_int seed, amps_int *ntet, 
     queue[tail++] = seed;
     while (head < tail && L.state != 3 && !joined) {
         amps_int v = queue[head++], j;
-        if (S->node.fixed[v] || (S->node.pinned[v] && !S->dyn.orphan[v])) {
+        if (S->node.fixed[v] || (S->node.pinned[v] && !amps__scene_orphan(S, v))) {
             amps__line_add(&L, m->xyz + 3 * v);
             (*ncon)++;
             *con = v;
