@@ -1269,8 +1269,9 @@ AMPS_API amps_status amps_scene_set_tet_material(amps_ctx *ctx, amps_scene *S, a
 AMPS_API amps_status amps_scene_gravity(amps_ctx *ctx, amps_scene *S, const double g[3]);
 /* Implicit dynamics from now on (paper "GPU-accelerated surgery simulation for opening a brain
    fissure", Eq. 27): backward Euler in velocity form with Rayleigh damping C = alpha M + beta K.
-   dt > 0, alpha, beta >= 0, finite (AMPS_ERR_VALUE). The state (u, w) starts at the current
-   displacements and zero velocity. Called after the factorization with new values it re-factors
+   dt > 0, alpha, beta >= 0, finite (AMPS_ERR_VALUE). The first call starts the state (u, w) at the
+   current displacements and zero velocity; a later call keeps u and w. Called after the
+   factorization with new values it re-factors
    A (a full amps_scene_prepare; if that fails the scene is left unprepared, prepared again by
    the next call). Then amps_scene_solve / amps_scene_solve_watched are AMPS_ERR_STATE. */
 AMPS_API amps_status amps_scene_dynamics(amps_ctx *ctx, amps_scene *S, double dt, double alpha, double beta);
