@@ -1042,9 +1042,11 @@ AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, 
 /* Holds node v at displacement u (again to move it); AMPS_ERR_ARG for a fixed node. */
 AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, const double u[3]);
 /* Releases a pin; does nothing for a node that is not pinned. In statics a release that leaves
-   the node-connected piece of v held by nothing, or only by constrained nodes on one line, is
-   AMPS_ERR_SINGULAR_UPDATE with the piece named, and the pin stays (cost: the piece explored until
-   three constrained nodes off one line); in a batch the commit's pivot test decides. */
+   the node-connected piece of v held by nothing, or only by constrained nodes on one line, or a
+   face-connected piece of v's tets joined to the rest only at nodes of one line (a hinge) and not
+   held off it, is AMPS_ERR_SINGULAR_UPDATE with the piece named, and the pin stays (cost: the
+   pieces explored until three constrained nodes off one line); in a batch the commit's pivot
+   test decides. */
 AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v);
 /* Cut at node v with the plane (p, nrm) (semantics of amps_mesh_cut). The copy v' starts free
    (no pin, no force) with v's displacement, and is fixed if v is. AMPS_WARN_NOOP if the plane
@@ -13485,6 +13487,11 @@ static int amps__scene_orphan(const amps_scene *S, amps_int v) {
     return S->dyn.orphan && v < S->dyn.cap && S->dyn.orphan[v];
 }
 
+/* 1 if node v holds its piece in statics: fixed, or pinned and not an orphan. */
+static int amps__scene_holds(const amps_scene *S, amps_int v) {
+    return S->node.fixed[v] || (S->node.pinned[v] && !amps__scene_orphan(S, v));
+}
+
 static amps_status amps__scene_node(amps_ctx *ctx, amps_scene *S, amps_int v, const char *fn) {
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "%s: NULL scene", fn);
     if (v < 0 || v >= S->m->nnode)
@@ -13543,6 +13550,8 @@ AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, co
 
 static amps_status amps__scene_held_ws(amps_ctx *ctx, amps_scene *S);
 static int amps__scene_piece_held(amps_scene *S, amps_int seed, amps_int *ntet, amps_int *ncon, amps_int *con);
+static int amps__face_piece_loose(amps_scene *S, amps_int t0, amps_int g, amps_int *nvis, amps_int *ntet, amps_int *nj,
+                                  amps_int *jn);
 
 /* Statics: the piece of node v held without v's pin (amps__scene_piece_held), or
    AMPS_ERR_SINGULAR_UPDATE naming it. */
@@ -13554,6 +13563,23 @@ static amps_status amps__scene_release_held(amps_ctx *ctx, amps_scene *S, amps_i
     if ((s = amps__scene_held_ws(ctx, S)) != AMPS_OK) return s;
     S->node.pinned[v] = 0;
     held = amps__scene_piece_held(S, v, &ntet, &ncon, &con);
+    if (held) { /* the face-connected pieces of v's tets: none a hinge (as amps__mechanism) */
+        amps_int k, nvis = 0, nj = 0, jn = -1, g = 0;
+        for (k = 0; k < S->m->inc_len[v] && held; k++) {
+            amps_int t = S->m->inc[S->m->inc_ptr[v] + k];
+            if (S->mech.tet_piece[t] >= 0) continue;
+            if (amps__face_piece_loose(S, t, g++, &nvis, &ntet, &nj, &jn)) held = 0;
+        }
+        for (k = 0; k < nvis; k++) S->mech.tet_piece[S->mech.visited[k]] = -1;
+        if (!held) {
+            S->node.pinned[v] = 1;
+            return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
+                             "amps_scene_release: releasing node %ld leaves a piece of %ld tets joined to the rest at "
+                             "%ld node%s on one line (node %ld) and not held otherwise: it could turn about that "
+                             "line; the pin stays",
+                             (long)v, (long)ntet, (long)nj, nj == 1 ? "" : "s", (long)jn);
+        }
+    }
     S->node.pinned[v] = 1;
     if (held) return AMPS_OK;
     if (ncon == 0)
@@ -13694,6 +13720,45 @@ static int amps__piece_loose(amps_scene *S, amps_int g, amps_int nvis, amps_int 
     return JX.state != 3 || JR.state != 3;
 }
 
+/* The piece still growing when amps__mechanism's others finished (a change that splits the model:
+   it need not be the held rest): grown on until it holds three constrained nodes off one line
+   (held: 0), or to its end, then tested by amps__piece_loose (1: loose; *ntet, *nj, *jn). */
+static int amps__mechanism_rest(amps_scene *S, amps_int ng, amps_int *nvis, amps_int *ntet, amps_int *nj,
+                                amps_int *jn) {
+    const amps_mesh *m = S->m;
+    amps_int g, k, t, c = 0;
+    amps__line L;
+    int q;
+    for (g = 0; g < ng && !S->mech.active[g]; g++) {}
+    if (g == ng) return 0;
+    L.state = 0;
+    L.tol = 1e-9 * S->mech.scale;
+    for (k = 0; k < *nvis && L.state != 3; k++) /* its constrained nodes so far */
+        if (amps__gfind(S->mech.piece_parent, S->mech.tet_piece[S->mech.visited[k]]) == g)
+            for (q = 0; q < 4; q++) {
+                amps_int v = m->tet[4 * S->mech.visited[k] + q];
+                if (amps__scene_holds(S, v)) amps__line_add(&L, m->xyz + 3 * v);
+            }
+    while ((t = S->mech.queue_head[g]) >= 0 && L.state != 3) {
+        S->mech.queue_head[g] = S->mech.tet_next[t];
+        for (q = 0; q < 4; q++) {
+            amps_int o = amps__tet_face_nb(m, t, q), v = m->tet[4 * t + q];
+            if (amps__scene_holds(S, v)) amps__line_add(&L, m->xyz + 3 * v);
+            if (o < 0 || S->mech.tet_piece[o] >= 0) continue;
+            S->mech.tet_piece[o] = g;
+            S->mech.tet_next[o] = -1;
+            S->mech.visited[(*nvis)++] = o;
+            if (S->mech.queue_head[g] >= 0) S->mech.tet_next[S->mech.queue_tail[g]] = o;
+            else S->mech.queue_head[g] = o;
+            S->mech.queue_tail[g] = o;
+        }
+    }
+    if (L.state == 3 || !amps__piece_loose(S, g, *nvis, nj, jn)) return 0;
+    for (k = 0; k < *nvis; k++) c += amps__gfind(S->mech.piece_parent, S->mech.tet_piece[S->mech.visited[k]]) == g;
+    *ntet = c;
+    return 1;
+}
+
 /* After a cut (of v into v and vc) or a removal: explores the face-connected pieces that hold
    the tets of nodes[0..nn-1] together, one tet per piece per round, merging pieces that meet,
    until one piece is left unfinished (the rest of the model). Cost: about (number of pieces) x
@@ -13703,7 +13768,7 @@ static int amps__piece_loose(amps_scene *S, amps_int g, amps_int nvis, amps_int 
 static int amps__mechanism(amps_scene *S, const amps_int *nodes, amps_int nn, amps_int *ntet, amps_int *nj,
                            amps_int *jn) {
     const amps_mesh *m = S->m;
-    amps_int ng = 0, nact, nvis = 0, k, g, loose = 0, w;
+    amps_int ng = 0, nact, nvis = 0, k, g, loose = 0, w, nfin = 0;
     for (w = 0; w < nn; w++)
         for (k = 0; k < m->inc_len[nodes[w]] && ng < S->mech.npiece; k++) {
             amps_int t = m->inc[m->inc_ptr[nodes[w]] + k];
@@ -13728,6 +13793,7 @@ static int amps__mechanism(amps_scene *S, const amps_int *nodes, amps_int nn, am
                 amps_int c = 0;
                 S->mech.active[g] = 0;
                 nact--;
+                nfin++;
                 if (amps__piece_loose(S, g, nvis, nj, jn)) {
                     for (k = 0; k < nvis; k++)
                         c += amps__gfind(S->mech.piece_parent, S->mech.tet_piece[S->mech.visited[k]]) == g;
@@ -13766,6 +13832,8 @@ static int amps__mechanism(amps_scene *S, const amps_int *nodes, amps_int nn, am
             }
         }
     }
+    if (!loose && nact == 1 && nfin > 0) /* the change split the model: the rest may be the loose part */
+        loose = amps__mechanism_rest(S, ng, &nvis, ntet, nj, jn);
     for (k = 0; k < nvis; k++) S->mech.tet_piece[S->mech.visited[k]] = -1;
     return loose;
 }
@@ -13801,6 +13869,38 @@ static amps_status amps__scene_cut_topology(amps_ctx *ctx, amps_scene *S, amps_i
     S->node.fixed[*vc] = S->node.fixed[v];
     for (k = 0; k < 3; k++) S->node.disp[3 * *vc + k] = S->node.disp[3 * v + k];
     return AMPS_OK;
+}
+
+/* Statics, a release of v (pinned[v] already 0): explores, as piece g, the face-connected piece of
+   tet t0 (unlabelled) until it holds three constrained nodes off one line (held: returns 0), or
+   to its end; then it is loose (returns 1; *ntet, *nj, *jn as amps__mechanism) when its joints to
+   the rest and its constrained nodes lie on one line (amps__piece_loose). The labels stay in
+   mech.tet_piece (visited[*nvis ..]); the caller clears them. */
+static int amps__face_piece_loose(amps_scene *S, amps_int t0, amps_int g, amps_int *nvis, amps_int *ntet, amps_int *nj,
+                                  amps_int *jn) {
+    const amps_mesh *m = S->m;
+    amps_int head = *nvis, start = *nvis;
+    amps__line L;
+    L.state = 0;
+    L.tol = 1e-9 * S->mech.scale;
+    S->mech.piece_parent[g] = g;
+    S->mech.tet_piece[t0] = g;
+    S->mech.visited[(*nvis)++] = t0;
+    while (head < *nvis) {
+        amps_int t = S->mech.visited[head++];
+        int q;
+        for (q = 0; q < 4; q++) {
+            amps_int v = m->tet[4 * t + q], o = amps__tet_face_nb(m, t, q);
+            if (amps__scene_holds(S, v)) amps__line_add(&L, m->xyz + 3 * v);
+            if (o >= 0 && S->mech.tet_piece[o] < 0) {
+                S->mech.tet_piece[o] = g;
+                S->mech.visited[(*nvis)++] = o;
+            }
+        }
+        if (L.state == 3) return 0;
+    }
+    *ntet = *nvis - start;
+    return amps__piece_loose(S, g, *nvis, nj, jn);
 }
 
 /* The mechanism test of the cut of v into v and vc: AMPS_ERR_SINGULAR_UPDATE with the loose piece
@@ -15467,7 +15567,7 @@ static int amps__scene_piece_held(amps_scene *S, amps_int seed, amps_int *ntet, 
     queue[tail++] = seed;
     while (head < tail && L.state != 3 && !joined) {
         amps_int v = queue[head++], j;
-        if (S->node.fixed[v] || (S->node.pinned[v] && !amps__scene_orphan(S, v))) {
+        if (amps__scene_holds(S, v)) {
             amps__line_add(&L, m->xyz + 3 * v);
             (*ncon)++;
             *con = v;

@@ -144,7 +144,7 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
             tt[0] = live_tet(mm);
             tt[1] = live_tet(mm);
             if (tt[0] < 0) continue;
-            amps_singular_policy pol = dyn && t_int(2) ? AMPS_SINGULAR_SEPARATE : AMPS_SINGULAR_REMOVE;
+            amps_singular_policy pol = t_int(2) ? AMPS_SINGULAR_SEPARATE : AMPS_SINGULAR_REMOVE;
             if (amps_scene_remove(&ctx, S, tt[1] >= 0 && tt[1] != tt[0] ? 2 : 1, tt, pol, &rr) == AMPS_OK) {
                 int q, k;
                 nrem++;
