@@ -1050,12 +1050,15 @@ AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, co
 AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v);
 /* Cut at node v with the plane (p, nrm) (semantics of amps_mesh_cut). The copy v' starts free
    (no pin, no force) with v's displacement, and is fixed if v is. AMPS_WARN_NOOP if the plane
-   leaves one side empty. A cut that leaves a piece held by nothing, or joined to the rest only at
-   nodes on one line (a hinge, a ball joint) and not held off it by fixed or pinned nodes, returns
-   AMPS_ERR_SINGULAR_UPDATE and the scene is as it was: a face-connected piece is tested by
-   exploring the pieces around v, at a cost of about the tets of the pieces the cut separates.
-   (Chains of pieces that are loose only together are left to the engine's pivot test.) Before
-   the model is factored a cut changes the topology only, as for amps_scene_remove. */
+   leaves one side empty. In statics a cut that leaves a piece held by nothing, or joined to the
+   rest only at nodes on one line (a hinge, a ball joint) and not held off it by fixed or pinned
+   nodes, returns AMPS_ERR_SINGULAR_UPDATE and the scene is as it was: a face-connected piece is
+   tested by exploring the pieces around v, at a cost of about the tets of the pieces the cut
+   separates (when it splits the model, also the largest piece until it meets three constrained
+   nodes off one line).
+   (Chains of pieces that are loose only together are left to the engine's pivot test.) In
+   dynamics a piece cut free is legal (its mass holds it) and moves. Before the model is
+   factored a cut changes the topology only, as for amps_scene_remove. */
 AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, const double p[3], const double nrm[3],
                                     amps_int *new_node);
 /* Solves for the displacements of every node. AMPS_WARN_INACCURATE (the accuracy guard's
@@ -14003,7 +14006,7 @@ static amps_status amps__scene_cut_update(amps_ctx *ctx, amps_scene *S, amps_int
         S->node.disp[3 * vc + k] = S->node.disp[3 * v + k];
         S->node.dof[3 * vc + k] = -1;
     }
-    if ((s = amps__scene_cut_held(ctx, S, v, vc)) != AMPS_OK) goto undo;
+    if (!S->dyn.on && (s = amps__scene_cut_held(ctx, S, v, vc)) != AMPS_OK) goto undo; /* dynamics: mass holds */
     if (!S->node.fixed[v] && S->node.dof[3 * v] >= 0) {
         if ((s = amps_update_add_dofs(ctx, S->U, 3, &first)) != AMPS_OK) goto undo_engine;
         for (k = 0; k < 3; k++) S->node.dof[3 * vc + k] = first + k;

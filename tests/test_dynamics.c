@@ -194,6 +194,56 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
 
 static amps_scene *make_scene(amps_ctx *ctx, amps_mesh *m, double zfix, tstate *w);
 
+/* A stroke across a beam's middle cuts its top free: refused in statics (a loose piece), legal in
+   dynamics (the mass holds it): the steps after it against CHOLMOD, the top falling. */
+static void test_cut_free(void) {
+    int dyn;
+    for (dyn = 0; dyn < 2; dyn++) {
+        amps_ctx ctx;
+        tstate w;
+        amps_scene *S;
+        double pts[6] = {-1, 2, 4, 5, 2, 4}, blade[3] = {0, 1, 0}, g[3] = {0, 0, -1};
+        amps_scene_stroke_result r;
+        amps_int cut[64], copy[64], top = -1, v;
+        amps_status st[64], s;
+        int k;
+        amps_ctx_init(&ctx);
+        S = make_scene(&ctx, amps_mesh_beam(&ctx, 8), 0.5, &w);
+        memset(&r, 0, sizeof(r));
+        r.node = cut;
+        r.copy = copy;
+        r.status = st;
+        r.cap = 64;
+        if (dyn) {
+            CHECK(amps_scene_dynamics(&ctx, S, 0.05, 0.1, 0.01) == AMPS_OK, "free cut: dynamics: %s", ctx.msg);
+            w.dyn = 1;
+            w.dt = 0.05;
+            w.alpha = 0.1;
+            w.beta = 0.01;
+        }
+        CHECK(amps_scene_gravity(&ctx, S, g) == AMPS_OK, "free cut: gravity: %s", ctx.msg);
+        memcpy(w.g, g, sizeof(g));
+        if (dyn) check_step(&ctx, S, &w, "free cut", 0);
+        else check_solve(&ctx, S, &w, "free cut", 0);
+        s = amps_scene_stroke(&ctx, S, 2, pts, blade, 2.9, &r);
+        shadow_grow(&w.sh, (int)S->m->nnode);
+        for (v = 0; v < S->m->nnode; v++)
+            if (S->m->xyz[3 * v + 2] > 6.5) top = v;
+        if (!dyn) {
+            for (k = 0; k < r.n && k < 64 && st[k] != AMPS_ERR_SINGULAR_UPDATE; k++) {}
+            CHECK(s == AMPS_OK && k < r.n, "free cut, statics: no cut refused (%d)", (int)s);
+            check_solve(&ctx, S, &w, "free cut", 1);
+        } else {
+            CHECK(s == AMPS_OK && r.ncut >= 25, "free cut, dynamics: %ld nodes cut (%s)", (long)r.ncut, ctx.msg);
+            for (k = 1; k < 6; k++) check_step(&ctx, S, &w, "free cut", k);
+            CHECK(top >= 0 && amps_scene_velocities(S)[3 * top + 2] < -0.1, "free cut: the top does not fall (%g)",
+                  top >= 0 ? amps_scene_velocities(S)[3 * top + 2] : 0.0);
+        }
+        amps_scene_free(&ctx, S);
+        shadow_free(&w.sh);
+    }
+}
+
 /* Statics removals on a 5x4x4 grid fixed at its base and loaded at its top, each solve against
    CHOLMOD: (a) with AMPS_SINGULAR_IGNORE, removals that would leave tet 166 joined to the rest
    only at nodes 43 and 69 (a hinge) are refused and change nothing; (b) with
@@ -783,6 +833,7 @@ int main(void) {
     test_physics();
     test_removal();
     test_removal_statics();
+    test_cut_free();
     test_orphans();
     test_fracture();
     test_warm();
