@@ -15633,7 +15633,7 @@ static amps_status amps__scene_removal_trips(amps_ctx *ctx, amps_scene *S, const
     for (k = 0; k < S->m->nnode; k++) rename[k] = k;
     for (k = 0; k < r->nsep; k++) rename[r->sep_copy[k]] = rename[r->sep_node[k]];
     memcpy(ts, r->tets, sizeof(amps_int) * (size_t)r->ntet);
-    memcpy(ts + r->ntet, r->sep_tets, sizeof(amps_int) * (size_t)r->sep_ptr[r->nsep]);
+    if (r->sep_ptr[r->nsep] > 0) memcpy(ts + r->ntet, r->sep_tets, sizeof(amps_int) * (size_t)r->sep_ptr[r->nsep]);
     qsort(ts, (size_t)n, sizeof(amps_int), amps__int_cmp);
     for (k = 0; k < n && !s; k++) {
         if (k > 0 && ts[k] == ts[k - 1]) continue;
