@@ -85,7 +85,11 @@ $(BUILD):
 $(BUILD)/test_%: tests/test_%.c amps.h tests/*.h | $(BUILD)
 	$(CC) $(CFLAGS_ALL) -o $@ $< $(LDLIBS_T)
 
-test: deps-check $(TEST_BIN) $(TOOLS)
+# Without -j from the caller the test programs still build on every core (each compiles the
+# whole implementation); the tests then run one at a time.
+JOBS ?= $(shell nproc 2>/dev/null || echo 2)
+test: deps-check
+	@$(MAKE) --no-print-directory $(if $(findstring jobserver,$(MAKEFLAGS)),,-j$(JOBS)) $(TEST_BIN) $(TOOLS)
 	@AMPS_BUILD=$(BUILD) bash tests/run.sh $(TEST_BIN) $(TEST_SH)
 
 # Long mode of tests/test_stress.c (the short mode is part of make test); the bunny run uses
