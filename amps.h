@@ -13081,9 +13081,9 @@ typedef struct amps__scene_dyn {
     unsigned char *cr_con;                        /* 1 per equation: constrained in the engine */
     amps_int cr_ncap;                             /* equation capacity of cr_eng, cr_con */
     amps_scene_step_stats info;                   /* the last step (amps_scene_step_info) */
-    amps_int *rm_list, *rm_flag, *rm_rename, *rm_queue; /* removal and fracture workspace, grown on demand: */
-    unsigned char *rm_seen;                             /* tets, orphans flagged, node map, queue, marks */
-    size_t rm_list_cap, rm_flag_cap, rm_rename_cap, rm_queue_cap, rm_seen_cap;
+    amps_int *rm_list, *rm_flag, *rm_rename, *rm_queue, *rm_sort; /* removal and fracture workspace, grown */
+    unsigned char *rm_seen; /* on demand: tets, orphans flagged, node map, queue, changed tets, marks */
+    size_t rm_list_cap, rm_flag_cap, rm_rename_cap, rm_queue_cap, rm_sort_cap, rm_seen_cap;
 } amps__scene_dyn;
 
 struct amps_scene {
@@ -13208,6 +13208,7 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->dyn.rm_flag);
     amps__free(ctx, S->dyn.rm_rename);
     amps__free(ctx, S->dyn.rm_queue);
+    amps__free(ctx, S->dyn.rm_sort);
     amps__free(ctx, S->dyn.rm_seen);
     amps__free(ctx, S);
 }
@@ -13732,17 +13733,16 @@ static int amps__piece_loose(amps_scene *S, amps_int g, amps_int nvis, amps_int 
     return JX.state != 3 || JR.state != 3;
 }
 
-/* The piece still growing when amps__mechanism's others finished (a change that splits the model:
-   it need not be the held rest): grown on until it holds three constrained nodes off one line
-   (held: 0), or to its end, then tested by amps__piece_loose (1: loose; *ntet, *nj, *jn). */
-static int amps__mechanism_rest(amps_scene *S, amps_int ng, amps_int *nvis, amps_int *ntet, amps_int *nj,
-                                amps_int *jn) {
+/* Face-connected piece g (its tets so far labelled g among visited[0:*nvis], more queued from
+   mech.queue_head[g]) grown face by face until it holds three constrained nodes off one line
+   (held: returns 0), or to its end; then 1 when it is loose (amps__piece_loose; *ntet, *nj, *jn
+   as amps__mechanism). Its labels stay in mech.tet_piece (visited); the caller clears them. */
+static int amps__piece_grow_loose(amps_scene *S, amps_int g, amps_int *nvis, amps_int *ntet, amps_int *nj,
+                                  amps_int *jn) {
     const amps_mesh *m = S->m;
-    amps_int g, k, t, c = 0;
+    amps_int k, t, c = 0;
     amps__line L;
     int q;
-    for (g = 0; g < ng && !S->mech.active[g]; g++) {}
-    if (g == ng) return 0;
     L.state = 0;
     L.tol = 1e-9 * S->mech.scale;
     for (k = 0; k < *nvis && L.state != 3; k++) /* its constrained nodes so far */
@@ -13769,6 +13769,15 @@ static int amps__mechanism_rest(amps_scene *S, amps_int ng, amps_int *nvis, amps
     for (k = 0; k < *nvis; k++) c += amps__gfind(S->mech.piece_parent, S->mech.tet_piece[S->mech.visited[k]]) == g;
     *ntet = c;
     return 1;
+}
+
+/* The piece still growing when amps__mechanism's others finished (a change that splits the model:
+   it need not be the held rest), tested by amps__piece_grow_loose. */
+static int amps__mechanism_rest(amps_scene *S, amps_int ng, amps_int *nvis, amps_int *ntet, amps_int *nj,
+                                amps_int *jn) {
+    amps_int g;
+    for (g = 0; g < ng && !S->mech.active[g]; g++) {}
+    return g < ng && amps__piece_grow_loose(S, g, nvis, ntet, nj, jn);
 }
 
 /* After a cut (of v into v and vc) or a removal: explores the face-connected pieces that hold
@@ -13883,36 +13892,16 @@ static amps_status amps__scene_cut_topology(amps_ctx *ctx, amps_scene *S, amps_i
     return AMPS_OK;
 }
 
-/* Statics, a release of v (pinned[v] already 0): explores, as piece g, the face-connected piece of
-   tet t0 (unlabelled) until it holds three constrained nodes off one line (held: returns 0), or
-   to its end; then it is loose (returns 1; *ntet, *nj, *jn as amps__mechanism) when its joints to
-   the rest and its constrained nodes lie on one line (amps__piece_loose). The labels stay in
-   mech.tet_piece (visited[*nvis ..]); the caller clears them. */
+/* Statics, a release of v (pinned[v] already 0): the face-connected piece of tet t0 (unlabelled)
+   as piece g, tested by amps__piece_grow_loose (1: loose). */
 static int amps__face_piece_loose(amps_scene *S, amps_int t0, amps_int g, amps_int *nvis, amps_int *ntet, amps_int *nj,
                                   amps_int *jn) {
-    const amps_mesh *m = S->m;
-    amps_int head = *nvis, start = *nvis;
-    amps__line L;
-    L.state = 0;
-    L.tol = 1e-9 * S->mech.scale;
     S->mech.piece_parent[g] = g;
     S->mech.tet_piece[t0] = g;
+    S->mech.tet_next[t0] = -1;
+    S->mech.queue_head[g] = S->mech.queue_tail[g] = t0;
     S->mech.visited[(*nvis)++] = t0;
-    while (head < *nvis) {
-        amps_int t = S->mech.visited[head++];
-        int q;
-        for (q = 0; q < 4; q++) {
-            amps_int v = m->tet[4 * t + q], o = amps__tet_face_nb(m, t, q);
-            if (amps__scene_holds(S, v)) amps__line_add(&L, m->xyz + 3 * v);
-            if (o >= 0 && S->mech.tet_piece[o] < 0) {
-                S->mech.tet_piece[o] = g;
-                S->mech.visited[(*nvis)++] = o;
-            }
-        }
-        if (L.state == 3) return 0;
-    }
-    *ntet = *nvis - start;
-    return amps__piece_loose(S, g, *nvis, nj, jn);
+    return amps__piece_grow_loose(S, g, nvis, ntet, nj, jn);
 }
 
 /* The mechanism test of the cut of v into v and vc: AMPS_ERR_SINGULAR_UPDATE with the loose piece
@@ -15635,10 +15624,10 @@ static amps_status amps__scene_removal_held(amps_ctx *ctx, amps_scene *S, const 
    of copies). */
 static amps_status amps__scene_removal_trips(amps_ctx *ctx, amps_scene *S, const amps_mesh_removal *r, amps_int *rename,
                                              amps__trips *T) {
-    amps_int k, n = r->ntet + r->sep_ptr[r->nsep];
-    amps_int *ts = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)n + 1, sizeof(amps_int)));
-    amps_status s = AMPS_OK;
-    if (!ts) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_remove: out of memory");
+    amps_int k, n = r->ntet + r->sep_ptr[r->nsep], *ts;
+    amps_status s = amps__scene_rm_ws(ctx, (void **)&S->dyn.rm_sort, &S->dyn.rm_sort_cap, (size_t)n, sizeof(amps_int));
+    if (s) return s;
+    ts = S->dyn.rm_sort;
     for (k = 0; k < S->m->nnode; k++) rename[k] = k;
     for (k = 0; k < r->nsep; k++) rename[r->sep_copy[k]] = rename[r->sep_node[k]];
     memcpy(ts, r->tets, sizeof(amps_int) * (size_t)r->ntet);
@@ -15649,7 +15638,6 @@ static amps_status amps__scene_removal_trips(amps_ctx *ctx, amps_scene *S, const
         if (!S->m->removed[ts[k]]) s = amps__trips_tet(ctx, S, T, ts[k], 1.0, NULL);
         if (!s) s = amps__trips_tet(ctx, S, T, ts[k], -1.0, rename);
     }
-    amps__free(ctx, ts);
     return s;
 }
 
