@@ -1199,7 +1199,8 @@ AMPS_API amps_int amps_scene_nodes_near_segment(amps_ctx *ctx, const amps_scene 
                                                 const double b[3], double radius, amps_int *out, amps_int cap);
 /* Batches: between amps_scene_begin_batch and amps_scene_commit, cuts, pins, releases and forces
    only record their changes (each cut's mechanism test still runs at the cut, so its refusal is
-   immediate, and the scene's mesh and node numbering change at once); amps_scene_commit applies
+   immediate, and the scene's mesh and node numbering change at once; in statics the releases are
+   tested at the commit, on the state after the batch, as amps_scene_release tests one); amps_scene_commit applies
    them to the engine in one commit. The solves commit an open batch first, as amps_scene_commit
    does. amps_scene_begin_batch prepares the scene if needed (AMPS_ERR_STATE if a batch is open).
    amps_scene_commit ends the batch; on failure (AMPS_ERR_SINGULAR_UPDATE: a piece the mechanism
@@ -13567,9 +13568,10 @@ static int amps__face_piece_loose(amps_scene *S, amps_int t0, amps_int g, amps_i
                                   amps_int *jn);
 
 /* Statics: the piece of node v held without v's pin (amps__scene_piece_held), or
-   AMPS_ERR_SINGULAR_UPDATE naming it. */
+   AMPS_ERR_SINGULAR_UPDATE naming it. pinned[v] is kept. */
 static amps_status amps__scene_release_held(amps_ctx *ctx, amps_scene *S, amps_int v) {
     amps_int ntet, ncon, con;
+    unsigned char was = S->node.pinned[v];
     int held;
     amps_status s;
     if (S->dyn.on || S->m->inc_len[v] == 0) return AMPS_OK;
@@ -13585,7 +13587,7 @@ static amps_status amps__scene_release_held(amps_ctx *ctx, amps_scene *S, amps_i
         }
         for (k = 0; k < nvis; k++) S->mech.tet_piece[S->mech.visited[k]] = -1;
         if (!held) {
-            S->node.pinned[v] = 1;
+            S->node.pinned[v] = was;
             return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
                              "amps_scene_release: releasing node %ld leaves a piece of %ld tets joined to the rest at "
                              "%ld node%s on one line (node %ld) and not held otherwise: it could turn about that "
@@ -13593,7 +13595,7 @@ static amps_status amps__scene_release_held(amps_ctx *ctx, amps_scene *S, amps_i
                              (long)v, (long)ntet, (long)nj, nj == 1 ? "" : "s", (long)jn);
         }
     }
-    S->node.pinned[v] = 1;
+    S->node.pinned[v] = was;
     if (held) return AMPS_OK;
     if (ncon == 0)
         return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
@@ -15003,6 +15005,24 @@ static void amps__scene_batch_abort(amps_scene *S) {
     amps__scene_batch_undo(S);
 }
 
+/* Statics: the releases of the open batch tested as amps_scene_release tests one, on the state
+   after the batch (a node released and not pinned again); a refusal undoes the batch. */
+static amps_status amps__scene_batch_held(amps_ctx *ctx, amps_scene *S, const char *fn) {
+    amps_int i, nops = S->batch.n;
+    amps_status s = AMPS_OK;
+    for (i = 0; i < nops && !s; i++)
+        if (S->batch.ops[i].kind == 2 && !S->node.pinned[S->batch.ops[i].v])
+            s = amps__scene_release_held(ctx, S, S->batch.ops[i].v);
+    if (s) {
+        char msg[200];
+        memcpy(msg, ctx ? ctx->msg : "", ctx ? sizeof(msg) : 1);
+        msg[sizeof(msg) - 1] = 0;
+        amps__scene_batch_abort(S);
+        return amps__err(ctx, s, "%s: the batch of %ld changes was undone (%s)", fn, (long)nops, msg);
+    }
+    return AMPS_OK;
+}
+
 AMPS_API amps_status amps_scene_begin_batch(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_begin_batch: NULL scene");
@@ -15022,6 +15042,7 @@ AMPS_API amps_status amps_scene_commit(amps_ctx *ctx, amps_scene *S) {
     if (S->batch.committing) return amps__scene_committing(ctx, "amps_scene_commit");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     nops = S->batch.n;
+    if (S->batch.open && (s = amps__scene_batch_held(ctx, S, "amps_scene_commit")) != AMPS_OK) return s;
     s = amps_update_commit(ctx, S->U);
     if (s != AMPS_OK && S->batch.open) {
         char msg[200];
@@ -15040,6 +15061,7 @@ AMPS_API amps_status amps_scene_commit_begin(amps_ctx *ctx, amps_scene *S) {
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_commit_begin: NULL scene");
     if (S->batch.committing) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_commit_begin: a commit is in progress");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
+    if (S->batch.open && (s = amps__scene_batch_held(ctx, S, "amps_scene_commit_begin")) != AMPS_OK) return s;
     if ((s = amps_update_commit_begin(ctx, S->U)) != AMPS_OK) {
         if (S->batch.open) amps__scene_batch_undo(S); /* the engine discarded it */
         return s;

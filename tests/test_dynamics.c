@@ -315,6 +315,19 @@ static void test_removal_statics(void) {
                           amps_scene_is_pinned(P, pins[1]),
                   "release: a release leaving two pins was not refused: %s", ctx.msg);
             check_solve(&ctx, P, &wp, "release", 2);
+            /* the same release in a batch: refused at the commit, the batch undone; so in two phases */
+            CHECK(amps_scene_begin_batch(&ctx, P) == AMPS_OK && amps_scene_release(&ctx, P, pins[1]) == AMPS_OK,
+                  "release: batch: %s", ctx.msg);
+            CHECK(amps_scene_commit(&ctx, P) == AMPS_ERR_SINGULAR_UPDATE && strstr(ctx.msg, "one line") &&
+                          amps_scene_is_pinned(P, pins[1]),
+                  "release: a batch's release leaving two pins was not refused: %s", ctx.msg);
+            check_solve(&ctx, P, &wp, "release", 3);
+            CHECK(amps_scene_begin_batch(&ctx, P) == AMPS_OK && amps_scene_release(&ctx, P, pins[1]) == AMPS_OK,
+                  "release: batch: %s", ctx.msg);
+            CHECK(amps_scene_commit_begin(&ctx, P) == AMPS_ERR_SINGULAR_UPDATE && strstr(ctx.msg, "one line") &&
+                          amps_scene_is_pinned(P, pins[1]),
+                  "release: a two-phase batch's release leaving two pins was not refused: %s", ctx.msg);
+            check_solve(&ctx, P, &wp, "release", 4);
             amps_scene_free(&ctx, P);
             shadow_free(&wp.sh);
         }
