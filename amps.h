@@ -1275,7 +1275,8 @@ AMPS_API amps_status amps_scene_set_tet_material(amps_ctx *ctx, amps_scene *S, a
 AMPS_API amps_status amps_scene_gravity(amps_ctx *ctx, amps_scene *S, const double g[3]);
 /* Implicit dynamics from now on (paper "GPU-accelerated surgery simulation for opening a brain
    fissure", Eq. 27): backward Euler in velocity form with Rayleigh damping C = alpha M + beta K.
-   dt > 0, alpha, beta >= 0, finite (AMPS_ERR_VALUE). The first call starts the state (u, w) at the
+   dt > 0, alpha, beta >= 0, finite, with 1 + alpha dt and beta dt + dt^2 > 0 finite
+   (AMPS_ERR_VALUE). The first call starts the state (u, w) at the
    current displacements and zero velocity; a later call keeps u and w. Called after the
    factorization with new values it re-factors
    A (a full amps_scene_prepare; if that fails the scene is left unprepared, prepared again by
@@ -15500,6 +15501,13 @@ AMPS_API amps_status amps_scene_dynamics(amps_ctx *ctx, amps_scene *S, double dt
     if (!amps__isfinite(dt) || !(dt > 0) || !amps__isfinite(alpha) || !(alpha >= 0) || !amps__isfinite(beta) ||
         !(beta >= 0))
         return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_dynamics: need dt > 0, alpha >= 0, beta >= 0 (finite)");
+    if (!amps__isfinite(1.0 + alpha * dt) || !amps__isfinite(beta * dt + dt * dt) || !(beta * dt + dt * dt > 0) ||
+        !amps__isfinite(1.0 / dt))
+        return amps__err(
+                ctx, AMPS_ERR_VALUE,
+                "amps_scene_dynamics: dt = %g, alpha = %g, beta = %g: 1 + alpha dt = %g or beta dt + dt^2 = %g "
+                "out of range",
+                dt, alpha, beta, 1.0 + alpha * dt, beta * dt + dt * dt);
     if ((s = amps__scene_dyn_room(ctx, S, S->m->nnode)) != AMPS_OK) return s;
     if (S->dyn.on && S->dyn.dt == dt && S->dyn.alpha == alpha && S->dyn.beta == beta) return AMPS_OK;
     S->dyn.on = 1;

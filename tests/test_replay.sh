@@ -86,7 +86,14 @@ boxinv|mesh beam 4\nfixbox 1 0 0 0 1 1\n|2|lo\[0\]
 spherenan|mesh beam 4\nfixsphere 0 0 0 nan\n|2|bad number
 hapticarg|mesh beam 4\nhaptic 0\n|2|usage
 fracneg|mesh beam 4\nfix z lt 0.5\ndynamics 0.01 0 0\nfracture -5\n|4|sigma_max must be > 0
+regrho0|mesh beam 4\nregion 0 1000 0.3 0\n|2|density 0 is not > 0
+dthuge|mesh beam 4\nfix z lt 0.5\ndynamics 1e300 0 0\n|3|out of range
 CASES
+# a UTF-8 byte order mark at the start; a comment line of 100,000 characters; a fixnodes line of
+# 30,000 nodes (no limit of the line's length)
+printf '\xEF\xBB\xBFmesh beam 4 # bom\n# %s\nfix z lt 0.5\nfixnodes %s\nsolve\n' "$(head -c 100000 /dev/zero | tr '\0' x)" \
+  "$(for i in $(seq 1 1000); do printf '1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 '; done)" > "$tmp/long.scn"
+"$R" "$tmp/long.scn" > "$tmp/long.out" 2>&1 && grep -q '^fixnodes: 30000 nodes' "$tmp/long.out" && ok || bad "bom, long lines: $(tail -3 "$tmp/long.out")"
 # --frames: a VTU per step and the .pvd of them (times k dt); a remove line of 100 tets (no limit
 # of arguments below the line length)
 printf 'mesh beam 12\nfix z lt 0.5\ndynamics 0.02 0 0\ngravity 0 0 -1\nstep 3\nremove %s\nstep 2\n' "$(seq -s ' ' 200 299)" > "$tmp/fr.scn"

@@ -67,12 +67,12 @@
 #include <ctype.h>
 #include <math.h>
 #include <errno.h>
+#include <limits.h>
 #ifndef AMPS_REPLAY_NO_MAIN
 #define JOBS_IMPLEMENTATION
 #include "../examples/jobs.h"
 #endif
 
-#define MAXTOK 32768 /* tokens of a line: a line holds at most 65535 characters */
 
 typedef struct replay {
     amps_ctx ctx;
@@ -92,8 +92,10 @@ typedef struct replay {
     const char *frames; /* --frames PREFIX: a VTU per solve or step and the .pvd of them */
     int nframes;
     double *frame_t, dt; /* the frames' times; the time step (dynamics) */
-    char **tok;          /* MAXTOK: the tokens of the line */
-    amps_int *ids;       /* MAXTOK: the node or tet list of a line */
+    char *buf;           /* the line being run (bufcap bytes) */
+    char **tok;          /* its tokens (tokcap) */
+    amps_int *ids;       /* a node or tet list of the line (tokcap) */
+    size_t bufcap, tokcap;
 } replay;
 
 
@@ -590,9 +592,10 @@ static int cmd_material_dyn(replay *R, int nt, char **t) {
         return amps_scene_set_density(&R->ctx, R->S, x[0]) ? lib_fail(R, "density") : 0;
     }
     if ((nt != 4 && nt != 5) || !parse_int(t[1], &id)) return fail(R, "%s", "usage: region <id> <E> <nu> [<rho>]");
-    x[2] = 0;
+    x[2] = 0; /* no density given: amps_scene_set_region keeps it */
     for (k = 2; k < nt; k++)
         if (!parse_num(t[k], &x[k - 2])) return fail(R, "bad number '%s'", t[k]);
+    if (nt == 5 && !(x[2] > 0)) return fail(R, "region: density %s is not > 0", t[4]);
     if (R->solved) return fail(R, "%s", "region is allowed only before the first solve or step");
     return amps_scene_set_region(&R->ctx, R->S, id, x[0], x[1], x[2]) ? lib_fail(R, "region") : 0;
 }
@@ -694,41 +697,58 @@ static int run_dynamics_line(replay *R, int nt, char **t) {
     return -1;
 }
 
+/* Room for a line of n characters: the line buffer and at most n / 2 + 1 tokens (a token and a
+   separator each). 0 or 1 (out of memory, or a line too long for an int count of tokens). */
+static int replay_line_room(replay *R, size_t n) {
+    size_t nt = n / 2 + 2;
+    if (n > (size_t)INT_MAX) return fail(R, "%s", "line too long");
+    if (n + 1 > R->bufcap) {
+        char *b = (char *)realloc(R->buf, n + 1 + n / 2);
+        if (!b) return fail(R, "%s", "out of memory");
+        R->buf = b;
+        R->bufcap = n + 1 + n / 2;
+    }
+    if (nt > R->tokcap) {
+        char **t = (char **)realloc(R->tok, sizeof(char *) * (nt + nt / 2));
+        amps_int *v;
+        if (t) R->tok = t;
+        v = t ? (amps_int *)realloc(R->ids, sizeof(amps_int) * (nt + nt / 2)) : NULL;
+        if (!v) return fail(R, "%s", "out of memory");
+        R->ids = v;
+        R->tokcap = nt + nt / 2;
+    }
+    return 0;
+}
+
 /* Runs the scenario text buf[0..len-1] (no NUL needed) line by line; returns 0 or 1 after the
-   first failing line (message on stderr). Lines longer than 65535 characters fail. */
+   first failing line (message on stderr). A UTF-8 byte order mark at the start is skipped. */
 static int replay_run_buffer(replay *R, const char *text, size_t len) {
-    char buf[65536];
     size_t pos = 0;
     int rc = 0;
-    if (!R->tok) R->tok = (char **)malloc(sizeof(char *) * MAXTOK);
-    if (!R->ids) R->ids = (amps_int *)malloc(sizeof(amps_int) * MAXTOK);
-    if (!R->tok || !R->ids) return fail(R, "%s", "out of memory");
+    if (len >= 3 && !memcmp(text, "\xEF\xBB\xBF", 3)) pos = 3;
     while (pos < len) {
-        char **tok = R->tok, *p = buf, *hash;
+        char **tok, *p, *hash;
         size_t e = pos, n;
         int nt = 0;
         while (e < len && text[e] != '\n') e++;
         n = e - pos;
         R->line++;
-        if (n >= sizeof(buf)) return fail(R, "%s", "line too long");
-        memcpy(buf, text + pos, n);
-        buf[n] = 0;
+        if ((rc = replay_line_room(R, n)) != 0) return rc;
+        p = R->buf;
+        tok = R->tok;
+        memcpy(p, text + pos, n);
+        p[n] = 0;
         pos = e < len ? e + 1 : e;
-        if (strlen(buf) != n) return fail(R, "%s", "NUL character in the line");
-        hash = strchr(buf, '#');
+        if (strlen(p) != n) return fail(R, "%s", "NUL character in the line");
+        hash = strchr(p, '#');
         if (hash) *hash = 0;
         while (*p) {
             while (*p && isspace((unsigned char)*p)) *p++ = 0;
             if (!*p) break;
-            if (nt == MAXTOK) {
-                nt = MAXTOK + 1;
-                break;
-            }
             tok[nt++] = p;
             while (*p && !isspace((unsigned char)*p)) p++;
         }
         if (nt == 0) continue;
-        if (nt > MAXTOK) return fail(R, "%s", "too many arguments");
         if ((rc = run_line(R, nt, tok)) != 0) return rc;
     }
     return 0;
@@ -743,13 +763,16 @@ static void replay_init(replay *R) {
 
 static void replay_free(replay *R) {
     free(R->times);
+    free(R->buf);
     free(R->tok);
     free(R->ids);
     free(R->frame_t);
     R->frame_t = NULL;
     amps_scene_free(&R->ctx, R->S);
+    R->buf = NULL;
     R->tok = NULL;
     R->ids = NULL;
+    R->bufcap = R->tokcap = 0;
     R->times = NULL;
     R->S = NULL;
 }
