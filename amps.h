@@ -589,6 +589,8 @@ typedef struct amps_update_stats {
     amps_int refactor_failed;       /* re-factorizations that failed (the engine kept its factors) */
     amps_int commit_folds;          /* commits too large for the augmentation, done as a synchronous
                                        re-factorization with the changes applied (among nrefactor) */
+    amps_int pivot_folds;           /* of them, commits whose dense pivot test failed (an ill-conditioned
+                                       K^; a singular one fails the re-factorization too) */
     int refactor_running;           /* 1 while one is in progress (started, not yet swapped) */
     double t_refactor;              /* wall time of the last one, start to ready (background) */
     double t_swap;                  /* time of its swap (inside the call that did it) */
@@ -649,7 +651,12 @@ AMPS_API void amps_update_discard(amps_update *U);
    discarded (as by amps_update_discard); record them again, corrected, to retry. A finished
    re-factorization the call swapped in first stays swapped in. A change set too large for the
    augmentation is committed by a synchronous re-factorization (see amps_refactor_policy: allocates
-   as one, and amps_update_factor changes); if that fails, through the augmentation as usual. */
+   as one, and amps_update_factor changes); if that fails, through the augmentation as usual.
+   AMPS_ERR_SINGULAR_UPDATE comes from a pivot of the dense system below singular_tol of its
+   column; an ill-conditioned K^ (stiffness ratios of 1e6, nu near 0.5) can meet one too, so the
+   changes are then committed by a synchronous re-factorization of K^ with them applied (any
+   policy; stats.pivot_folds; not while a two-phase watched solve runs), and refused only if
+   that finds K^ singular. */
 AMPS_API amps_status amps_update_commit(amps_ctx *ctx, amps_update *U);
 /* The same in two phases, for a caller whose haptic thread must not wait for a commit's Steps 1-2
    (the L^{-1} columns of the new indices and the new rows of G: the expensive part):
@@ -8414,10 +8421,10 @@ static void amps__delta_add(amps_update *U, amps_int a, amps_int b, double v) {
     U->delta.row_len[a]++;
 }
 
-/* Rollback of a failed commit: drops the new positions, restores the Delta row headers, kinds
-   and prescribed values from the journal and the pool sizes, refactors the old system, and
-   discards the recorded changes. */
-static void amps__rollback(amps_update *U, amps_int u_old, size_t vused_old, amps_int dused_old) {
+/* The engine before a failed commit, its recorded changes kept: drops the new positions,
+   restores the Delta row headers, kinds and prescribed values from the journal and the pool
+   sizes, and refactors the old system. */
+static void amps__restore(amps_update *U, amps_int u_old, size_t vused_old, amps_int dused_old) {
     amps_int a, k, bad;
     for (a = u_old; a < U->aug.size; a++) U->aug.pos[U->aug.idx[a]] = -1;
     for (k = U->journal.n_rows - 1; k >= 0; k--) {
@@ -8441,7 +8448,6 @@ static void amps__rollback(amps_update *U, amps_int u_old, size_t vused_old, amp
     if (U->sol.n_rhs > u_old) U->sol.n_rhs = u_old;
     U->journal.n_rows = 0;
     U->journal.n_kinds = 0;
-    amps_update_discard(U);
     /* refactor the old system from scratch. It was accepted, but a fresh elimination order can
        meet a pivot below tol; the singularity test must not stop this factorization halfway
        (a partial LU gives garbage solutions: beam 5x5x4096 in tests/test_stress.c) */
@@ -8452,6 +8458,12 @@ static void amps__rollback(amps_update *U, amps_int u_old, size_t vused_old, amp
         U->singular_tol = tol;
     }
     U->sol.x_stale = U->sol.react_stale = U->sol.watched_stale = 1;
+}
+
+/* Rollback of a failed commit: amps__restore, and the recorded changes discarded. */
+static void amps__rollback(amps_update *U, amps_int u_old, size_t vused_old, amps_int dused_old) {
+    amps__restore(U, u_old, vused_old, dused_old);
+    amps_update_discard(U);
 }
 
 AMPS_API void amps_update_discard(amps_update *U) {
@@ -8728,12 +8740,17 @@ static amps_status amps__commit_finish(amps_ctx *ctx, amps_update *U, amps_int u
     s = amps__lu_update(U, q0, u_old, &bad);
     t1 = amps_now();
     U->stats.t_step[AMPS_STEP_DENSE] = t1 - t0;
-    if (s != AMPS_OK) {
+    if (s != AMPS_OK) { /* the dense pivot test failed: a singular K^, or an ill-conditioned one */
         amps_int bi = bad >= 0 ? U->aug.idx[bad] : -1;
-        amps__rollback(U, u_old, vused_old, dused_old);
+        amps__restore(U, u_old, vused_old, dused_old);
+        if (may_swap && !U->watch.job_y && amps__commit_fold(ctx, U) == AMPS_OK) {
+            U->stats.pivot_folds++;
+            return AMPS_OK;
+        }
+        amps_update_discard(U);
         return amps__err(ctx, AMPS_ERR_SINGULAR_UPDATE,
                          "amps_update_commit: the updated system is singular (pivot of index %ld below %g of its "
-                         "column); the changes were discarded",
+                         "column, and a re-factorization with the changes failed); the changes were discarded",
                          (long)bi, U->singular_tol);
     }
     /* done: the log of a running re-factorization, the new order, the solution stale */
