@@ -1298,7 +1298,10 @@ AMPS_API amps_status amps_scene_dynamics(amps_ctx *ctx, amps_scene *S, double dt
    (amps_scene_reaction) are (A w+ - b)_P / dt; the haptic path amps_scene_solve_reactions gives
    those of the step that would be taken now. With fracture on,
    after each step the tets over the threshold are removed (amps_scene_fracture). AMPS_ERR_STATE
-   in statics; a failing step returns its error with the earlier steps done. With
+   in statics; a failing step returns its error with the earlier steps done, except that a
+   fracture's removal that fails (memory, capacity) returns its error with its step taken and
+   nothing fractured (amps_scene_step_info's steps counts the steps taken; the next step tests
+   the stresses again). With
    amps_scene_corotational on, every step is the corotational one (see there). */
 AMPS_API amps_status amps_scene_step(amps_ctx *ctx, amps_scene *S, amps_int nsteps);
 /* Velocities w, 3 per node (NULL before amps_scene_dynamics). */
@@ -1395,6 +1398,7 @@ typedef struct amps_scene_step_stats {
     amps_int iterations_total; /* PCG iterations of all steps */
     amps_int iterations_gs;    /* of the last step's iterations, those with the Gauss-Seidel preconditioner */
     amps_int factored;         /* steps whose PCG stalled and factored A_R (see amps_scene_corotational_tol) */
+    amps_int steps;            /* steps taken since amps_scene_dynamics was first called */
 } amps_scene_step_stats;
 /* Fills st with the last step's statistics (zeros before the first step). AMPS_ERR_ARG for NULL. */
 AMPS_API amps_status amps_scene_step_info(const amps_scene *S, amps_scene_step_stats *st);
@@ -1794,6 +1798,11 @@ static amps_status amps__err(amps_ctx *ctx, amps_status s, const char *fmt, ...)
 }
 
 /* n*size bytes, or NULL (with AMPS_ERR_OOM in ctx) on overflow or failure. Never 0 bytes. */
+/* qsort of n entries of a (a may be NULL when n < 2: qsort's pointer must not be). */
+static void amps__sort(void *a, size_t n, size_t size, int (*cmp)(const void *, const void *)) {
+    if (n > 1) qsort(a, n, size, cmp);
+}
+
 static void *amps__malloc(amps_ctx *ctx, size_t n, size_t size) {
     void *p;
     if (n == 0) n = 1;
@@ -3615,7 +3624,7 @@ static void amps__nd_geo(const amps__ndg *g, amps_int *where, amps_int *pw, amps
             kv[v].k = dir[d][0] * g->xyz[3 * v] + dir[d][1] * g->xyz[3 * v + 1] + dir[d][2] * g->xyz[3 * v + 2];
             kv[v].v = v;
         }
-        qsort(kv, (size_t)n, sizeof(amps__keyv), amps__keyv_cmp);
+        amps__sort(kv, (size_t)n, sizeof(amps__keyv), amps__keyv_cmp);
         for (k = 0; k < n; k++) {
             rank[kv[k].v] = k;
             cnt[kv[k].v] = 0;
@@ -7146,7 +7155,7 @@ AMPS_API amps_status amps_update_add(amps_ctx *ctx, amps_update *U, amps_int nz,
         U->pending.delta[start + k].c = c[k];
         U->pending.delta[start + k].v = v[k];
     }
-    qsort(U->pending.delta + start, (size_t)nz, sizeof(amps__pdelta), amps__pd_cmp);
+    amps__sort(U->pending.delta + start, (size_t)nz, sizeof(amps__pdelta), amps__pd_cmp);
     for (k = start + 1; k < start + nz; k++)
         if (amps__pd_cmp(U->pending.delta + k - 1, U->pending.delta + k) == 0)
             return amps__err(ctx, AMPS_ERR_ARG, "amps_update_add: entry (%ld, %ld) given twice",
@@ -7246,7 +7255,7 @@ static amps_int amps__row_columns(const amps_update *U, amps_int r, amps_int a, 
         else if (U->pending.delta[q].c == r) iw[cnt++] = U->pending.delta[q].r;
     }
     for (q = 0; q < nc; q++) iw[cnt++] = ci[q];
-    qsort(iw, (size_t)cnt, sizeof(amps_int), amps__int_cmp);
+    amps__sort(iw, (size_t)cnt, sizeof(amps_int), amps__int_cmp);
     for (q = 0; q < cnt; q++)
         if (m == 0 || iw[m - 1] != iw[q]) iw[m++] = iw[q];
     return m;
@@ -7502,7 +7511,7 @@ static void amps__wc_chunks(amps_int b, amps_int e, int th, void *arg) {
                 lmap[k] = 0;
                 clo[nc++] = k;
             }
-        qsort(clo, (size_t)nc, sizeof(amps_int), amps__int_cmp);
+        amps__sort(clo, (size_t)nc, sizeof(amps_int), amps__int_cmp);
         for (t = 0; t < nc; t++) {
             lmap[clo[t]] = t;
             lanes[2 * t] = (unsigned char)(AMPS__VB - 1);
@@ -8568,7 +8577,7 @@ static amps_int amps__step1_list(amps_update *U, amps_int u_old, amps_int *list)
             U->memo.used += (size_t)U->memo.len[a];
             list[nb++] = F->iperm[U->aug.idx[a]];
         }
-    qsort(list, (size_t)nb, sizeof(amps_int), amps__int_cmp);
+    amps__sort(list, (size_t)nb, sizeof(amps_int), amps__int_cmp);
     for (k = 0; k < nb; k++) list[k] = U->aug.pos[F->perm[list[k]]];
     return nb;
 }
@@ -8893,7 +8902,10 @@ AMPS_API amps_status amps_update_commit_begin(amps_ctx *ctx, amps_update *U) {
             return AMPS_OK;
         }
     }
-    if ((s = amps__cjob_workspace(ctx, U)) != AMPS_OK) return s;
+    if ((s = amps__cjob_workspace(ctx, U)) != AMPS_OK) {
+        amps_update_discard(U); /* as documented for a failed begin */
+        return s;
+    }
     u_old = U->aug.size;
     vused_old = U->memo.used;
     if ((s = amps__commit_grow(ctx, U)) != AMPS_OK) return s;
@@ -12814,7 +12826,7 @@ static amps_status amps__rm_orphans(amps_ctx *ctx, const amps_mesh *m, struct am
         if (m->inc_len[R->saved.a[k]] == 0 && amps__iv_push(ctx, &R->orphans, R->saved.a[k])) return AMPS_ERR_OOM;
     for (v = R->nnode0; v < m->nnode; v++)
         if (m->inc_len[v] == 0 && amps__iv_push(ctx, &R->orphans, v)) return AMPS_ERR_OOM;
-    if (R->orphans.n > 1) qsort(R->orphans.a, R->orphans.n, sizeof(amps_int), amps__int_cmp);
+    amps__sort(R->orphans.a, R->orphans.n, sizeof(amps_int), amps__int_cmp);
     return AMPS_OK;
 }
 
@@ -12894,7 +12906,7 @@ static amps_int amps__singular(amps_ctx *ctx, const amps_mesh *m, int edges, amp
             for (q = 0; q < 4 && !s; q++)
                 if (m->tet[4 * lst[j] + q] > a) s = amps__iv_push(ctx, &R.aux, m->tet[4 * lst[j] + q]);
         if (s) break;
-        if (R.aux.n > 1) qsort(R.aux.a, R.aux.n, sizeof(amps_int), amps__int_cmp);
+        amps__sort(R.aux.a, R.aux.n, sizeof(amps_int), amps__int_cmp);
         for (k = 0; k < R.aux.n && !s; k++) {
             if (k > 0 && R.aux.a[k] == R.aux.a[k - 1]) continue;
             if (amps__rm_groups(ctx, m, &R, a, R.aux.a[k], 3, &kept, &s) > 1) {
@@ -13563,6 +13575,8 @@ AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, co
             return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_pin: non-finite displacement for node %ld", (long)v);
     if ((s = amps__scene_node(ctx, S, v, "amps_scene_pin")) != AMPS_OK) return s;
     if (S->node.fixed[v]) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_pin: node %ld is fixed", (long)v);
+    if (S->batch.committing && !S->node.pinned[v])
+        return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_pin: node %ld: a new pin during a two-phase commit", (long)v);
     if (amps_mesh_degree(S->m, v) == 0)
         return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_pin: node %ld belongs to no tetrahedron", (long)v);
     if (!S->prepared) {
@@ -15211,7 +15225,7 @@ static amps_status amps__stroke_nodes(amps_ctx *ctx, amps_scene *S, amps_int npt
         }
     }
     amps__free(ctx, buf);
-    qsort(L, (size_t)n, sizeof(*L), amps__stroke_cmp);
+    amps__sort(L, (size_t)n, sizeof(*L), amps__stroke_cmp);
     *list = L;
     *nc = n;
     return AMPS_OK;
@@ -15461,7 +15475,7 @@ static amps_status amps__trips_add(amps_ctx *ctx, amps_scene *S, amps__trips *T)
     double *v = NULL;
     amps_status s = AMPS_OK;
     if (T->n > 0) {
-        qsort(T->e, T->n, sizeof(amps__trip), amps__trip_cmp);
+        amps__sort(T->e, T->n, sizeof(amps__trip), amps__trip_cmp);
         for (k = 1; k < T->n; k++) {
             if (T->e[k].r == T->e[nz].r && T->e[k].c == T->e[nz].c) T->e[nz].v += T->e[k].v;
             else T->e[++nz] = T->e[k];
@@ -15679,7 +15693,7 @@ static amps_status amps__scene_removal_trips(amps_ctx *ctx, amps_scene *S, const
     for (k = 0; k < r->nsep; k++) rename[r->sep_copy[k]] = rename[r->sep_node[k]];
     memcpy(ts, r->tets, sizeof(amps_int) * (size_t)r->ntet);
     if (r->sep_ptr[r->nsep] > 0) memcpy(ts + r->ntet, r->sep_tets, sizeof(amps_int) * (size_t)r->sep_ptr[r->nsep]);
-    qsort(ts, (size_t)n, sizeof(amps_int), amps__int_cmp);
+    amps__sort(ts, (size_t)n, sizeof(amps_int), amps__int_cmp);
     for (k = 0; k < n && !s; k++) {
         if (k > 0 && ts[k] == ts[k - 1]) continue;
         if (!S->m->removed[ts[k]]) s = amps__trips_tet(ctx, S, T, ts[k], 1.0, NULL);
@@ -17461,6 +17475,7 @@ AMPS_API amps_status amps_scene_corotational_tol(amps_ctx *ctx, amps_scene *S, d
 AMPS_API amps_status amps_scene_step_info(const amps_scene *S, amps_scene_step_stats *st) {
     if (!S || !st) return AMPS_ERR_ARG;
     *st = S->dyn.info;
+    st->steps = S->dyn.nstep;
     return AMPS_OK;
 }
 #endif /* AMPS_NO_FEM */
@@ -17785,7 +17800,7 @@ static amps_status amps__tb_dedup(amps_ctx *ctx, amps__tetbuf *b, amps_int *ndup
             }
         key[k].k = k;
     }
-    qsort(key, (size_t)b->n, sizeof(amps__tkey), amps__tkey_cmp);
+    amps__sort(key, (size_t)b->n, sizeof(amps__tkey), amps__tkey_cmp);
     for (k = 1; k < b->n; k++)
         if (!memcmp(key[k].v, key[k - 1].v, sizeof(key[k].v))) gone[key[k].k] = 1; /* not the first */
     for (k = 0; k < b->n; k++) {
@@ -18192,7 +18207,7 @@ static amps_status amps__gmsh_nodes4(amps__gmsh *G, long long nblk, long long to
 static amps_status amps__gmsh_tagmap(amps__gmsh *G) {
     amps__gtag *t = G->tags;
     amps_int k, n = G->R.nn;
-    qsort(t, (size_t)n, sizeof(amps__gtag), amps__gtag_cmp);
+    amps__sort(t, (size_t)n, sizeof(amps__gtag), amps__gtag_cmp);
     for (k = 1; k < n; k++)
         if (t[k].tag == t[k - 1].tag)
             return amps__lx_err(&G->R.L, t[k].line, AMPS_ERR_PARSE, "duplicate node tag %lld (first on line %lld)",
@@ -18768,7 +18783,7 @@ static amps_status amps__live_regions(amps_ctx *ctx, const amps_mesh *m, amps_in
     if (!r) return AMPS_ERR_OOM;
     for (t = 0; t < m->ntet; t++)
         if (!m->removed[t]) r[k++] = m->region[t];
-    if (k > 1) qsort(r, (size_t)k, sizeof(amps_int), amps__int_cmp);
+    amps__sort(r, (size_t)k, sizeof(amps_int), amps__int_cmp);
     for (t = 0; t < k; t++)
         if (*n == 0 || r[t] != r[*n - 1]) r[(*n)++] = r[t];
     return AMPS_OK;

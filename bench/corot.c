@@ -400,7 +400,7 @@ int main(int argc, char **argv) {
     amps_scene_prepare(&ctx, L);
     for (k = 0; k < steps; k++) {
         double t0;
-        amps_scene_step_stats st = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+        amps_scene_step_stats st = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
         sys y;
         int sample = k % every == every - 1, i;
         amps_status s;

@@ -250,14 +250,26 @@ static void test_engine(void) {
 
 /* ---------------------------------- scene ---------------------------------- */
 
-#define SOPS 16
+#define SOPS 17
+static void disarm(void);
 static amps_status scene_op(amps_ctx *c, amps_scene *S, int j) {
     double f[3] = {0.5, -1, 2}, u[3] = {0.01, 0, -0.01}, u2[3] = {0, 0.02, 0}, p[3], nrm[3] = {0.3, 1, 0.2},
            pts[6] = {0.5, -0.1, 1.2, 0.5, 1.1, 1.2}, blade[3] = {0, 0, 1};
     amps_int vc;
     const amps_mesh *m = amps_scene_mesh(S);
     switch (j) {
-    case 0: return amps_scene_force(c, S, 40, f);
+    case 0: { /* a batch with a new pin, committed in two phases (the first: its workspace) */
+        amps_status s = amps_scene_begin_batch(c, S);
+        if (s != AMPS_OK) return s;
+        if ((s = amps_scene_pin(c, S, 32, u)) != AMPS_OK) {
+            disarm();
+            (void)amps_scene_commit(c, S); /* the batch is empty: close it */
+            return s;
+        }
+        if ((s = amps_scene_commit_begin(c, S)) != AMPS_OK) return s;
+        amps_scene_commit_run(S);
+        return amps_scene_commit_end(c, S);
+    }
     case 1: return amps_scene_pin(c, S, 30, u);
     case 2:
     case 6:
@@ -276,6 +288,7 @@ static amps_status scene_op(amps_ctx *c, amps_scene *S, int j) {
     case 12: return amps_scene_release(c, S, 31);
     case 14: memcpy(p, m->xyz + 3 * 22, sizeof(p)); return amps_scene_cut(c, S, 22, p, nrm, &vc);
     case 15: return amps_scene_solve(c, S);
+    case 16: return amps_scene_force(c, S, 40, f);
     }
     return AMPS_OK;
 }

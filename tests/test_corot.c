@@ -794,7 +794,7 @@ static void test_inverted(void) {
 static void test_bad_input(void) {
     amps_ctx ctx;
     amps_scene *S;
-    amps_scene_step_stats st = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+    amps_scene_step_stats st = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
     double g[3] = {0, 0.5, 0.5};
     amps_ctx_init(&ctx);
     S = amps_scene_create(&ctx, amps_mesh_grid(&ctx, 3, 3, 5, 1, 1, 1), NULL);

@@ -717,6 +717,10 @@ static void test_fracture(void) {
     CHECK(amps_scene_fracture(&ctx, S, 0) == AMPS_OK && amps_scene_step(&ctx, S, 1) == AMPS_OK &&
                   amps_scene_fractured(S, NULL) == 0,
           "fracture off still removes");
+    {
+        amps_scene_step_stats st;
+        CHECK(amps_scene_step_info(S, &st) == AMPS_OK && st.steps == 5, "steps taken: %ld", (long)st.steps);
+    }
     printf("  fracture: %ld tets over sigma_max removed after one step\n", (long)got);
     amps_scene_free(&ctx, S);
     shadow_free(&w.sh);

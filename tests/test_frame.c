@@ -276,6 +276,36 @@ static void test_two_phase_dynamics(void) {
     }
 }
 
+/* A scene's first two-phase commit that only releases a pin (no new position; under UBSan the
+   empty list of new positions must not reach qsort) equals the release done at once. */
+static void test_two_phase_release(void) {
+    amps_ctx ctx;
+    amps_scene *S[2];
+    shadow w[2];
+    amps_int top = 25 * 3 + 12;
+    int k;
+    amps_ctx_init(&ctx);
+    for (k = 0; k < 2; k++) {
+        S[k] = beam_scene(&ctx, 4, w + k, NULL);
+        CHECK(amps_scene_dynamics(&ctx, S[k], 0.05, 0.1, 0.01) == AMPS_OK && amps_scene_step(&ctx, S[k], 1) == AMPS_OK,
+              "release: dynamics: %s", ctx.msg);
+    }
+    CHECK(amps_scene_begin_batch(&ctx, S[0]) == AMPS_OK && amps_scene_release(&ctx, S[0], top) == AMPS_OK &&
+                  amps_scene_commit_begin(&ctx, S[0]) == AMPS_OK,
+          "release: two phases: %s", ctx.msg);
+    amps_scene_commit_run(S[0]);
+    CHECK(amps_scene_commit_end(&ctx, S[0]) == AMPS_OK, "release: commit_end: %s", ctx.msg);
+    CHECK(amps_scene_release(&ctx, S[1], top) == AMPS_OK, "release: %s", ctx.msg);
+    for (k = 0; k < 2; k++) CHECK(amps_scene_step(&ctx, S[k], 2) == AMPS_OK, "release: steps: %s", ctx.msg);
+    CHECK(t_reldiff(3 * (int)amps_scene_mesh(S[0])->nnode, amps_scene_displacements(S[0]),
+                    amps_scene_displacements(S[1])) <= 1e-13,
+          "release: two phases differ from one");
+    for (k = 0; k < 2; k++) {
+        amps_scene_free(&ctx, S[k]);
+        shadow_free(w + k);
+    }
+}
+
 /* Random changes, in batches of 1-6 on A and one by one on B. */
 static void test_batches(unsigned long long seed) {
     amps_ctx ctx;
@@ -557,6 +587,8 @@ static void test_two_phase(void) {
         CHECK(amps_scene_cut(&ctx, A, 0, p, nrm, &vc) == AMPS_ERR_STATE, "two-phase: a cut during the job accepted");
         CHECK(amps_scene_pin(&ctx, A, 25 * 15 + 3, u) == AMPS_ERR_STATE,
               "two-phase: a new pin during the job accepted");
+        CHECK(amps_scene_pin(&ctx, A, amps_scene_mesh(A)->nnode - 1, u) == AMPS_ERR_STATE,
+              "two-phase: a pin of the batch's newest node during the job: %s", ctx.msg);
         amps_scene_commit_run(A);
         CHECK(amps_scene_commit_end(&ctx, A) == AMPS_OK, "two-phase: end: %s", ctx.msg);
         CHECK(amps_scene_commit(&ctx, B) == AMPS_OK, "two-phase: one-phase commit: %s", ctx.msg);
@@ -644,5 +676,6 @@ int main(void) {
     test_haptic_no_swap();
     test_two_phase();
     test_two_phase_dynamics();
+    test_two_phase_release();
     return amps_t_end("test_frame");
 }
