@@ -1,8 +1,22 @@
 #!/usr/bin/env bash
-# Runs every test program given, then prints the total as the last line: "N passed, N failed".
-pass=0; fail=0; crashed=0
+# Runs every test program given, AMPS_TEST_JOBS (default: the number of cores) at a time, then
+# prints each one's summary in the order given and the total as the last line:
+# "N passed, N failed".
+jobs=${AMPS_TEST_JOBS:-$(nproc 2>/dev/null || echo 2)}
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+i=0
 for t in "$@"; do
-  out=$("$t" 2>&1); rc=$?
+  while [ "$(jobs -rp | wc -l)" -ge "$jobs" ]; do wait -n 2>/dev/null || sleep 0.1; done
+  ( "$t" > "$tmp/$i.out" 2>&1; echo $? > "$tmp/$i.rc" ) &
+  i=$((i+1))
+done
+wait
+pass=0; fail=0
+i=0
+for t in "$@"; do
+  out=$(cat "$tmp/$i.out"); rc=$(cat "$tmp/$i.rc" 2>/dev/null || echo 255)
+  i=$((i+1))
   printf '%s\n' "$out" | grep -E '^(FAIL|[a-z_0-9]+: [0-9]+ passed)' | tail -n 40
   line=$(printf '%s\n' "$out" | grep -E '^[a-z_0-9]+: [0-9]+ passed, [0-9]+ failed' | tail -n 1)
   if [ -z "$line" ]; then
