@@ -1449,8 +1449,9 @@ AMPS_API amps_status amps_mesh_write_vtu(amps_ctx *ctx, const char *path, const 
    removed tets are left out, so the tets of a mesh with removals are renumbered; materials
    and densities are not written). Regions are written so that every reader gives them back.
    TetGen: base.node and base.ele with numbering from first_index (0 or 1), one tet attribute
-   (the region) when any region is not 0. Gmsh: version 2 (2.2: the region as the physical tag)
-   or 4 (4.1: a volume entity per region with the region as its physical tag), ASCII.
+   (the region) when any region is not 0. Gmsh: version 2 (2.2: the region as the physical tag,
+   an elementary tag per region) or 4 (4.1: a volume entity per region with the region as its
+   physical tag), ASCII; Gmsh itself reads either back with the regions.
    MEDIT: .mesh, version 2, the region as the tet reference. */
 AMPS_API amps_status amps_mesh_write_tetgen(amps_ctx *ctx, const char *base, const amps_mesh *m, int first_index);
 AMPS_API amps_status amps_mesh_write_gmsh(amps_ctx *ctx, const char *path, const amps_mesh *m, int version);
@@ -18863,12 +18864,10 @@ AMPS_API amps_status amps_mesh_write_gmsh(amps_ctx *ctx, const char *path, const
     if (s) return s;
     nn = (long long)m->nnode;
     nt = (long long)(m->ntet - m->nremoved);
-    if (version == 4) {
-        s = amps__live_regions(ctx, m, &reg, &nreg);
-        if (s) {
-            fclose(o.f);
-            return s;
-        }
+    s = amps__live_regions(ctx, m, &reg, &nreg); /* an entity per region, in both versions */
+    if (s) {
+        fclose(o.f);
+        return s;
     }
     amps__pr(&o, "$MeshFormat\n%s 0 8\n$EndMeshFormat\n", version == 2 ? "2.2" : "4.1");
     if (version == 2) {
@@ -18879,9 +18878,10 @@ AMPS_API amps_status amps_mesh_write_gmsh(amps_ctx *ctx, const char *path, const
         amps__pr(&o, "$EndNodes\n$Elements\n%lld\n", nt);
         for (t = 0, k = 1; t < m->ntet; t++)
             if (!m->removed[t])
-                amps__pr(&o, "%lld 4 2 %lld 1 %lld %lld %lld %lld\n", k++, (long long)m->region[t],
-                         (long long)m->tet[4 * t] + 1, (long long)m->tet[4 * t + 1] + 1,
-                         (long long)m->tet[4 * t + 2] + 1, (long long)m->tet[4 * t + 3] + 1);
+                amps__pr(&o, "%lld 4 2 %lld %lld %lld %lld %lld %lld\n", k++, (long long)m->region[t],
+                         (long long)amps__region_index(reg, nreg, m->region[t]) + 1, (long long)m->tet[4 * t] + 1,
+                         (long long)m->tet[4 * t + 1] + 1, (long long)m->tet[4 * t + 2] + 1,
+                         (long long)m->tet[4 * t + 3] + 1);
     } else {
         amps__gmsh_write_entities(&o, m, reg, nreg);
         amps__pr(&o, "$Nodes\n1 %lld 1 %lld\n3 1 0 %lld\n", nn, nn, nn);
@@ -18890,8 +18890,8 @@ AMPS_API amps_status amps_mesh_write_gmsh(amps_ctx *ctx, const char *path, const
             amps__pr(&o, "%.17g %.17g %.17g\n", m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
         amps__pr(&o, "$EndNodes\n");
         amps__gmsh_write_blocks4(&o, m, reg, nreg);
-        amps__free(ctx, reg);
     }
+    amps__free(ctx, reg);
     amps__pr(&o, "$EndElements\n");
     return amps__close_out(ctx, fn, path, &o);
 }

@@ -1022,6 +1022,70 @@ static void test_vtu_frames(void) {
 
 /* Regions of a real `tetgen -A` run (two stacked unit cubes, regions 10 and 20), when tetgen
    is installed; skipped otherwise. */
+/* The Gmsh 2.2 writer gives each region its own elementary tag (Gmsh itself groups a file's
+   elements by elementary entity: one tag for all would put every tet in every physical group);
+   with the gmsh binary installed, a file re-saved by gmsh reads back with the regions. */
+static void test_gmsh2_entities(void) {
+    static const amps_int ids[3] = {7, 3, 11};
+    char path[700], out[700], cmd[1600], *txt, *p;
+    amps_ctx ctx;
+    amps_mesh *m = t_beam4(&ctx), *r;
+    amps_int t, elem[3] = {-1, -1, -1}, k;
+    size_t len;
+    int bad = 0, lines = 0;
+    if (!m) return;
+    for (t = 0; t < m->ntet; t++) amps_mesh_set_tet_region(&ctx, m, t, ids[t % 3]);
+    t_path(path, "regions22.msh");
+    CHECK(amps_mesh_write_gmsh(&ctx, path, m, 2) == AMPS_OK, "write gmsh 2: %s", ctx.msg);
+    txt = t_slurp(path, &len);
+    p = txt ? strstr(txt, "$Elements\n") : NULL;
+    if (p) p = strchr(p + 10, '\n'); /* past the count */
+    while (p && p[1] != '$') {
+        long long num, type, ntag, phys, el;
+        if (sscanf(p + 1, "%lld %lld %lld %lld %lld", &num, &type, &ntag, &phys, &el) != 5) break;
+        for (k = 0; k < 3 && ids[k] != phys; k++) {}
+        if (k == 3 || (elem[k] >= 0 && elem[k] != el)) bad++;
+        else elem[k] = (amps_int)el;
+        lines++;
+        p = strchr(p + 1, '\n');
+    }
+    CHECK(lines == m->ntet && !bad && elem[0] != elem[1] && elem[1] != elem[2] && elem[0] != elem[2],
+          "gmsh 2.2: elementary tags per region (%d lines, %d bad)", lines, bad);
+    free(txt);
+    if (system("command -v gmsh >/dev/null 2>&1") == 0) {
+        int v;
+        for (v = 2; v <= 4; v += 2) {
+            t_path(out, "regions22_resaved.msh");
+            snprintf(cmd, sizeof(cmd), "gmsh -0 '%s' -format %s -o '%s' >/dev/null 2>&1", path,
+                     v == 2 ? "msh22" : "msh41", out);
+            CHECK(system(cmd) == 0, "gmsh re-save");
+            amps_ctx_init(&ctx);
+            r = amps_mesh_read(&ctx, out);
+            { /* gmsh orders the elements by entity: the tets and volume of each region */
+                double vol[2][3] = {{0, 0, 0}, {0, 0, 0}};
+                int q;
+                for (q = 0; q < 2; q++) {
+                    const amps_mesh *x = q ? r : m;
+                    for (t = 0; x && t < x->ntet; t++) {
+                        double X[12], G[12];
+                        for (k = 0; k < 3 && ids[k] != x->region[t]; k++) {}
+                        amps_mesh_tet_coords(x, t, X);
+                        if (k < 3) vol[q][k] += fabs(amps_tet_gradients(X, G));
+                        else bad++;
+                    }
+                }
+                for (k = 0; k < 3; k++) bad += fabs(vol[0][k] - vol[1][k]) > 1e-12 * (1 + vol[0][k]);
+            }
+            CHECK(r && r->ntet == m->ntet && !bad, "gmsh re-saved as %d: %s (%d regions differ)", v, r ? "" : ctx.msg,
+                  bad);
+            amps_mesh_free(&ctx, r);
+            remove(out);
+        }
+    }
+    remove(path);
+    amps_mesh_free(&ctx, m);
+}
+
 static void test_tetgen_regions(void) {
     static const char *poly =
             "12 3 0 0\n1 0 0 0\n2 1 0 0\n3 1 1 0\n4 0 1 0\n5 0 0 1\n6 1 0 1\n7 1 1 1\n8 0 1 1\n9 0 0 2\n10 1 0 2\n"
@@ -1080,6 +1144,7 @@ int main(int argc, char **argv) {
     test_region_roundtrip();
     test_vtu_frames();
     test_tetgen_regions();
+    test_gmsh2_entities();
 #endif
     test_corruption();
     test_reader_oom();
