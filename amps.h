@@ -1417,7 +1417,9 @@ AMPS_API amps_status amps_scene_step_info(const amps_scene *S, amps_scene_step_s
      surface, line and point elements are skipped; hexahedra, prisms and pyramids (any order)
      are an error, AMPS_ERR_MESH with their counts and the line of the first; node tags may be
      any distinct integers. Binary files are rejected. Region: 2.x the first (physical) tag; 4.1
-     the first physical tag of the element's volume entity ($Entities). A tet given twice (2.x
+     the first physical tag of the element's volume entity ($Entities; of a partitioned file,
+     $PartitionedEntities, a volume without one taking its parent's); tets in an entity that
+     the file does not list, or not of dimension 3, are an error. A tet given twice (2.x
      writes an element once per physical group holding its volume) is read once, in the place
      and with the region of its first line (logged).
    MEDIT .mesh (ASCII): Dimension 3, Vertices, Tetrahedra; Hexahedra, Prisms, Pyramids and the
@@ -18269,6 +18271,14 @@ static amps_status amps__gmsh_elems2(amps__gmsh *G, long long total) {
     return s;
 }
 
+/* 1 if 4.1 volume entity tag is listed ($Entities or $PartitionedEntities). */
+static int amps__gmsh_vol_known(const amps__gmsh *G, long long tag) {
+    long long i;
+    for (i = 0; i < G->nvol; i++)
+        if (G->vol_tag[i] == tag) return 1;
+    return 0;
+}
+
 /* 4.1 element blocks: a header, then one element a line "tag <nodes>"; the tets (type 4) join
    R.tb, their region the physical tag of the block's volume entity; together total elements. */
 static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long total) {
@@ -18282,6 +18292,12 @@ static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long to
         r.region = 0;
         for (i = 0; h.dim == 3 && i < G->nvol; i++)
             if (G->vol_tag[i] == h.tag) r.region = G->vol_phys[i];
+        if (!s && amps__gmsh_is_tet(h.kind) && h.n > 0 &&
+            (h.dim != 3 || (G->vol_tag && !amps__gmsh_vol_known(G, h.tag))))
+            s = amps__lx_err(L, L->tline, AMPS_ERR_PARSE,
+                             h.dim != 3 ? "tetrahedra in an entity of dimension %lld"
+                                        : "tetrahedra in volume entity %lld, which $Entities does not list",
+                             h.dim != 3 ? (long long)h.dim : (long long)h.tag);
         for (i = 0; !s && i < h.n; i++) {
             if (amps__gmsh_is_tet(h.kind)) {
                 s = amps__lx_int(L, 1, &a, "element tag");
@@ -18298,39 +18314,54 @@ static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long to
     return amps__gmsh_held(L, 1, total, got);
 }
 
-/* 4.1 $Entities up to $EndEntities: "numPoints numCurves numSurfaces numVolumes", one entity a
-   line; of a volume "tag minX minY minZ maxX maxY maxZ numPhysicalTags physicalTag ... ..."
-   keeps the tag and its first physical tag. Other versions skip the section. */
-static amps_status amps__gmsh_entities(amps__gmsh *G) {
+/* 4.1 $Entities (part 0) or $PartitionedEntities (part 1) up to its end: ("numPartitions
+   numGhostEntities" and that many "ghostTag partition" first when part), "numPoints numCurves
+   numSurfaces numVolumes", one entity a line; of a volume "tag [parentDim parentTag
+   numPartitions partitionTag ...] minX minY minZ maxX maxY maxZ numPhysicalTags physicalTag ...
+   ..." keeps the tag and its first physical tag (a partitioned volume without one: its parent's).
+   Other versions skip the section. */
+static amps_status amps__gmsh_entities(amps__gmsh *G, int part) {
     amps__lex *L = &G->R.L;
-    long long cnt[4], k, i, nph, tag, ph;
+    long long cnt[4], k, i, nph, tag, ph, np, pdim = 0, ptag = 0, n0 = G->nvol;
     double x;
     amps_status s = AMPS_OK;
-    if (G->version != 4 || G->vol_tag) return amps__gmsh_skip(L, G->sec);
+    if (G->version != 4 || (!part && G->vol_tag)) return amps__gmsh_skip(L, G->sec);
+    if (G->have_elems) return amps__lx_err(L, L->tline, AMPS_ERR_PARSE, "$%s after $Elements", G->sec);
+    if (part) { /* partitions, ghost entities */
+        s = amps__lx_int(L, 1, &np, "partition count");
+        if (!s) s = amps__lx_nrec(L, 1, &np, "ghost entity count", "ghost entity", 2);
+        for (k = 0; k < 2 * np && !s; k++) s = amps__lx_int(L, 1, &tag, "ghost entity");
+    }
     for (k = 0; k < 4 && !s; k++) s = amps__lx_nrec(L, k == 0, cnt + k, "entity count", "entity", 1);
     if (s) return s;
     amps__lx_eol(L);
-    G->vol_tag = AMPS__CAST(long long *, amps__malloc(L->ctx, (size_t)cnt[3], sizeof(long long)));
-    G->vol_phys = AMPS__CAST(amps_int *, amps__malloc(L->ctx, (size_t)cnt[3], sizeof(amps_int)));
-    if (!G->vol_tag || !G->vol_phys) return AMPS_ERR_OOM;
+    if (amps__realloc(L->ctx, (void **)&G->vol_tag, (size_t)(n0 + cnt[3] + 1), sizeof(long long)) ||
+        amps__realloc(L->ctx, (void **)&G->vol_phys, (size_t)(n0 + cnt[3] + 1), sizeof(amps_int)))
+        return AMPS_ERR_OOM;
     for (k = 0; k < cnt[0] + cnt[1] + cnt[2] && !s; k++) {
         s = amps__lx_int(L, 1, &tag, "entity tag");
         if (!s) amps__lx_eol(L);
     }
     for (k = 0; k < cnt[3] && !s; k++) {
         s = amps__lx_int(L, 1, &tag, "volume tag");
+        if (!s && part) s = amps__lx_int(L, 0, &pdim, "parent dimension");
+        if (!s && part) s = amps__lx_int(L, 0, &ptag, "parent tag");
+        if (!s && part) s = amps__lx_int(L, 0, &np, "partition count");
+        for (i = 0; part && i < np && !s; i++) s = amps__lx_int(L, 0, &ph, "partition tag");
         for (i = 0; i < 6 && !s; i++) s = amps__lx_num(L, 0, &x, "bounding box coordinate");
         if (!s) s = amps__lx_int(L, 0, &nph, "physical tag count");
-        G->vol_tag[k] = tag;
-        G->vol_phys[k] = 0;
-        G->nvol = k + 1;
+        G->vol_tag[n0 + k] = tag;
+        G->vol_phys[n0 + k] = 0;
+        for (i = 0; part && nph <= 0 && pdim == 3 && i < n0; i++) /* its parent's */
+            if (G->vol_tag[i] == ptag) G->vol_phys[n0 + k] = G->vol_phys[i];
+        G->nvol = n0 + k + 1;
         for (i = 0; i < nph && !s; i++) {
             s = amps__lx_int(L, 0, &ph, "physical tag");
-            if (!s && i == 0) s = amps__lx_region(L, ph, G->vol_phys + k);
+            if (!s && i == 0) s = amps__lx_region(L, ph, G->vol_phys + n0 + k);
         }
         if (!s) amps__lx_eol(L); /* bounding surfaces */
     }
-    return s ? s : amps__gmsh_end(L, "Entities", " (entity count mismatch?)");
+    return s ? s : amps__gmsh_end(L, G->sec, " (entity count mismatch?)");
 }
 
 /* $Elements (after $Nodes) up to $EndElements. */
@@ -18359,7 +18390,8 @@ static amps_status amps__gmsh_section(amps__gmsh *G) {
     if (!strcmp(G->sec, "MeshFormat")) return amps__gmsh_format(G);
     if (!strcmp(G->sec, "Nodes")) return amps__gmsh_nodes(G);
     if (!strcmp(G->sec, "Elements")) return amps__gmsh_elements(G);
-    if (!strcmp(G->sec, "Entities")) return amps__gmsh_entities(G);
+    if (!strcmp(G->sec, "Entities")) return amps__gmsh_entities(G, 0);
+    if (!strcmp(G->sec, "PartitionedEntities")) return amps__gmsh_entities(G, 1);
     return amps__gmsh_skip(L, G->sec);
 }
 

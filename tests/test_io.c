@@ -844,6 +844,18 @@ static const char *G41_REGIONS =
         "$Nodes\n1 6 1 6\n3 7 0 6\n1\n2\n3\n4\n5\n6\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 1\n0.5 0.5 -1\n$EndNodes\n"
         "$Elements\n3 3 1 3\n3 8 4 1\n1 1 2 3 4\n3 4 4 1\n2 2 3 4 5\n3 7 4 1\n3 1 3 2 6\n$EndElements\n";
 
+/* The same partitioned: the blocks in volumes of $PartitionedEntities (one with its own physical
+   tag, one taking its parent's, one with none), a ghost entity and a point entity. */
+static const char *G41_PART =
+        "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n"
+        "$Entities\n1 1 0 3\n1 0 0 0 0\n1 0 0 0 1 1 1 0 2 1 -1\n"
+        "7 0 0 0 1 1 1 1 5 0\n8 0 0 0 1 1 1 2 9 5 0\n4 0 0 0 1 1 1 0 0\n$EndEntities\n"
+        "$PartitionedEntities\n2\n1\n20 2\n1 0 0 3\n21 0 1 1 2 0 0 0 0\n"
+        "10 3 7 1 1 0 0 0 1 1 1 1 5 0\n11 3 8 1 2 0 0 0 1 1 1 0 0\n12 3 4 1 2 0 0 0 1 1 1 0 0\n"
+        "$EndPartitionedEntities\n"
+        "$Nodes\n1 6 1 6\n3 10 0 6\n1\n2\n3\n4\n5\n6\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 1\n0.5 0.5 -1\n$EndNodes\n"
+        "$Elements\n3 3 1 3\n3 11 4 1\n1 1 2 3 4\n3 12 4 1\n2 2 3 4 5\n3 10 4 1\n3 1 3 2 6\n$EndElements\n";
+
 static int t_regions_are(const amps_mesh *m, amps_int a, amps_int b, amps_int c) {
     return m && m->ntet == 3 && m->region[0] == a && m->region[1] == b && m->region[2] == c;
 }
@@ -862,6 +874,29 @@ static void test_region_readers(void) {
     m = t_gmsh(&ctx, G41_REGIONS);
     CHECK(t_regions_are(m, 9, 0, 5), "gmsh 4.1 first physical tag of the volume entity: %s", ctx.msg);
     amps_mesh_free(&ctx, m);
+    m = t_gmsh(&ctx, G41_PART);
+    CHECK(t_regions_are(m, 9, 0, 5), "gmsh 4.1 partitioned entities: %s", ctx.msg);
+    amps_mesh_free(&ctx, m);
+    { /* tets in a volume the file does not list, in a surface entity, after $Elements */
+        static const char *bad[3][2] = {
+                {"3 4 4 1\n2 2", "3 99 4 1\n2 2"}, {"3 4 4 1\n2 2", "2 4 4 1\n2 2"}, {"$Entities", "$Entitie0"}};
+        static const char *want[3] = {"volume entity 99", "dimension 2", "$Entities after $Elements"};
+        int q;
+        for (q = 0; q < 3; q++) {
+            char buf[2048], *at;
+            snprintf(buf, sizeof(buf), "%s", G41_REGIONS);
+            at = strstr(buf, bad[q][0]);
+            if (q == 2) { /* $Entities moved after $Elements */
+                const char *e = strstr(G41_REGIONS, "$Nodes");
+                snprintf(buf, sizeof(buf), "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n%s%.*s", e,
+                         (int)(e - strstr(G41_REGIONS, "$Entities")), strstr(G41_REGIONS, "$Entities"));
+            } else if (at) memcpy(at, bad[q][1], strlen(bad[q][1]));
+            m = t_gmsh(&ctx, buf);
+            CHECK(!m && ctx.status == AMPS_ERR_PARSE && strstr(ctx.msg, want[q]), "gmsh 4.1 bad entity %d: %s", q,
+                  ctx.msg);
+            amps_mesh_free(&ctx, m);
+        }
+    }
     m = t_gmsh(&ctx, G22);
     CHECK(m && m->region[0] == 0, "gmsh 2.2 physical tag 0");
     amps_mesh_free(&ctx, m);
