@@ -1423,7 +1423,8 @@ AMPS_API amps_status amps_scene_step_info(const amps_scene *S, amps_scene_step_s
      writes an element once per physical group holding its volume) is read once, in the place
      and with the region of its first line (logged).
    MEDIT .mesh (ASCII): Dimension 3, Vertices, Tetrahedra; Hexahedra, Prisms, Pyramids and the
-     higher-order volume keywords are an error (AMPS_ERR_MESH); other keywords are skipped.
+     higher-order volume keywords with elements are an error (AMPS_ERR_MESH); other keywords are
+     skipped.
      Region: the reference number of each tetrahedron.
    A tet without a region attribute gets region 0.
    amps_mesh_read picks the reader by extension: .node (and the .ele of the same name), .ele
@@ -18538,7 +18539,7 @@ AMPS_API amps_mesh *amps_mesh_read_medit_mem(amps_ctx *ctx, const char *buf, siz
             memcpy(kw, L->tok, kl);
             kw[kl] = '\0';
             s = amps__lx_int(L, 1, &cnt, "element count");
-            if (!s)
+            if (!s && cnt != 0) /* an empty section is harmless */
                 s = amps__lx_err(L, line, AMPS_ERR_MESH,
                                  "%lld %s: amps reads linear tetrahedra only (Tetrahedra); mesh with them only", cnt,
                                  kw);

@@ -903,6 +903,14 @@ static void test_region_readers(void) {
     m = t_medit(&ctx, M_MIXED);
     CHECK(t_regions_are(m, 1, 7, 7), "medit references");
     amps_mesh_free(&ctx, m);
+    { /* an empty Hexahedra section is harmless */
+        char buf[1024];
+        const char *at = strstr(M_MIXED, "Corners");
+        snprintf(buf, sizeof(buf), "%.*sHexahedra\n0\nPrisms 0\n%s", (int)(at - M_MIXED), M_MIXED, at);
+        m = t_medit(&ctx, buf);
+        CHECK(t_regions_are(m, 1, 7, 7), "medit: empty Hexahedra and Prisms sections: %s", ctx.msg);
+        amps_mesh_free(&ctx, m);
+    }
     /* gmsh 2.2 writes an element once per physical group of its volume: read once, the first
        group's region, the file order of the first lines kept */
     m = t_gmsh(&ctx, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n5\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 1 1 1\n"
