@@ -1134,7 +1134,9 @@ AMPS_API amps_status amps_scene_residual(amps_ctx *ctx, amps_scene *S, double *r
 /* Per-tet stresses of the last solve (see amps_mesh_stress); outputs may be NULL. */
 AMPS_API amps_status amps_scene_stress(amps_ctx *ctx, const amps_scene *S, double *sigma, double *von_mises,
                                        double *principal);
-/* Equations of the current system (free DOFs of the initial mesh plus those of cut copies). */
+/* Equations of the current system (free DOFs of the initial mesh plus those of cut copies),
+   those of a batch being committed in two phases included: every amps_scene_node_dofs entry is
+   below it. */
 AMPS_API amps_int amps_scene_ndof(const amps_scene *S);
 /* The engine (for statistics) and its current base factor; NULL before the factorization. */
 AMPS_API amps_update *amps_scene_engine(const amps_scene *S);
@@ -1184,7 +1186,7 @@ AMPS_API amps_status amps_scene_watched_positions(amps_ctx *ctx, const amps_scen
    among equally near nodes the smallest index), over the nodes in at least one tet; *v = -1
    if there is none. The first call builds a uniform grid over the nodes (O(nnode) memory);
    later calls cost about the nodes of a few grid cells. Errors: AMPS_ERR_VALUE (NaN/Inf in
-   p), AMPS_ERR_ARG (NULL), AMPS_ERR_OOM. For picking on the deformed surface, pass the
+   p, or a coordinate beyond 1e150 in magnitude), AMPS_ERR_ARG (NULL), AMPS_ERR_OOM. For picking on the deformed surface, pass the
    reference point of the picked triangle (barycentric coordinates map it back). */
 AMPS_API amps_status amps_scene_nearest_node(amps_ctx *ctx, amps_scene *S, const double p[3], amps_int *v);
 /* Fixes the nodes (copies included) whose reference coordinates lie in the closed box
@@ -1201,7 +1203,8 @@ AMPS_API int amps_scene_is_pinned(const amps_scene *S, amps_int v);
    configuration, that belong to a tet: what a blade or a grasper touches. out receives the first
    min(count, cap) of them, ascending (out may be NULL when cap is 0). Returns their count, or a
    negative status (AMPS_ERR_ARG: NULL scene, a, b, or out with cap > 0; AMPS_ERR_VALUE: not
-   finite, negative radius). O(nnode); allocates nothing. */
+   finite, a coordinate beyond 1e150 in magnitude, negative radius). O(nnode); allocates
+   nothing. */
 AMPS_API amps_int amps_scene_nodes_near_segment(amps_ctx *ctx, const amps_scene *S, const double a[3],
                                                 const double b[3], double radius, amps_int *out, amps_int cap);
 /* Batches: between amps_scene_begin_batch and amps_scene_commit, cuts, pins, releases and forces
@@ -12992,7 +12995,7 @@ typedef struct amps__scene_render {
     amps_int *added, nadded, *removed, nremoved;
     amps_int *new_nodes, nnew, cap_new;
     amps_int *moved, nmoved;  /* room for ntet */
-    unsigned char *tet_moved; /* per tet: in moved */
+    amps_int *tet_moved;      /* per tet: the recorded cuts that moved it (in moved iff > 0) */
 } amps__scene_render;
 
 /* The uniform grid of amps_scene_nearest_node over the creation nodes; copies are chained to
@@ -13302,7 +13305,9 @@ AMPS_API const amps_factor *amps_scene_factor(const amps_scene *S) {
     return S && S->U ? amps_update_factor(S->U) : NULL;
 }
 AMPS_API amps_int amps_scene_ndof(const amps_scene *S) {
-    return S && S->U ? amps_update_dim(S->U) : (S ? S->ndof0 : 0);
+    if (!S) return 0;
+    if (!S->U) return S->ndof0;
+    return amps_update_dim(S->U) + (S->U->cjob.state && S->U->cjob.nlist >= 0 ? S->U->cjob.n_dofs : 0);
 }
 
 AMPS_API amps_status amps_scene_set_material(amps_ctx *ctx, amps_scene *S, double E, double nu) {
@@ -14629,20 +14634,20 @@ static void amps__scene_cut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v, a
     R->new_nodes[R->nnew++] = vc;
     inc = amps_mesh_incident(S->m, vc, &deg);
     for (k = 0; k < deg; k++)
-        if (!R->tet_moved[inc[k]]) {
-            R->tet_moved[inc[k]] = 1;
-            R->moved[R->nmoved++] = inc[k];
-        }
+        if (R->tet_moved[inc[k]]++ == 0) R->moved[R->nmoved++] = inc[k];
     amps__scene_faces_changed(ctx, S, inc, deg);
     inc = amps_mesh_incident(S->m, v, &deg);
     amps__scene_faces_changed(ctx, S, inc, deg);
 }
 
-/* The change record of the undoing of the cut of v into v and vc (vc gone): vc leaves the new
-   nodes, the faces around v are brought up to date. */
-static void amps__scene_uncut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v, amps_int vc) {
+/* The change record of the undoing of the cut of v into v and vc (vc gone; mv[0..nmv-1] the tets
+   it moved back to v): vc leaves the new nodes, each of those tets leaves the moved ones unless
+   another recorded cut moved it (or the record was taken since the cut: then it moved again),
+   the faces around v are brought up to date. */
+static void amps__scene_uncut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v, amps_int vc, const amps_int *mv,
+                                       amps_int nmv) {
     amps__scene_render *R = &S->rd;
-    amps_int k, deg;
+    amps_int k, j, deg;
     const amps_int *inc;
     if (!R->on || R->lost) return;
     amps__render_begin(R);
@@ -14652,6 +14657,19 @@ static void amps__scene_uncut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v,
             R->nnew--;
             break;
         }
+    for (j = 0; j < nmv; j++) {
+        amps_int t = mv[j];
+        if (R->tet_moved[t] == 0) { /* moved back after a take */
+            R->tet_moved[t] = 1;
+            R->moved[R->nmoved++] = t;
+        } else if (--R->tet_moved[t] == 0) {
+            for (k = R->nmoved - 1; k >= 0 && R->moved[k] != t; k--) {}
+            if (k >= 0) {
+                memmove(R->moved + k, R->moved + k + 1, sizeof(amps_int) * (size_t)(R->nmoved - k - 1));
+                R->nmoved--;
+            }
+        }
+    }
     inc = amps_mesh_incident(S->m, v, &deg);
     amps__scene_faces_changed(ctx, S, inc, deg);
 }
@@ -14664,7 +14682,7 @@ static amps_status amps__render_rebuild(amps_ctx *ctx, amps_scene *S) {
     if (n < 0) return ctx ? ctx->status : AMPS_ERR_OOM;
     if (!R->face_id) R->face_id = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)nt, sizeof(amps_int)));
     if (!R->moved) R->moved = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m->ntet, sizeof(amps_int)));
-    if (!R->tet_moved) R->tet_moved = AMPS__CAST(unsigned char *, amps__malloc(ctx, (size_t)m->ntet, 1));
+    if (!R->tet_moved) R->tet_moved = AMPS__CAST(amps_int *, amps__malloc(ctx, (size_t)m->ntet, sizeof(amps_int)));
     if (!R->face_id || !R->moved || !R->tet_moved) return AMPS_ERR_OOM;
     if (amps__render_ids(ctx, R, n + 64)) return AMPS_ERR_OOM;
     if (amps_mesh_boundary(ctx, m, R->tri, R->face) != n) return AMPS_ERR_OOM;
@@ -14865,6 +14883,15 @@ static double amps__grid_gap(const amps__scene_grid *G, const amps_int c[3], amp
 
 /* Shells of cells at growing Chebyshev distance r around p's cell, until the best distance is
    below what any cell beyond can hold. */
+/* 1 if the 3 coordinates are finite and at most 1e150 in magnitude (squared distances of
+   picking stay finite). */
+static int amps__pick_ok(const double *p) {
+    int k;
+    for (k = 0; k < 3; k++)
+        if (!amps__isfinite(p[k]) || fabs(p[k]) > 1e150) return 0;
+    return 1;
+}
+
 AMPS_API amps_status amps_scene_nearest_node(amps_ctx *ctx, amps_scene *S, const double p[3], amps_int *v) {
     amps__scene_grid *G;
     amps_int c[3], r, i, j, k, bv = -1;
@@ -14872,8 +14899,8 @@ AMPS_API amps_status amps_scene_nearest_node(amps_ctx *ctx, amps_scene *S, const
     int a;
     if (v) *v = -1;
     if (!S || !p || !v) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_nearest_node: NULL argument");
-    if (!amps__isfinite(p[0]) || !amps__isfinite(p[1]) || !amps__isfinite(p[2]))
-        return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_nearest_node: NaN or Inf in the point");
+    if (!amps__pick_ok(p))
+        return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_nearest_node: a coordinate is NaN, Inf or beyond 1e150");
     G = &S->grid;
     if (!G->built && amps__scene_grid_build(ctx, S)) {
         amps__free(ctx, G->cell_ptr);
@@ -15027,7 +15054,7 @@ static void amps__scene_batch_undo(amps_scene *S) {
             (void)amps_mesh_uncut(&c2, S->m, op->v, op->vc, B->moved + op->moved_at, op->nmoved);
             amps__scene_mass_node(S, op->v);
             amps__scene_mass_node(S, op->vc);
-            amps__scene_uncut_recorded(&c2, S, op->v, op->vc);
+            amps__scene_uncut_recorded(&c2, S, op->v, op->vc, B->moved + op->moved_at, op->nmoved);
         }
     }
     B->open = 0;
@@ -15146,12 +15173,11 @@ static double amps__seg_dist2(const double *x, const double *a, const double *b,
 AMPS_API amps_int amps_scene_nodes_near_segment(amps_ctx *ctx, const amps_scene *S, const double a[3],
                                                 const double b[3], double radius, amps_int *out, amps_int cap) {
     amps_int v, cnt = 0;
-    int k;
     if (!S || !a || !b || (cap > 0 && !out))
         return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_nodes_near_segment: NULL argument");
-    for (k = 0; k < 3; k++)
-        if (!amps__isfinite(a[k]) || !amps__isfinite(b[k]))
-            return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_nodes_near_segment: segment not finite");
+    if (!amps__pick_ok(a) || !amps__pick_ok(b))
+        return amps__err(ctx, AMPS_ERR_VALUE,
+                         "amps_scene_nodes_near_segment: a coordinate of the segment is NaN, Inf or beyond 1e150");
     if (!(radius >= 0) || !amps__isfinite(radius))
         return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_nodes_near_segment: radius must be finite and >= 0");
     for (v = 0; v < S->m->nnode; v++) {

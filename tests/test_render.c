@@ -286,6 +286,48 @@ static void cut_sequence(amps_mesh *m, int ncut, int prepared, const char *what)
     free(w.tet0);
 }
 
+/* A batch undone at its commit (its cuts split the column, its releases leave the top loose):
+   the change record lists no moved tet and no new node. During a two-phase commit
+   amps_scene_ndof counts the batch's equations. */
+static void test_undone_batch(void) {
+    amps_ctx ctx;
+    amps_scene *S;
+    mirror w;
+    amps_int k, vc;
+    double u0[3] = {0, 0, 0}, p[3] = {0.5, 0.5, 1}, n[3] = {0, 0, 1};
+    amps_ctx_init(&ctx);
+    memset(&w, 0, sizeof(w));
+    S = amps_scene_create(&ctx, amps_mesh_grid(&ctx, 2, 2, 3, 1, 1, 1), NULL);
+    CHECK(amps_scene_fix_where(&ctx, S, 2, AMPS_LT, 0.5, NULL) == AMPS_OK, "undone: fix");
+    for (k = 8; k < 12; k++) amps_scene_pin(&ctx, S, k, u0);
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "undone: solve: %s", ctx.msg);
+    take_and_check(&ctx, S, &w, "undone batch", 0);
+    CHECK(amps_scene_begin_batch(&ctx, S) == AMPS_OK, "undone: begin");
+    for (k = 4; k < 8; k++) amps_scene_cut(&ctx, S, k, p, n, &vc);
+    for (k = 8; k < 12; k++) amps_scene_release(&ctx, S, k);
+    CHECK(amps_scene_commit(&ctx, S) == AMPS_ERR_SINGULAR_UPDATE, "undone: the loose batch was committed");
+    take_and_check(&ctx, S, &w, "undone batch", 1);
+    amps_scene_free(&ctx, S);
+    { /* amps_scene_ndof during a two-phase commit */
+        amps_int d[3], nd;
+        S = amps_scene_create(&ctx, amps_mesh_grid(&ctx, 5, 5, 4, 1, 1, 1), NULL);
+        amps_scene_fix_where(&ctx, S, 2, AMPS_LT, 0.5, NULL);
+        CHECK(amps_scene_prepare(&ctx, S) == AMPS_OK && amps_scene_begin_batch(&ctx, S) == AMPS_OK &&
+                      amps_scene_cut(&ctx, S, 62, amps_scene_mesh(S)->xyz + 3 * 62, n, &vc) == AMPS_OK &&
+                      amps_scene_commit_begin(&ctx, S) == AMPS_OK,
+              "ndof: batch: %s", ctx.msg);
+        nd = amps_scene_ndof(S);
+        CHECK(amps_scene_node_dofs(&ctx, S, vc, d) == AMPS_OK && d[0] >= 0 && d[2] < nd,
+              "ndof during a two-phase commit: %ld, the copy's equations %ld..%ld", (long)nd, (long)d[0], (long)d[2]);
+        amps_scene_commit_run(S);
+        CHECK(amps_scene_commit_end(&ctx, S) == AMPS_OK && amps_scene_ndof(S) == nd, "ndof after the commit");
+        amps_scene_free(&ctx, S);
+    }
+    free(w.tri);
+    free(w.face);
+    free(w.tet0);
+}
+
 /* The face hook after tets leave the incidence lists (an element removal): the faces they
    exposed appear, theirs disappear. */
 static void test_removed_hook(void) {
@@ -433,6 +475,16 @@ static void test_nearest(amps_mesh *m, const char *what) {
     CHECK(amps_scene_nearest_node(&ctx, S, nan3, &v) == AMPS_ERR_VALUE && v == -1 && strstr(ctx.msg, "NaN"),
           "nearest at NaN: %s", ctx.msg);
     CHECK(amps_scene_nearest_node(&ctx, NULL, p, &v) == AMPS_ERR_ARG, "nearest NULL scene");
+    { /* beyond 1e150 the squared distances would overflow: refused, not answered -1 */
+        double far[3] = {1e155, -1e155, 1e155}, a[3] = {-1e154, 0, 0};
+        CHECK(amps_scene_nearest_node(&ctx, S, far, &v) == AMPS_ERR_VALUE && v == -1, "nearest beyond 1e150: %ld",
+              (long)v);
+        CHECK(amps_scene_nodes_near_segment(&ctx, S, a, far, 1.0, NULL, 0) == AMPS_ERR_VALUE,
+              "segment beyond 1e150 accepted");
+        far[0] = far[2] = 1e149;
+        far[1] = -1e149;
+        CHECK(amps_scene_nearest_node(&ctx, S, far, &v) == AMPS_OK && v >= 0, "nearest at 1e149: %s", ctx.msg);
+    }
     amps_scene_free(&ctx, S);
 }
 
@@ -614,6 +666,7 @@ int main(void) {
     if (box) cut_sequence(box, 40, 1, "tetgen box");
     test_removed_hook();
     test_node_map();
+    test_undone_batch();
     test_nearest(amps_mesh_brick(&ctx, 4), "brick:4");
     box = read_box(&ctx);
     if (box) test_nearest(box, "tetgen box");
