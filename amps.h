@@ -1362,7 +1362,10 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    slabs of a sweep run in parallel; assembly, products and the PCG's vector updates are parallel
    on the engine's threads; all are bitwise independent of the thread count (the order depends
    on the mesh alone, and dot products are summed per chunk of 256 nodes or per slab, then in
-   order). Memory from the first step: 36 doubles and 36 indices per tet (reference gradients,
+   order). Whole runs repeat bit for bit only with a re-factorization policy that does not
+   depend on the clock (AMPS_REFACTOR_COUNT, MANUAL or OFF): the default AUTO swaps a new base
+   in when its background job is done, which changes the preconditioner and the engine's
+   rounding (results agree to the solve's tolerance). Memory from the first step: 36 doubles and 36 indices per tet (reference gradients,
    volume, R_e, Lame constants, element results; the block map and the workspace of its
    rebuild), 60 doubles, a long, 9 indices and 4 bytes per node (and 2 doubles per 256 nodes), 9
    doubles and 2 indices per block of A_R (one per pair of nodes sharing a tet), a double and a
