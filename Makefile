@@ -5,7 +5,7 @@
 #   make tsan          ThreadSanitizer on the tests that run background re-factorizations, on
 #                      tests/test_par.c (the parallel layer on a pthread job system) and on
 #                      tests/test_corot.c (the corotational passes on 1-3 threads)
-#   make test-tasks    the tests with every context on the host-task back end (tests/jobs_test.h)
+#   make test-tasks    the tests of the parallel kernels on the host-task back end (tests/jobs_test.h)
 #   make examples      build the examples (build/default/readme_example, haptic_loop, frame_loop)
 #   make switches      AMPS_NO_FEM / NO_STDIO / NO_THREADS combinations: build, tests, object sizes
 #   make demo          the main job: replay examples/brick_incision.scn (VTU, CSV, PNG in build/demo)
@@ -121,9 +121,13 @@ tsan:
 	@TSAN_OPTIONS="halt_on_error=1 suppressions=$(abspath tests/tsan.supp)" AMPS_BUILD=build/tsan \
 	  bash tests/run.sh build/tsan/test_update build/tsan/test_scene build/tsan/test_par build/tsan/test_corot
 
-# The whole suite on the host-callback back end (tests/jobs_test.h's pool of 4 workers), no OpenMP.
+# The tests that run the parallel kernels (factorization, solves, updates, scenes, dynamics,
+# corotational passes, frame loop, haptic path, stress) on the host-callback back end
+# (tests/jobs_test.h's pool of 4 workers), no OpenMP; the others do not reach the back end.
+TASK_TESTS := factor solve update par scene dynamics corot frame haptic stress alloc_update render
 test-tasks:
-	$(MAKE) test OMP= BUILD=build/tasks EXTRA="-DAMPS_TEST_HOST_TASKS -DAMPS__PAR_ADAPT=0 -pthread $(EXTRA)"
+	$(MAKE) test OMP= BUILD=build/tasks EXTRA="-DAMPS_TEST_HOST_TASKS -DAMPS__PAR_ADAPT=0 -pthread $(EXTRA)" \
+	  TEST_SRC="$(patsubst %,tests/test_%.c,$(TASK_TESTS))" TEST_SH=
 
 # The compile-time switches, each combination built with -Werror, tested and sized (tests/switches.sh).
 switches: deps-check
