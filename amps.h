@@ -1241,9 +1241,11 @@ AMPS_API amps_status amps_scene_commit_end(amps_ctx *ctx, amps_scene *S);
    [p_i, p_i+1]: the plane through p_i spanned by the segment and the blade, whose normal is
    n_i = (p_i+1 - p_i) x blade / |...|. Every node within radius of the polyline (of the nodes
    that exist at the call and belong to a tet) is cut (amps_scene_cut) by the plane of its nearest
-   segment (the first of equal ones), in the order of the segments and then of the position along
-   the segment (ties by node number). The cuts form one batch committed once (inside an open batch
-   they join it and the caller commits). out (may be NULL) reports the nodes touched: node[k],
+   segment (the first of equal ones; distances that differ by less than 1e-12 of the squared
+   distance plus the squared segment length count as equal), in the order of the segments and
+   then of the position along the segment (ties by node number). The cuts form one batch
+   committed once (inside an open batch they join it and the caller commits; before the
+   factorization they change the topology only, as amps_scene_cut, and nothing is factored). out (may be NULL) reports the nodes touched: node[k],
    copy[k] (the new node, or -1) and status[k] (AMPS_OK: cut; AMPS_WARN_NOOP: the plane leaves
    one side of the node empty; AMPS_ERR_SINGULAR_UPDATE: refused by the mechanism test) for
    k < min(n, cap) (arrays caller-owned, cap entries each), n the number touched, ncut the nodes
@@ -1251,7 +1253,8 @@ AMPS_API amps_status amps_scene_commit_end(amps_ctx *ctx, amps_scene *S);
    the cuts are made again one commit each, the cuts that leave a piece loose refused
    (AMPS_ERR_SINGULAR_UPDATE in status); inside an open batch the caller's commit decides.
    Errors: AMPS_ERR_ARG (npts < 2, NULL, a segment of zero length or parallel to the blade),
-   AMPS_ERR_VALUE (not finite, radius < 0), the commit's (the stroke undone, as amps_scene_commit)
+   AMPS_ERR_VALUE (not finite, a point's coordinate beyond 1e150, radius < 0), AMPS_ERR_STATE (a
+   two-phase commit in progress), the commit's (the stroke undone, as amps_scene_commit)
    and AMPS_ERR_OOM / AMPS_ERR_CAPACITY (in the one-commit-each pass the cuts made before it
    stay). Allocates O(nnode) scratch. */
 typedef struct amps_scene_stroke_result {
@@ -15092,8 +15095,8 @@ static amps_status amps__scene_batch_held(amps_ctx *ctx, amps_scene *S, const ch
 AMPS_API amps_status amps_scene_begin_batch(amps_ctx *ctx, amps_scene *S) {
     amps_status s;
     if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_begin_batch: NULL scene");
-    if (S->batch.open || S->batch.committing)
-        return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_begin_batch: a batch is open");
+    if (S->batch.committing) return amps__scene_committing(ctx, "amps_scene_begin_batch");
+    if (S->batch.open) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_begin_batch: a batch is open");
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
     S->batch.open = 1;
@@ -15210,16 +15213,20 @@ static amps_status amps__stroke_planes(amps_ctx *ctx, amps_int npts, const doubl
                                        double *nrm) {
     amps_int i;
     int k;
+    double b[3], sb = 0;
+    for (k = 0; k < 3; k++) sb = fabs(blade[k]) > sb ? fabs(blade[k]) : sb;
+    for (k = 0; k < 3; k++) b[k] = sb > 0 ? blade[k] / sb : 0; /* scaled: no overflow or underflow below */
     for (i = 0; i + 1 < npts; i++) {
         const double *p = pts + 3 * i, *q = p + 3;
-        double d[3], c[3], ld = 0, lb = 0, lc = 0;
-        for (k = 0; k < 3; k++) d[k] = q[k] - p[k];
-        c[0] = d[1] * blade[2] - d[2] * blade[1];
-        c[1] = d[2] * blade[0] - d[0] * blade[2];
-        c[2] = d[0] * blade[1] - d[1] * blade[0];
+        double d[3], c[3], ld = 0, lb = 0, lc = 0, sd = 0;
+        for (k = 0; k < 3; k++) sd = fabs(q[k] - p[k]) > sd ? fabs(q[k] - p[k]) : sd;
+        for (k = 0; k < 3; k++) d[k] = sd > 0 ? (q[k] - p[k]) / sd : 0;
+        c[0] = d[1] * b[2] - d[2] * b[1];
+        c[1] = d[2] * b[0] - d[0] * b[2];
+        c[2] = d[0] * b[1] - d[1] * b[0];
         for (k = 0; k < 3; k++) {
             ld += d[k] * d[k];
-            lb += blade[k] * blade[k];
+            lb += b[k] * b[k];
             lc += c[k] * c[k];
         }
         if (!(ld > 0) || !(lc > 1e-12 * ld * lb))
@@ -15246,11 +15253,18 @@ static amps_status amps__stroke_nodes(amps_ctx *ctx, amps_scene *S, amps_int npt
     for (k = 0; k < nn; k++) at[k] = -1;
     for (i = 0; i + 1 < npts; i++) {
         amps_int cnt = amps_scene_nodes_near_segment(ctx, S, pts + 3 * i, pts + 3 * i + 3, radius, buf, nn);
+        double len2 = 0;
+        if (cnt < 0) {
+            amps__free(ctx, buf);
+            amps__free(ctx, L);
+            return (amps_status)cnt;
+        }
+        for (k = 0; k < 3; k++) len2 += (pts[3 * i + 3 + k] - pts[3 * i + k]) * (pts[3 * i + 3 + k] - pts[3 * i + k]);
         for (k = 0; k < cnt; k++) {
             amps_int v = buf[k];
             double t, d2 = amps__seg_dist2(S->m->xyz + 3 * v, pts + 3 * i, pts + 3 * i + 3, &t);
             if (at[v] < 0) at[v] = n++;
-            else if (!(d2 < L[at[v]].d2)) continue;
+            else if (!(d2 < L[at[v]].d2 - 1e-12 * (L[at[v]].d2 + len2))) continue; /* equal to rounding: the first */
             L[at[v]].v = v;
             L[at[v]].seg = i;
             L[at[v]].t = t;
@@ -15293,9 +15307,11 @@ AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int np
     amps_status s;
     int opened = 0;
     if (!S || !pts || !blade || npts < 2) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_stroke: bad arguments");
-    for (i = 0; i < 3 * npts; i++)
-        if (!amps__isfinite(pts[i]) || (i < 3 && !amps__isfinite(blade[i])))
-            return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_stroke: points or blade not finite");
+    for (i = 0; i < npts; i++)
+        if (!amps__pick_ok(pts + 3 * i) || (i < 3 && !amps__isfinite(blade[i])))
+            return amps__err(ctx, AMPS_ERR_VALUE,
+                             "amps_scene_stroke: the blade is not finite, or a coordinate of the points is NaN, Inf "
+                             "or beyond 1e150");
     if (!(radius >= 0) || !amps__isfinite(radius))
         return amps__err(ctx, AMPS_ERR_VALUE, "amps_scene_stroke: radius must be finite and >= 0");
     nrm = AMPS__CAST(double *, amps__malloc(ctx, 3 * (size_t)npts, sizeof(double)));
@@ -15303,6 +15319,10 @@ AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int np
     if ((s = amps__stroke_planes(ctx, npts, pts, blade, nrm)) != AMPS_OK ||
         (s = amps__stroke_nodes(ctx, S, npts, pts, radius, &L, &nc)) != AMPS_OK)
         goto done;
+    if (!S->prepared) { /* before the factorization: topology only, as amps_scene_cut */
+        s = amps__stroke_cuts(ctx, S, L, nc, pts, nrm, out, &ncut);
+        goto report;
+    }
     if (!S->batch.open) {
         if ((s = amps_scene_begin_batch(ctx, S)) != AMPS_OK) goto done;
         opened = 1;
@@ -15315,6 +15335,7 @@ AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int np
         amps__log(ctx, AMPS_OK, "amps_scene_stroke: the stroke's commit is singular; its cuts one commit each");
         s = amps__stroke_cuts(ctx, S, L, nc, pts, nrm, out, &ncut);
     }
+report:
     if (out && s == AMPS_OK) {
         out->n = nc;
         out->ncut = ncut;

@@ -306,6 +306,46 @@ static void test_two_phase_release(void) {
     }
 }
 
+/* Stroke edge cases: a polyline that folds back on itself (every node as near to both segments,
+   to rounding) reports what its first segment alone reports; a blade of length 1e160 or 1e-170
+   is a direction like any other; a point beyond 1e150 is AMPS_ERR_VALUE; before the
+   factorization a stroke changes the topology only (the scene can still be fixed). */
+static void test_stroke_edges(void) {
+    amps_ctx ctx;
+    amps_scene *S;
+    amps_int nd[2][64], nn0;
+    amps_scene_stroke_result r[2];
+    double p[9] = {0.25, 0.25, 1, 0.5, 0.25, 1.75, 0.25, 0.25, 1}, bl[3] = {0, 1, 0};
+    int q;
+    amps_ctx_init(&ctx);
+    for (q = 0; q < 2; q++) {
+        S = amps_scene_create(&ctx, amps_mesh_brick(&ctx, 4), NULL);
+        amps_scene_fix_where(&ctx, S, 2, AMPS_LT, 0.01, NULL);
+        CHECK(amps_scene_prepare(&ctx, S) == AMPS_OK, "stroke edges: prepare: %s", ctx.msg);
+        memset(r + q, 0, sizeof(r[q]));
+        r[q].cap = 64;
+        r[q].node = nd[q];
+        CHECK(amps_scene_stroke(&ctx, S, q ? 2 : 3, p, bl, 0.0905, r + q) == AMPS_OK, "stroke edges: %s", ctx.msg);
+        amps_scene_free(&ctx, S);
+    }
+    CHECK(r[0].n == r[1].n && r[0].n > 0 && memcmp(nd[0], nd[1], sizeof(amps_int) * (size_t)r[0].n) == 0,
+          "a folded-back stroke differs from its first segment (%ld against %ld nodes)", (long)r[0].n, (long)r[1].n);
+    S = amps_scene_create(&ctx, amps_mesh_brick(&ctx, 4), NULL);
+    nn0 = amps_scene_mesh(S)->nnode;
+    for (q = 0; q < 2; q++) { /* unprepared: topology only */
+        double big[3] = {0, q ? 1e-170 : 1e160, 0};
+        CHECK(amps_scene_stroke(&ctx, S, 2, p, big, 0.0905, NULL) == AMPS_OK, "stroke with blade %g: %s", big[1],
+              ctx.msg);
+    }
+    CHECK(amps_scene_mesh(S)->nnode > nn0 && amps_scene_engine(S) == NULL &&
+                  amps_scene_fix_where(&ctx, S, 2, AMPS_LT, 0.01, NULL) == AMPS_OK,
+          "a stroke before the factorization factored the scene: %s", ctx.msg);
+    p[0] = 1e151;
+    CHECK(amps_scene_stroke(&ctx, S, 2, p, bl, 0.5, NULL) == AMPS_ERR_VALUE, "a stroke point beyond 1e150 accepted");
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "stroke edges: solve: %s", ctx.msg);
+    amps_scene_free(&ctx, S);
+}
+
 /* Random changes, in batches of 1-6 on A and one by one on B. */
 static void test_batches(unsigned long long seed) {
     amps_ctx ctx;
@@ -677,5 +717,6 @@ int main(void) {
     test_two_phase();
     test_two_phase_dynamics();
     test_two_phase_release();
+    test_stroke_edges();
     return amps_t_end("test_frame");
 }

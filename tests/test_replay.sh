@@ -88,6 +88,7 @@ hapticarg|mesh beam 4\nhaptic 0\n|2|usage
 fracneg|mesh beam 4\nfix z lt 0.5\ndynamics 0.01 0 0\nfracture -5\n|4|sigma_max must be > 0
 regrho0|mesh beam 4\nregion 0 1000 0.3 0\n|2|density 0 is not > 0
 dthuge|mesh beam 4\nfix z lt 0.5\ndynamics 1e300 0 0\n|3|out of range
+bndwrite|mesh beam 4\nfix z lt 0.5\nsolve\nboundary /nonexistent/dir/b.obj\n|4|cannot write
 CASES
 # a UTF-8 byte order mark at the start; a comment line of 100,000 characters; a fixnodes line of
 # 30,000 nodes (no limit of the line's length)

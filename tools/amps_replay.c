@@ -131,6 +131,13 @@ static int parse_node(const char *s, amps_int *v) {
     return 1;
 }
 
+/* A file that cannot be written: "file:line: ..." for a command (cmd), else "path: ...". */
+static int write_fail(replay *R, const char *path, int cmd) {
+    if (cmd) return fail(R, "cannot write '%s'", path);
+    fprintf(stderr, "%s: cannot write\n", path);
+    return 1;
+}
+
 /* Boundary triangles (amps_mesh_boundary: faces of exactly one tet, cut faces included) at their
    deformed positions: an OBJ file (obj != 0) or blocks of 4 lines "x y z |u|" per triangle. */
 static int write_boundary(replay *R, const char *path, int obj) {
@@ -142,8 +149,7 @@ static int write_boundary(replay *R, const char *path, int obj) {
     int q;
     if (!o) {
         free(tri);
-        fprintf(stderr, "%s: cannot write\n", path);
-        return 1;
+        return write_fail(R, path, obj);
     }
     amps_mesh_boundary(&R->ctx, m, tri, NULL);
     if (obj) {
@@ -163,10 +169,7 @@ static int write_boundary(replay *R, const char *path, int obj) {
             fprintf(o, "\n");
         }
     free(tri);
-    if (fclose(o)) {
-        fprintf(stderr, "%s: cannot write\n", path);
-        return 1;
-    }
+    if (fclose(o)) return write_fail(R, path, obj);
     if (!R->quiet) printf("%s: %s (%ld triangles)\n", obj ? "boundary" : "surface", path, (long)n);
     return 0;
 }
