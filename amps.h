@@ -1186,8 +1186,9 @@ AMPS_API amps_status amps_scene_watched_positions(amps_ctx *ctx, const amps_scen
    among equally near nodes the smallest index), over the nodes in at least one tet; *v = -1
    if there is none. The first call builds a uniform grid over the nodes (O(nnode) memory);
    later calls cost about the nodes of a few grid cells. Errors: AMPS_ERR_VALUE (NaN/Inf in
-   p, or a coordinate beyond 1e150 in magnitude), AMPS_ERR_ARG (NULL), AMPS_ERR_OOM. For picking on the deformed surface, pass the
-   reference point of the picked triangle (barycentric coordinates map it back). */
+   p, or a coordinate beyond 1e150 in magnitude), AMPS_ERR_ARG (NULL), AMPS_ERR_OOM. For
+   picking on the deformed surface, pass the reference point of the picked triangle
+   (barycentric coordinates map it back). */
 AMPS_API amps_status amps_scene_nearest_node(amps_ctx *ctx, amps_scene *S, const double p[3], amps_int *v);
 /* Fixes the nodes (copies included) whose reference coordinates lie in the closed box
    [lo, hi] / the closed ball |x - c| <= r; before the factorization only (AMPS_ERR_STATE).
@@ -1245,8 +1246,9 @@ AMPS_API amps_status amps_scene_commit_end(amps_ctx *ctx, amps_scene *S);
    distance plus the squared segment length count as equal), in the order of the segments and
    then of the position along the segment (ties by node number). The cuts form one batch
    committed once (inside an open batch they join it and the caller commits; before the
-   factorization they change the topology only, as amps_scene_cut, and nothing is factored). out (may be NULL) reports the nodes touched: node[k],
-   copy[k] (the new node, or -1) and status[k] (AMPS_OK: cut; AMPS_WARN_NOOP: the plane leaves
+   factorization they change the topology only, as amps_scene_cut, and nothing is factored).
+   out (may be NULL) reports the nodes touched: node[k], copy[k] (the new node, or -1) and
+   status[k] (AMPS_OK: cut; AMPS_WARN_NOOP: the plane leaves
    one side of the node empty; AMPS_ERR_SINGULAR_UPDATE: refused by the mechanism test) for
    k < min(n, cap) (arrays caller-owned, cap entries each), n the number touched, ncut the nodes
    cut. A commit that is singular (a piece the per-node test missed is left loose) is undone and
@@ -1368,7 +1370,8 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total);
    order). Whole runs repeat bit for bit only with a re-factorization policy that does not
    depend on the clock (AMPS_REFACTOR_COUNT, MANUAL or OFF): the default AUTO swaps a new base
    in when its background job is done, which changes the preconditioner and the engine's
-   rounding (results agree to the solve's tolerance). Memory from the first step: 36 doubles and 36 indices per tet (reference gradients,
+   rounding (results agree to the solve's tolerance). Memory from the first step: 36 doubles
+   and 36 indices per tet (reference gradients,
    volume, R_e, Lame constants, element results; the block map and the workspace of its
    rebuild), 60 doubles, a long, 9 indices and 4 bytes per node (and 2 doubles per 256 nodes), 9
    doubles and 2 indices per block of A_R (one per pair of nodes sharing a tet), a double and a
