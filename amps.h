@@ -18325,14 +18325,6 @@ static amps_status amps__gmsh_elems2(amps__gmsh *G, long long total) {
     return s;
 }
 
-/* 1 if 4.1 volume entity tag is listed ($Entities or $PartitionedEntities). */
-static int amps__gmsh_vol_known(const amps__gmsh *G, long long tag) {
-    long long i;
-    for (i = 0; i < G->nvol; i++)
-        if (G->vol_tag[i] == tag) return 1;
-    return 0;
-}
-
 /* 4.1 element blocks: a header, then one element a line "tag <nodes>"; the tets (type 4) join
    R.tb, their region the physical tag of the block's volume entity; together total elements. */
 static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long total) {
@@ -18340,14 +18332,18 @@ static amps_status amps__gmsh_elems4(amps__gmsh *G, long long nblk, long long to
     amps__gblk h;
     amps__tetrec r;
     long long b, i, a, got = 0;
+    int known;
     for (b = 0; b < nblk; b++) {
         amps_status s = amps__gmsh_block(L, 1, total, got, &h);
         if (!s) amps__gmsh_volume(G, h.kind, L->tline, h.n);
         r.region = 0;
+        known = 0;
         for (i = 0; h.dim == 3 && i < G->nvol; i++)
-            if (G->vol_tag[i] == h.tag) r.region = G->vol_phys[i];
-        if (!s && amps__gmsh_is_tet(h.kind) && h.n > 0 &&
-            (h.dim != 3 || (G->vol_tag && !amps__gmsh_vol_known(G, h.tag))))
+            if (G->vol_tag[i] == h.tag) {
+                r.region = G->vol_phys[i];
+                known = 1;
+            }
+        if (!s && amps__gmsh_is_tet(h.kind) && h.n > 0 && (h.dim != 3 || (G->vol_tag && !known)))
             s = amps__lx_err(L, L->tline, AMPS_ERR_PARSE,
                              h.dim != 3 ? "tetrahedra in an entity of dimension %lld"
                                         : "tetrahedra in volume entity %lld, which $Entities does not list",
