@@ -1208,21 +1208,29 @@ AMPS_API int amps_scene_is_pinned(const amps_scene *S, amps_int v);
    nothing. */
 AMPS_API amps_int amps_scene_nodes_near_segment(amps_ctx *ctx, const amps_scene *S, const double a[3],
                                                 const double b[3], double radius, amps_int *out, amps_int cap);
-/* Batches: between amps_scene_begin_batch and amps_scene_commit, cuts, pins, releases and forces
-   only record their changes (each cut's mechanism test still runs at the cut, so its refusal is
-   immediate, and the scene's mesh and node numbering change at once; in statics the releases are
-   tested at the commit, on the state after the batch, as amps_scene_release tests one); amps_scene_commit applies
-   them to the engine in one commit. The solves commit an open batch first, as amps_scene_commit
-   does. amps_scene_begin_batch prepares the scene if needed (AMPS_ERR_STATE if a batch is open).
-   amps_scene_commit ends the batch; on failure (AMPS_ERR_SINGULAR_UPDATE: a piece the mechanism
-   test missed is loose; AMPS_ERR_CAPACITY, AMPS_ERR_OOM) every cut, pin and release of the batch
-   is undone (forces stay, as in the engine) and the scene is as at amps_scene_begin_batch. A cut
-   in a batch that fails for lack of memory also undoes the batch. Outside a batch amps_scene_commit
-   commits what the scene recorded (moved pins, forces). Removals and material changes are not
-   recorded: they fail with AMPS_ERR_STATE while a batch is open or committing. Cost: one engine
-   commit (see amps_update_commit) for the whole batch instead of one per change. */
+/* Batches: between amps_scene_begin_batch and amps_scene_commit, cuts, pins, releases, removals,
+   material changes and forces only record their changes (each cut's and, in statics, each
+   removal's mechanism test still runs at the call, so its refusal is immediate and leaves the
+   batch as it was; the scene's mesh, node numbering and materials change at once; in statics the
+   releases are tested at the commit, on the state after the batch, as amps_scene_release tests
+   one); amps_scene_commit applies them to the engine in one commit. The solves and steps commit
+   an open batch first, as amps_scene_commit does. amps_scene_begin_batch prepares the scene if
+   needed (AMPS_ERR_STATE if a batch is open). amps_scene_commit ends the batch; on failure
+   (AMPS_ERR_SINGULAR_UPDATE: a piece the mechanism test missed is loose; AMPS_ERR_CAPACITY,
+   AMPS_ERR_OOM) every cut, pin, release, removal and material change of the batch is undone,
+   last first (forces stay, as in the engine; the masses and gravity loads follow the restored
+   mesh) and the scene is as at amps_scene_begin_batch. A cut, removal or material change in a
+   batch that fails for lack of memory or capacity (AMPS_ERR_OOM, AMPS_ERR_CAPACITY) also undoes
+   the batch (the batch is closed); its other errors leave the batch open as it was. Outside a
+   batch amps_scene_commit commits what the scene recorded (moved pins, forces). Cost: one engine
+   commit (see amps_update_commit) for the whole batch instead of one per change; the log holds
+   the changes' undo records (a removal's: its tets, separations and the incidence slots it
+   changed) and grows only past its largest size. */
 AMPS_API amps_status amps_scene_begin_batch(amps_ctx *ctx, amps_scene *S);
 AMPS_API amps_status amps_scene_commit(amps_ctx *ctx, amps_scene *S);
+/* Undoes every change of the open batch, last first, as a failed amps_scene_commit does, and
+   closes it (forces stay). AMPS_ERR_STATE if no batch is open or a two-phase commit runs. */
+AMPS_API amps_status amps_scene_cancel_batch(amps_ctx *ctx, amps_scene *S);
 /* amps_scene_commit in two phases (amps_update_commit_begin/run/end): begin and end under the
    caller's lock, run outside it (Steps 1-2, the expensive part). Meanwhile the haptic thread may
    move pins (amps_scene_pin of a node pinned before the batch), set forces and, in statics,
@@ -1277,8 +1285,11 @@ AMPS_API amps_status amps_scene_stroke(amps_ctx *ctx, amps_scene *S, amps_int np
 AMPS_API amps_status amps_scene_set_density(amps_ctx *ctx, amps_scene *S, double rho);
 /* E, nu and (rho > 0; 0 keeps) of the tets whose region attribute is id. Before the
    factorization it sets the mesh; after, the change of their element matrices is one update
-   (O(tets of the region) element matrices; allocates). Errors: AMPS_ERR_ARG (no tet has region
-   id), AMPS_ERR_VALUE (material, rho < 0 or not finite), a failed commit; the scene unchanged. */
+   (O(tets of the region) element matrices; allocates the region's list, and workspace when the
+   change is larger than every earlier one), committed at once or, inside a batch, with the
+   batch. Errors: AMPS_ERR_ARG (no tet has region id), AMPS_ERR_VALUE (material, rho < 0 or not
+   finite), AMPS_ERR_STATE (a two-phase commit in progress), a failed commit; the scene
+   unchanged. */
 AMPS_API amps_status amps_scene_set_region(amps_ctx *ctx, amps_scene *S, amps_int id, double E, double nu, double rho);
 /* Material of tet t at any time (after the factorization: an update of its nodes' rows, as
    amps_scene_set_region; amps_scene_set_material likewise updates every tet). A removed tet keeps
@@ -1328,7 +1339,9 @@ AMPS_API const double *amps_scene_velocities(const amps_scene *S);
    (amps_mesh_unremove); in dynamics a free piece is legal. Before the model is factored
    (amps_scene_prepare, the first solve or step) a removal changes the topology only, as fixing
    may still follow: there a loose piece is found by the factorization (AMPS_ERR_NOT_SPD naming
-   a node of it). Errors of amps_mesh_remove (index, removed twice) change nothing. Allocates. */
+   a node of it). Errors of amps_mesh_remove (index, removed twice) change nothing. Inside a batch
+   (amps_scene_begin_batch) the engine's change waits for the batch's commit. Allocates only when
+   a removal is larger than every earlier one (the mesh's and the scene's workspaces grow). */
 AMPS_API amps_status amps_scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, const amps_int *tets,
                                        amps_singular_policy policy, amps_mesh_removal *report);
 /* Fracture: after each step, tets with max |principal stress| > sigma_max are removed (default
@@ -12779,22 +12792,65 @@ static amps_status amps__rm_resolve(amps_ctx *ctx, amps_mesh *m, struct amps__re
     return AMPS_OK;
 }
 
-/* Restores m to its state before the removal R recorded. */
-static void amps__rm_undo(amps_mesh *m, struct amps__removal *R) {
-    size_t k;
-    amps_int v;
-    for (k = R->edits.n; k >= 2; k -= 2) m->tet[R->edits.a[k - 2]] = R->edits.a[k - 1];
-    for (k = 0; k + 4 <= R->saved.n; k += 4) {
-        amps_int *sv = R->saved.a + k;
+/* The log of a removal, flat: {nnode0, ntet, nsaved, nslot, nedits, tets, saved, slot, edits}
+   (the parts of struct amps__removal that undo it). */
+#define AMPS__RMLOG_HEAD 5
+
+/* Restores m to its state before a removal from its undo record: the tet entries edited (pairs
+   4 t + q, old node; undone last first), the saved incidence slots (per node: node, inc_ptr,
+   inc_len, offset into slot), nnode and the removed flags of tets. */
+static void amps__rm_restore(amps_mesh *m, amps_int nnode0, const amps_int *tets, amps_int ntet, const amps_int *saved,
+                             amps_int nsaved, const amps_int *slot, const amps_int *edits, amps_int nedits) {
+    amps_int k, v;
+    for (k = nedits; k >= 2; k -= 2) m->tet[edits[k - 2]] = edits[k - 1];
+    for (k = 0; k + 4 <= nsaved; k += 4) {
+        const amps_int *sv = saved + k;
         m->inc_ptr[sv[0]] = sv[1];
         m->inc_len[sv[0]] = sv[2];
-        if (sv[2] > 0) memcpy(m->inc + sv[1], R->slot.a + sv[3], sizeof(amps_int) * (size_t)sv[2]);
+        if (sv[2] > 0) memcpy(m->inc + sv[1], slot + sv[3], sizeof(amps_int) * (size_t)sv[2]);
     }
-    for (v = R->nnode0; v < m->nnode; v++) m->inc_ptr[v] = m->inc_len[v] = 0;
-    m->nnode = R->nnode0;
-    for (k = 0; k < R->tets.n; k++) m->removed[R->tets.a[k]] = 0;
-    m->nremoved -= (amps_int)R->tets.n;
+    for (v = nnode0; v < m->nnode; v++) m->inc_ptr[v] = m->inc_len[v] = 0;
+    m->nnode = nnode0;
+    for (k = 0; k < ntet; k++) m->removed[tets[k]] = 0;
+    m->nremoved -= ntet;
+}
+
+/* Restores m to its state before the removal R recorded. */
+static void amps__rm_undo(amps_mesh *m, struct amps__removal *R) {
+    amps__rm_restore(m, R->nnode0, R->tets.a, (amps_int)R->tets.n, R->saved.a, (amps_int)R->saved.n, R->slot.a,
+                     R->edits.a, (amps_int)R->edits.n);
     R->valid = 0;
+}
+
+/* The log of a removal, flat: {nnode0, ntet, nsaved, nslot, nedits, tets, saved, slot, edits}. */
+#define AMPS__RMLOG_HEAD 5
+
+/* The length of the log of the last removal of m (0 if it is not the last change of m). */
+static amps_int amps__rm_log_len(const amps_mesh *m) {
+    const struct amps__removal *R = m->last_removal;
+    if (!R || !R->valid) return 0;
+    return AMPS__RMLOG_HEAD + (amps_int)(R->tets.n + R->saved.n + R->slot.n + R->edits.n);
+}
+
+/* Writes the log of the last removal of m (amps__rm_log_len entries) to L. */
+static void amps__rm_log_save(const amps_mesh *m, amps_int *L) {
+    const struct amps__removal *R = m->last_removal;
+    const amps__ivec *part[4];
+    int k;
+    part[0] = &R->tets, part[1] = &R->saved, part[2] = &R->slot, part[3] = &R->edits;
+    L[0] = R->nnode0;
+    for (k = 0; k < 4; k++) L[1 + k] = (amps_int)part[k]->n;
+    L += AMPS__RMLOG_HEAD;
+    for (k = 0; k < 4; L += part[k]->n, k++)
+        if (part[k]->n) memcpy(L, part[k]->a, sizeof(amps_int) * part[k]->n);
+}
+
+/* Undoes the removal logged in L; the changes of m since (cuts, removals) must have been undone,
+   last first. */
+static void amps__rm_log_undo(amps_mesh *m, const amps_int *L) {
+    const amps_int *tets = L + AMPS__RMLOG_HEAD, *saved = tets + L[1], *slot = saved + L[2];
+    amps__rm_restore(m, L[0], tets, L[1], saved, L[2], slot, slot + L[3], L[4]);
+    amps__removal_forget(m);
 }
 
 /* Checks the tets of amps_mesh_remove: in range, live, none twice (marked 2 while checking). */
@@ -13020,19 +13076,21 @@ typedef struct amps__scene_grid {
 static void amps__scene_render_free(amps_ctx *ctx, amps_scene *S);
 static void amps__scene_cut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v, amps_int vc);
 /* An open batch (amps_scene_begin_batch): the changes it recorded, to undo them if its commit
-   fails. moved holds the tets each cut moved, op k's at moved[op.moved_at..+op.nmoved]. */
+   fails. Op k's integers are ilog[op.at .. op.at + op.len - 1], its doubles from dlog[op.dat]. */
 typedef struct amps__scene_op {
-    int kind;                  /* 0 cut, 1 pin, 2 release */
-    int watched, was_pinned;   /* cut: its copy joined the watch set; pin: v was pinned */
-    amps_int v, vc;            /* the node, the cut's copy */
-    amps_int moved_at, nmoved; /* cut: its moved tets */
-    double old[3];             /* pin: the previous pin value */
+    int kind;                /* 0 cut, 1 pin, 2 release, 3 material, 4 removal */
+    int watched, was_pinned; /* cut: its copy joined the watch set; pin: v was pinned; material: rho set */
+    amps_int v, vc;          /* the node, the cut's copy */
+    amps_int at, len, dat;   /* cut: its moved tets; material: its tets, their old (E, nu, rho) in dlog;
+                                removal: amps__scene_batch_removal's log */
+    double old[3];           /* pin: the previous pin value */
 } amps__scene_op;
 typedef struct amps__scene_batch {
     int open, committing; /* a batch records; a two-phase commit of it is in progress */
-    amps_int n, cap, nmoved, cap_moved;
+    amps_int n, cap, nilog, cap_ilog, ndlog, cap_dlog;
     amps__scene_op *ops;
-    amps_int *moved;
+    amps_int *ilog;
+    double *dlog;
 } amps__scene_batch;
 
 /* The corotational PCG's Gauss-Seidel sweeps run on at most AMPS__CR_PARTS slabs of about
@@ -13133,6 +13191,21 @@ typedef struct amps__scene_dyn {
     size_t rm_list_cap, rm_flag_cap, rm_rename_cap, rm_queue_cap, rm_sort_cap, rm_seen_cap;
 } amps__scene_dyn;
 
+/* Triplets of a change of the system matrix (upper triangle in equations): the scene's workspace
+   (kept between changes: a change allocates only when it is larger than every one before), and
+   the summed entries handed to amps_update_add. */
+typedef struct amps__trip {
+    amps_int r, c;
+    double v;
+} amps__trip;
+typedef struct amps__trips {
+    amps__trip *e;
+    size_t n, cap;
+    amps_int *r, *c; /* cap_sum summed entries */
+    double *v;
+    size_t cap_sum;
+} amps__trips;
+
 struct amps_scene {
     amps_mesh *m;
     amps_scene_opts opts;
@@ -13149,6 +13222,7 @@ struct amps_scene {
     amps__scene_grid grid;
     amps__scene_batch batch;
     amps__scene_dyn dyn;
+    amps__trips trips;
 };
 
 /* Ae = cK Ke + cM Me of tet t, Me = diag(rho |V| / 4) (statics: Ae = Ke): every element matrix
@@ -13209,7 +13283,12 @@ AMPS_API void amps_scene_free(amps_ctx *ctx, amps_scene *S) {
     amps__free(ctx, S->mech.active);
     amps__scene_render_free(ctx, S);
     amps__free(ctx, S->batch.ops);
-    amps__free(ctx, S->batch.moved);
+    amps__free(ctx, S->batch.ilog);
+    amps__free(ctx, S->trips.e);
+    amps__free(ctx, S->trips.r);
+    amps__free(ctx, S->trips.c);
+    amps__free(ctx, S->trips.v);
+    amps__free(ctx, S->batch.dlog);
     amps__free(ctx, S->dyn.vel);
     amps__free(ctx, S->dyn.ku);
     amps__free(ctx, S->dyn.idx);
@@ -13581,7 +13660,7 @@ AMPS_API amps_status amps_scene_force(amps_ctx *ctx, amps_scene *S, amps_int v, 
     return AMPS_OK;
 }
 
-static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int nmoved);
+static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int ni, amps_int nd);
 static void amps__scene_batch_pin(amps_scene *S, int kind, amps_int v);
 
 AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, const double u[3]) {
@@ -13603,7 +13682,7 @@ AMPS_API amps_status amps_scene_pin(amps_ctx *ctx, amps_scene *S, amps_int v, co
         return AMPS_OK;
     }
     for (k = 0; k < 3; k++) idx[k] = S->node.dof[3 * v + k];
-    if (S->batch.open && (s = amps__scene_batch_room(ctx, S, 0)) != AMPS_OK) return s;
+    if (S->batch.open && (s = amps__scene_batch_room(ctx, S, 0, 0)) != AMPS_OK) return s;
     if ((s = amps_update_constrain(ctx, S->U, 3, idx, u)) != AMPS_OK) return s;
     if (S->batch.open) amps__scene_batch_pin(S, 1, v);
     else if (!S->node.pinned[v] && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s;
@@ -13669,7 +13748,7 @@ AMPS_API amps_status amps_scene_release(amps_ctx *ctx, amps_scene *S, amps_int v
     }
     if (!S->batch.open && (s = amps__scene_release_held(ctx, S, v)) != AMPS_OK) return s;
     for (k = 0; k < 3; k++) idx[k] = S->node.dof[3 * v + k];
-    if (S->batch.open && (s = amps__scene_batch_room(ctx, S, 0)) != AMPS_OK) return s;
+    if (S->batch.open && (s = amps__scene_batch_room(ctx, S, 0, 0)) != AMPS_OK) return s;
     if ((s = amps_update_release(ctx, S->U, 3, idx)) != AMPS_OK) return s;
     if (S->batch.open) amps__scene_batch_pin(S, 2, v);
     else if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) {
@@ -14097,7 +14176,7 @@ undo:
     return s;
 }
 
-static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int nmoved);
+static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int ni, amps_int nd);
 
 /* The refusal of a call that must wait for the end of a two-phase commit. */
 static amps_status amps__scene_committing(amps_ctx *ctx, const char *fn) {
@@ -14115,7 +14194,7 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
     if (S->prepared && !S->batch.open && (s = amps_update_commit(ctx, S->U)) != AMPS_OK)
         return s; /* earlier changes first */
     if ((s = amps__scene_cut_room(ctx, S, v, &watched)) != AMPS_OK ||
-        (S->batch.open && (s = amps__scene_batch_room(ctx, S, amps_mesh_degree(S->m, v))) != AMPS_OK) ||
+        (S->batch.open && (s = amps__scene_batch_room(ctx, S, amps_mesh_degree(S->m, v), 0)) != AMPS_OK) ||
         (s = amps__scene_dyn_room(ctx, S, S->m->nnode + 1)) != AMPS_OK) {
         if (S->batch.open) amps__scene_batch_abort(S); /* as documented for a batch's cut */
         return s;
@@ -14992,8 +15071,10 @@ AMPS_API int amps_scene_is_pinned(const amps_scene *S, amps_int v) {
 
 /* ---- batches, strokes and segment queries ---- */
 
-/* Room in the batch log for one more change and a cut moving up to nmoved tets. */
-static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int nmoved) {
+static amps_status amps__scene_refresh_force(amps_ctx *ctx, amps_scene *S, amps_int v);
+
+/* Room in the batch log for one more change with ni integers and nd doubles. */
+static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int ni, amps_int nd) {
     amps__scene_batch *B = &S->batch;
     if (B->n + 1 > B->cap) {
         amps_int cap = 2 * B->cap + 16;
@@ -15001,73 +15082,180 @@ static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int
             return amps__err(ctx, AMPS_ERR_OOM, "amps_scene: out of memory recording a batch");
         B->cap = cap;
     }
-    if (B->nmoved + nmoved > B->cap_moved) {
-        amps_int cap = 2 * B->cap_moved + nmoved + 64;
-        if (amps__realloc(ctx, (void **)&B->moved, (size_t)cap, sizeof(amps_int)))
+    if (B->nilog + ni > B->cap_ilog) {
+        amps_int cap = 2 * B->cap_ilog + ni + 64;
+        if (amps__realloc(ctx, (void **)&B->ilog, (size_t)cap, sizeof(amps_int)))
             return amps__err(ctx, AMPS_ERR_OOM, "amps_scene: out of memory recording a batch");
-        B->cap_moved = cap;
+        B->cap_ilog = cap;
+    }
+    if (B->ndlog + nd > B->cap_dlog) {
+        amps_int cap = 2 * B->cap_dlog + nd + 64;
+        if (amps__realloc(ctx, (void **)&B->dlog, (size_t)cap, sizeof(double)))
+            return amps__err(ctx, AMPS_ERR_OOM, "amps_scene: out of memory recording a batch");
+        B->cap_dlog = cap;
     }
     return AMPS_OK;
 }
 
-/* Logs the cut of v into v and vc (its moved tets in cut.moved); room made by amps__scene_batch_room. */
-static void amps__scene_batch_cut(amps_scene *S, amps_int v, amps_int vc, amps_int nmoved) {
+/* A new op of the given kind and node in the log, its integers ilog[at .. at + len - 1] (to be
+   written by the caller); room made by amps__scene_batch_room. */
+static amps__scene_op *amps__scene_batch_op(amps_scene *S, int kind, amps_int v, amps_int len) {
     amps__scene_batch *B = &S->batch;
     amps__scene_op *op = B->ops + B->n++;
-    memset(op, 0, sizeof(*op));
-    op->kind = 0;
-    op->v = v;
-    op->vc = vc;
-    op->moved_at = B->nmoved;
-    op->nmoved = nmoved;
-    memcpy(B->moved + B->nmoved, S->cut.moved, sizeof(amps_int) * (size_t)nmoved);
-    B->nmoved += nmoved;
-}
-
-/* Logs a pin (kind 1) or release (kind 2) of v with v's state before it. */
-static void amps__scene_batch_pin(amps_scene *S, int kind, amps_int v) {
-    amps__scene_op *op = S->batch.ops + S->batch.n++;
     memset(op, 0, sizeof(*op));
     op->kind = kind;
     op->v = v;
     op->vc = -1;
+    op->at = B->nilog;
+    op->len = len;
+    op->dat = B->ndlog;
+    B->nilog += len;
+    return op;
+}
+
+/* Logs the cut of v into v and vc (its moved tets in cut.moved). */
+static void amps__scene_batch_cut(amps_scene *S, amps_int v, amps_int vc, amps_int nmoved) {
+    amps__scene_op *op = amps__scene_batch_op(S, 0, v, nmoved);
+    op->vc = vc;
+    memcpy(S->batch.ilog + op->at, S->cut.moved, sizeof(amps_int) * (size_t)nmoved);
+}
+
+/* Logs a pin (kind 1) or release (kind 2) of v with v's state before it. */
+static void amps__scene_batch_pin(amps_scene *S, int kind, amps_int v) {
+    amps__scene_op *op = amps__scene_batch_op(S, kind, v, 0);
     op->was_pinned = S->node.pinned[v];
     memcpy(op->old, S->node.pin_value + 3 * v, sizeof(op->old));
 }
 
-/* Undoes the batch's cuts, pins and releases, last first, and closes it (the engine has
-   discarded its changes). */
-static void amps__scene_batch_undo(amps_scene *S) {
-    amps__scene_batch *B = &S->batch;
-    amps_int i, k;
+/* Logs the material change of tets[0..n-1], whose old (E, nu, rho) are the 3 n doubles at
+   dlog[ndlog] (rho_set: the densities changed). */
+static void amps__scene_batch_material(amps_scene *S, amps_int n, const amps_int *tets, int rho_set) {
+    amps__scene_op *op = amps__scene_batch_op(S, 3, -1, n);
+    op->was_pinned = rho_set;
+    memcpy(S->batch.ilog + op->at, tets, sizeof(amps_int) * (size_t)n);
+    S->batch.ndlog += 3 * n;
+}
+
+/* Integers of a removal's log: {nflag, flagged orphans, nsep, sep_node, sep_copy, sep_ptr (nsep
+   + 1), sep_tets, the mesh's log (amps__rm_log_save)}. */
+static amps_int amps__scene_removal_log_len(const amps_scene *S, const amps_mesh_removal *r, amps_int nflag) {
+    return 2 + nflag + 3 * r->nsep + 1 + r->sep_ptr[r->nsep] + amps__rm_log_len(S->m);
+}
+
+/* Logs the removal r (the last change of the mesh) that flagged[0..nflag-1] as orphans; room
+   for amps__scene_removal_log_len integers made. */
+static void amps__scene_batch_removal(amps_scene *S, const amps_mesh_removal *r, const amps_int *flagged,
+                                      amps_int nflag) {
+    amps__scene_op *op = amps__scene_batch_op(S, 4, -1, amps__scene_removal_log_len(S, r, nflag));
+    amps_int *L = S->batch.ilog + op->at, ns = r->nsep;
+    *L++ = nflag;
+    memcpy(L, flagged, sizeof(amps_int) * (size_t)nflag);
+    L += nflag;
+    *L++ = ns;
+    memcpy(L, r->sep_node, sizeof(amps_int) * (size_t)ns);
+    memcpy(L + ns, r->sep_copy, sizeof(amps_int) * (size_t)ns);
+    memcpy(L + 2 * ns, r->sep_ptr, sizeof(amps_int) * (size_t)(ns + 1));
+    L += 3 * ns + 1;
+    memcpy(L, r->sep_tets, sizeof(amps_int) * (size_t)r->sep_ptr[ns]);
+    amps__rm_log_save(S->m, L + r->sep_ptr[ns]);
+}
+
+/* The scene's side of undoing a removal before its mesh is restored: the orphans it flagged
+   (flagged[0..nflag-1]) as they were, no equations for the nodes from nn0 on. */
+static void amps__scene_unremove_nodes(amps_scene *S, const amps_int *flagged, amps_int nflag, amps_int nn0) {
+    amps_int k;
+    for (k = 0; k < nflag; k++) {
+        S->node.pinned[flagged[k]] = (unsigned char)(S->dyn.orphan[flagged[k]] == 2);
+        S->dyn.orphan[flagged[k]] = 0;
+    }
+    for (k = 3 * nn0; k < 3 * S->m->nnode && k < 3 * S->node.cap; k++) S->node.dof[k] = -1;
+}
+
+/* After a removal's mesh was restored: the masses and gravity loads of the nodes of its tets
+   and of its separated nodes (a discard keeps the engine's forces). */
+static void amps__scene_unremove_forces(amps_scene *S, const amps_int *tets, amps_int ntet, const amps_int *sep_node,
+                                        amps_int nsep) {
+    amps_ctx c2;
+    amps_int k;
+    amps_ctx_init(&c2);
+    for (k = 0; S->prepared && k < 4 * ntet; k++)
+        (void)amps__scene_refresh_force(&c2, S, S->m->tet[4 * tets[k / 4] + k % 4]);
+    for (k = 0; S->prepared && k < nsep; k++) (void)amps__scene_refresh_force(&c2, S, sep_node[k]);
+}
+
+/* Undoes the logged removal L (amps__scene_batch_removal): scene, mesh, forces, rendering
+   record (its separations' copies gone, the faces around its tets). */
+static void amps__scene_batch_unremove(amps_scene *S, const amps_int *L) {
+    amps_int nflag = L[0], ns = L[1 + nflag], k;
+    const amps_int *fl = L + 1, *sn = fl + nflag + 1, *sc = sn + ns, *sp = sc + ns, *st = sp + ns + 1,
+                   *ML = st + sp[ns], *tets = ML + AMPS__RMLOG_HEAD;
     amps_ctx c2;
     amps_ctx_init(&c2);
+    amps__scene_unremove_nodes(S, fl, nflag, ML[0]);
+    amps__rm_log_undo(S->m, ML);
+    amps__scene_unremove_forces(S, tets, ML[1], sn, ns);
+    for (k = ns - 1; k >= 0; k--) amps__scene_uncut_recorded(&c2, S, sn[k], sc[k], st + sp[k], sp[k + 1] - sp[k]);
+    amps__scene_faces_changed(&c2, S, tets, ML[1]);
+}
+
+/* Undoes the logged material change op: the old materials and, when the densities changed, the
+   masses and gravity loads of the tets' nodes. */
+static void amps__scene_batch_unmaterial(amps_scene *S, const amps__scene_op *op) {
+    const amps_int *tets = S->batch.ilog + op->at;
+    const double *old = S->batch.dlog + op->dat;
+    amps_mesh *m = S->m;
+    amps_ctx c2;
+    amps_int k;
+    amps_ctx_init(&c2);
+    for (k = 0; k < op->len; k++) {
+        m->E[tets[k]] = old[3 * k];
+        m->nu[tets[k]] = old[3 * k + 1];
+        if (op->was_pinned) m->rho[tets[k]] = old[3 * k + 2];
+    }
+    for (k = 0; op->was_pinned && k < 4 * op->len; k++)
+        (void)amps__scene_refresh_force(&c2, S, m->tet[4 * tets[k / 4] + k % 4]);
+}
+
+/* Undoes the logged cut op (the copy out of the watch set and the mesh, the masses of both
+   nodes, the rendering record). */
+static void amps__scene_batch_uncut(amps_scene *S, const amps__scene_op *op) {
+    const amps_int *mv = S->batch.ilog + op->at;
+    amps_int k;
+    amps_ctx c2;
+    amps_ctx_init(&c2);
+    for (k = S->watch.n - 1; op->watched && k >= 0; k--)
+        if (S->watch.nodes[k] == op->vc) {
+            memmove(S->watch.nodes + k, S->watch.nodes + k + 1, sizeof(amps_int) * (size_t)(S->watch.n - k - 1));
+            S->watch.n--;
+            S->watch.stale = 1;
+            break;
+        }
+    for (k = 0; k < 3; k++) S->node.dof[3 * op->vc + k] = -1;
+    S->node.fixed[op->vc] = 0;
+    S->node.pinned[op->vc] = 0;
+    (void)amps_mesh_uncut(&c2, S->m, op->v, op->vc, mv, op->len);
+    amps__scene_mass_node(S, op->v);
+    amps__scene_mass_node(S, op->vc);
+    amps__scene_uncut_recorded(&c2, S, op->v, op->vc, mv, op->len);
+}
+
+/* Undoes the batch's changes, last first, and closes it (the engine has discarded its
+   changes). */
+static void amps__scene_batch_undo(amps_scene *S) {
+    amps__scene_batch *B = &S->batch;
+    amps_int i;
     for (i = B->n - 1; i >= 0; i--) {
         const amps__scene_op *op = B->ops + i;
         if (op->kind == 1) {
             S->node.pinned[op->v] = (unsigned char)op->was_pinned;
             memcpy(S->node.pin_value + 3 * op->v, op->old, sizeof(op->old));
         } else if (op->kind == 2) S->node.pinned[op->v] = 1;
-        else {
-            for (k = S->watch.n - 1; op->watched && k >= 0; k--)
-                if (S->watch.nodes[k] == op->vc) {
-                    memmove(S->watch.nodes + k, S->watch.nodes + k + 1,
-                            sizeof(amps_int) * (size_t)(S->watch.n - k - 1));
-                    S->watch.n--;
-                    S->watch.stale = 1;
-                    break;
-                }
-            for (k = 0; k < 3; k++) S->node.dof[3 * op->vc + k] = -1;
-            S->node.fixed[op->vc] = 0;
-            S->node.pinned[op->vc] = 0;
-            (void)amps_mesh_uncut(&c2, S->m, op->v, op->vc, B->moved + op->moved_at, op->nmoved);
-            amps__scene_mass_node(S, op->v);
-            amps__scene_mass_node(S, op->vc);
-            amps__scene_uncut_recorded(&c2, S, op->v, op->vc, B->moved + op->moved_at, op->nmoved);
-        }
+        else if (op->kind == 3) amps__scene_batch_unmaterial(S, op);
+        else if (op->kind == 4) amps__scene_batch_unremove(S, B->ilog + op->at);
+        else amps__scene_batch_uncut(S, op);
     }
     B->open = 0;
-    B->n = B->nmoved = 0;
+    B->n = B->nilog = B->ndlog = 0;
 }
 
 /* A failed batch: the engine's pending changes discarded (the batch began with none), then the
@@ -15103,7 +15291,7 @@ AMPS_API amps_status amps_scene_begin_batch(amps_ctx *ctx, amps_scene *S) {
     if (!S->prepared && (s = amps_scene_prepare(ctx, S)) != AMPS_OK) return s;
     if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
     S->batch.open = 1;
-    S->batch.n = S->batch.nmoved = 0;
+    S->batch.n = S->batch.nilog = S->batch.ndlog = 0;
     return AMPS_OK;
 }
 
@@ -15124,8 +15312,16 @@ AMPS_API amps_status amps_scene_commit(amps_ctx *ctx, amps_scene *S) {
         return amps__err(ctx, s, "amps_scene_commit: the batch of %ld changes was undone (%s)", (long)nops, msg);
     }
     S->batch.open = 0;
-    S->batch.n = S->batch.nmoved = 0;
+    S->batch.n = S->batch.nilog = S->batch.ndlog = 0;
     return s;
+}
+
+AMPS_API amps_status amps_scene_cancel_batch(amps_ctx *ctx, amps_scene *S) {
+    if (!S) return amps__err(ctx, AMPS_ERR_ARG, "amps_scene_cancel_batch: NULL scene");
+    if (S->batch.committing) return amps__scene_committing(ctx, "amps_scene_cancel_batch");
+    if (!S->batch.open) return amps__err(ctx, AMPS_ERR_STATE, "amps_scene_cancel_batch: no batch is open");
+    amps__scene_batch_abort(S);
+    return AMPS_OK;
 }
 
 AMPS_API amps_status amps_scene_commit_begin(amps_ctx *ctx, amps_scene *S) {
@@ -15156,7 +15352,7 @@ AMPS_API amps_status amps_scene_commit_end(amps_ctx *ctx, amps_scene *S) {
         amps__scene_batch_undo(S);
         return s;
     }
-    S->batch.n = S->batch.nmoved = 0;
+    S->batch.n = S->batch.nilog = S->batch.ndlog = 0;
     return AMPS_OK;
 }
 
@@ -15479,16 +15675,6 @@ static amps_status amps__scene_dyn_load(amps_ctx *ctx, amps_scene *S) {
     return n ? amps_update_constrain(ctx, S->U, n, S->dyn.idx, S->dyn.val) : AMPS_OK;
 }
 
-/* Triplets of a change of the system matrix (upper triangle in equations). */
-typedef struct amps__trip {
-    amps_int r, c;
-    double v;
-} amps__trip;
-typedef struct amps__trips {
-    amps__trip *e;
-    size_t n, cap;
-} amps__trips;
-
 /* Appends sign * Ae(t) scattered on the equations of its nodes (node w read as rename[w] when
    rename is given). */
 static amps_status amps__trips_tet(amps_ctx *ctx, const amps_scene *S, amps__trips *T, amps_int t, double sign,
@@ -15525,11 +15711,9 @@ static int amps__trip_cmp(const void *x, const void *y) {
     return a->r < b->r ? -1 : a->r > b->r;
 }
 
-/* Records the change T (duplicates summed) with amps_update_add; frees T. */
+/* Records the change T (duplicates summed) with amps_update_add; T emptied, its storage kept. */
 static amps_status amps__trips_add(amps_ctx *ctx, amps_scene *S, amps__trips *T) {
     size_t k, nz = 0;
-    amps_int *r = NULL, *c = NULL;
-    double *v = NULL;
     amps_status s = AMPS_OK;
     if (T->n > 0) {
         amps__sort(T->e, T->n, sizeof(amps__trip), amps__trip_cmp);
@@ -15538,23 +15722,21 @@ static amps_status amps__trips_add(amps_ctx *ctx, amps_scene *S, amps__trips *T)
             else T->e[++nz] = T->e[k];
         }
         nz++;
-        r = AMPS__CAST(amps_int *, amps__malloc(ctx, nz, sizeof(amps_int)));
-        c = AMPS__CAST(amps_int *, amps__malloc(ctx, nz, sizeof(amps_int)));
-        v = AMPS__CAST(double *, amps__malloc(ctx, nz, sizeof(double)));
-        if (!r || !c || !v) s = amps__err(ctx, AMPS_ERR_OOM, "amps_scene: out of memory");
-        for (k = 0; !s && k < nz; k++) {
-            r[k] = T->e[k].r;
-            c[k] = T->e[k].c;
-            v[k] = T->e[k].v;
+        if (nz > T->cap_sum) {
+            if (amps__realloc(ctx, (void **)&T->r, nz, sizeof(amps_int)) ||
+                amps__realloc(ctx, (void **)&T->c, nz, sizeof(amps_int)) ||
+                amps__realloc(ctx, (void **)&T->v, nz, sizeof(double)))
+                s = amps__err(ctx, AMPS_ERR_OOM, "amps_scene: out of memory");
+            else T->cap_sum = nz;
         }
-        if (!s) s = amps_update_add(ctx, S->U, (amps_int)nz, r, c, v);
+        for (k = 0; !s && k < nz; k++) {
+            T->r[k] = T->e[k].r;
+            T->c[k] = T->e[k].c;
+            T->v[k] = T->e[k].v;
+        }
+        if (!s) s = amps_update_add(ctx, S->U, (amps_int)nz, T->r, T->c, T->v);
     }
-    amps__free(ctx, r);
-    amps__free(ctx, c);
-    amps__free(ctx, v);
-    amps__free(ctx, T->e);
-    T->e = NULL;
-    T->n = T->cap = 0;
+    T->n = 0;
     return s;
 }
 
@@ -15761,25 +15943,27 @@ static amps_status amps__scene_removal_trips(amps_ctx *ctx, amps_scene *S, const
 
 /* The engine side of the removal r (the mesh already changed): new equations for the separated
    copies, the change of K^ (amps__scene_removal_trips), orphans held (amps__scene_orphan),
-   gravity loads of the nodes whose mass changed; one commit. *nflag receives the orphans
-   flagged (undo: amps__scene_removal_undo). */
+   gravity loads of the nodes whose mass changed; one commit (none inside a batch: the batch's).
+   In statics the mechanism test (amps__scene_removal_held) comes first: its refusal changes
+   nothing in the engine. *nflag receives the orphans flagged. */
 static amps_status amps__scene_removal_update(amps_ctx *ctx, amps_scene *S, const amps_mesh_removal *r,
                                               amps_int *rename, amps_int *flagged, amps_int *nflag) {
     const amps_mesh *m = S->m;
-    amps__trips T = {NULL, 0, 0};
+    amps__trips *T = &S->trips;
     amps_int k, first;
     amps_status s = AMPS_OK;
     int d;
     *nflag = 0;
+    if (!S->dyn.on && (s = amps__scene_removal_held(ctx, S, r)) != AMPS_OK) return s; /* before any engine change */
     for (k = 0; k < r->nsep && !s; k++) {
         amps_int v = r->sep_node[k], c = r->sep_copy[k];
         if (S->node.fixed[v] || S->node.dof[3 * v] < 0) continue;
         if ((s = amps_update_add_dofs(ctx, S->U, 3, &first)) == AMPS_OK)
             for (d = 0; d < 3; d++) S->node.dof[3 * c + d] = first + d;
     }
-    if (!s) s = amps__scene_removal_trips(ctx, S, r, rename, &T);
-    if (!s) s = amps__trips_add(ctx, S, &T);
-    else amps__free(ctx, T.e);
+    T->n = 0;
+    if (!s) s = amps__scene_removal_trips(ctx, S, r, rename, T);
+    if (!s) s = amps__trips_add(ctx, S, T);
     for (k = 0; k < 4 * r->ntet && !s; k++) { /* orphans: held by their own rows (amps__scene_orphan) */
         amps_int v = m->tet[4 * r->tets[k / 4] + k % 4];
         double val[3];
@@ -15800,10 +15984,7 @@ static amps_status amps__scene_removal_update(amps_ctx *ctx, amps_scene *S, cons
         amps_update_discard(S->U);
         return s;
     }
-    if (!S->dyn.on && (s = amps__scene_removal_held(ctx, S, r)) != AMPS_OK) {
-        amps_update_discard(S->U);
-        return s;
-    }
+    if (S->batch.open) return AMPS_OK; /* committed with the batch */
     if ((s = amps_update_commit(ctx, S->U)) == AMPS_ERR_SINGULAR_UPDATE)
         amps__err(ctx, s, "amps_scene_remove: the removal leaves a piece held by nothing or by a hinge; undone");
     return s;
@@ -15827,24 +16008,27 @@ static void amps__scene_removal_copies(amps_scene *S, const amps_mesh_removal *r
     }
 }
 
-/* The refusal of a change that batches do not record (a removal, a material) while a batch is
-   open or a two-phase commit runs: the batch's undo could not take it back. */
-static amps_status amps__scene_unbatched(amps_ctx *ctx, amps_scene *S, const char *fn) {
-    if (S->batch.committing) return amps__err(ctx, AMPS_ERR_STATE, "%s: a two-phase commit is in progress", fn);
-    if (S->batch.open) return amps__err(ctx, AMPS_ERR_STATE, "%s: a batch is open (commit it first)", fn);
-    return AMPS_OK;
+/* A change inside an open batch that failed for lack of memory or capacity undoes the batch, as
+   one that failed after reaching the engine. Returns s. */
+static amps_status amps__scene_batch_failed(amps_scene *S, amps_status s) {
+    if (S->batch.open && (s == AMPS_ERR_OOM || s == AMPS_ERR_CAPACITY)) amps__scene_batch_abort(S);
+    return s;
 }
 
-/* Removal with the report in *out (see amps_scene_remove). */
+/* Removal with the report in *out (see amps_scene_remove). Inside a batch its engine changes
+   wait for the batch's commit and it is logged to be undone with the batch; a failure after
+   its engine changes, or for lack of memory, undoes the batch. */
 static amps_status amps__scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, const amps_int *tets,
                                       amps_singular_policy policy, amps_mesh_removal *out) {
     amps_int k, nflag = 0, nn0 = S->m->nnode, *rename = NULL, *flagged = NULL;
     amps_status s;
     amps_ctx c2;
-    if ((s = amps__scene_unbatched(ctx, S, "amps_scene_remove")) != AMPS_OK) return s;
-    if (S->prepared && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
-    if ((s = amps__scene_dyn_room(ctx, S, nn0)) != AMPS_OK) return s;
-    if ((s = amps_mesh_remove(ctx, S->m, n, tets, policy, out)) != AMPS_OK) return s;
+    int engine = 0; /* the removal reached the engine */
+    if (S->batch.committing) return amps__scene_committing(ctx, "amps_scene_remove");
+    if (S->prepared && !S->batch.open && (s = amps_update_commit(ctx, S->U)) != AMPS_OK)
+        return s; /* earlier changes first */
+    if ((s = amps__scene_dyn_room(ctx, S, nn0)) != AMPS_OK || (s = amps_mesh_remove(ctx, S->m, n, tets, policy, out)))
+        return amps__scene_batch_failed(S, s);
     if (S->m->nnode > S->node.cap &&
         amps__scene_grow(ctx, S, S->m->node_cap > S->m->nnode ? S->m->node_cap : S->m->nnode))
         s = amps__err(ctx, AMPS_ERR_OOM, "amps_scene_remove: out of memory");
@@ -15862,23 +16046,24 @@ static amps_status amps__scene_remove(amps_ctx *ctx, amps_scene *S, amps_int n, 
     for (k = 0; !s && !S->prepared && k < 4 * out->ntet; k++) /* before the factorization: topology only */
         if (S->m->inc_len[S->m->tet[4 * out->tets[k / 4] + k % 4]] == 0)
             S->node.pinned[S->m->tet[4 * out->tets[k / 4] + k % 4]] = 0;
-    if (!s && S->prepared) s = amps__scene_removal_update(ctx, S, out, rename, flagged, &nflag);
+    if (!s && S->prepared) {
+        s = amps__scene_removal_update(ctx, S, out, rename, flagged, &nflag);
+        engine = s != AMPS_ERR_SINGULAR_UPDATE || !S->batch.open; /* a batch's refusal comes first */
+    }
+    if (!s && S->batch.open &&
+        (s = amps__scene_batch_room(ctx, S, amps__scene_removal_log_len(S, out, nflag), 0)) == AMPS_OK)
+        amps__scene_batch_removal(S, out, flagged, nflag);
     if (s) { /* the scene as it was */
-        for (k = 0; k < nflag; k++) {
-            S->node.pinned[flagged[k]] = (unsigned char)(S->dyn.orphan[flagged[k]] == 2);
-            S->dyn.orphan[flagged[k]] = 0;
-        }
-        for (k = 3 * nn0; k < 3 * S->m->nnode && k < 3 * S->node.cap; k++) S->node.dof[k] = -1;
+        amps__scene_unremove_nodes(S, flagged, nflag, nn0);
         amps_ctx_init(&c2);
         (void)amps_mesh_unremove(&c2, S->m, out);
-        /* the gravity loads of the restored masses: a discard keeps the engine's forces */
-        for (k = 0; S->prepared && k < 4 * out->ntet; k++)
-            (void)amps__scene_refresh_force(&c2, S, S->m->tet[4 * out->tets[k / 4] + k % 4]);
-        for (k = 0; S->prepared && k < out->nsep; k++) (void)amps__scene_refresh_force(&c2, S, out->sep_node[k]);
-    } else { /* rendering data: the separations' copies, then the faces around the removed tets */
-        for (k = 0; k < out->nsep; k++) amps__scene_cut_recorded(ctx, S, out->sep_node[k], out->sep_copy[k]);
-        amps__scene_faces_changed(ctx, S, out->tets, out->ntet);
+        amps__scene_unremove_forces(S, out->tets, out->ntet, out->sep_node, out->nsep);
+        if (S->batch.open && (engine || s == AMPS_ERR_OOM || s == AMPS_ERR_CAPACITY)) amps__scene_batch_abort(S);
+        return s;
     }
+    /* rendering data: the separations' copies, then the faces around the removed tets */
+    for (k = 0; k < out->nsep; k++) amps__scene_cut_recorded(ctx, S, out->sep_node[k], out->sep_copy[k]);
+    amps__scene_faces_changed(ctx, S, out->tets, out->ntet);
     return s;
 }
 
@@ -16045,24 +16230,30 @@ AMPS_API amps_int amps_scene_fractured(const amps_scene *S, amps_int *total) {
 }
 
 /* Runtime material change of tets[0..n-1] to (E, nu) and, if rho > 0, rho: the change of their
-   element matrices as one update (statics: the gravity loads of their nodes follow). The mesh
-   values are restored on failure. */
+   element matrices as one update (statics: the gravity loads of their nodes follow), committed
+   at once or, inside a batch, logged and committed with it. The mesh values (and the masses and
+   loads) are restored on failure; a failure after the engine changes, or for lack of memory,
+   undoes an open batch. The old values go to the batch's double log (past its end outside a
+   batch). */
 static amps_status amps__scene_retet(amps_ctx *ctx, amps_scene *S, amps_int n, const amps_int *tets, double E,
                                      double nu, double rho, const char *fn) {
     amps_mesh *m = S->m;
-    amps__trips T = {NULL, 0, 0};
+    amps__trips *T = &S->trips;
     amps_int k;
     double *old;
     amps_status s;
+    amps_ctx c2;
     if ((s = amps__check_material(ctx, fn, E, nu)) != AMPS_OK) return s;
     if (!amps__isfinite(rho)) return amps__err(ctx, AMPS_ERR_VALUE, "%s: non-finite density", fn);
-    if ((s = amps__scene_unbatched(ctx, S, fn)) != AMPS_OK) return s;
-    if (rho > 0 && !m->rho && (s = amps_mesh_set_density(ctx, m, 1.0)) != AMPS_OK) return s;
-    if ((s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
-    old = AMPS__CAST(double *, amps__malloc(ctx, 3 * (size_t)n + 1, sizeof(double)));
-    if (!old) return amps__err(ctx, AMPS_ERR_OOM, "%s: out of memory", fn);
+    if (S->batch.committing) return amps__scene_committing(ctx, fn);
+    if (rho > 0 && !m->rho && (s = amps_mesh_set_density(ctx, m, 1.0)) != AMPS_OK)
+        return amps__scene_batch_failed(S, s);
+    if (!S->batch.open && (s = amps_update_commit(ctx, S->U)) != AMPS_OK) return s; /* earlier changes first */
+    if ((s = amps__scene_batch_room(ctx, S, n, 3 * n)) != AMPS_OK) return amps__scene_batch_failed(S, s);
+    old = S->batch.dlog + S->batch.ndlog;
+    T->n = 0;
     for (k = 0; k < n && !s; k++)
-        if (!(m->removed && m->removed[tets[k]])) s = amps__trips_tet(ctx, S, &T, tets[k], -1.0, NULL);
+        if (!(m->removed && m->removed[tets[k]])) s = amps__trips_tet(ctx, S, T, tets[k], -1.0, NULL);
     for (k = 0; k < n; k++) {
         amps_int t = tets[k];
         old[3 * k] = m->E[t];
@@ -16073,20 +16264,24 @@ static amps_status amps__scene_retet(amps_ctx *ctx, amps_scene *S, amps_int n, c
         if (rho > 0) m->rho[t] = rho;
     }
     for (k = 0; k < n && !s; k++)
-        if (!(m->removed && m->removed[tets[k]])) s = amps__trips_tet(ctx, S, &T, tets[k], 1.0, NULL);
-    if (!s) s = amps__trips_add(ctx, S, &T);
-    else amps__free(ctx, T.e);
+        if (!(m->removed && m->removed[tets[k]])) s = amps__trips_tet(ctx, S, T, tets[k], 1.0, NULL);
+    if (!s) s = amps__trips_add(ctx, S, T);
     for (k = 0; k < 4 * n && !s && rho > 0; k++) s = amps__scene_refresh_force(ctx, S, m->tet[4 * tets[k / 4] + k % 4]);
-    if (s) amps_update_discard(S->U);
-    else s = amps_update_commit(ctx, S->U);
-    if (s)
-        for (k = 0; k < n; k++) {
-            m->E[tets[k]] = old[3 * k];
-            m->nu[tets[k]] = old[3 * k + 1];
-            if (rho > 0) m->rho[tets[k]] = old[3 * k + 2];
-        }
-    for (k = 0; k < 4 * n && s && rho > 0; k++) amps__scene_mass_node(S, m->tet[4 * tets[k / 4] + k % 4]);
-    amps__free(ctx, old);
+    if (!s && S->batch.open) {
+        amps__scene_batch_material(S, n, tets, rho > 0);
+        return AMPS_OK;
+    }
+    if (!s) s = amps_update_commit(ctx, S->U);
+    else amps_update_discard(S->U);
+    if (!s) return AMPS_OK;
+    for (k = 0; k < n; k++) {
+        m->E[tets[k]] = old[3 * k];
+        m->nu[tets[k]] = old[3 * k + 1];
+        if (rho > 0) m->rho[tets[k]] = old[3 * k + 2];
+    }
+    amps_ctx_init(&c2); /* a discard keeps the engine's forces */
+    for (k = 0; k < 4 * n && rho > 0; k++) (void)amps__scene_refresh_force(&c2, S, m->tet[4 * tets[k / 4] + k % 4]);
+    if (S->batch.open) amps__scene_batch_undo(S); /* the engine discarded it */
     return s;
 }
 
@@ -16118,7 +16313,7 @@ AMPS_API amps_status amps_scene_set_region(amps_ctx *ctx, amps_scene *S, amps_in
     if (!amps__isfinite(rho) || rho < 0) return amps__err(ctx, AMPS_ERR_VALUE, "%s: density %g is not >= 0", fn, rho);
     if (!S->prepared) return amps_mesh_set_region_material(ctx, S->m, id, E, nu, rho);
     if (!(list = amps__scene_region_tets(ctx, S->m, id, &n)))
-        return amps__err(ctx, AMPS_ERR_OOM, "%s: out of memory", fn);
+        return amps__scene_batch_failed(S, amps__err(ctx, AMPS_ERR_OOM, "%s: out of memory", fn));
     s = n ? amps__scene_retet(ctx, S, n, list, E, nu, rho, fn)
           : amps__err(ctx, AMPS_ERR_ARG, "%s: no tetrahedron has region %ld", fn, (long)id);
     amps__free(ctx, list);
@@ -16129,7 +16324,8 @@ AMPS_API amps_status amps_scene_set_region(amps_ctx *ctx, amps_scene *S, amps_in
 static amps_status amps__scene_set_material_all(amps_ctx *ctx, amps_scene *S, double E, double nu) {
     amps_int n, *list = amps__scene_region_tets(ctx, S->m, AMPS__IMAX, &n);
     amps_status s;
-    if (!list) return amps__err(ctx, AMPS_ERR_OOM, "amps_scene_set_material: out of memory");
+    if (!list)
+        return amps__scene_batch_failed(S, amps__err(ctx, AMPS_ERR_OOM, "amps_scene_set_material: out of memory"));
     s = amps__scene_retet(ctx, S, n, list, E, nu, 0.0, "amps_scene_set_material");
     amps__free(ctx, list);
     return s;

@@ -84,17 +84,39 @@ static void check_solve(amps_ctx *ctx, amps_scene *S, tstate *w, const char *wha
     free(ur);
 }
 
+/* The open batch of a batched random sequence committed, in one phase or two (at random); a
+   refused commit (statics: a loose piece) restores the shadow's pins saved at its begin. */
+static void commit_batch(amps_ctx *ctx, amps_scene *S, tstate *w, const unsigned char *pinned0, const double *pinval0,
+                         int nn0, const char *what, int *nundone) {
+    amps_status s;
+    if (t_int(2)) s = amps_scene_commit(ctx, S);
+    else if ((s = amps_scene_commit_begin(ctx, S)) == AMPS_OK) {
+        amps_scene_commit_run(S);
+        s = amps_scene_commit_end(ctx, S);
+    }
+    CHECK(s == AMPS_OK || (!w->dyn && s == AMPS_ERR_SINGULAR_UPDATE), "%s: batch commit: %s", what, ctx->msg);
+    if (s == AMPS_OK) return;
+    CHECK((int)amps_scene_mesh(S)->nnode == nn0 && amps_mesh_check(ctx, amps_scene_mesh(S)) == AMPS_OK,
+          "%s: an undone batch left %ld nodes (%d before): %s", what, (long)amps_scene_mesh(S)->nnode, nn0, ctx->msg);
+    memcpy(w->sh.pinned, pinned0, (size_t)nn0);
+    memcpy(w->sh.pinval, pinval0, sizeof(double) * 3 * (size_t)nn0);
+    (*nundone)++;
+}
+
 /* Random sequence of nops operations on mesh m (fixed below z = zfix), regions: tets with
-   centroid z above zreg get region 1; dyn = 0: statics (solves instead of steps). */
+   centroid z above zreg get region 1; dyn = 0: statics (solves instead of steps). batched: the
+   changes between two solves form one batch (amps_scene_begin_batch), committed before the
+   solve. */
 static void random_sequence(const char *what, amps_mesh *m, double zfix, double zreg, int nops, unsigned long long seed,
-                            int dyn) {
+                            int dyn, int batched) {
     amps_ctx ctx;
     amps_scene *S;
     amps_update_stats st;
     tstate w;
-    int op, v, step = 0, ncut = 0, nrem = 0, npin = 0, nsep = 0;
+    int op, v, step = 0, ncut = 0, nrem = 0, npin = 0, nsep = 0, open = 0, nbatch = 0, nundone = 0, nn0 = 0;
     amps_int t;
-    double gz[3] = {0, 0, -0.02};
+    double gz[3] = {0, 0, -0.02}, *pinval0 = NULL;
+    unsigned char *pinned0 = NULL;
     memset(&w, 0, sizeof(w));
     amps_ctx_init(&ctx);
     t_seed(seed);
@@ -121,6 +143,20 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
         const amps_mesh *mm = amps_scene_mesh(S);
         int kind = t_int(10);
         shadow_grow(&w.sh, mm->nnode + 1);
+        if (batched && kind > 2 && !open) { /* a new batch; the shadow's pins saved to undo it */
+            CHECK(amps_scene_begin_batch(&ctx, S) == AMPS_OK, "%s: begin batch: %s", what, ctx.msg);
+            nn0 = (int)mm->nnode;
+            pinned0 = (unsigned char *)realloc(pinned0, (size_t)nn0);
+            pinval0 = (double *)realloc(pinval0, sizeof(double) * 3 * (size_t)nn0);
+            memcpy(pinned0, w.sh.pinned, (size_t)nn0);
+            memcpy(pinval0, w.sh.pinval, sizeof(double) * 3 * (size_t)nn0);
+            open = 1;
+            nbatch++;
+        }
+        if (kind <= 2 && open) {
+            commit_batch(&ctx, S, &w, pinned0, pinval0, nn0, what, &nundone);
+            open = 0;
+        }
         if (kind <= 2) {
             if (dyn) check_step(&ctx, S, &w, what, step++);
             else check_solve(&ctx, S, &w, what, step++);
@@ -181,6 +217,7 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
             }
         }
     }
+    if (open) commit_batch(&ctx, S, &w, pinned0, pinval0, nn0, what, &nundone);
     if (dyn) check_step(&ctx, S, &w, what, step++);
     else check_solve(&ctx, S, &w, what, step++);
     amps_update_get_stats(amps_scene_engine(S), &st);
@@ -188,6 +225,9 @@ static void random_sequence(const char *what, amps_mesh *m, double zfix, double 
            "refinement steps %ld, worst error %.2e\n",
            what, step, ncut, nrem, nsep, npin, (long)amps_scene_mesh(S)->nnode, (long)st.warm_solves,
            (long)st.refine_solves, worst_err);
+    if (batched) printf("  %-22s %d batches, %d undone by their commit\n", what, nbatch, nundone);
+    free(pinned0);
+    free(pinval0);
     amps_scene_free(&ctx, S);
     shadow_free(&w.sh);
 }
@@ -854,19 +894,24 @@ int main(void) {
     test_orphans();
     test_fracture();
     test_warm();
-    random_sequence("beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 120, 1, 1);
-    random_sequence("brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 2, 1);
-    random_sequence("beam 5x5x6 seed 3", amps_mesh_beam(&ctx, 6), 0.5, 3.0, 150, 3, 1);
-    random_sequence("statics beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 120, 4, 0);
+    random_sequence("beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 120, 1, 1, 0);
+    random_sequence("brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 2, 1, 0);
+    random_sequence("beam 5x5x6 seed 3", amps_mesh_beam(&ctx, 6), 0.5, 3.0, 150, 3, 1, 0);
+    random_sequence("statics beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 120, 4, 0, 0);
     /* Statics on the coarse brick: seed 5 there disagreed with CHOLMOD by 1e-3 at a well-conditioned
        system (cond 8e2): a refused removal kept its gravity loads, fixed. Seeds 7 and 8 reached
        removals that leave a piece held only at constrained nodes on one line (a hinge: reduced K
        exactly singular), which the statics removal now refuses; they pass, as do 9 and 10. Seed 5
        still reaches an exactly singular system after a mix of cuts, pins, releases and removals
        (CHOLMOD fails on it too; not diagnosed), so it is not run; seed 6 does not reach one. */
-    random_sequence("statics brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 6, 0);
-    random_sequence("statics brick R=2 seed 7", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 7, 0);
-    random_sequence("statics brick R=2 seed 8", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 8, 0);
-    random_sequence("statics brick R=3", amps_mesh_brick(&ctx, 3), 0.25, 1.0, 120, 5, 0);
+    random_sequence("statics brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 6, 0, 0);
+    random_sequence("statics brick R=2 seed 7", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 7, 0, 0);
+    random_sequence("statics brick R=2 seed 8", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 120, 8, 0, 0);
+    random_sequence("statics brick R=3", amps_mesh_brick(&ctx, 3), 0.25, 1.0, 120, 5, 0, 0);
+    /* the same changes in batches (removals and materials among them), committed before each step */
+    random_sequence("batched beam 5x5x8", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 160, 11, 1, 1);
+    random_sequence("batched brick R=2", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 160, 12, 1, 1);
+    random_sequence("batched statics beam", amps_mesh_beam(&ctx, 8), 0.5, 4.0, 160, 13, 0, 1);
+    random_sequence("batched statics brick", amps_mesh_brick(&ctx, 2), 0.25, 1.0, 160, 6, 0, 1);
     return amps_t_end("test_dynamics");
 }

@@ -251,18 +251,21 @@ static void test_two_phase_dynamics(void) {
           "a removal or a material change during a two-phase commit");
     amps_scene_commit_run(S[0]);
     CHECK(amps_scene_commit_end(&ctx, S[0]) == AMPS_OK, "commit_end: %s", ctx.msg);
-    /* a removal or a material in an open batch is refused (the batch could not undo it); a step
-       commits an open batch first, as the solves do */
+    /* a batch of a cut, a removal and material changes: two phases on S[0], one on S[1] */
     memcpy(p, amps_scene_mesh(S[0])->xyz + 3 * 60, sizeof(p));
     for (k = 0; k < 2; k++) {
+        amps_int t2 = 40;
         CHECK(amps_scene_begin_batch(&ctx, S[k]) == AMPS_OK && amps_scene_cut(&ctx, S[k], 60, p, g, &vc) == AMPS_OK,
               "second batch: %s", ctx.msg);
-        CHECK(amps_scene_remove(&ctx, S[k], 1, &tet, AMPS_SINGULAR_REMOVE, NULL) == AMPS_ERR_STATE &&
-                      amps_scene_set_tet_material(&ctx, S[k], tet, 2.0, 0.3) == AMPS_ERR_STATE &&
-                      amps_scene_set_region(&ctx, S[k], 0, 2.0, 0.3, 1.0) == AMPS_ERR_STATE,
-              "a removal or a material change in an open batch");
+        CHECK(amps_scene_remove(&ctx, S[k], 1, &tet, AMPS_SINGULAR_REMOVE, NULL) == AMPS_OK &&
+                      amps_scene_set_tet_material(&ctx, S[k], t2, 2.0, 0.3) == AMPS_OK &&
+                      amps_scene_set_region(&ctx, S[k], 0, 0.7, 0.25, 1.3) == AMPS_OK,
+              "a removal or a material change in an open batch: %s", ctx.msg);
     }
     CHECK(amps_scene_commit(&ctx, S[1]) == AMPS_OK, "second one-phase commit: %s", ctx.msg);
+    CHECK(amps_scene_commit_begin(&ctx, S[0]) == AMPS_OK, "second commit_begin: %s", ctx.msg);
+    amps_scene_commit_run(S[0]);
+    CHECK(amps_scene_commit_end(&ctx, S[0]) == AMPS_OK, "second commit_end: %s", ctx.msg);
     for (k = 0; k < 2; k++) CHECK(amps_scene_step(&ctx, S[k], 3) == AMPS_OK, "steps after the commit: %s", ctx.msg);
     CHECK(amps_scene_begin_batch(&ctx, S[0]) == AMPS_OK, "a batch after the step: %s", ctx.msg);
     CHECK(amps_scene_commit(&ctx, S[0]) == AMPS_OK, "an empty batch: %s", ctx.msg);
@@ -418,6 +421,162 @@ static void test_batches(unsigned long long seed) {
     shadow_free(&wb);
 }
 
+/* The scene's boundary triangles (the change record's) against amps_mesh_boundary from scratch. */
+static void boundary_check(amps_ctx *ctx, amps_scene *S, const char *what) {
+    const amps_int *tri, *face;
+    amps_int nid = amps_scene_boundary(S, &tri, &face), live = 0, bad = 0, i;
+    amps_int nb = amps_mesh_boundary(ctx, amps_scene_mesh(S), NULL, NULL);
+    amps_int *sf = (amps_int *)malloc(sizeof(amps_int) * (size_t)(3 * nb + nb + 1));
+    amps_mesh_boundary(ctx, amps_scene_mesh(S), sf, sf + 3 * nb);
+    for (i = 0; i < nid; i++) {
+        amps_int j;
+        if (face[i] < 0) continue;
+        live++;
+        for (j = 0; j < nb && sf[3 * nb + j] != face[i]; j++) {}
+        bad += j == nb || memcmp(sf + 3 * j, tri + 3 * i, 3 * sizeof(amps_int)) != 0;
+    }
+    CHECK(live == nb && bad == 0, "%s: boundary %ld triangles (%ld not from scratch), %ld from scratch", what,
+          (long)live, (long)bad, (long)nb);
+    free(sf);
+}
+
+static void *dup(const void *p, size_t n) {
+    void *q = malloc(n ? n : 1);
+    if (n) memcpy(q, p, n);
+    return q;
+}
+
+/* A copy of the mesh arrays a batch's undo must restore bit for bit. */
+typedef struct mesh_copy {
+    amps_int nnode, nremoved, *tet, *inc_ptr, *inc_len, *inc;
+    unsigned char *removed;
+    double *E, *nu, *rho;
+} mesh_copy;
+
+static void mesh_copy_take(const amps_mesh *m, mesh_copy *c) {
+    amps_int v, n = 0;
+    c->nnode = m->nnode;
+    c->nremoved = m->nremoved;
+    c->tet = (amps_int *)dup(m->tet, sizeof(amps_int) * 4 * (size_t)m->ntet);
+    c->inc_ptr = (amps_int *)dup(m->inc_ptr, sizeof(amps_int) * (size_t)m->nnode);
+    c->inc_len = (amps_int *)dup(m->inc_len, sizeof(amps_int) * (size_t)m->nnode);
+    for (v = 0; v < m->nnode; v++) n += m->inc_len[v];
+    c->inc = (amps_int *)malloc(sizeof(amps_int) * (size_t)(n + 1));
+    for (v = 0, n = 0; v < m->nnode; n += m->inc_len[v], v++)
+        memcpy(c->inc + n, m->inc + m->inc_ptr[v], sizeof(amps_int) * (size_t)m->inc_len[v]);
+    c->removed = (unsigned char *)dup(m->removed, (size_t)m->ntet);
+    c->E = (double *)dup(m->E, sizeof(double) * (size_t)m->ntet);
+    c->nu = (double *)dup(m->nu, sizeof(double) * (size_t)m->ntet);
+    c->rho = m->rho ? (double *)dup(m->rho, sizeof(double) * (size_t)m->ntet) : NULL;
+}
+
+/* 1 if m is the mesh copied in c (a NULL rho copy: every density 1). */
+static int mesh_copy_same(const amps_mesh *m, const mesh_copy *c) {
+    amps_int v, t, n = 0;
+    int same = m->nnode == c->nnode && m->nremoved == c->nremoved &&
+               !memcmp(m->tet, c->tet, sizeof(amps_int) * 4 * (size_t)m->ntet) &&
+               !memcmp(m->removed, c->removed, (size_t)m->ntet) &&
+               !memcmp(m->E, c->E, sizeof(double) * (size_t)m->ntet) &&
+               !memcmp(m->nu, c->nu, sizeof(double) * (size_t)m->ntet);
+    for (t = 0; same && t < m->ntet; t++) same = (m->rho ? m->rho[t] : 1.0) == (c->rho ? c->rho[t] : 1.0);
+    for (v = 0; same && v < m->nnode; n += m->inc_len[v], v++)
+        same = m->inc_ptr[v] == c->inc_ptr[v] && m->inc_len[v] == c->inc_len[v] &&
+               !memcmp(c->inc + n, m->inc + m->inc_ptr[v], sizeof(amps_int) * (size_t)m->inc_len[v]);
+    return same;
+}
+
+static void mesh_copy_free(mesh_copy *c) {
+    free(c->tet);
+    free(c->inc_ptr);
+    free(c->inc_len);
+    free(c->inc);
+    free(c->removed);
+    free(c->E);
+    free(c->nu);
+    free(c->rho);
+}
+
+/* A batch of removals (one with a separation), region and tet materials with densities, a cut
+   and pins, cancelled (amps_scene_cancel_batch): the mesh as before bit for bit, the boundary as
+   from scratch, and the next solve or steps equal those of a twin scene that never had the
+   batch. The same batch committed equals the changes made one by one. (Undone by a failed
+   commit: test_alloc_update.) */
+static void test_batch_cancel(void) {
+    int dyn, how;
+    for (dyn = 0; dyn < 2; dyn++)
+        for (how = 0; how < 2; how++) {
+            amps_ctx ctx;
+            amps_scene *S[2];
+            shadow w[2];
+            mesh_copy mc;
+            amps_scene_changes ch;
+            amps_mesh_removal rr;
+            amps_int sep[3] = {118, 120, 148}, one = 40, vc, k, nn, nsep = 0;
+            double p[3], nrm[3] = {0.2, 1, 0.1}, u[3] = {0.01, 0, 0.02}, e;
+            amps_status st = AMPS_OK;
+            amps_ctx_init(&ctx);
+            for (k = 0; k < 2; k++) {
+                S[k] = beam_scene(&ctx, 6, w + k, NULL);
+                if (dyn)
+                    CHECK(amps_scene_dynamics(&ctx, S[k], 0.05, 0.1, 0.02) == AMPS_OK &&
+                                  amps_scene_step(&ctx, S[k], 2) == AMPS_OK,
+                          "cancel: dynamics: %s", ctx.msg);
+                else CHECK(amps_scene_solve(&ctx, S[k]) == AMPS_OK, "cancel: solve: %s", ctx.msg);
+                CHECK(amps_scene_take_changes(&ctx, S[k], &ch) == AMPS_OK, "cancel: take: %s", ctx.msg);
+            }
+            mesh_copy_take(amps_scene_mesh(S[0]), &mc);
+            nn = amps_scene_mesh(S[0])->nnode;
+            for (k = 0; k < 2; k++) {
+                if (k == 1 && how == 0) break; /* the twin stays as it was */
+                CHECK(amps_scene_begin_batch(&ctx, S[k]) == AMPS_OK, "cancel: begin: %s", ctx.msg);
+                st = amps_scene_pin(&ctx, S[k], 130, u);
+                if (!st) st = amps_scene_remove(&ctx, S[k], 3, sep, AMPS_SINGULAR_SEPARATE, &rr);
+                if (!st) nsep = rr.nsep;
+                if (!st) st = amps_scene_set_region(&ctx, S[k], 0, 800.0, 0.31, 1.7);
+                memcpy(p, amps_scene_mesh(S[k])->xyz + 3 * 87, sizeof(p));
+                if (!st) st = amps_scene_cut(&ctx, S[k], 87, p, nrm, &vc);
+                if (!st) st = amps_scene_set_tet_material(&ctx, S[k], 7, 2000.0, 0.28);
+                if (!st) st = amps_scene_remove(&ctx, S[k], 1, &one, AMPS_SINGULAR_REMOVE, NULL);
+                if (!st) st = amps_scene_pin(&ctx, S[k], 80, u);
+                CHECK(st == AMPS_OK && nsep > 0 && amps_scene_mesh(S[k])->nnode > nn,
+                      "cancel: the batch's changes: %s (%ld separations)", ctx.msg, (long)nsep);
+                if (how == 0) CHECK(amps_scene_cancel_batch(&ctx, S[k]) == AMPS_OK, "cancel: %s", ctx.msg);
+                else if (k == 0) {
+                    CHECK(amps_scene_commit(&ctx, S[k]) == AMPS_OK, "commit: %s", ctx.msg);
+                    CHECK(amps_scene_cancel_batch(&ctx, S[k]) == AMPS_ERR_STATE, "a cancel after the commit");
+                } else { /* the twin made the same changes one by one */
+                    CHECK(amps_scene_cancel_batch(&ctx, S[k]) == AMPS_OK, "cancel the twin: %s", ctx.msg);
+                    CHECK(amps_scene_pin(&ctx, S[k], 130, u) == AMPS_OK &&
+                                  amps_scene_remove(&ctx, S[k], 3, sep, AMPS_SINGULAR_SEPARATE, NULL) == AMPS_OK &&
+                                  amps_scene_set_region(&ctx, S[k], 0, 800.0, 0.31, 1.7) == AMPS_OK &&
+                                  amps_scene_cut(&ctx, S[k], 87, p, nrm, &vc) == AMPS_OK &&
+                                  amps_scene_set_tet_material(&ctx, S[k], 7, 2000.0, 0.28) == AMPS_OK &&
+                                  amps_scene_remove(&ctx, S[k], 1, &one, AMPS_SINGULAR_REMOVE, NULL) == AMPS_OK &&
+                                  amps_scene_pin(&ctx, S[k], 80, u) == AMPS_OK,
+                          "one by one: %s", ctx.msg);
+                }
+            }
+            if (how == 0) /* undone: bit for bit */
+                CHECK(mesh_copy_same(amps_scene_mesh(S[0]), &mc) &&
+                              amps_mesh_check(&ctx, amps_scene_mesh(S[0])) == AMPS_OK,
+                      "cancel (dyn %d, how %d): the mesh differs from the one before the batch", dyn, how);
+            CHECK(amps_scene_take_changes(&ctx, S[0], &ch) == AMPS_OK, "cancel: take: %s", ctx.msg);
+            boundary_check(&ctx, S[0], "cancel");
+            for (k = 0; k < 2; k++)
+                CHECK((dyn ? amps_scene_step(&ctx, S[k], 3) : amps_scene_solve(&ctx, S[k])) == AMPS_OK,
+                      "cancel: after: %s", ctx.msg);
+            e = t_reldiff(3 * (int)amps_scene_mesh(S[1])->nnode, amps_scene_displacements(S[0]),
+                          amps_scene_displacements(S[1]));
+            CHECK(amps_scene_mesh(S[0])->nnode == amps_scene_mesh(S[1])->nnode && e <= 1e-12,
+                  "cancel (dyn %d, how %d): %.2e from the twin", dyn, how, e);
+            for (k = 0; k < 2; k++) {
+                amps_scene_free(&ctx, S[k]);
+                shadow_free(w + k);
+            }
+            mesh_copy_free(&mc);
+        }
+}
+
 /* Two stacked cells, the top one held by three pins: a batch cuts the middle layer free (allowed:
    the pins hold the top) and releases the pins; its commit finds the top loose and undoes all. */
 static void test_batch_undo(void) {
@@ -449,26 +608,9 @@ static void test_batch_undo(void) {
     CHECK(s == AMPS_ERR_SINGULAR_UPDATE, "undo: commit of a loose piece: %d (%s)", (int)s, ctx.msg);
     CHECK(amps_scene_mesh(S)->nnode == nn, "undo: node count not restored");
     CHECK(amps_mesh_check(&ctx, amps_scene_mesh(S)) == AMPS_OK, "undo: mesh invariants: %s", ctx.msg);
-    { /* the change record of the undone batch: no new node, the boundary of the restored mesh */
-        const amps_int *tri, *face;
-        amps_int nid, live = 0, bad = 0, nb, *sf, i;
-        CHECK(amps_scene_take_changes(&ctx, S, &ch) == AMPS_OK && ch.nnew == 0, "undo: take: %s, %ld new nodes",
-              ctx.msg, (long)ch.nnew);
-        nid = amps_scene_boundary(S, &tri, &face);
-        nb = amps_mesh_boundary(&ctx, amps_scene_mesh(S), NULL, NULL);
-        sf = (amps_int *)malloc(sizeof(amps_int) * (size_t)(3 * nb + nb + 1));
-        amps_mesh_boundary(&ctx, amps_scene_mesh(S), sf, sf + 3 * nb);
-        for (i = 0; i < nid; i++) {
-            amps_int j;
-            if (face[i] < 0) continue;
-            live++;
-            for (j = 0; j < nb && sf[3 * nb + j] != face[i]; j++) {}
-            bad += j == nb || memcmp(sf + 3 * j, tri + 3 * i, 3 * sizeof(amps_int)) != 0;
-        }
-        CHECK(live == nb && bad == 0, "undo: boundary %ld triangles (%ld not from scratch), %ld from scratch",
-              (long)live, (long)bad, (long)nb);
-        free(sf);
-    }
+    CHECK(amps_scene_take_changes(&ctx, S, &ch) == AMPS_OK && ch.nnew == 0, "undo: take: %s, %ld new nodes", ctx.msg,
+          (long)ch.nnew);
+    boundary_check(&ctx, S, "undo");
     {
         double r[3];
         CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "undo: solve after undo: %s", ctx.msg);
@@ -712,6 +854,7 @@ int main(void) {
     test_batches(21);
     test_batches(22);
     test_batch_undo();
+    test_batch_cancel();
     test_count();
     test_haptic_no_swap();
     test_two_phase();

@@ -104,5 +104,17 @@ if (cd "$tmp" && "$OLDPWD/$R" --frames fr/f fr.scn) > "$tmp/fr.out" 2>&1; then o
 [ "$(ls "$tmp"/fr/f_*.vtu 2>/dev/null | wc -l)" = 5 ] && [ "$(grep -c '<DataSet timestep=' "$tmp/fr/f.pvd")" = 5 ] &&
   grep -q 'timestep="0.10000000000000001" group="" part="0" file="f_00005.vtu"' "$tmp/fr/f.pvd" && ok || bad "frames: $(ls "$tmp/fr"; cat "$tmp/fr/f.pvd")"
 n=$(sed -n 's/^remove: \([0-9]*\) tetrahedra.*/\1/p' "$tmp/fr.out"); [ "${n:-0}" -ge 100 ] && ok || bad "remove of 100 tets: $(cat "$tmp/fr.out")"
+# a batch of cuts, pins and removals in dynamics: committed, it gives the dump of the same
+# changes one by one; cancelled, the dump of a run without it
+base='mesh beam 6\nfix z lt 0.5\ndynamics 0.05 0.1 0.01\ngravity 0 0 -1\nstep 2\n'
+chg='cut 87 2 2 3.5 0.2 1 0.1\nremove 118 120 148\npin 130 0.01 0 0.02\nremove 40\n'
+printf "$base$chg"'step 3\ndump one.csv\n' > "$tmp/b1.scn"
+printf "$base"'batch\n'"$chg"'commit\nstep 3\ndump bat.csv\n' > "$tmp/b2.scn"
+printf "$base"'step 3\ndump none.csv\n' > "$tmp/b3.scn"
+printf "$base"'batch\n'"$chg"'cancel\nstep 3\ndump can.csv\n' > "$tmp/b4.scn"
+for k in 1 2 3 4; do (cd "$tmp" && "$OLDPWD/$R" b$k.scn) > "$tmp/b$k.out" 2>&1 || bad "batch scenario $k: $(tail -3 "$tmp/b$k.out")"; done
+csvdiff() { paste -d, "$1" "$2" | awk -F, 'NR > 1 { n = NF / 2; for (i = 2; i <= n; i++) { d = $i - $(i + n); if (d < 0) d = -d; if (d > m) m = d } } END { exit !(m < 1e-12 && NR > 1) }'; }
+csvdiff "$tmp/one.csv" "$tmp/bat.csv" && ok || bad "a committed batch differs from the changes one by one"
+csvdiff "$tmp/none.csv" "$tmp/can.csv" && [ "$(wc -l < "$tmp/none.csv")" = "$(wc -l < "$tmp/can.csv")" ] && ok || bad "a cancelled batch changed the run"
 echo "test_replay: $pass passed, $fail failed"
 [ $fail -eq 0 ]

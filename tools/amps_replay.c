@@ -30,10 +30,12 @@
                               a blade stroke (amps_scene_stroke): the polyline of 2 or 3 points
                               swept along the blade direction b cuts the nodes within radius of
                               it, one commit; prints the nodes cut, the no-ops and the refusals
-     batch                    open a batch: cuts, strokes, pins, releases only record ...
+     batch                    open a batch: cuts, strokes, pins, releases, removals only
+                              record ...
      commit                   ... until commit applies them at once (amps_scene_commit; a solve
-                              commits an open batch too); a commit that leaves a piece loose
-                              is undone and reported, and the scenario goes on
+                              or a step commits an open batch too); a commit that leaves a piece
+                              loose is undone and reported, and the scenario goes on
+     cancel                   undoes the open batch (amps_scene_cancel_batch)
      solve
      residual on|off
      dump <file.csv>          node,ux,uy,uz of every node (values of the last solve)
@@ -355,11 +357,12 @@ static int cmd_stroke(replay *R, int nt, char **t, double t0) {
     return 0;
 }
 
-/* batch | commit */
+/* batch | commit | cancel */
 static int cmd_batch(replay *R, int nt, char **t, double t0) {
     int begin = !strcmp(t[0], "batch");
     amps_status s;
     if (nt != 1) return fail(R, "usage: %s", t[0]);
+    if (!strcmp(t[0], "cancel")) return amps_scene_cancel_batch(&R->ctx, R->S) ? lib_fail(R, t[0]) : 0;
     s = begin ? amps_scene_begin_batch(&R->ctx, R->S) : amps_scene_commit(&R->ctx, R->S);
     if (s == AMPS_ERR_SINGULAR_UPDATE && !begin) /* the batch is undone; the scenario goes on */
         printf("%s:%d: commit undone: %s\n", R->file, R->line, R->ctx.msg);
@@ -519,7 +522,7 @@ static int run_line(replay *R, int nt, char **t) {
         return 0;
     }
     if (!strcmp(c, "stroke")) return cmd_stroke(R, nt, t, t0);
-    if (!strcmp(c, "batch") || !strcmp(c, "commit")) return cmd_batch(R, nt, t, t0);
+    if (!strcmp(c, "batch") || !strcmp(c, "commit") || !strcmp(c, "cancel")) return cmd_batch(R, nt, t, t0);
     if (!strcmp(c, "solve")) {
         if (nt != 1) return fail(R, "%s", "usage: solve");
         if (amps_scene_solve(&R->ctx, R->S) != AMPS_OK) return lib_fail(R, "solve");
