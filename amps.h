@@ -15149,15 +15149,17 @@ static void amps__scene_batch_removal(amps_scene *S, const amps_mesh_removal *r,
     amps__scene_op *op = amps__scene_batch_op(S, 4, -1, amps__scene_removal_log_len(S, r, nflag));
     amps_int *L = S->batch.ilog + op->at, ns = r->nsep;
     *L++ = nflag;
-    memcpy(L, flagged, sizeof(amps_int) * (size_t)nflag);
+    if (nflag > 0) memcpy(L, flagged, sizeof(amps_int) * (size_t)nflag);
     L += nflag;
     *L++ = ns;
-    memcpy(L, r->sep_node, sizeof(amps_int) * (size_t)ns);
-    memcpy(L + ns, r->sep_copy, sizeof(amps_int) * (size_t)ns);
-    memcpy(L + 2 * ns, r->sep_ptr, sizeof(amps_int) * (size_t)(ns + 1));
+    if (ns > 0) { /* (empty arrays may be NULL) */
+        memcpy(L, r->sep_node, sizeof(amps_int) * (size_t)ns);
+        memcpy(L + ns, r->sep_copy, sizeof(amps_int) * (size_t)ns);
+        memcpy(L + 2 * ns, r->sep_ptr, sizeof(amps_int) * (size_t)(ns + 1));
+        memcpy(L + 3 * ns + 1, r->sep_tets, sizeof(amps_int) * (size_t)r->sep_ptr[ns]);
+    } else L[0] = 0; /* sep_ptr[0] */
     L += 3 * ns + 1;
-    memcpy(L, r->sep_tets, sizeof(amps_int) * (size_t)r->sep_ptr[ns]);
-    amps__rm_log_save(S->m, L + r->sep_ptr[ns]);
+    amps__rm_log_save(S->m, L + L[-1]);
 }
 
 /* The scene's side of undoing a removal before its mesh is restored: the orphans it flagged
