@@ -1014,7 +1014,8 @@ AMPS_API amps_int amps_mesh_boundary(amps_ctx *ctx, const amps_mesh *m, amps_int
    the element stiffness of those tets only. Lifecycle: create, fix nodes and set materials,
    then any sequence of force / pin / release / cut / solve (the first of these factors K).
    A failed scene call leaves the scene as it was. Structural changes (a pin of a node not
-   pinned yet, a release, a cut) commit to the engine at once, outside a batch
+   pinned yet, a release, a cut, a removal, a material change) commit to the engine at once,
+   outside a batch
    (amps_scene_begin_batch); moved pins and forces wait for the next solve, whose commit then
    has only values to apply.
    Allocation: amps_scene_prepare (or the first change) allocates everything; later calls
