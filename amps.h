@@ -1307,7 +1307,8 @@ AMPS_API amps_status amps_scene_gravity(amps_ctx *ctx, amps_scene *S, const doub
    current displacements and zero velocity; a later call keeps u and w. Called after the
    factorization with new values it re-factors
    A (a full amps_scene_prepare; if that fails the scene is left unprepared, prepared again by
-   the next call). Then amps_scene_solve / amps_scene_solve_watched are AMPS_ERR_STATE. */
+   the next call), after committing an open batch (as the solves do). Then amps_scene_solve /
+   amps_scene_solve_watched are AMPS_ERR_STATE. */
 AMPS_API amps_status amps_scene_dynamics(amps_ctx *ctx, amps_scene *S, double dt, double alpha, double beta);
 /* nsteps time steps: A w+ = M w + dt (f + M g - K u), u+ = u + dt w+; fixed DOFs w+ = 0, a pin
    with target g has w+ = (g - u)/dt, an orphan node w+ = 0; the free DOFs solve the reduced
@@ -15783,6 +15784,7 @@ AMPS_API amps_status amps_scene_dynamics(amps_ctx *ctx, amps_scene *S, double dt
                 dt, alpha, beta, 1.0 + alpha * dt, beta * dt + dt * dt);
     if ((s = amps__scene_dyn_room(ctx, S, S->m->nnode)) != AMPS_OK) return s;
     if (S->dyn.on && S->dyn.dt == dt && S->dyn.alpha == alpha && S->dyn.beta == beta) return AMPS_OK;
+    if (S->prepared && S->batch.open && (s = amps_scene_commit(ctx, S)) != AMPS_OK) return s; /* before re-factoring */
     S->dyn.on = 1;
     S->dyn.dt = dt;
     S->dyn.alpha = alpha;

@@ -575,6 +575,31 @@ static void test_batch_cancel(void) {
             }
             mesh_copy_free(&mc);
         }
+    { /* amps_scene_dynamics re-factors: it commits an open batch first (a cancel then finds none) */
+        amps_ctx ctx;
+        amps_scene *S[2];
+        shadow w[2];
+        amps_int one = 40, k;
+        double u[3] = {0.01, 0, 0.02};
+        amps_ctx_init(&ctx);
+        for (k = 0; k < 2; k++) {
+            S[k] = beam_scene(&ctx, 6, w + k, NULL);
+            CHECK(amps_scene_solve(&ctx, S[k]) == AMPS_OK && (k == 1 || amps_scene_begin_batch(&ctx, S[k]) == AMPS_OK) &&
+                          amps_scene_remove(&ctx, S[k], 1, &one, AMPS_SINGULAR_REMOVE, NULL) == AMPS_OK &&
+                          amps_scene_pin(&ctx, S[k], 130, u) == AMPS_OK &&
+                          amps_scene_dynamics(&ctx, S[k], 0.05, 0.1, 0.02) == AMPS_OK,
+                  "dynamics in a batch: %s", ctx.msg);
+        }
+        CHECK(amps_scene_cancel_batch(&ctx, S[0]) == AMPS_ERR_STATE, "a batch open after amps_scene_dynamics");
+        for (k = 0; k < 2; k++) CHECK(amps_scene_step(&ctx, S[k], 3) == AMPS_OK, "steps: %s", ctx.msg);
+        CHECK(t_reldiff(3 * (int)amps_scene_mesh(S[1])->nnode, amps_scene_displacements(S[0]),
+                        amps_scene_displacements(S[1])) <= 1e-12,
+              "amps_scene_dynamics in a batch differs from the changes made before it");
+        for (k = 0; k < 2; k++) {
+            amps_scene_free(&ctx, S[k]);
+            shadow_free(w + k);
+        }
+    }
 }
 
 /* Two stacked cells, the top one held by three pins: a batch cuts the middle layer free (allowed:
