@@ -584,7 +584,8 @@ static void test_batch_cancel(void) {
         amps_ctx_init(&ctx);
         for (k = 0; k < 2; k++) {
             S[k] = beam_scene(&ctx, 6, w + k, NULL);
-            CHECK(amps_scene_solve(&ctx, S[k]) == AMPS_OK && (k == 1 || amps_scene_begin_batch(&ctx, S[k]) == AMPS_OK) &&
+            CHECK(amps_scene_solve(&ctx, S[k]) == AMPS_OK &&
+                          (k == 1 || amps_scene_begin_batch(&ctx, S[k]) == AMPS_OK) &&
                           amps_scene_remove(&ctx, S[k], 1, &one, AMPS_SINGULAR_REMOVE, NULL) == AMPS_OK &&
                           amps_scene_pin(&ctx, S[k], 130, u) == AMPS_OK &&
                           amps_scene_dynamics(&ctx, S[k], 0.05, 0.1, 0.02) == AMPS_OK,
