@@ -14179,6 +14179,7 @@ undo:
 }
 
 static amps_status amps__scene_batch_room(amps_ctx *ctx, amps_scene *S, amps_int ni, amps_int nd);
+static amps_status amps__scene_batch_failed(amps_scene *S, amps_status s);
 
 /* The refusal of a call that must wait for the end of a two-phase commit. */
 static amps_status amps__scene_committing(amps_ctx *ctx, const char *fn) {
@@ -14202,7 +14203,7 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
         return s;
     }
     s = S->prepared ? amps__scene_cut_update(ctx, S, v, p, nrm, &vc) : amps__scene_cut_topology(ctx, S, v, p, nrm, &vc);
-    if (s != AMPS_OK) return s;
+    if (s != AMPS_OK) return amps__scene_batch_failed(S, s);
     amps__scene_cut_recorded(ctx, S, v, vc);
     amps__scene_dyn_cut(ctx, S, v, vc);
     if (new_node) *new_node = vc;
@@ -15238,8 +15239,8 @@ static void amps__scene_batch_uncut(amps_scene *S, const amps__scene_op *op) {
     S->node.fixed[op->vc] = 0;
     S->node.pinned[op->vc] = 0;
     (void)amps_mesh_uncut(&c2, S->m, op->v, op->vc, mv, op->len);
-    amps__scene_mass_node(S, op->v);
     amps__scene_mass_node(S, op->vc);
+    (void)amps__scene_refresh_force(&c2, S, op->v); /* its mass and gravity load (a discard keeps forces) */
     amps__scene_uncut_recorded(&c2, S, op->v, op->vc, mv, op->len);
 }
 

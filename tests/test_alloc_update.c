@@ -543,6 +543,73 @@ static void test_stroke_oom(void) {
         t_al.live = 0;
     }
     printf("  the second cut of a batch: %ld allocation points\n", points);
+    /* a cut in a batch that must grow the mesh's node storage, failing: the batch (a material
+       change before it) is undone and closed */
+    for (k = 0, points = 0; k < 2000; k++) {
+        amps_status s;
+        double p[3], nrm[3] = {0.3, 1, 0.2}, E0;
+        amps_int vc, v, t10 = 10;
+        amps_int nn1;
+        amps_ctx_init(&c);
+        c.alloc_user = &t_al;
+        c.nthreads = 1;
+        S = amps_scene_create(&c, amps_mesh_beam(&c, 3), NULL);
+        amps_scene_fix_where(&c, S, 2, AMPS_LT, 0.01, NULL);
+        CHECK(amps_scene_dynamics(&c, S, 0.05, 0, 0) == AMPS_OK && amps_scene_prepare(&c, S) == AMPS_OK,
+              "growth: scene: %s", c.msg);
+        t_seed(7);
+        nn1 = amps_scene_mesh(S)->nnode; /* cut until the mesh's node storage is full after one growth (the
+                                            scene's, grown by another rule, has room) */
+        for (v = 0;
+             (amps_scene_mesh(S)->nnode < amps_scene_mesh(S)->node_cap || amps_scene_mesh(S)->nnode == nn1) && v < 5000;
+             v++) {
+            amps_int w = t_int((int)amps_scene_mesh(S)->nnode);
+            int d;
+            for (d = 0; d < 3; d++) {
+                p[d] = amps_scene_mesh(S)->xyz[3 * w + d];
+                nrm[d] = t_unif() - 0.5;
+            }
+            (void)amps_scene_cut(&c, S, w, p, nrm, &vc);
+        }
+        nrm[0] = 0, nrm[1] = 1, nrm[2] = 0;
+        nn = amps_scene_mesh(S)->nnode;
+        E0 = amps_scene_mesh(S)->E[t10];
+        CHECK(nn == amps_scene_mesh(S)->node_cap && amps_scene_begin_batch(&c, S) == AMPS_OK &&
+                      amps_scene_set_tet_material(&c, S, t10, 5.0, 0.25) == AMPS_OK,
+              "growth: the mesh full (%ld of %ld nodes), a batch: %s", (long)nn, (long)amps_scene_mesh(S)->node_cap,
+              c.msg);
+        for (v = 0; v < nn; v++) { /* a node the plane y = y_v splits (tet centroids on both sides) */
+            const amps_mesh *m = amps_scene_mesh(S);
+            amps_int deg, j, below = 0;
+            const amps_int *inc = amps_mesh_incident(m, v, &deg);
+            for (j = 0; j < deg; j++) {
+                double yc = 0;
+                int q;
+                for (q = 0; q < 4; q++) yc += 0.25 * m->xyz[3 * m->tet[4 * inc[j] + q] + 1];
+                below += yc < m->xyz[3 * v + 1];
+            }
+            if (!amps_scene_is_fixed(S, v) && below > 0 && below < deg) break;
+        }
+        memcpy(p, amps_scene_mesh(S)->xyz + 3 * v, sizeof(p));
+        arm(k);
+        s = amps_scene_cut(&c, S, v, p, nrm, &vc);
+        disarm();
+        if (s != AMPS_ERR_OOM) {
+            CHECK(s == AMPS_OK || s == AMPS_WARN_NOOP, "growth: the cut: %s", c.msg);
+            amps_scene_free(&c, S);
+            t_al.live = 0;
+            break;
+        }
+        points++;
+        CHECK(amps_scene_mesh(S)->nnode == nn && amps_scene_mesh(S)->E[t10] == E0 &&
+                      amps_scene_cancel_batch(&c, S) == AMPS_ERR_STATE,
+              "growth: cut fail at %ld: the batch was not undone (E %g, was %g)", k, amps_scene_mesh(S)->E[t10], E0);
+        amps_scene_free(&c, S);
+        CHECK(t_al.live == 0, "growth: cut fail at %ld: %ld live", k, t_al.live);
+        t_al.live = 0;
+    }
+    CHECK(points > 0, "growth: no allocation failed");
+    printf("  a cut growing the mesh in a batch: %ld allocation points\n", points);
     /* the first corotational step failing, then made again */
     for (k = -1, points = 0; k < 2000; k++) {
         amps_status s;

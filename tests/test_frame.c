@@ -496,8 +496,8 @@ static void mesh_copy_free(mesh_copy *c) {
     free(c->rho);
 }
 
-/* A batch of removals (one with a separation), region and tet materials with densities, a cut
-   and pins, cancelled (amps_scene_cancel_batch): the mesh as before bit for bit, the boundary as
+/* Under gravity, a batch of removals (one with a separation), region and tet materials with
+   densities, a cut and pins, cancelled (amps_scene_cancel_batch): the mesh as before bit for bit, the boundary as
    from scratch, and the next solve or steps equal those of a twin scene that never had the
    batch. The same batch committed equals the changes made one by one. (Undone by a failed
    commit: test_alloc_update.) */
@@ -512,11 +512,12 @@ static void test_batch_cancel(void) {
             amps_scene_changes ch;
             amps_mesh_removal rr;
             amps_int sep[3] = {118, 120, 148}, one = 40, vc, k, nn, nsep = 0;
-            double p[3], nrm[3] = {0.2, 1, 0.1}, u[3] = {0.01, 0, 0.02}, e;
+            double p[3], nrm[3] = {0.2, 1, 0.1}, u[3] = {0.01, 0, 0.02}, e, grav[3] = {0, 0.1, -0.5};
             amps_status st = AMPS_OK;
             amps_ctx_init(&ctx);
             for (k = 0; k < 2; k++) {
                 S[k] = beam_scene(&ctx, 6, w + k, NULL);
+                CHECK(amps_scene_gravity(&ctx, S[k], grav) == AMPS_OK, "cancel: gravity: %s", ctx.msg);
                 if (dyn)
                     CHECK(amps_scene_dynamics(&ctx, S[k], 0.05, 0.1, 0.02) == AMPS_OK &&
                                   amps_scene_step(&ctx, S[k], 2) == AMPS_OK,
@@ -532,9 +533,9 @@ static void test_batch_cancel(void) {
                 st = amps_scene_pin(&ctx, S[k], 130, u);
                 if (!st) st = amps_scene_remove(&ctx, S[k], 3, sep, AMPS_SINGULAR_SEPARATE, &rr);
                 if (!st) nsep = rr.nsep;
-                if (!st) st = amps_scene_set_region(&ctx, S[k], 0, 800.0, 0.31, 1.7);
                 memcpy(p, amps_scene_mesh(S[k])->xyz + 3 * 87, sizeof(p));
                 if (!st) st = amps_scene_cut(&ctx, S[k], 87, p, nrm, &vc);
+                if (!st) st = amps_scene_set_region(&ctx, S[k], 0, 800.0, 0.31, 1.7);
                 if (!st) st = amps_scene_set_tet_material(&ctx, S[k], 7, 2000.0, 0.28);
                 if (!st) st = amps_scene_remove(&ctx, S[k], 1, &one, AMPS_SINGULAR_REMOVE, NULL);
                 if (!st) st = amps_scene_pin(&ctx, S[k], 80, u);
@@ -548,8 +549,8 @@ static void test_batch_cancel(void) {
                     CHECK(amps_scene_cancel_batch(&ctx, S[k]) == AMPS_OK, "cancel the twin: %s", ctx.msg);
                     CHECK(amps_scene_pin(&ctx, S[k], 130, u) == AMPS_OK &&
                                   amps_scene_remove(&ctx, S[k], 3, sep, AMPS_SINGULAR_SEPARATE, NULL) == AMPS_OK &&
-                                  amps_scene_set_region(&ctx, S[k], 0, 800.0, 0.31, 1.7) == AMPS_OK &&
                                   amps_scene_cut(&ctx, S[k], 87, p, nrm, &vc) == AMPS_OK &&
+                                  amps_scene_set_region(&ctx, S[k], 0, 800.0, 0.31, 1.7) == AMPS_OK &&
                                   amps_scene_set_tet_material(&ctx, S[k], 7, 2000.0, 0.28) == AMPS_OK &&
                                   amps_scene_remove(&ctx, S[k], 1, &one, AMPS_SINGULAR_REMOVE, NULL) == AMPS_OK &&
                                   amps_scene_pin(&ctx, S[k], 80, u) == AMPS_OK,
