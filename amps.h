@@ -10917,6 +10917,13 @@ static void amps__bg_take(amps_ctx *c2, amps_update *U, amps_update *V, amps__bg
     amps_update_free(c2, V);
 }
 
+/* The watch set's closure workspace sized for the new base V (amps__bg_take computes it there). */
+static amps_status amps__bg_watch_room(amps_ctx *c2, amps_update *U, const amps_update *V) {
+    if (U->watch.closure && amps__realloc(c2, (void **)&U->watch.closure, (size_t)V->n, sizeof(amps_int)))
+        return AMPS_ERR_OOM;
+    return AMPS_OK;
+}
+
 /* Swaps a ready re-factorization in: amps__bg_catch_up, then the new base takes the handle's
    place. The system is unchanged, so the solution, reactions and their freshness carry over.
    On failure the engine keeps its old factors (the re-factorization is dropped). */
@@ -10931,9 +10938,7 @@ static amps_status amps__bg_swap(amps_ctx *ctx, amps_update *U) {
     amps__bg_join(b);
     V->nthr = U->nbuf;
     s = amps__bg_catch_up(&c2, U, V, b);
-    if (s == AMPS_OK && U->watch.closure &&
-        amps__realloc(&c2, (void **)&U->watch.closure, (size_t)V->n, sizeof(amps_int)))
-        s = AMPS_ERR_OOM;
+    if (s == AMPS_OK) s = amps__bg_watch_room(&c2, U, V);
     if (s != AMPS_OK) {
         amps__bg_end(&c2, U, 1);
         return amps__err(ctx, s,
@@ -11137,9 +11142,10 @@ static amps_status amps__commit_fold(amps_ctx *ctx, amps_update *U) {
     if (!(b = amps__bg_snapshot(&c2, U, 1))) return c2.status ? c2.status : AMPS_ERR_OOM;
     U->refac.job = b;
     amps__bg_work(b); /* not threaded: this thread, the engine's kernels' back end unused */
-    if (b->state != AMPS__BG_READY) {
-        amps_status s = b->status ? b->status : AMPS_ERR_STATE;
-        amps__log(ctx, s, "amps_update_commit: committing by a re-factorization failed (%s)", b->msg);
+    if (b->state != AMPS__BG_READY || amps__bg_watch_room(&c2, U, b->result.U) != AMPS_OK) {
+        amps_status s = b->state != AMPS__BG_READY ? (b->status ? b->status : AMPS_ERR_STATE) : AMPS_ERR_OOM;
+        amps__log(ctx, s, "amps_update_commit: committing by a re-factorization failed (%s)",
+                  b->state != AMPS__BG_READY ? b->msg : "out of memory");
         amps__bg_end(&c2, U, 1);
         return s;
     }

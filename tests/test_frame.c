@@ -604,6 +604,46 @@ static void test_batch_cancel(void) {
     }
 }
 
+/* A batch large enough to be committed by a re-factorization (a fold) while every node is
+   watched: the watch set's workspace follows the new factor's size (under ASan a write past it
+   was caught), and the watched solve after it equals the full solve. */
+static void test_fold_watched(void) {
+    amps_ctx ctx;
+    amps_scene *S;
+    amps_update_stats st;
+    amps_int *w, k, n0, done = 0, vc;
+    double f[3] = {0.2, -0.1, -0.5}, nrm[3] = {0, 0, 1}, *uw, e;
+    const amps_mesh *m;
+    amps_ctx_init(&ctx);
+    S = amps_scene_create(&ctx, amps_mesh_brick(&ctx, 3), NULL);
+    amps_scene_fix_where(&ctx, S, 2, AMPS_LT, 0.01, NULL);
+    m = amps_scene_mesh(S);
+    n0 = m->nnode;
+    for (k = 0; k < n0; k++)
+        if (m->xyz[3 * k + 2] > 1.99) amps_scene_force(&ctx, S, k, f);
+    w = (amps_int *)malloc(sizeof(amps_int) * (size_t)n0);
+    for (k = 0; k < n0; k++) w[k] = k;
+    CHECK(amps_scene_prepare(&ctx, S) == AMPS_OK && amps_scene_watch(&ctx, S, n0, w) == AMPS_OK &&
+                  amps_scene_solve_watched(&ctx, S) == AMPS_OK && amps_scene_begin_batch(&ctx, S) == AMPS_OK,
+          "fold: %s", ctx.msg);
+    for (k = 0; k < n0 && done < 20; k++)
+        if (m->xyz[3 * k + 2] > 0.01 && m->xyz[3 * k + 2] < 1.99 &&
+            amps_scene_cut(&ctx, S, k, m->xyz + 3 * k, nrm, &vc) == AMPS_OK)
+            done++;
+    CHECK(amps_scene_commit(&ctx, S) == AMPS_OK && amps_scene_solve_watched(&ctx, S) == AMPS_OK, "fold: commit: %s",
+          ctx.msg);
+    amps_update_get_stats(amps_scene_engine(S), &st);
+    CHECK(st.commit_folds > 0, "fold: the batch of %ld cuts was not committed by a re-factorization", (long)done);
+    uw = (double *)malloc(sizeof(double) * 3 * (size_t)n0);
+    memcpy(uw, amps_scene_displacements(S), sizeof(double) * 3 * (size_t)n0);
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "fold: solve: %s", ctx.msg);
+    e = t_reldiff(3 * (int)n0, uw, amps_scene_displacements(S));
+    CHECK(e <= 1e-12, "fold: watched solve %.2e from the full solve", e);
+    free(uw);
+    free(w);
+    amps_scene_free(&ctx, S);
+}
+
 /* Two stacked cells, the top one held by three pins: a batch cuts the middle layer free (allowed:
    the pins hold the top) and releases the pins; its commit finds the top loose and undoes all. */
 static void test_batch_undo(void) {
@@ -882,6 +922,7 @@ int main(void) {
     test_batches(22);
     test_batch_undo();
     test_batch_cancel();
+    test_fold_watched();
     test_count();
     test_haptic_no_swap();
     test_two_phase();
