@@ -1073,7 +1073,8 @@ AMPS_API amps_status amps_scene_cut(amps_ctx *ctx, amps_scene *S, amps_int v, co
    tolerance was not reached) still gives the displacements. */
 AMPS_API amps_status amps_scene_solve(amps_ctx *ctx, amps_scene *S);
 /* Watch set: the nodes amps_scene_solve_watched computes (replaces the previous set; nv = 0
-   clears it). A cut of a watched node watches its copy too. Allocates. */
+   clears it; a node given twice counts once). A cut of a watched node watches its copy too.
+   Allocates. */
 AMPS_API amps_status amps_scene_watch(amps_ctx *ctx, amps_scene *S, amps_int nv, const amps_int *nodes);
 /* Solves for the displacements of the watched nodes only (amps_update_solve_watched: the
    backward solve touches closure_L of their DOFs); other entries of amps_scene_displacements
@@ -14274,7 +14275,9 @@ AMPS_API amps_status amps_scene_watch(amps_ctx *ctx, amps_scene *S, amps_int nv,
         S->watch.cap = nv;
     }
     for (k = 0; k < nv; k++) S->watch.nodes[k] = nodes[k];
-    S->watch.n = nv;
+    amps__sort(S->watch.nodes, (size_t)nv, sizeof(amps_int), amps__int_cmp);
+    for (S->watch.n = 0, k = 0; k < nv; k++) /* ascending, each once */
+        if (k == 0 || S->watch.nodes[k] != S->watch.nodes[k - 1]) S->watch.nodes[S->watch.n++] = S->watch.nodes[k];
     S->watch.stale = 1;
     return AMPS_OK;
 }

@@ -621,9 +621,10 @@ static void test_fold_watched(void) {
     n0 = m->nnode;
     for (k = 0; k < n0; k++)
         if (m->xyz[3 * k + 2] > 1.99) amps_scene_force(&ctx, S, k, f);
-    w = (amps_int *)malloc(sizeof(amps_int) * (size_t)n0);
-    for (k = 0; k < n0; k++) w[k] = k;
-    CHECK(amps_scene_prepare(&ctx, S) == AMPS_OK && amps_scene_watch(&ctx, S, n0, w) == AMPS_OK &&
+    w = (amps_int *)malloc(sizeof(amps_int) * (size_t)(n0 + 1));
+    for (k = 0; k < n0; k++) w[k] = (k + 3) % n0; /* every node, not in order, one twice */
+    w[n0] = w[0];
+    CHECK(amps_scene_prepare(&ctx, S) == AMPS_OK && amps_scene_watch(&ctx, S, n0 + 1, w) == AMPS_OK &&
                   amps_scene_solve_watched(&ctx, S) == AMPS_OK && amps_scene_begin_batch(&ctx, S) == AMPS_OK,
           "fold: %s", ctx.msg);
     for (k = 0; k < n0 && done < 20; k++)
