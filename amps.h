@@ -14743,7 +14743,7 @@ static void amps__scene_cut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v, a
 /* The change record of the undoing of the cut of v into v and vc (vc gone; mv[0..nmv-1] the tets
    it moved back to v): vc leaves the new nodes, each of those tets leaves the moved ones unless
    another recorded cut moved it (or the record was taken since the cut: then it moved again),
-   the faces around v are brought up to date. */
+   the faces around v are brought up to date (v < 0: the record of vc and mv only). */
 static void amps__scene_uncut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v, amps_int vc, const amps_int *mv,
                                        amps_int nmv) {
     amps__scene_render *R = &S->rd;
@@ -14770,6 +14770,7 @@ static void amps__scene_uncut_recorded(amps_ctx *ctx, amps_scene *S, amps_int v,
             }
         }
     }
+    if (v < 0) return; /* the record only */
     inc = amps_mesh_incident(S->m, v, &deg);
     amps__scene_faces_changed(ctx, S, inc, deg);
 }
@@ -15204,11 +15205,20 @@ static void amps__scene_batch_unremove(amps_scene *S, const amps_int *L) {
     const amps_int *fl = L + 1, *sn = fl + nflag + 1, *sc = sn + ns, *sp = sc + ns, *st = sp + ns + 1,
                    *ML = st + sp[ns], *tets = ML + AMPS__RMLOG_HEAD;
     amps_ctx c2;
+    amps_int deg;
+    const amps_int *inc;
     amps_ctx_init(&c2);
+    for (k = ns - 1; k >= 0; k--) { /* the copies' records as made: their tets at the end of the removal */
+        inc = amps_mesh_incident(S->m, sc[k], &deg);
+        amps__scene_uncut_recorded(&c2, S, -1, sc[k], inc, deg);
+    }
     amps__scene_unremove_nodes(S, fl, nflag, ML[0]);
     amps__rm_log_undo(S->m, ML);
     amps__scene_unremove_forces(S, tets, ML[1], sn, ns);
-    for (k = ns - 1; k >= 0; k--) amps__scene_uncut_recorded(&c2, S, sn[k], sc[k], st + sp[k], sp[k + 1] - sp[k]);
+    for (k = 0; k < ns; k++) { /* the faces around the nodes the tets came back to, and the removed tets' */
+        inc = amps_mesh_incident(S->m, sn[k], &deg);
+        amps__scene_faces_changed(&c2, S, inc, deg);
+    }
     amps__scene_faces_changed(&c2, S, tets, ML[1]);
 }
 

@@ -174,8 +174,12 @@ static void take_and_check(amps_ctx *ctx, amps_scene *S, mirror *w, const char *
                   "%s: moved tet listed twice", what);
             mv[c.moved_tets[k]] = 1;
         }
-        for (k = 0; k < m->ntet; k++) {
+        for (k = 0; k < m->ntet; k++) { /* live tets (a removed one may keep a copy's node unlisted) */
             int diff = memcmp(m->tet + 4 * k, w->tet0 + 4 * k, 4 * sizeof(amps_int)) != 0;
+            if (m->removed && m->removed[k]) {
+                nmv += mv[k]; /* listed or not */
+                continue;
+            }
             nmv += diff;
             if (diff != mv[k]) bad++;
         }
@@ -323,6 +327,73 @@ static void test_undone_batch(void) {
         CHECK(amps_scene_commit_end(&ctx, S) == AMPS_OK && amps_scene_ndof(S) == nd, "ndof after the commit");
         amps_scene_free(&ctx, S);
     }
+    free(w.tri);
+    free(w.face);
+    free(w.tet0);
+}
+
+/* Random batches of cuts (also of the copies) and removals with node separation, cancelled or
+   committed (with the top pins released, a commit a mechanism refusal may undo), with takes in
+   between at random: after each take the
+   change record matches the mesh (the moved tets are exactly the live tets whose nodes changed
+   since the last take) and the boundary equals the mesh's. */
+static void test_batch_records(unsigned long long seed) {
+    amps_ctx ctx;
+    amps_scene *S;
+    mirror w;
+    amps_int k, vc, top[3] = {-1, -1, -1};
+    int round, nsep = 0, ncancel = 0, nrefused = 0, ntop = 0;
+    double u0[3] = {0, 0, 0};
+    amps_ctx_init(&ctx);
+    memset(&w, 0, sizeof(w));
+    t_seed(seed);
+    S = amps_scene_create(&ctx, amps_mesh_brick(&ctx, 3), NULL);
+    CHECK(amps_scene_fix_where(&ctx, S, 2, AMPS_LT, 0.01, NULL) == AMPS_OK, "records: fix");
+    for (k = 0; k < amps_scene_mesh(S)->nnode && ntop < 3; k++) /* three pins on top: releasing them is refused */
+        if (amps_scene_mesh(S)->xyz[3 * k + 2] > 1.99 && (ntop == 0 || k > top[ntop - 1] + 2)) top[ntop++] = k;
+    for (k = 0; k < ntop; k++) amps_scene_pin(&ctx, S, top[k], u0);
+    CHECK(amps_scene_solve(&ctx, S) == AMPS_OK, "records: solve: %s", ctx.msg);
+    take_and_check(&ctx, S, &w, "records", 0);
+    for (round = 1; round <= 40; round++) {
+        const amps_mesh *m = amps_scene_mesh(S);
+        int nop = 1 + t_int(5), op, how = t_int(3);
+        amps_status st;
+        CHECK(amps_scene_begin_batch(&ctx, S) == AMPS_OK, "records: begin: %s", ctx.msg);
+        for (op = 0; op < nop; op++) {
+            if (t_int(2)) { /* a cut of a random node (copies included) */
+                amps_int v = t_int((int)m->nnode);
+                double nrm[3] = {t_unif() - 0.5, t_unif() - 0.5, t_unif() - 0.5};
+                if (amps_mesh_degree(m, v) > 0) (void)amps_scene_cut(&ctx, S, v, m->xyz + 3 * v, nrm, &vc);
+            } else { /* 1-3 random live tets, separating */
+                amps_int t[3];
+                amps_mesh_removal r;
+                int q, n = 1 + t_int(3);
+                for (q = 0; q < n; q++) {
+                    do t[q] = t_int((int)m->ntet);
+                    while (m->removed[t[q]]);
+                    if (q > 0 && (t[q] == t[0] || (q == 2 && t[2] == t[1]))) n = q;
+                }
+                if (amps_scene_remove(&ctx, S, n, t, AMPS_SINGULAR_SEPARATE, &r) == AMPS_OK) nsep += (int)r.nsep;
+            }
+        }
+        if (how == 0) {
+            CHECK(amps_scene_cancel_batch(&ctx, S) == AMPS_OK, "records: cancel: %s", ctx.msg);
+            ncancel++;
+        } else if (how == 1 && ntop == 3) { /* the top pins released */
+            for (k = 0; k < 3; k++) amps_scene_release(&ctx, S, top[k]);
+            st = amps_scene_commit(&ctx, S);
+            nrefused += st == AMPS_ERR_SINGULAR_UPDATE;
+            CHECK(st == AMPS_OK || st == AMPS_ERR_SINGULAR_UPDATE, "records: commit: %s", ctx.msg);
+            if (st == AMPS_OK) ntop = 0; /* released for good */
+        } else {
+            st = amps_scene_commit(&ctx, S);
+            CHECK(st == AMPS_OK || st == AMPS_ERR_SINGULAR_UPDATE, "records: commit: %s", ctx.msg);
+        }
+        CHECK(amps_mesh_check(&ctx, m) == AMPS_OK, "records round %d: mesh: %s", round, ctx.msg);
+        if (t_int(10) < 7 || round == 40) take_and_check(&ctx, S, &w, "records", round);
+    }
+    printf("  batch records (seed %llu): %d separations, %d cancelled, %d refused\n", seed, nsep, ncancel, nrefused);
+    amps_scene_free(&ctx, S);
     free(w.tri);
     free(w.face);
     free(w.tet0);
@@ -657,6 +728,7 @@ static void test_oom(void) {
 int main(void) {
     amps_ctx ctx;
     amps_mesh *box;
+    unsigned long long k;
     amps_ctx_init(&ctx);
     t_seed(19);
     cut_sequence(amps_mesh_brick(&ctx, 3), 40, 1, "brick:3");
@@ -667,6 +739,7 @@ int main(void) {
     test_removed_hook();
     test_node_map();
     test_undone_batch();
+    for (k = 1; k <= 6; k++) test_batch_records(k);
     test_nearest(amps_mesh_brick(&ctx, 4), "brick:4");
     box = read_box(&ctx);
     if (box) test_nearest(box, "tetgen box");
