@@ -487,7 +487,9 @@ typedef struct amps_update_opts {
     amps_int cap_pending; /* changes recorded between commits; default 4096 */
     int grow;             /* 1: grow capacities on demand (may allocate in update calls) */
     amps_formulation formulation;
-    double singular_tol;            /* pivot of the dense system below tol * column norm is singular; default 1e-15 */
+    double singular_tol;            /* pivot of the dense system below tol * column norm: the commit goes to a
+                                       re-factorization (amps_update_commit); default 1e-13 (about 450 eps: a
+                                       singular K^ leaves a pivot at the rounding level of the dense system) */
     int refine;                     /* refinement steps on the residual of the modified rows inside the same
                                full solve (default 1; each adds a partial backward solve over
                                closure(S u C u neighbours) and O(|S u C|^2)); 0 = none */
@@ -6570,7 +6572,7 @@ AMPS_API void amps_update_opts_default(amps_update_opts *o) {
     o->cap_pending = 4096;
     o->grow = 0;
     o->formulation = AMPS_FORM_PRIMAL;
-    o->singular_tol = 1e-15;
+    o->singular_tol = 1e-13;
     o->refine = 1;
     o->xs_from_dense = 0;
     o->refactor = AMPS_REFACTOR_AUTO;

@@ -735,6 +735,37 @@ static void test_fe_sequences(void) {
     }
 }
 
+/* A change that leaves K^ singular up to a relative 3e-14 (K^ + delta e_i e_i^T with
+   1 + delta (K^-1)_ii = 3e-14, the Schur complement's pivot at rounding level of an engine that
+   went through rounding) is refused: the dense pivot test sends it to the re-factorization,
+   which finds K^ not positive definite. A change at 1e-6 of singular is committed. */
+static void test_near_singular(void) {
+    int k, trial;
+    for (trial = 0; trial < 2; trial++) {
+        model m;
+        amps_update_opts o;
+        int nz, *ti, *tj;
+        double *tx, e[40], x[40], delta;
+        amps_int i = 7;
+        amps_status s;
+        amps_update_opts_default(&o);
+        o.grow = 1;
+        random_spd(40, 9, &nz, &ti, &tj, &tx);
+        CHECK(model_init(&m, 40, nz, ti, tj, tx, &o) == 0, "near singular: init: %s", m.ctx.msg);
+        for (k = 0; k < 40; k++) e[k] = k == i;
+        CHECK(amps_update_solve_rhs(&m.ctx, m.U, e, x) == AMPS_OK, "near singular: solve: %s", m.ctx.msg);
+        delta = -(1.0 - (trial ? 1e-6 : 3e-14)) / x[i];
+        s = amps_update_add(&m.ctx, m.U, 1, &i, &i, &delta);
+        if (s == AMPS_OK) s = amps_update_commit(&m.ctx, m.U);
+        if (trial == 0) CHECK(s == AMPS_ERR_SINGULAR_UPDATE, "a change singular to 3e-14 committed (%d)", (int)s);
+        else CHECK(s == AMPS_OK, "a change 1e-6 from singular refused: %s", m.ctx.msg);
+        model_free(&m);
+        free(ti);
+        free(tj);
+        free(tx);
+    }
+}
+
 /* Bad input and a singular update: each fails cleanly, the solution stays, a valid update works. */
 static void test_errors(void) {
     model m;
@@ -1524,6 +1555,7 @@ static void test_commit_fold(void) {
 int main(void) {
     test_log();
     test_errors();
+    test_near_singular();
     test_random_sequences();
     test_fe_sequences();
     test_guard();
