@@ -15151,10 +15151,10 @@ static void amps__scene_batch_material(amps_scene *S, amps_int n, const amps_int
     S->batch.ndlog += 3 * n;
 }
 
-/* Integers of a removal's log: {nflag, flagged orphans, nsep, sep_node, sep_copy, sep_ptr (nsep
-   + 1), sep_tets, the mesh's log (amps__rm_log_save)}. */
+/* Integers of a removal's log: {nflag, flagged orphans, nsep, sep_node, sep_copy, the mesh's
+   log (amps__rm_log_save)}. */
 static amps_int amps__scene_removal_log_len(const amps_scene *S, const amps_mesh_removal *r, amps_int nflag) {
-    return 2 + nflag + 3 * r->nsep + 1 + r->sep_ptr[r->nsep] + amps__rm_log_len(S->m);
+    return 2 + nflag + 2 * r->nsep + amps__rm_log_len(S->m);
 }
 
 /* Logs the removal r (the last change of the mesh) that flagged[0..nflag-1] as orphans; room
@@ -15170,11 +15170,8 @@ static void amps__scene_batch_removal(amps_scene *S, const amps_mesh_removal *r,
     if (ns > 0) { /* (empty arrays may be NULL) */
         memcpy(L, r->sep_node, sizeof(amps_int) * (size_t)ns);
         memcpy(L + ns, r->sep_copy, sizeof(amps_int) * (size_t)ns);
-        memcpy(L + 2 * ns, r->sep_ptr, sizeof(amps_int) * (size_t)(ns + 1));
-        memcpy(L + 3 * ns + 1, r->sep_tets, sizeof(amps_int) * (size_t)r->sep_ptr[ns]);
-    } else L[0] = 0; /* sep_ptr[0] */
-    L += 3 * ns + 1;
-    amps__rm_log_save(S->m, L + L[-1]);
+    }
+    amps__rm_log_save(S->m, L + 2 * ns);
 }
 
 /* The scene's side of undoing a removal before its mesh is restored: the orphans it flagged
@@ -15204,8 +15201,7 @@ static void amps__scene_unremove_forces(amps_scene *S, const amps_int *tets, amp
    record (its separations' copies gone, the faces around its tets). */
 static void amps__scene_batch_unremove(amps_scene *S, const amps_int *L) {
     amps_int nflag = L[0], ns = L[1 + nflag], k;
-    const amps_int *fl = L + 1, *sn = fl + nflag + 1, *sc = sn + ns, *sp = sc + ns, *st = sp + ns + 1,
-                   *ML = st + sp[ns], *tets = ML + AMPS__RMLOG_HEAD;
+    const amps_int *fl = L + 1, *sn = fl + nflag + 1, *sc = sn + ns, *ML = sc + ns, *tets = ML + AMPS__RMLOG_HEAD;
     amps_ctx c2;
     amps_int deg;
     const amps_int *inc;
